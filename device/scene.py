@@ -1,0 +1,453 @@
+"""What a device renders for one sample: the :class:`Scene` and its parts.
+
+A scene is plain validated data with SI units. It lists exactly what the sample
+needs, and the device models nothing more: a real sample has a physical
+:class:`Material` and no rendering; a virtual sample has a penetration spring and
+optionally a :class:`Transient` played open-loop at contact.
+
+Sign conventions (used throughout :mod:`device`): heights point up, the surface
+is at ``surface_height``; penetration is ``surface_height - z``; an *incoming
+velocity* is reported as a positive speed into the surface; forces are positive
+out of the surface (upwards).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, ClassVar
+
+from .errors import SceneError
+
+__all__ = [
+    "Scene",
+    "Material",
+    "Ringing",
+    "Transient",
+    "Pulse",
+    "ForceSinusoid",
+    "AccelSinusoid",
+    "register_transient",
+    "transient_kinds",
+]
+
+
+def _finite(where: str, name: str, value: Any, *, minimum: float | None = None,
+            strict: bool = False, maximum: float | None = None) -> float:
+    """Return ``value`` as a float after checking it is a finite number in range."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"{where}: field '{name}' must be a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise SceneError(f"{where}: field '{name}' must be finite, got {value!r}")
+    if minimum is not None and (v <= minimum if strict else v < minimum):
+        op = ">" if strict else ">="
+        raise SceneError(f"{where}: field '{name}' must be {op} {minimum:g}, got {v:g}")
+    if maximum is not None and v > maximum:
+        raise SceneError(f"{where}: field '{name}' must be <= {maximum:g}, got {v:g}")
+    return v
+
+
+def _check_keys(where: str, data: Mapping[str, Any], allowed: set[str], required: set[str]) -> None:
+    import difflib
+
+    for key in data:
+        if key not in allowed:
+            hint = difflib.get_close_matches(key, sorted(allowed), n=1)
+            extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+            raise SceneError(
+                f"{where}: unknown field '{key}'{extra}; allowed: {', '.join(sorted(allowed))}")
+    missing = sorted(required - set(data))
+    if missing:
+        raise SceneError(f"{where}: missing field(s) {', '.join(repr(m) for m in missing)}")
+
+
+@dataclass(frozen=True)
+class Ringing:
+    """Decaying-sinusoid vibration model of a material, Q(t) = A·v·exp(−B·t)·sin(2π·f·t).
+
+    Parameters
+    ----------
+    slope : float [1/s]
+        A, amplitude of acceleration per unit normal velocity. The papers give it
+        negative: with the normal velocity negative into the surface, ``A·v`` > 0 and
+        the first push is out of the surface.
+    decay : float [1/s]
+        B, exponential decay rate, >= 0.
+    frequency : float [Hz]
+        f, > 0.
+    """
+
+    slope: float
+    decay: float
+    frequency: float
+
+    def __post_init__(self) -> None:
+        where = "ringing"
+        object.__setattr__(self, "slope", _finite(where, "slope", self.slope))
+        object.__setattr__(self, "decay", _finite(where, "decay", self.decay, minimum=0.0))
+        object.__setattr__(self, "frequency",
+                           _finite(where, "frequency", self.frequency, minimum=0.0, strict=True))
+
+    def acceleration(self, t, speed: float):
+        """Model acceleration [m/s²] at times ``t`` [s] after a contact at ``speed`` [m/s]."""
+        import numpy as np
+
+        t = np.asarray(t, dtype=float)
+        q = self.slope * (-speed) * np.exp(-self.decay * t) * np.sin(2 * np.pi * self.frequency * t)
+        return np.where(t >= 0, q, 0.0)
+
+
+@dataclass(frozen=True)
+class Material:
+    """A physical sample touched through the device (real, never rendered).
+
+    Parameters
+    ----------
+    stiffness : float [N/m]
+        Contact stiffness, > 0.
+    damping : float [N·s/m]
+        Contact damping, >= 0.
+    ringing : Ringing or None
+        Vibration excited at each contact by the true incoming velocity.
+    """
+
+    stiffness: float
+    damping: float = 0.0
+    ringing: Ringing | None = None
+
+    def __post_init__(self) -> None:
+        where = "material"
+        object.__setattr__(self, "stiffness",
+                           _finite(where, "stiffness", self.stiffness, minimum=0.0, strict=True))
+        object.__setattr__(self, "damping", _finite(where, "damping", self.damping, minimum=0.0))
+
+
+class Transient:
+    """Base of open-loop contact transients; subclasses register a ``kind`` name.
+
+    A transient knows how to become a force table at a servo rate (see
+    :meth:`unit_table`): the force [N] to play per tick for a contact at 1 m/s.
+    The device scales it by its own estimate of the incoming speed.
+    """
+
+    kind: ClassVar[str] = ""
+
+    def unit_table(self, rate_hz: float, effective_mass: float):
+        """Force per unit incoming speed [N/(m/s)] at each servo tick after contact."""
+        raise NotImplementedError
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": self.kind}
+        for f in fields(self):  # type: ignore[arg-type]
+            out[f.name] = getattr(self, f.name)
+        return out
+
+
+_TRANSIENTS: dict[str, Callable[[str, Mapping[str, Any]], Transient]] = {}
+
+
+def register_transient(kind: str, parser: Callable[[str, Mapping[str, Any]], Transient]) -> None:
+    """Make a transient kind available to :meth:`Scene.from_dict`.
+
+    ``parser(where, data)`` receives the table without its ``kind`` key and returns
+    a :class:`Transient`, raising :class:`SceneError` naming ``where`` on bad data.
+    Later capabilities (acceleration-matched libraries, the grasp model) plug in here.
+    """
+    _TRANSIENTS[kind] = parser
+
+
+def transient_kinds() -> list[str]:
+    """Names of the transient kinds this installation can build, sorted."""
+    return sorted(_TRANSIENTS)
+
+
+@dataclass(frozen=True)
+class Pulse(Transient):
+    """Fixed-duration rectangular force pulse of magnitude ``gain``·v.
+
+    Parameters
+    ----------
+    gain : float [N·s/m]
+        A, force per unit incoming speed.
+    duration : float [s]
+        d, pulse length.
+    """
+
+    kind: ClassVar[str] = "pulse"
+    gain: float
+    duration: float
+
+    def __post_init__(self) -> None:
+        w = "transient 'pulse'"
+        object.__setattr__(self, "gain", _finite(w, "gain", self.gain, minimum=0.0))
+        object.__setattr__(self, "duration",
+                           _finite(w, "duration", self.duration, minimum=0.0, strict=True))
+
+    def unit_table(self, rate_hz: float, effective_mass: float):
+        import numpy as np
+
+        n = max(1, int(round(self.duration * rate_hz)))
+        return np.full(n, self.gain)
+
+
+@dataclass(frozen=True)
+class ForceSinusoid(Transient):
+    """Decaying sinusoid specified in force: F(t) = A·v·exp(−t/d)·sin(2π·f·t).
+
+    ``d`` is read as the decay time constant; the table stops when the envelope
+    has fallen to ``cutoff`` of its start.
+
+    Parameters
+    ----------
+    gain : float [N·s/m]
+        A.
+    decay_time : float [s]
+        d, time constant of the envelope.
+    frequency : float [Hz]
+        f.
+    cutoff : float [1]
+        Relative envelope at which playback stops (default 0.01, i.e. after d·ln 100).
+    """
+
+    kind: ClassVar[str] = "sinusoid"
+    gain: float
+    decay_time: float
+    frequency: float
+    cutoff: float = 0.01
+
+    def __post_init__(self) -> None:
+        w = "transient 'sinusoid'"
+        object.__setattr__(self, "gain", _finite(w, "gain", self.gain, minimum=0.0))
+        object.__setattr__(self, "decay_time",
+                           _finite(w, "decay_time", self.decay_time, minimum=0.0, strict=True))
+        object.__setattr__(self, "frequency",
+                           _finite(w, "frequency", self.frequency, minimum=0.0, strict=True))
+        object.__setattr__(self, "cutoff",
+                           _finite(w, "cutoff", self.cutoff, minimum=0.0, strict=True, maximum=1.0))
+
+    def unit_table(self, rate_hz: float, effective_mass: float):
+        import numpy as np
+
+        n = max(1, int(math.ceil(self.decay_time * math.log(1.0 / self.cutoff) * rate_hz)))
+        t = np.arange(n) / rate_hz
+        return self.gain * np.exp(-t / self.decay_time) * np.sin(2 * np.pi * self.frequency * t)
+
+
+@dataclass(frozen=True)
+class AccelSinusoid(Transient):
+    """Decaying sinusoid specified in acceleration, played as effective mass × Q(t).
+
+    Q(t) = A·v_n·exp(−B·t)·sin(2π·f·t) with v_n the (negative) normal velocity,
+    as in the reality-based vibration models (SPEC §2).
+
+    Parameters
+    ----------
+    slope : float [1/s]
+        A (negative in the papers' tables).
+    decay : float [1/s]
+        B.
+    frequency : float [Hz]
+        f.
+    cutoff : float [1]
+        Relative envelope at which playback stops (default 0.01).
+    """
+
+    kind: ClassVar[str] = "q_sinusoid"
+    slope: float
+    decay: float
+    frequency: float
+    cutoff: float = 0.01
+
+    def __post_init__(self) -> None:
+        w = "transient 'q_sinusoid'"
+        object.__setattr__(self, "slope", _finite(w, "slope", self.slope))
+        object.__setattr__(self, "decay",
+                           _finite(w, "decay", self.decay, minimum=0.0, strict=True))
+        object.__setattr__(self, "frequency",
+                           _finite(w, "frequency", self.frequency, minimum=0.0, strict=True))
+        object.__setattr__(self, "cutoff",
+                           _finite(w, "cutoff", self.cutoff, minimum=0.0, strict=True, maximum=1.0))
+
+    def unit_table(self, rate_hz: float, effective_mass: float):
+        import numpy as np
+
+        n = max(1, int(math.ceil(math.log(1.0 / self.cutoff) / self.decay * rate_hz)))
+        t = np.arange(n) / rate_hz
+        ring = Ringing(self.slope, self.decay, self.frequency)
+        return effective_mass * ring.acceleration(t, 1.0)
+
+
+def _dataclass_parser(cls) -> Callable[[str, Mapping[str, Any]], Transient]:
+    names = {f.name for f in fields(cls)}
+    required = {f.name for f in fields(cls)
+                if f.default is MISSING and f.default_factory is MISSING}
+
+    def parse(where: str, data: Mapping[str, Any]) -> Transient:
+        _check_keys(where, data, names, required)
+        try:
+            return cls(**data)
+        except SceneError as exc:
+            raise SceneError(f"{where}: {exc}") from None
+
+    return parse
+
+
+for _cls in (Pulse, ForceSinusoid, AccelSinusoid):
+    register_transient(_cls.kind, _dataclass_parser(_cls))
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One sample as the device sees it.
+
+    Exactly one of ``material`` (a real sample, physically touched) and ``spring``
+    (a virtual sample) is set. Build scenes from data with :meth:`from_dict`.
+
+    Parameters
+    ----------
+    name : str
+        Identifier, used in records and messages.
+    surface_height : float [m]
+        Height of the (real or virtual) surface in device coordinates.
+    spring : float or None [N/m]
+        Penetration-spring stiffness of a virtual sample (0 allowed: transient only);
+        None for a real sample.
+    transient : Transient or None
+        Open-loop force transient played at each contact (virtual samples only).
+    material : Material or None
+        Physical contact of a real sample.
+    """
+
+    name: str
+    surface_height: float = 0.0
+    spring: float | None = None
+    transient: Transient | None = None
+    material: Material | None = None
+    meta: Mapping[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        where = f"scene '{self.name}'"
+        if not isinstance(self.name, str) or not self.name:
+            raise SceneError(f"scene: field 'name' must be a non-empty string, got {self.name!r}")
+        object.__setattr__(self, "surface_height",
+                           _finite(where, "surface_height", self.surface_height))
+        if self.material is None and self.spring is None:
+            raise SceneError(f"{where}: a scene needs either 'material' (real sample) "
+                             "or 'spring' (virtual sample)")
+        if self.material is not None and (self.spring is not None or self.transient is not None):
+            raise SceneError(f"{where}: a real sample ('material') cannot also have "
+                             "'spring' or 'transient'; real samples are touched, not rendered")
+        if self.spring is not None:
+            object.__setattr__(self, "spring",
+                               _finite(where, "spring", self.spring, minimum=0.0))
+
+    @property
+    def is_real(self) -> bool:
+        """True for a physical sample (no rendering)."""
+        return self.material is not None
+
+    @property
+    def kind(self) -> str:
+        """``real``, ``spring`` or the transient kind."""
+        if self.material is not None:
+            return "real"
+        return self.transient.kind if self.transient is not None else "spring"
+
+    # ------------------------------------------------------------------ data
+    _KEYS: ClassVar[set[str]] = {"name", "surface_height", "spring", "transient", "material"}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, where: str | None = None) -> Scene:
+        """Build and validate a scene from plain data (e.g. a TOML table).
+
+        Parameters
+        ----------
+        data : mapping
+            Keys ``name``, ``surface_height`` [m], and either ``spring`` [N/m] with an
+            optional ``transient`` table (``kind`` plus its fields), or a ``material``
+            table (``stiffness`` [N/m], ``damping`` [N·s/m], optional ``ringing`` table
+            with ``slope`` [1/s], ``decay`` [1/s], ``frequency`` [Hz]).
+        where : str, optional
+            Prefix for error messages (e.g. a file and table name).
+
+        Raises
+        ------
+        SceneError
+            Naming the field, the offending value and what is allowed.
+        """
+        if not isinstance(data, Mapping):
+            raise SceneError(f"{where or 'scene'}: expected a table, got {type(data).__name__}")
+        name = data.get("name", "?")
+        where = where or f"scene '{name}'"
+        _check_keys(where, data, cls._KEYS, {"name"})
+        kwargs: dict[str, Any] = {"name": data["name"]}
+        if "surface_height" in data:
+            kwargs["surface_height"] = data["surface_height"]
+        if "spring" in data:
+            kwargs["spring"] = data["spring"]
+        if "transient" in data:
+            kwargs["transient"] = _parse_transient(f"{where}.transient", data["transient"])
+        if "material" in data:
+            kwargs["material"] = _parse_material(f"{where}.material", data["material"])
+        try:
+            return cls(**kwargs)
+        except SceneError as exc:
+            msg = str(exc)
+            raise SceneError(msg if msg.startswith(where) else f"{where}: {msg}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-data form accepted by :meth:`from_dict`."""
+        out: dict[str, Any] = {"name": self.name, "surface_height": self.surface_height}
+        if self.spring is not None:
+            out["spring"] = self.spring
+        if self.transient is not None:
+            out["transient"] = self.transient.to_dict()
+        if self.material is not None:
+            m: dict[str, Any] = {"stiffness": self.material.stiffness,
+                                 "damping": self.material.damping}
+            if self.material.ringing is not None:
+                r = self.material.ringing
+                m["ringing"] = {"slope": r.slope, "decay": r.decay, "frequency": r.frequency}
+            out["material"] = m
+        return out
+
+
+def _parse_transient(where: str, data: Any) -> Transient | None:
+    if not isinstance(data, Mapping):
+        raise SceneError(f"{where}: expected a table with 'kind', got {data!r}")
+    kind = data.get("kind")
+    if kind in (None, "none"):
+        if kind is None:
+            raise SceneError(f"{where}: missing field 'kind'; allowed: none, "
+                             + ", ".join(transient_kinds()))
+        _check_keys(where, data, {"kind"}, set())
+        return None
+    if kind not in _TRANSIENTS:
+        raise SceneError(f"{where}: transient kind {kind!r} is not available; allowed: none, "
+                         + ", ".join(transient_kinds()))
+    rest = {k: v for k, v in data.items() if k != "kind"}
+    return _TRANSIENTS[kind](where, rest)
+
+
+def _parse_material(where: str, data: Any) -> Material:
+    if not isinstance(data, Mapping):
+        raise SceneError(f"{where}: expected a table, got {data!r}")
+    _check_keys(where, data, {"stiffness", "damping", "ringing"}, {"stiffness"})
+    ringing = None
+    if "ringing" in data:
+        r = data["ringing"]
+        if not isinstance(r, Mapping):
+            raise SceneError(f"{where}.ringing: expected a table, got {r!r}")
+        _check_keys(f"{where}.ringing", r, {"slope", "decay", "frequency"},
+                    {"slope", "decay", "frequency"})
+        try:
+            ringing = Ringing(**r)
+        except SceneError as exc:
+            raise SceneError(f"{where}.{exc}") from None
+    try:
+        return Material(stiffness=data["stiffness"], damping=data.get("damping", 0.0),
+                        ringing=ringing)
+    except SceneError as exc:
+        raise SceneError(f"{where}: {str(exc).removeprefix('material: ')}") from None

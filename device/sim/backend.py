@@ -1,0 +1,415 @@
+"""The ``sim`` backend: a sampled-data physics simulation of the device, hand and samples."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from ..base import DeviceInfo, HapticDevice
+from ..errors import DeviceError, DeviceFaultError
+from ..events import ContactEvent, FaultEvent, Flags, SaturationEvent, WindowResult
+from ..scene import Scene
+from . import kernel as K
+from .params import DeviceParams, HandParams
+from .plant import N_INPUTS, Plant, build_plant, piece_propagators, zoh
+from .tapper import Tapper
+
+__all__ = ["SimDevice", "CompiledScene", "compile_scene"]
+
+_CHUNK_S = 0.1  # device time between progress callbacks / heartbeats in virtual time
+_LIVE_CHUNK_S = 0.001  # pacing granularity in live mode
+
+
+class CompiledScene:
+    """A scene turned into what the servo kernel needs at one servo rate.
+
+    Only what the scene requires is built: virtual scenes get one mode and no
+    contact-switch propagators; spring-only scenes no transient table.
+    """
+
+    def __init__(self, scene: Scene, dev: DeviceParams, hand: HandParams):
+        self.scene = scene
+        self.plant: Plant = build_plant(dev, hand, scene.material, scene.surface_height)
+        p = self.plant
+        dt = dev.dt
+        ns = p.n_states
+        self.tick_prop = np.stack([zoh(p.A[m], p.B[m], dt) for m in range(p.n_modes)])
+        if p.n_modes > 1:
+            h = dt / p.n_sub
+            self.pieces = np.stack([piece_propagators(p.A[m], p.B[m], h)
+                                    for m in range(p.n_modes)])
+        else:
+            self.pieces = np.zeros((1, 1, ns, ns + N_INPUTS))
+        if scene.is_real:
+            self.render = 0
+        elif scene.transient is None:
+            self.render = 1
+        else:
+            self.render = 2
+        self.spring = float(scene.spring or 0.0)
+        if self.render == 2:
+            self.table = np.ascontiguousarray(
+                scene.transient.unit_table(dev.servo_rate_hz, dev.effective_mass), dtype=float)
+        else:
+            self.table = np.zeros(1)
+
+
+def compile_scene(scene: Scene, dev: DeviceParams, hand: HandParams) -> CompiledScene:
+    """Build the kernel inputs of ``scene`` (see :class:`CompiledScene`)."""
+    return CompiledScene(scene, dev, hand)
+
+
+def velocity_weights(dev: DeviceParams) -> np.ndarray:
+    """Least-squares slope weights over the encoder buffer, oldest sample first [1/s]."""
+    n = max(2, int(round(dev.velocity_window_s * dev.servo_rate_hz)) + 1)
+    k = np.arange(n) - (n - 1) / 2.0
+    return k / np.sum(k * k) * dev.servo_rate_hz
+
+
+class SimDevice(HapticDevice):
+    """Simulated haptic device (virtual time by default).
+
+    Parameters
+    ----------
+    device : DeviceParams, optional
+        Hardware parameters; ``rate_hz`` overrides its servo rate.
+    hand : HandParams, optional
+        Impedance of the hand holding the stylus.
+    tapper : Tapper, optional
+        The simulated person's tapping motion during windows.
+    seed : int
+        Seed of the ``numpy.random.Generator`` behind tapping and sensor noise.
+    rate_hz : float, optional [Hz]
+        Servo rate, 1,000–20,000 Hz (default 10,000).
+    live : bool
+        Pace the simulation to the wall clock (busy-wait), for interactive dry runs.
+    noise : bool
+        Add accelerometer noise (turn off for reference comparisons).
+    """
+
+    def __init__(self, device: DeviceParams | None = None, hand: HandParams | None = None,
+                 tapper: Tapper | None = None, seed: int = 0, rate_hz: float | None = None,
+                 live: bool = False, noise: bool = True):
+        dev = device or DeviceParams()
+        if rate_hz is not None:
+            if not 1_000 <= float(rate_hz) <= 20_000:
+                raise ValueError(f"sim servo rate must be 1,000–20,000 Hz, got {rate_hz!r}")
+            dev = dev.with_rate(rate_hz)
+        self.params = dev
+        self.hand = hand or HandParams()
+        self.tapper = tapper or Tapper()
+        self.seed = int(seed)
+        # independent streams, so switching sensor noise off does not change the taps
+        ss = np.random.SeedSequence(self.seed)
+        self.rng_tapping, self.rng_noise = (np.random.default_rng(c) for c in ss.spawn(2))
+        self.live = bool(live)
+        self.noise = bool(noise)
+        self._info = DeviceInfo(
+            backend="sim", model="hapticlab simulated stylus device", serial_number="SIM-0001",
+            firmware="sim", servo_rate_hz=dev.servo_rate_hz, current_limit=dev.current_limit,
+            force_constant=dev.force_constant, effective_mass=dev.effective_mass,
+            watchdog_s=dev.watchdog_s, encoder_resolution=dev.encoder_resolution,
+            accel_range=dev.accel_range)
+        self._vel_w = velocity_weights(dev)
+        self._cache: dict[Scene, CompiledScene] = {}
+        self._scene: CompiledScene | None = None
+        self._x: np.ndarray | None = None
+        self._ist = np.zeros(K.IST, dtype=np.int64)
+        self._fst = np.zeros(K.FST)
+        self._rb = np.zeros(len(self._vel_w))
+        self._tick = 0  # device time in ticks
+        self._t_heartbeat = 0.0
+        self._enabled = False
+        self._homed_clearance: float | None = None
+        self._fault: FaultEvent | None = None
+        self._estop_requested = False
+        self._closed = False
+        self.output_force = 0.0
+
+    @classmethod
+    def from_spec(cls, arg: str | None = None, **options: Any) -> SimDevice:
+        """Factory behind ``open_device("sim")``; ``"sim:RATE"`` sets the servo rate in Hz."""
+        if arg:
+            try:
+                options.setdefault("rate_hz", float(arg))
+            except ValueError:
+                raise DeviceError(f"sim spec 'sim:{arg}': expected a servo rate in Hz, "
+                                  "e.g. 'sim:10000'") from None
+        return cls(**options)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def info(self) -> DeviceInfo:
+        return self._info
+
+    @property
+    def time(self) -> float:
+        """Device time [s]."""
+        return self._tick * self.params.dt
+
+    @property
+    def fault(self) -> FaultEvent | None:
+        return self._fault
+
+    @property
+    def scene(self) -> Scene | None:
+        return self._scene.scene if self._scene else None
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise DeviceError("device is closed")
+
+    # ---------------------------------------------------------------- control
+    def load_scene(self, scene: Scene) -> None:
+        self._check_open()
+        if not isinstance(scene, Scene):
+            raise TypeError(f"load_scene expects a device.Scene, got {type(scene).__name__}")
+        if scene not in self._cache:
+            self._cache[scene] = compile_scene(scene, self.params, self.hand)
+        self._scene = self._cache[scene]
+        self._enabled = False
+        self._homed_clearance = None
+        self.output_force = 0.0
+
+    def home(self, clearance: float | None = None) -> None:
+        """Put the stylus at rest ``clearance`` [m] above the surface (default: the
+        tapper's stroke top) and enable output with a ramp.
+
+        Homing is modelled as completed position control: the state is set, not simulated.
+        """
+        self._check_open()
+        if self._scene is None:
+            raise DeviceError("load a scene before homing")
+        if self._fault is not None:
+            raise DeviceFaultError(f"fault latched ({self._fault.code}): clear it first")
+        c = self.tapper.top if clearance is None else float(clearance)
+        if not (math.isfinite(c) and c > 0):
+            raise ValueError(f"home clearance must be finite and > 0 m, got {clearance!r}")
+        p = self._scene.plant
+        z = p.surface_height + c
+        x = np.zeros(p.n_states)
+        x[K.Z1] = x[K.Z2] = z
+        self._x = x
+        self._ist[:] = 0
+        self._ist[K.IST_ARMED] = 1
+        self._ist[K.IST_PLAY] = -1
+        self._ist[K.IST_FIRST] = -1
+        self._ist[K.IST_STOP] = -1
+        self._ist[K.IST_FAULT_TICK] = -1
+        self._rb[:] = np.floor(z / self.params.encoder_resolution + 0.5) * \
+            self.params.encoder_resolution
+        self._homed_clearance = c
+        self._enabled = True
+        self.output_force = 0.0
+        self.heartbeat()
+
+    def heartbeat(self) -> None:
+        self._t_heartbeat = self.time
+
+    def estop(self) -> None:
+        self._estop_requested = True
+        self.output_force = 0.0
+        if self._fault is None:
+            self._fault = FaultEvent(self.time, "estop", "emergency stop (latched)")
+
+    def clear_fault(self) -> None:
+        self._check_open()
+        self._fault = None
+        self._estop_requested = False
+        self._enabled = False  # output comes back only through home(), ramped
+
+    def zero(self) -> None:
+        self._enabled = False
+        self.output_force = 0.0
+
+    def close(self) -> None:
+        self.zero()
+        self._closed = True
+
+    # ----------------------------------------------------------------- window
+    def run_window(self, duration: float = 5.0, *, from_first_contact: bool = True,
+                   timeout: float = 30.0,
+                   on_progress: Callable[[float, WindowResult], None] | None = None,
+                   heartbeats: bool = True) -> WindowResult:
+        """Simulate one tapping window (see :meth:`HapticDevice.run_window`).
+
+        ``heartbeats=False`` makes the simulated host go silent for the window, so the
+        watchdog trips ``watchdog_s`` after the last heartbeat.
+        """
+        self._check_open()
+        if self._fault is not None:
+            raise DeviceFaultError(f"fault latched ({self._fault.code}): clear it first")
+        if self._scene is None or self._x is None or not self._enabled:
+            raise DeviceError("load a scene and home the device before running a window")
+        if not (duration > 0 and math.isfinite(duration)):
+            raise ValueError(f"window duration must be finite and > 0 s, got {duration!r}")
+        dev, cs = self.params, self._scene
+        dt = dev.dt
+        total_s = (timeout + duration) if from_first_contact else duration
+        plan = replace(self.tapper, top=self._homed_clearance).plan(
+            self.rng_tapping, total_s + 1.0, cs.plant.surface_height)
+        n_max = int(math.ceil(total_s / dt))
+        stop_after = int(round(duration / dt)) if from_first_contact else -1
+        if not from_first_contact:
+            self._ist[K.IST_STOP] = n_max
+        else:
+            self._ist[K.IST_STOP] = -1
+        self._ist[K.IST_FIRST] = -1
+        self._ist[K.IST_NEV] = 0
+        tick0 = self._tick
+        buf = _Buffers(min(n_max, int(round((duration + 2.0) / dt))), plan, self.hand, dt)
+        ev_tick = np.zeros(4096, dtype=np.int64)
+        ev_vel = np.zeros(4096)
+        chunk = max(1, int(round((_LIVE_CHUNK_S if self.live else _CHUNK_S) / dt)))
+        ramp_ticks = int(round(dev.ramp_s / dt))
+        wall0 = time.perf_counter()
+        late: list[float] = []
+        n = 0
+        while n < n_max:
+            if heartbeats:
+                self.heartbeat()
+            n1 = min(n + chunk, n_max)
+            buf.ensure(n1)
+            wd = (self._t_heartbeat + dev.watchdog_s - tick0 * dt) / dt
+            zero_from = int(math.ceil(wd - 1e-9)) if wd < 2**62 else 2**62
+            if self._estop_requested:
+                zero_from = min(zero_from, n)
+            n_done = K.run_ticks(
+                n, n1, self._x, self._ist, self._fst, self._rb,
+                cs.tick_prop, cs.pieces, cs.plant.n_sub, cs.plant.accel_row,
+                cs.plant.surface_height, cs.plant.contact_stiffness, cs.plant.contact_damping,
+                cs.plant.ring_gain, buf.u_hand, _EMPTY,
+                cs.render, cs.spring, dev.encoder_resolution, self._vel_w,
+                dev.contact_hysteresis, cs.table,
+                dev.force_constant, dev.current_limit, ramp_ticks, zero_from, stop_after,
+                buf.pos, buf.fcmd, buf.fout, buf.cur, buf.acc, buf.flags, buf.z2, buf.v2, buf.a2,
+                ev_tick, ev_vel)
+            self._tick = tick0 + n_done
+            n = n_done
+            if self.live:
+                target = wall0 + n * dt
+                now = time.perf_counter()
+                late.append(now - target)
+                while time.perf_counter() < target:  # busy-wait: sleep is too coarse
+                    pass
+            if n_done < n1:
+                break  # window complete
+            if from_first_contact and self._ist[K.IST_FIRST] < 0 and n * dt >= timeout:
+                break  # nobody tapped
+            if on_progress is not None:
+                on_progress(n * dt, self._result(buf, n, tick0, ev_tick, ev_vel))
+        res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True)
+        res.timed_out = from_first_contact and res.t_first_contact is None
+        if self.live:
+            wall = time.perf_counter() - wall0
+            lat = np.asarray(late)
+            res.timing = {"achieved_rate_hz": n / wall if wall > 0 else float("nan"),
+                          "lateness_p50_s": float(np.median(lat)) if lat.size else 0.0,
+                          "lateness_p99_s": float(np.quantile(lat, 0.99)) if lat.size else 0.0,
+                          "jitter_sd_s": float(np.std(np.diff(lat))) if lat.size > 1 else 0.0}
+        self.output_force = float(buf.cur[n - 1] * dev.force_constant) if n else 0.0
+        if self._fault is not None:
+            self.output_force = 0.0
+        return res
+
+    def _result(self, buf: _Buffers, n: int, tick0: int, ev_tick, ev_vel,
+                final: bool = False) -> WindowResult:
+        dev = self.params
+        dt = dev.dt
+        nev = min(int(self._ist[K.IST_NEV]), len(ev_tick))
+        contacts = [ContactEvent((tick0 + int(ev_tick[i])) * dt, float(ev_vel[i]))
+                    for i in range(nev)]
+        first = self._ist[K.IST_FIRST]
+        res = WindowResult(rate_hz=dev.servo_rate_hz,
+                           t_first_contact=(tick0 + first) * dt if first >= 0 else None,
+                           contacts=contacts)
+        if not final:
+            return res
+        flags = buf.flags[:n].astype(np.uint16)
+        fcmd = buf.fcmd[:n].copy()
+        sat = (flags & np.uint16(Flags.SATURATED)) != 0
+        res.saturations = [SaturationEvent((tick0 + a) * dt,
+                                           float(np.max(np.abs(fcmd[a:b]))) / dev.force_constant,
+                                           (b - a) * dt) for a, b in _runs(sat)]
+        ft = int(self._ist[K.IST_FAULT_TICK])
+        if ft >= 0:  # the kernel zeroed output at tick ft
+            t_f = (tick0 + ft) * dt
+            if self._estop_requested:
+                self._fault = FaultEvent(t_f, "estop", "emergency stop (latched): output zeroed")
+            elif self._fault is None:
+                self._fault = FaultEvent(t_f, "watchdog",
+                                         f"no heartbeat for {dev.watchdog_s:g} s: output zeroed")
+            res.faults = [self._fault]
+        acc = buf.acc[:n].copy()
+        if self.noise and dev.accel_noise_rms > 0:
+            acc += self.rng_noise.normal(0.0, dev.accel_noise_rms, n)
+        clipped = np.abs(acc) >= dev.accel_range
+        acc = np.clip(acc, -dev.accel_range, dev.accel_range)
+        lsb = 2 * dev.accel_range / 2**dev.accel_bits
+        acc = np.round(acc / lsb) * lsb
+        flags[clipped] |= np.uint16(Flags.ACCEL_CLIPPED)
+        pos = buf.pos[:n].copy()
+        w = self._vel_w
+        padded = np.concatenate([np.full(len(w) - 1, pos[0] if n else 0.0), pos])
+        vel = np.convolve(padded, w[::-1], mode="valid")
+        res.traces = {
+            "t": (tick0 + np.arange(n)) * dt,
+            "position": pos,
+            "velocity": vel,
+            "force_cmd": fcmd,
+            "force_out": buf.fout[:n].copy(),
+            "current": buf.cur[:n].copy(),
+            "accel": acc,
+            "flags": flags,
+            "true_position": buf.z2[:n].copy(),
+            "true_velocity": buf.v2[:n].copy(),
+            "true_accel": buf.a2[:n].copy(),
+        }
+        return res
+
+
+_EMPTY = np.zeros(0)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index pairs of the True runs of a boolean array."""
+    if not mask.any():
+        return []
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
+
+
+class _Buffers:
+    """Growable per-tick arrays of a window, with the hand input computed alongside."""
+
+    NAMES = ("pos", "fcmd", "fout", "cur", "acc", "z2", "v2", "a2")
+
+    def __init__(self, capacity: int, plan, hand: HandParams, dt: float):
+        self.plan, self.hand, self.dt = plan, hand, dt
+        self.n = 0
+        for name in self.NAMES:
+            setattr(self, name, np.zeros(0))
+        self.flags = np.zeros(0, dtype=np.int64)
+        self.u_hand = np.zeros(0)
+        self.ensure(capacity)
+
+    def ensure(self, n: int) -> None:
+        if n <= self.n:
+            return
+        new = max(n, 2 * self.n)
+        for name in self.NAMES:
+            a = np.zeros(new)
+            a[: self.n] = getattr(self, name)[: self.n]
+            setattr(self, name, a)
+        f = np.zeros(new, dtype=np.int64)
+        f[: self.n] = self.flags[: self.n]
+        self.flags = f
+        zr, vr = self.plan.reference(np.arange(self.n, new) * self.dt)
+        self.u_hand = np.concatenate([self.u_hand[: self.n],
+                                      self.hand.stiffness * zr + self.hand.damping * vr])
+        self.n = new

@@ -1,0 +1,220 @@
+"""The compiled servo loop of the simulator.
+
+One call advances the simulation over a range of servo ticks. Per tick, in order:
+
+1. sample the encoder (motor-side position, quantized) and keep it in a ring buffer;
+2. contact logic on the encoder: a contact starts when the reading falls below the
+   surface while armed; it re-arms once the reading is ``hysteresis`` above it. At a
+   contact the incoming speed is the least-squares slope of the buffered readings;
+3. rendering (virtual scenes only): spring K·(penetration of the encoder reading),
+   plus, in transient scenes, the transient table scaled by the estimated speed;
+   output ramp after enable; zero on a latched fault or when the watchdog deadline
+   has passed; current clamp with saturation flag;
+4. record the tick's outputs;
+5. propagate the continuous plant over the tick with the command held (exact ZOH).
+   Real samples switch between free and contact modes; a switch inside a tick is
+   located by bisection with precomputed power-of-two propagators, so the physics of
+   a real contact does not depend on the servo rate.
+
+Per-tick work depends on the scene: ``render`` 0 (real sample) runs no rendering
+code, 1 (spring) no transient code, 2 (spring + transient) both.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["run_ticks", "propagate_linear", "IST", "FST"]
+
+# integer state slots
+IST_MODE, IST_ARMED, IST_PLAY, IST_SINCE_ENABLE, IST_FIRST, IST_NEV, IST_RB, IST_FAULT, \
+    IST_STOP, IST_FAULT_TICK, IST_SAT = range(11)
+IST = 11
+# float state slots
+FST_SCALE = 0
+FST = 1
+
+F_CONTACT, F_SAT, F_TRANSIENT, F_ZEROED, F_RAMP = 1, 2, 4, 8, 16
+
+Z1, V1, Z2, V2, FA, Y, YD, Q, QD = range(9)
+
+
+@njit(cache=True)
+def _apply(P, x, u, out):
+    """out = P @ [x; u] for P of shape (ns, ns+nu)."""
+    ns = x.shape[0]
+    nu = u.shape[0]
+    for i in range(ns):
+        s = 0.0
+        for j in range(ns):
+            s += P[i, j] * x[j]
+        for j in range(nu):
+            s += P[i, ns + j] * u[j]
+        out[i] = s
+
+
+@njit(cache=True)
+def propagate_linear(P, x0, u, n, out):
+    """Step x ← P·[x; u] ``n`` times, storing each state (rows of ``out``)."""
+    x = x0.copy()
+    tmp = np.empty_like(x)
+    for k in range(n):
+        _apply(P, x, u, tmp)
+        x[:] = tmp
+        out[k, :] = x
+
+
+@njit(cache=True)
+def _crossed(mode, x, h, ks, bs):
+    if mode == 0:  # free → contact when the tip is below the surface and moving in
+        return x[Z2] < h and x[V2] < 0.0
+    # contact → free when the sample would have to pull
+    return ks * (h - x[Z2]) - bs * x[V2] <= 0.0
+
+
+@njit(cache=True)
+def _advance_switching(pieces, x, u, ist, h, ks, bs, ring_gain, has_ring, tmp):
+    """Advance one substep in a two-mode (real contact) plant, locating switches."""
+    levels = pieces.shape[1] - 1
+    remaining = np.int64(1) << levels
+    j = levels
+    switches = 0
+    while remaining > 0:
+        while (np.int64(1) << j) > remaining:
+            j -= 1
+        mode = ist[IST_MODE]
+        _apply(pieces[mode, j], x, u, tmp)
+        if _crossed(mode, tmp, h, ks, bs) and switches < 64:
+            if j > 0:
+                j -= 1
+                continue
+            # finest piece: accept it and switch mode
+            x[:] = tmp
+            remaining -= 1
+            switches += 1
+            if mode == 0:
+                ist[IST_MODE] = 1
+                if has_ring:
+                    x[QD] += ring_gain * x[V2]
+            else:
+                ist[IST_MODE] = 0
+            j = levels
+        else:
+            x[:] = tmp
+            remaining -= np.int64(1) << j
+
+
+@njit(cache=True)
+def run_ticks(n0, n1, x, ist, fst, rb,
+              tick_prop, pieces, n_sub, accel_row,
+              h, ks, bs, ring_gain,
+              u_hand, f_ext,
+              render, K, enc_res, vel_w, hyst, table,
+              kt, i_max, ramp_ticks, zero_from, stop_after,
+              o_pos, o_fcmd, o_fout, o_cur, o_acc, o_flags, o_z2, o_v2, o_a2,
+              ev_tick, ev_vel):
+    """Advance ticks n0..n1-1 (indices into the input and output arrays).
+
+    Returns the first tick not simulated (n1, or earlier when ``ist[IST_STOP]`` is reached).
+    """
+    ns = x.shape[0]
+    u = np.zeros(3)
+    tmp = np.empty(ns)
+    n_rb = rb.shape[0]
+    has_ring = ns > Q
+    n_modes = tick_prop.shape[0]
+    inv_res = 1.0 / enc_res
+    n_tab = table.shape[0]
+    has_ext = f_ext.shape[0] > 0
+    for n in range(n0, n1):
+        if ist[IST_STOP] >= 0 and n >= ist[IST_STOP]:
+            return n
+        # 1. encoder
+        enc = np.floor(x[Z1] * inv_res + 0.5) * enc_res
+        head = ist[IST_RB]
+        rb[head] = enc
+        head = (head + 1) % n_rb
+        ist[IST_RB] = head
+        flags = 0
+        # 2. contact logic
+        if enc < h:
+            flags |= F_CONTACT
+            if ist[IST_ARMED] == 1:
+                ist[IST_ARMED] = 0
+                slope = 0.0
+                for k in range(n_rb):  # oldest sample is at `head`
+                    slope += vel_w[k] * rb[(head + k) % n_rb]
+                speed = -slope
+                e = ist[IST_NEV]
+                if e < ev_tick.shape[0]:
+                    ev_tick[e] = n
+                    ev_vel[e] = speed
+                ist[IST_NEV] = e + 1
+                if ist[IST_FIRST] < 0:
+                    ist[IST_FIRST] = n
+                    if stop_after >= 0:  # a window measured from the first contact
+                        ist[IST_STOP] = n + stop_after
+                if render == 2:
+                    ist[IST_PLAY] = 0
+                    fst[FST_SCALE] = speed
+        elif enc > h + hyst:
+            ist[IST_ARMED] = 1
+        # 3. rendering
+        fc = 0.0
+        if render >= 1:
+            if enc < h:
+                fc = K * (h - enc)
+            if render == 2 and ist[IST_PLAY] >= 0:
+                fc += fst[FST_SCALE] * table[ist[IST_PLAY]]
+                flags |= F_TRANSIENT
+                ist[IST_PLAY] += 1
+                if ist[IST_PLAY] >= n_tab:
+                    ist[IST_PLAY] = -1
+        if has_ext:
+            fc += f_ext[n]
+        since = ist[IST_SINCE_ENABLE]
+        if since < ramp_ticks:
+            fc *= (since + 1.0) / ramp_ticks
+            flags |= F_RAMP
+        ist[IST_SINCE_ENABLE] = since + 1
+        if ist[IST_FAULT] == 0 and n >= zero_from:
+            ist[IST_FAULT] = 1
+            ist[IST_FAULT_TICK] = n
+        cur = fc / kt
+        if ist[IST_FAULT] != 0:
+            cur = 0.0
+            flags |= F_ZEROED
+        elif cur > i_max:
+            cur = i_max
+            flags |= F_SAT
+        elif cur < -i_max:
+            cur = -i_max
+            flags |= F_SAT
+        u[0] = cur * kt
+        u[1] = u_hand[n]
+        u[2] = 1.0
+        # 4. record
+        o_pos[n] = enc
+        o_fcmd[n] = fc
+        o_fout[n] = x[FA]
+        o_cur[n] = cur
+        o_acc[n] = x[Y]
+        o_flags[n] = flags
+        o_z2[n] = x[Z2]
+        o_v2[n] = x[V2]
+        mode = ist[IST_MODE]
+        a2 = 0.0
+        for j in range(ns):
+            a2 += accel_row[mode, j] * x[j]
+        for j in range(3):
+            a2 += accel_row[mode, ns + j] * u[j]
+        o_a2[n] = a2
+        # 5. propagate
+        if n_modes == 1:
+            _apply(tick_prop[0], x, u, tmp)
+            x[:] = tmp
+        else:
+            for _ in range(n_sub):
+                _advance_switching(pieces, x, u, ist, h, ks, bs, ring_gain, has_ring, tmp)
+    return n1
