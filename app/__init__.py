@@ -1,0 +1,6 @@
+"""The experiment application: command line, runner, screens, console, audio, recorder.
+
+The only package that imports PsychoPy (lazily, in the screen module).
+"""
+
+__all__: list[str] = []

@@ -99,8 +99,8 @@ class HapticDevice(ABC):
     @abstractmethod
     def run_window(self, duration: float = 5.0, *, from_first_contact: bool = True,
                    timeout: float = 30.0,
-                   on_progress: Callable[[float, WindowResult], None] | None = None
-                   ) -> WindowResult:
+                   on_progress: Callable[[float, WindowResult], None] | None = None,
+                   heartbeats: bool = True) -> WindowResult:
         """Render the loaded scene for one tapping window.
 
         Parameters
@@ -111,7 +111,10 @@ class HapticDevice(ABC):
             Longest wait for a first contact; the result has ``timed_out`` set.
         on_progress : callable, optional
             Called as ``on_progress(t, partial_result)`` a few times per second of
-            device time (live velocities, operator e-stop, heartbeats).
+            device time (live velocities, operator e-stop).
+        heartbeats : bool
+            Keep the host heartbeat going during the window (default). False makes the
+            host go silent, which trips the watchdog: the device-safety test.
         """
 
     @abstractmethod
@@ -130,6 +133,11 @@ class HapticDevice(ABC):
     @abstractmethod
     def fault(self) -> FaultEvent | None:
         """The latched fault, or None."""
+
+    @property
+    @abstractmethod
+    def output_force(self) -> float:
+        """Force [N] the device is commanding right now (0 when idle, zeroed or closed)."""
 
     @abstractmethod
     def zero(self) -> None:

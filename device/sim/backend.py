@@ -129,7 +129,7 @@ class SimDevice(HapticDevice):
         self._fault: FaultEvent | None = None
         self._estop_requested = False
         self._closed = False
-        self.output_force = 0.0
+        self._output_force = 0.0
 
     @classmethod
     def from_spec(cls, arg: str | None = None, **options: Any) -> SimDevice:
@@ -157,6 +157,10 @@ class SimDevice(HapticDevice):
         return self._fault
 
     @property
+    def output_force(self) -> float:
+        return self._output_force
+
+    @property
     def scene(self) -> Scene | None:
         return self._scene.scene if self._scene else None
 
@@ -174,7 +178,7 @@ class SimDevice(HapticDevice):
         self._scene = self._cache[scene]
         self._enabled = False
         self._homed_clearance = None
-        self.output_force = 0.0
+        self._output_force = 0.0
 
     def home(self, clearance: float | None = None) -> None:
         """Put the stylus at rest ``clearance`` [m] above the surface (default: the
@@ -205,7 +209,7 @@ class SimDevice(HapticDevice):
             self.params.encoder_resolution
         self._homed_clearance = c
         self._enabled = True
-        self.output_force = 0.0
+        self._output_force = 0.0
         self.heartbeat()
 
     def heartbeat(self) -> None:
@@ -213,7 +217,7 @@ class SimDevice(HapticDevice):
 
     def estop(self) -> None:
         self._estop_requested = True
-        self.output_force = 0.0
+        self._output_force = 0.0
         if self._fault is None:
             self._fault = FaultEvent(self.time, "estop", "emergency stop (latched)")
 
@@ -225,7 +229,7 @@ class SimDevice(HapticDevice):
 
     def zero(self) -> None:
         self._enabled = False
-        self.output_force = 0.0
+        self._output_force = 0.0
 
     def close(self) -> None:
         self.zero()
@@ -287,6 +291,7 @@ class SimDevice(HapticDevice):
                 cs.render, cs.spring, dev.encoder_resolution, self._vel_w,
                 dev.contact_hysteresis, cs.table,
                 dev.force_constant, dev.current_limit, ramp_ticks, zero_from, stop_after,
+                dev.servo_rate_hz,
                 buf.pos, buf.fcmd, buf.fout, buf.cur, buf.acc, buf.flags, buf.z2, buf.v2, buf.a2,
                 ev_tick, ev_vel)
             self._tick = tick0 + n_done
@@ -312,9 +317,9 @@ class SimDevice(HapticDevice):
                           "lateness_p50_s": float(np.median(lat)) if lat.size else 0.0,
                           "lateness_p99_s": float(np.quantile(lat, 0.99)) if lat.size else 0.0,
                           "jitter_sd_s": float(np.std(np.diff(lat))) if lat.size > 1 else 0.0}
-        self.output_force = float(buf.cur[n - 1] * dev.force_constant) if n else 0.0
+        self._output_force = float(buf.cur[n - 1] * dev.force_constant) if n else 0.0
         if self._fault is not None:
-            self.output_force = 0.0
+            self._output_force = 0.0
         return res
 
     def _result(self, buf: _Buffers, n: int, tick0: int, ev_tick, ev_vel,
@@ -331,7 +336,7 @@ class SimDevice(HapticDevice):
         if not final:
             return res
         flags = buf.flags[:n].astype(np.uint16)
-        fcmd = buf.fcmd[:n].copy()
+        fcmd = buf.fcmd[:n]
         sat = (flags & np.uint16(Flags.SATURATED)) != 0
         res.saturations = [SaturationEvent((tick0 + a) * dt,
                                            float(np.max(np.abs(fcmd[a:b]))) / dev.force_constant,
@@ -353,7 +358,7 @@ class SimDevice(HapticDevice):
         lsb = 2 * dev.accel_range / 2**dev.accel_bits
         acc = np.round(acc / lsb) * lsb
         flags[clipped] |= np.uint16(Flags.ACCEL_CLIPPED)
-        pos = buf.pos[:n].copy()
+        pos = buf.pos[:n]
         w = self._vel_w
         padded = np.concatenate([np.full(len(w) - 1, pos[0] if n else 0.0), pos])
         vel = np.convolve(padded, w[::-1], mode="valid")
@@ -362,13 +367,13 @@ class SimDevice(HapticDevice):
             "position": pos,
             "velocity": vel,
             "force_cmd": fcmd,
-            "force_out": buf.fout[:n].copy(),
-            "current": buf.cur[:n].copy(),
+            "force_out": buf.fout[:n],
+            "current": buf.cur[:n],
             "accel": acc,
             "flags": flags,
-            "true_position": buf.z2[:n].copy(),
-            "true_velocity": buf.v2[:n].copy(),
-            "true_accel": buf.a2[:n].copy(),
+            "true_position": buf.z2[:n],
+            "true_velocity": buf.v2[:n],
+            "true_accel": buf.a2[:n],
         }
         return res
 
@@ -409,7 +414,9 @@ class _Buffers:
         f = np.zeros(new, dtype=np.int64)
         f[: self.n] = self.flags[: self.n]
         self.flags = f
-        zr, vr = self.plan.reference(np.arange(self.n, new) * self.dt)
-        self.u_hand = np.concatenate([self.u_hand[: self.n],
+        # the hand's pull at every tick, plus one beyond for its slope over the last tick
+        start = max(0, self.n)
+        zr, vr = self.plan.reference(np.arange(start, new + 1) * self.dt)
+        self.u_hand = np.concatenate([self.u_hand[:start],
                                       self.hand.stiffness * zr + self.hand.damping * vr])
         self.n = new

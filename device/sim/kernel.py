@@ -37,7 +37,7 @@ FST = 1
 
 F_CONTACT, F_SAT, F_TRANSIENT, F_ZEROED, F_RAMP = 1, 2, 4, 8, 16
 
-Z1, V1, Z2, V2, FA, Y, YD, Q, QD = range(9)
+Z1, V1, Z2, V2, FA, Y, YD, FH, Q, QD = range(10)
 
 
 @njit(cache=True)
@@ -111,10 +111,12 @@ def run_ticks(n0, n1, x, ist, fst, rb,
               h, ks, bs, ring_gain,
               u_hand, f_ext,
               render, K, enc_res, vel_w, hyst, table,
-              kt, i_max, ramp_ticks, zero_from, stop_after,
+              kt, i_max, ramp_ticks, zero_from, stop_after, rate,
               o_pos, o_fcmd, o_fout, o_cur, o_acc, o_flags, o_z2, o_v2, o_a2,
               ev_tick, ev_vel):
     """Advance ticks n0..n1-1 (indices into the input and output arrays).
+
+    ``u_hand`` holds the hand's pull at every tick and one beyond ``n1``.
 
     Returns the first tick not simulated (n1, or earlier when ``ist[IST_STOP]`` is reached).
     """
@@ -192,7 +194,8 @@ def run_ticks(n0, n1, x, ist, fst, rb,
             cur = -i_max
             flags |= F_SAT
         u[0] = cur * kt
-        u[1] = u_hand[n]
+        x[FH] = u_hand[n]  # the hand's pull, exact at each tick ...
+        u[1] = (u_hand[n + 1] - u_hand[n]) * rate  # ... and linear in between
         u[2] = 1.0
         # 4. record
         o_pos[n] = enc

@@ -9,13 +9,16 @@ States (SI units)::
     4 fa   force delivered by the amplifier/actuator [N]
     5 y    accelerometer output before noise/ADC [m/s²]
     6 yd   its derivative [m/s³]
-    7 q    sample ringing acceleration [m/s²]   (only for real samples that ring)
-    8 qd   its derivative [m/s³]
+    7 fh   the hand's pull k_h·z_ref + b_h·v_ref towards its intended motion [N]
+    8 q    sample ringing acceleration [m/s²]   (only for real samples that ring)
+    9 qd   its derivative [m/s³]
 
-Inputs, held constant over each servo tick (zero-order hold)::
+Inputs, held constant over each servo tick::
 
-    0 f_cmd   commanded force after the current clamp [N]
-    1 f_hand  k_h·z_ref + b_h·v_ref, the hand's pull towards its intended motion [N]
+    0 f_cmd   commanded force after the current clamp [N] (zero-order hold: what a
+              sampled-data device does)
+    1 fh_rate slope of the hand's pull over the tick [N/s] (the hand is a continuous
+              input: its pull is interpolated linearly between ticks, not held)
     2 one     constant 1 (carries k_s·h of the contact spring)
 
 A real sample adds a second *mode* (in contact), in which the tip feels
@@ -39,8 +42,8 @@ from .params import DeviceParams, HandParams
 
 __all__ = ["Plant", "build_plant", "zoh", "piece_propagators", "N_INPUTS"]
 
-Z1, V1, Z2, V2, FA, Y, YD, Q, QD = range(9)
-U_CMD, U_HAND, U_ONE = range(3)
+Z1, V1, Z2, V2, FA, Y, YD, FH, Q, QD = range(10)
+U_CMD, U_HAND_RATE, U_ONE = range(3)
 N_INPUTS = 3
 N_LEVELS = 30  # bisection depth for locating a contact switch inside a substep
 
@@ -84,7 +87,7 @@ class Plant:
 def _mode_matrices(dev: DeviceParams, hand: HandParams, ringing: Ringing | None,
                    contact: Material | None, h: float) -> tuple[np.ndarray, np.ndarray]:
     """A and B of one mode; ``contact`` is the sample touching the tip (None: free)."""
-    ns = 9 if ringing is not None else 7
+    ns = 10 if ringing is not None else 8
     m1 = dev.motor_mass
     m2 = dev.tip_mass + hand.mass
     A = np.zeros((ns, ns))
@@ -97,7 +100,8 @@ def _mode_matrices(dev: DeviceParams, hand: HandParams, ringing: Ringing | None,
     A[Z2, V2] = 1.0
     A[V2, Z1], A[V2, Z2] = kl / m2, -(kl + hand.stiffness) / m2
     A[V2, V1], A[V2, V2] = bl / m2, -(bl + hand.damping) / m2
-    B[V2, U_HAND] = 1.0 / m2
+    A[V2, FH] = 1.0 / m2
+    B[FH, U_HAND_RATE] = 1.0
     if contact is not None:
         A[V2, Z2] -= contact.stiffness / m2
         A[V2, V2] -= contact.damping / m2
@@ -127,7 +131,7 @@ def build_plant(dev: DeviceParams, hand: HandParams, material: Material | None =
     """Assemble the continuous-time model for one scene.
 
     Only what the scene requires is modelled: a virtual scene has one mode and
-    seven states; a real sample adds the contact mode, and ringing adds two states.
+    eight states; a real sample adds the contact mode, and ringing adds two states.
     """
     ringing = material.ringing if material is not None else None
     modes = [_mode_matrices(dev, hand, ringing, None, surface_height)]

@@ -1,0 +1,104 @@
+"""The ``hapticlab`` command line.
+
+User errors (bad specs, files, values) print one clear line to stderr and exit 2,
+never a traceback. Heavy modules are imported inside the command that needs them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+
+__all__ = ["main"]
+
+
+class UserError(Exception):
+    """An error in what the user asked for; printed without a traceback."""
+
+
+def _device_selftest(args: argparse.Namespace) -> int:
+    from device import DeviceError, open_device
+    from device.suite import run_selftest
+
+    try:
+        open_device(args.spec).close()
+    except (DeviceError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+    report = run_selftest(args.spec, lambda: open_device(args.spec))
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        from rich.console import Console
+        from rich.table import Table
+
+        table = Table(title=f"device self-test: {args.spec}")
+        table.add_column("check")
+        table.add_column("result")
+        table.add_column("detail")
+        for row in report["checks"]:
+            table.add_row(row["name"], "[green]ok[/]" if row["ok"] else "[red]FAIL[/]",
+                          row["detail"])
+        Console().print(table)
+        print(f"{report['passed']} passed, {report['failed']} failed")
+    return 0 if report["failed"] == 0 else 1
+
+
+def _bench(args: argparse.Namespace) -> int:
+    import importlib
+
+    try:
+        module = importlib.import_module(f"benchmarks.{args.what}")
+    except ModuleNotFoundError:
+        raise UserError(f"no benchmark named {args.what!r}; available: sim") from None
+    return module.main(args)
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from app.demo import run_demo
+
+    return run_demo(seed=args.seed)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="hapticlab",
+        description="Psychophysics of haptic contact realism: devices, protocols, analysis.")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    dev = sub.add_parser("device", help="device tools (selftest)")
+    dsub = dev.add_subparsers(dest="device_command", required=True, metavar="ACTION")
+    st = dsub.add_parser("selftest", help="run the backend-independent checks against a device")
+    st.add_argument("spec", help="device spec, e.g. sim or serial:/dev/ttyACM0")
+    st.add_argument("--json", action="store_true", help="print a JSON summary")
+    st.set_defaults(func=_device_selftest)
+
+    b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
+    b.add_argument("what", help="which benchmark: sim")
+    b.add_argument("--json", action="store_true", help="print JSON rows")
+    b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
+    b.set_defaults(func=_bench)
+
+    d = sub.add_parser("demo", help="what `make demo` runs: a simulated tap window per sample")
+    d.add_argument("--seed", type=int, default=1)
+    d.set_defaults(func=_demo)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except UserError as exc:
+        print(f"hapticlab: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("hapticlab: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,38 @@
+"""Helpers shared by the benchmarks: medians of repeats and table printing."""
+
+from __future__ import annotations
+
+import json
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+__all__ = ["median_time", "print_table", "emit"]
+
+
+def median_time(fn: Callable[[], Any], repeats: int) -> float:
+    """Median wall time [s] of ``repeats`` calls (machines are shared and noisy)."""
+    times = []
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title)
+    for c in columns:
+        table.add_column(c, no_wrap=True)
+    for r in rows:
+        table.add_row(*[str(x) for x in r])
+    Console(width=160).print(table)
+
+
+def emit(payload: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(payload, indent=2))

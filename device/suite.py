@@ -1,0 +1,253 @@
+"""Backend-independent device checks: the same contract for ``sim`` and ``serial:…``.
+
+Each check opens a fresh device through ``opener`` (a zero-argument callable returning
+a :class:`~device.base.HapticDevice`), exercises one promise of the interface and
+returns a short detail string, or raises :class:`CheckFailed`. The pytest suite
+(``tests/device/test_backend_suite.py``) and ``hapticlab device selftest SPEC`` run
+the same functions.
+
+The scenes here are test fixtures with physical values from SPEC §1.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from .base import HapticDevice
+from .errors import DeviceError, DeviceFaultError
+from .events import Flags, WindowResult
+from .scene import Material, Pulse, Ringing, Scene
+
+__all__ = ["CHECKS", "CheckFailed", "run_selftest", "SUITE_SCENES"]
+
+Opener = Callable[[], HapticDevice]
+
+SUITE_SCENES = {
+    "wood": Scene("wood", material=Material(70_000.0, 40.0, Ringing(-1500.0, 600.0, 592.0))),
+    "firm_spring": Scene("firm_spring", spring=680.0),
+    "pulse_firm": Scene("pulse_firm", spring=680.0, transient=Pulse(5.7, 0.020)),
+    "hard_pulse": Scene("hard_pulse", spring=680.0, transient=Pulse(200.0, 0.010)),
+}
+
+
+class CheckFailed(AssertionError):
+    """A device check did not hold; the message says what was seen."""
+
+
+def _require(cond: bool, msg: str) -> None:
+    if not cond:
+        raise CheckFailed(msg)
+
+
+def _window(dev: HapticDevice, scene: Scene, duration: float = 1.0, **kw) -> WindowResult:
+    dev.load_scene(scene)
+    dev.home()
+    return dev.run_window(duration, **kw)
+
+
+def _tick_of(res: WindowResult, t: float) -> int:
+    return int(round((t - res.traces["t"][0]) * res.rate_hz))
+
+
+def check_info(opener: Opener) -> str:
+    with opener() as dev:
+        i = dev.info
+        _require(1_000 <= i.servo_rate_hz <= 20_000, f"servo rate {i.servo_rate_hz} Hz")
+        for name in ("current_limit", "force_constant", "effective_mass", "watchdog_s",
+                     "encoder_resolution", "accel_range"):
+            v = getattr(i, name)
+            _require(math.isfinite(v) and v > 0, f"info.{name} = {v!r}")
+        return f"{i.model} at {i.servo_rate_hz:g} Hz, {i.max_force:.2f} N max"
+
+
+def check_real_sample(opener: Opener) -> str:
+    with opener() as dev:
+        res = _window(dev, SUITE_SCENES["wood"], 1.5)
+        _require(len(res.contacts) >= 1, "no contact detected on a real sample")
+        _require(not res.saturations, "a real sample reported saturation")
+        cur = res.traces["current"]
+        _require(bool(np.all(cur == 0)), f"real sample was rendered: |I| up to {np.abs(cur).max()}")
+        v = res.velocities
+        _require(bool(np.all((v > 0) & (v < 1.0))), f"implausible incoming speeds {v}")
+        return f"{len(v)} contacts, speeds {v.min():.3f}–{v.max():.3f} m/s"
+
+
+def check_spring_law(opener: Opener) -> str:
+    with opener() as dev:
+        sc = SUITE_SCENES["firm_spring"]
+        res = _window(dev, sc, 1.0)
+        tr = res.traces
+        pen = np.maximum(sc.surface_height - tr["position"], 0.0)
+        steady = (tr["flags"] & Flags.RAMP) == 0
+        expect = sc.spring * pen
+        err = np.abs(tr["force_cmd"] - expect)[steady]
+        _require(err.size > 0 and float(err.max()) <= 1e-9 * max(1.0, float(expect.max())),
+                 f"force_cmd differs from K·penetration by up to {err.max():.3g} N")
+        _require(float(expect.max()) > 0, "the stylus never penetrated the virtual spring")
+        return f"F = K·p holds on {int(steady.sum())} ticks (peak {expect.max():.2f} N)"
+
+
+def check_transient_scaling(opener: Opener) -> str:
+    with opener() as dev:
+        sc = SUITE_SCENES["pulse_firm"]
+        res = _window(dev, sc, 1.5)
+        tr = res.traces
+        _require(len(res.contacts) >= 1, "no contact")
+        pulse = sc.transient
+        n_pulse = int(round(pulse.duration * res.rate_hz))
+        worst = 0.0
+        for c in res.contacts:
+            i = _tick_of(res, c.t)
+            spring = sc.spring * max(sc.surface_height - tr["position"][i], 0.0)
+            worst = max(worst, abs(tr["force_cmd"][i] - spring - pulse.gain * c.velocity))
+            on = (tr["flags"][i:i + n_pulse + 2] & Flags.TRANSIENT) != 0
+            _require(int(on.sum()) == n_pulse,
+                     f"pulse played {int(on.sum())} ticks, expected {n_pulse}")
+        _require(worst <= 1e-6, f"pulse force differs from A·v by {worst:.3g} N")
+        return f"{len(res.contacts)} pulses of A·v (error {worst:.1e} N), {n_pulse} ticks each"
+
+
+def check_saturation(opener: Opener) -> str:
+    with opener() as dev:
+        res = _window(dev, SUITE_SCENES["hard_pulse"], 1.5)
+        lim = dev.info.current_limit
+        cur = np.abs(res.traces["current"])
+        _require(bool(res.saturations), "a 200 N·s/m pulse did not saturate")
+        _require(float(cur.max()) <= lim * (1 + 1e-9), f"current {cur.max()} A above limit {lim}")
+        peaks = [s.peak_current for s in res.saturations]
+        _require(min(peaks) > lim, f"saturation peak {min(peaks)} A not above the limit {lim} A")
+        return f"{len(peaks)} saturations, peaks {min(peaks):.2f}–{max(peaks):.2f} A, clamp {lim} A"
+
+
+def check_window_length(opener: Opener) -> str:
+    with opener() as dev:
+        res = _window(dev, SUITE_SCENES["firm_spring"], 1.0)
+        _require(res.t_first_contact is not None, "no first contact")
+        span = res.traces["t"][-1] - res.t_first_contact
+        _require(abs(span - 1.0) <= 2.0 / res.rate_hz, f"window spans {span:.5f} s, expected 1 s")
+        return f"window of {span:.4f} s from the first contact"
+
+
+def check_estop(opener: Opener) -> str:
+    with opener() as dev:
+        def stop(t: float, _partial: WindowResult) -> None:
+            if t >= 0.3:
+                dev.estop()
+
+        res = _window(dev, SUITE_SCENES["pulse_firm"], 1.5, on_progress=stop)
+        _require(bool(res.faults) and res.faults[0].code == "estop", f"faults: {res.faults}")
+        tr = res.traces
+        after = tr["t"] >= res.faults[0].t
+        _require(bool(np.all(tr["current"][after] == 0)), "current not zero after the e-stop")
+        _require(dev.output_force == 0.0, "output not zero after the e-stop")
+        for call in (dev.home, lambda: dev.run_window(0.5)):
+            try:
+                call()
+            except DeviceFaultError:
+                pass
+            else:
+                raise CheckFailed("the e-stop did not stay latched")
+        dev.clear_fault()
+        dev.home()
+        again = dev.run_window(0.5)
+        _require(not again.faults, "fault came back after clearing")
+        return f"latched at t={res.faults[0].t:.3f} s; cleared and re-homed"
+
+
+def check_watchdog(opener: Opener) -> str:
+    with opener() as dev:
+        sc = SUITE_SCENES["firm_spring"]
+        dev.load_scene(sc)
+        dev.home()
+        res = dev.run_window(1.0, from_first_contact=False, heartbeats=False)
+        wd = dev.info.watchdog_s
+        _require(bool(res.faults) and res.faults[0].code == "watchdog", f"faults: {res.faults}")
+        t0 = res.traces["t"][0]
+        dt_f = res.faults[0].t - t0
+        _require(dt_f <= wd + 2.0 / res.rate_hz + 0.05, f"watchdog tripped after {dt_f:.4f} s")
+        after = res.traces["t"] >= res.faults[0].t
+        _require(bool(np.all(res.traces["current"][after] == 0)), "output not zero after trip")
+        _require(dev.fault is not None, "watchdog fault not latched")
+        return f"output zeroed {dt_f * 1e3:.1f} ms into a silent window (T_wd {wd * 1e3:g} ms)"
+
+
+def check_ramp(opener: Opener) -> str:
+    with opener() as dev:
+        res = _window(dev, SUITE_SCENES["firm_spring"], 0.5)
+        ramp = (res.traces["flags"] & Flags.RAMP) != 0
+        _require(bool(ramp[0]), "no output ramp after enabling")
+        n = int(np.argmin(ramp)) if not ramp.all() else len(ramp)
+        _require(not ramp[n:].any(), "ramp flag not one run from enable")
+        return f"output ramp over the first {n / res.rate_hz * 1e3:.0f} ms"
+
+
+def check_zero_on_exit(opener: Opener) -> str:
+    dev = opener()
+    try:
+        with dev:
+            dev.load_scene(SUITE_SCENES["pulse_firm"])
+            dev.home()
+            dev.run_window(0.3)
+            raise RuntimeError("simulated failure inside the session")
+    except RuntimeError:
+        pass
+    _require(dev.output_force == 0.0, f"output {dev.output_force} N after exit by exception")
+    try:
+        dev.run_window(0.3)
+    except DeviceError:
+        pass
+    else:
+        raise CheckFailed("a closed device still ran a window")
+    return "closed with zero output after an exception"
+
+
+def check_bad_input(opener: Opener) -> str:
+    with opener() as dev:
+        for call, exc in ((lambda: dev.load_scene("wood"), TypeError),
+                          (lambda: dev.run_window(1.0), DeviceError)):
+            try:
+                call()
+            except exc:
+                pass
+            else:
+                raise CheckFailed(f"bad call accepted (expected {exc.__name__})")
+        dev.load_scene(SUITE_SCENES["firm_spring"])
+        dev.home()
+        try:
+            dev.run_window(-1.0)
+        except ValueError:
+            pass
+        else:
+            raise CheckFailed("negative window duration accepted")
+        return "rejects non-scenes, unhomed windows and negative durations"
+
+
+CHECKS: dict[str, Callable[[Opener], str]] = {
+    "info": check_info,
+    "real_sample": check_real_sample,
+    "spring_law": check_spring_law,
+    "transient_scaling": check_transient_scaling,
+    "saturation": check_saturation,
+    "window_length": check_window_length,
+    "estop": check_estop,
+    "watchdog": check_watchdog,
+    "ramp": check_ramp,
+    "zero_on_exit": check_zero_on_exit,
+    "bad_input": check_bad_input,
+}
+
+
+def run_selftest(spec: str, opener: Opener) -> dict:
+    """Run every check; return ``{"backend", "passed", "failed", "checks": [...]}``."""
+    rows = []
+    for name, fn in CHECKS.items():
+        try:
+            detail, ok = fn(opener), True
+        except Exception as exc:  # a check reports, never crashes the self-test
+            detail, ok = f"{type(exc).__name__}: {exc}", False
+        rows.append({"name": name, "ok": ok, "detail": detail})
+    passed = sum(r["ok"] for r in rows)
+    return {"backend": spec, "passed": passed, "failed": len(rows) - passed, "checks": rows}
