@@ -116,6 +116,9 @@ class SimDevice(HapticDevice):
             watchdog_s=dev.watchdog_s, encoder_resolution=dev.encoder_resolution,
             accel_range=dev.accel_range)
         self._vel_w = velocity_weights(dev)
+        # the hand's pull per intended position, velocity, acceleration (impedance + feedforward)
+        self._pull_gains = (self.hand.stiffness, self.hand.damping + dev.motor_damping,
+                            dev.motor_mass + dev.tip_mass + self.hand.mass)
         self._cache: dict[Scene, CompiledScene] = {}
         self._scene: CompiledScene | None = None
         self._x: np.ndarray | None = None
@@ -266,7 +269,7 @@ class SimDevice(HapticDevice):
         self._ist[K.IST_FIRST] = -1
         self._ist[K.IST_NEV] = 0
         tick0 = self._tick
-        buf = _Buffers(min(n_max, int(round((duration + 2.0) / dt))), plan, self.hand, dt)
+        buf = _Buffers(min(n_max, int(round((duration + 2.0) / dt))), plan, self._pull_gains, dt)
         ev_tick = np.zeros(4096, dtype=np.int64)
         ev_vel = np.zeros(4096)
         chunk = max(1, int(round((_LIVE_CHUNK_S if self.live else _CHUNK_S) / dt)))
@@ -394,8 +397,8 @@ class _Buffers:
 
     NAMES = ("pos", "fcmd", "fout", "cur", "acc", "z2", "v2", "a2")
 
-    def __init__(self, capacity: int, plan, hand: HandParams, dt: float):
-        self.plan, self.hand, self.dt = plan, hand, dt
+    def __init__(self, capacity: int, plan, gains: tuple[float, float, float], dt: float):
+        self.plan, self.gains, self.dt = plan, gains, dt
         self.n = 0
         for name in self.NAMES:
             setattr(self, name, np.zeros(0))
@@ -416,7 +419,7 @@ class _Buffers:
         self.flags = f
         # the hand's pull at every tick, plus one beyond for its slope over the last tick
         start = max(0, self.n)
-        zr, vr = self.plan.reference(np.arange(start, new + 1) * self.dt)
-        self.u_hand = np.concatenate([self.u_hand[:start],
-                                      self.hand.stiffness * zr + self.hand.damping * vr])
+        zr, vr, ar = self.plan.reference(np.arange(start, new + 1) * self.dt)
+        kz, kv, ka = self.gains
+        self.u_hand = np.concatenate([self.u_hand[:start], kz * zr + kv * vr + ka * ar])
         self.n = new

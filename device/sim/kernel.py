@@ -23,7 +23,8 @@ code, 1 (spring) no transient code, 2 (spring + transient) both.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ._jit import lazy_njit
 
 __all__ = ["run_ticks", "propagate_linear", "IST", "FST"]
 
@@ -40,7 +41,7 @@ F_CONTACT, F_SAT, F_TRANSIENT, F_ZEROED, F_RAMP = 1, 2, 4, 8, 16
 Z1, V1, Z2, V2, FA, Y, YD, FH, Q, QD = range(10)
 
 
-@njit(cache=True)
+@lazy_njit
 def _apply(P, x, u, out):
     """out = P @ [x; u] for P of shape (ns, ns+nu)."""
     ns = x.shape[0]
@@ -54,7 +55,7 @@ def _apply(P, x, u, out):
         out[i] = s
 
 
-@njit(cache=True)
+@lazy_njit
 def propagate_linear(P, x0, u, n, out):
     """Step x ← P·[x; u] ``n`` times, storing each state (rows of ``out``)."""
     x = x0.copy()
@@ -65,7 +66,7 @@ def propagate_linear(P, x0, u, n, out):
         out[k, :] = x
 
 
-@njit(cache=True)
+@lazy_njit
 def _crossed(mode, x, h, ks, bs):
     if mode == 0:  # free → contact when the tip is below the surface and moving in
         return x[Z2] < h and x[V2] < 0.0
@@ -73,7 +74,7 @@ def _crossed(mode, x, h, ks, bs):
     return ks * (h - x[Z2]) - bs * x[V2] <= 0.0
 
 
-@njit(cache=True)
+@lazy_njit
 def _advance_switching(pieces, x, u, ist, h, ks, bs, ring_gain, has_ring, tmp):
     """Advance one substep in a two-mode (real contact) plant, locating switches."""
     levels = pieces.shape[1] - 1
@@ -105,7 +106,7 @@ def _advance_switching(pieces, x, u, ist, h, ks, bs, ring_gain, has_ring, tmp):
             remaining -= np.int64(1) << j
 
 
-@njit(cache=True)
+@lazy_njit
 def run_ticks(n0, n1, x, ist, fst, rb,
               tick_prop, pieces, n_sub, accel_row,
               h, ks, bs, ring_gain,

@@ -64,17 +64,30 @@ def restitution(scene: Scene, rate_hz: float = 10_000.0, speed: float = 0.11,
     dev.load_scene(scene)
     dev.home()
     res = dev.run_window(0.3)
-    z = res.traces["true_position"] - scene.surface_height
-    v = res.traces["true_velocity"]
+    tr = res.traces
+    z = tr["true_position"] - scene.surface_height
     below = z < 0
     if not below.any():
         return Restitution(float("nan"), float("nan"), float("nan"))
     i_in = int(np.argmax(below))
-    v_in = -float(np.interp(0.0, [z[i_in], z[i_in - 1]], [v[i_in], v[i_in - 1]]))
+    v_in = -_at_crossing(z, tr["true_velocity"], tr["true_accel"], i_in - 1, dev.params.dt)
     out = np.flatnonzero(~below[i_in:])
     if out.size == 0:
         return Restitution(v_in, 0.0, float("nan"))
     i_out = i_in + int(out[0])
-    v_out = float(np.interp(0.0, [z[i_out - 1], z[i_out]], [v[i_out - 1], v[i_out]]))
-    e = v_out / v_in if v_in > 0 else math.nan
-    return Restitution(v_in, v_out, e)
+    v_out = _at_crossing(z, tr["true_velocity"], tr["true_accel"], i_out, dev.params.dt)
+    return Restitution(v_in, v_out, v_out / v_in if v_in > 0 else math.nan)
+
+
+def _at_crossing(z, v, a, i: int, dt: float) -> float:
+    """Velocity where z crosses 0 near free-flight tick ``i``, by its local quadratic motion.
+
+    Between ticks the tip moves freely (no contact force), so z ≈ z_i + v_i·τ + a_i·τ²/2
+    is accurate to the jerk × τ²; linear interpolation across a contact tick is not.
+    """
+    zi, vi, ai = float(z[i]), float(v[i]), float(a[i])
+    roots = np.roots([ai / 2, vi, zi]) if ai != 0 else np.array([-zi / vi])
+    roots = roots[np.isreal(roots)].real
+    roots = roots[np.abs(roots) <= 2 * dt] if roots.size else roots
+    tau = float(roots[np.argmin(np.abs(roots))]) if roots.size else 0.0
+    return vi + ai * tau

@@ -10,6 +10,11 @@ surface:
    stiffness × the remaining distance);
 3. dwell there, rise back to ``top`` along a half cosine, pause, repeat.
 
+The hand pulls the stylus with its impedance towards the intended motion and adds
+what an internal model of the moving mass would (mass × intended acceleration plus
+the device's friction × intended velocity): in free air the stylus follows the
+intention, and on contact the impedance alone reacts.
+
 The speed of each tap is drawn from a normal distribution (default 0.11 ± 0.033 m/s,
 the incoming velocities reported in SPEC §1), truncated to [v_min, v_max]. The stylus
 follows the reference through the hand's mass–spring–damper, so the speed at
@@ -22,7 +27,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+
+from ._jit import lazy_njit
 
 __all__ = ["Tapper", "TapPlan"]
 
@@ -126,17 +132,22 @@ class TapPlan:
         """Intended speed of each tap [m/s]."""
         return self.strokes[:, 1]
 
-    def reference(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Intended height [m] and velocity [m/s] at device times ``t`` [s] (sorted)."""
+    def reference(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Intended height [m], velocity [m/s] and acceleration [m/s²] at times ``t`` [s].
+
+        ``t`` must be sorted. The acceleration omits the impulse where a stroke stops
+        at its bottom (the stylus is against the surface then).
+        """
         t = np.ascontiguousarray(t, dtype=float)
         z = np.empty_like(t)
         v = np.empty_like(t)
-        _reference(t, self.strokes, self.top, -self.press_depth, self.surface_height, z, v)
-        return z, v
+        a = np.empty_like(t)
+        _reference(t, self.strokes, self.top, -self.press_depth, self.surface_height, z, v, a)
+        return z, v, a
 
 
-@njit(cache=True)
-def _reference(t, strokes, top, bottom, h, z_out, v_out):
+@lazy_njit
+def _reference(t, strokes, top, bottom, h, z_out, v_out, a_out):
     """Piecewise stroke profile (see the module docstring); ``t`` ascending."""
     k = 0
     n_str = strokes.shape[0]
@@ -150,18 +161,24 @@ def _reference(t, strokes, top, bottom, h, z_out, v_out):
             x = tau / ta
             z = top - v * (tau / 2 - ta / (2 * math.pi) * math.sin(math.pi * x))
             vel = -v * (1 - math.cos(math.pi * x)) / 2
+            acc = -v * math.pi / (2 * ta) * math.sin(math.pi * x)
         elif tau < ta + tc:  # cruise
             z = top - v * ta / 2 - v * (tau - ta)
             vel = -v
+            acc = 0.0
         elif tau < ta + tc + dw:  # dwell pressed
             z = bottom
             vel = 0.0
+            acc = 0.0
         elif tau < ta + tc + dw + tr:  # half-cosine rise
             y = (tau - ta - tc - dw) / tr
             z = bottom + (top - bottom) * (1 - math.cos(math.pi * y)) / 2
             vel = (top - bottom) * math.pi / (2 * tr) * math.sin(math.pi * y)
+            acc = (top - bottom) * (math.pi / tr) ** 2 / 2 * math.cos(math.pi * y)
         else:  # pause at the top
             z = top
             vel = 0.0
+            acc = 0.0
         z_out[i] = h + z
         v_out[i] = vel
+        a_out[i] = acc

@@ -1,0 +1,92 @@
+"""The backend-independent device suite, run against every backend available here.
+
+``serial:<pty>`` joins the list when the serial backend and its emulator exist.
+"""
+
+import numpy as np
+import pytest
+
+from device import open_device
+from device.base import HapticDevice
+from device.suite import CHECKS, CheckFailed, run_selftest
+
+BACKENDS = {"sim": lambda: open_device("sim", seed=5)}
+
+
+@pytest.mark.parametrize("check", sorted(CHECKS))
+@pytest.mark.parametrize("backend", sorted(BACKENDS))
+def test_backend_contract(backend, check):
+    detail = CHECKS[check](BACKENDS[backend])
+    assert isinstance(detail, str) and detail
+
+
+class _Lying(HapticDevice):
+    """Delegates to a real device but breaks one promise, to show the checks can fail."""
+
+    def __init__(self, inner, lie):
+        self.inner, self.lie = inner, lie
+
+    info = property(lambda self: self.inner.info)
+    fault = property(lambda self: self.inner.fault)
+
+    @property
+    def output_force(self):
+        return 1.0 if self.lie == "output" else self.inner.output_force
+
+    def load_scene(self, scene):
+        self.inner.load_scene(scene)
+
+    def home(self, clearance=None):
+        self.inner.home(clearance)
+
+    def run_window(self, *a, **kw):
+        res = self.inner.run_window(*a, **kw)
+        if self.lie == "velocity":
+            res.contacts = [type(c)(c.t, c.velocity * 1.1) for c in res.contacts]
+        if self.lie == "unclamped":
+            res.traces["current"] = res.traces["force_cmd"] / self.inner.info.force_constant
+        if self.lie == "no_fault":
+            res.faults = []
+        return res
+
+    def heartbeat(self):
+        self.inner.heartbeat()
+
+    def estop(self):
+        if self.lie != "no_estop":
+            self.inner.estop()
+
+    def clear_fault(self):
+        self.inner.clear_fault()
+
+    def zero(self):
+        self.inner.zero()
+
+    def close(self):
+        self.inner.close()
+
+
+@pytest.mark.parametrize("lie, check", [
+    ("output", "zero_on_exit"),
+    ("velocity", "transient_scaling"),
+    ("unclamped", "saturation"),
+    ("no_fault", "watchdog"),
+    ("no_estop", "estop"),
+])
+def test_checks_catch_a_device_that_breaks_its_contract(lie, check):
+    with pytest.raises(CheckFailed):
+        CHECKS[check](lambda: _Lying(open_device("sim", seed=5), lie))
+
+
+def test_selftest_summary_shape():
+    report = run_selftest("sim", BACKENDS["sim"])
+    assert report["backend"] == "sim"
+    assert report["passed"] == len(CHECKS) and report["failed"] == 0
+    assert [r["name"] for r in report["checks"]] == list(CHECKS)
+
+
+def test_selftest_reports_failures_without_crashing():
+    report = run_selftest("liar", lambda: _Lying(open_device("sim", seed=5), "velocity"))
+    failed = [r["name"] for r in report["checks"] if not r["ok"]]
+    assert failed == ["transient_scaling"] and report["failed"] == 1
+    assert np.isfinite(report["passed"])

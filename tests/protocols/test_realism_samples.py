@@ -1,0 +1,40 @@
+"""The realism samples are data that build scenes (SPEC §1, Table 1)."""
+
+import tomllib
+from importlib import resources
+
+import pytest
+
+from device import Scene, SceneError
+
+
+def samples():
+    text = resources.files("protocols").joinpath("realism.toml").read_text(encoding="utf-8")
+    return tomllib.loads(text)["samples"]
+
+
+def test_eleven_samples_three_real():
+    ids = [s["id"] for s in samples()]
+    assert len(ids) == len(set(ids)) == 11
+    real = [s["id"] for s in samples() if "material" in s["scene"]]
+    assert sorted(real) == ["foam", "wood", "wood_on_foam"]
+
+
+def test_paper_values():
+    by = {s["id"]: s["scene"] for s in samples()}
+    assert by["wood"]["material"]["stiffness"] == 70_000
+    assert by["wood_on_foam"]["material"]["stiffness"] == 350
+    assert by["foam"]["material"]["stiffness"] == 220
+    assert by["firm_spring"]["spring"] == 680 and by["soft_spring"]["spring"] == 340
+    assert by["pulse_firm"]["transient"] == {"kind": "pulse", "gain": 5.7, "duration": 0.020}
+    assert by["sinusoid_soft"]["transient"]["frequency"] == 36.2  # what the study ran
+
+
+@pytest.mark.parametrize("sample", samples(), ids=lambda s: s["id"])
+def test_each_sample_builds_a_scene_or_needs_a_library(sample):
+    data = {"name": sample["id"], **sample["scene"]}
+    if sample["scene"].get("transient", {}).get("kind") == "library":
+        with pytest.raises(SceneError, match="'library' is not available"):
+            Scene.from_dict(data)
+    else:
+        assert Scene.from_dict(data).name == sample["id"]
