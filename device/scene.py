@@ -49,6 +49,19 @@ def _finite(where: str, name: str, value: Any, *, minimum: float | None = None,
     return v
 
 
+# range rules for _set_checked
+_ANY: dict[str, Any] = {}
+_NONNEG: dict[str, Any] = {"minimum": 0.0}
+_POS: dict[str, Any] = {"minimum": 0.0, "strict": True}
+_FRACTION: dict[str, Any] = {"minimum": 0.0, "strict": True, "maximum": 1.0}
+
+
+def _set_checked(obj: Any, where: str, **rules: dict[str, Any]) -> None:
+    """Validate fields of a frozen dataclass in place: ``field=rule`` for :func:`_finite`."""
+    for name, rule in rules.items():
+        object.__setattr__(obj, name, _finite(where, name, getattr(obj, name), **rule))
+
+
 def _check_keys(where: str, data: Mapping[str, Any], allowed: set[str], required: set[str]) -> None:
     import difflib
 
@@ -84,11 +97,7 @@ class Ringing:
     frequency: float
 
     def __post_init__(self) -> None:
-        where = "ringing"
-        object.__setattr__(self, "slope", _finite(where, "slope", self.slope))
-        object.__setattr__(self, "decay", _finite(where, "decay", self.decay, minimum=0.0))
-        object.__setattr__(self, "frequency",
-                           _finite(where, "frequency", self.frequency, minimum=0.0, strict=True))
+        _set_checked(self, "ringing", slope=_ANY, decay=_NONNEG, frequency=_POS)
 
     def acceleration(self, t, speed: float):
         """Model acceleration [m/s²] at times ``t`` [s] after a contact at ``speed`` [m/s]."""
@@ -118,10 +127,7 @@ class Material:
     ringing: Ringing | None = None
 
     def __post_init__(self) -> None:
-        where = "material"
-        object.__setattr__(self, "stiffness",
-                           _finite(where, "stiffness", self.stiffness, minimum=0.0, strict=True))
-        object.__setattr__(self, "damping", _finite(where, "damping", self.damping, minimum=0.0))
+        _set_checked(self, "material", stiffness=_POS, damping=_NONNEG)
 
 
 class Transient:
@@ -180,10 +186,7 @@ class Pulse(Transient):
     duration: float
 
     def __post_init__(self) -> None:
-        w = "transient 'pulse'"
-        object.__setattr__(self, "gain", _finite(w, "gain", self.gain, minimum=0.0))
-        object.__setattr__(self, "duration",
-                           _finite(w, "duration", self.duration, minimum=0.0, strict=True))
+        _set_checked(self, "transient 'pulse'", gain=_NONNEG, duration=_POS)
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         import numpy as np
@@ -218,14 +221,8 @@ class ForceSinusoid(Transient):
     cutoff: float = 0.01
 
     def __post_init__(self) -> None:
-        w = "transient 'sinusoid'"
-        object.__setattr__(self, "gain", _finite(w, "gain", self.gain, minimum=0.0))
-        object.__setattr__(self, "decay_time",
-                           _finite(w, "decay_time", self.decay_time, minimum=0.0, strict=True))
-        object.__setattr__(self, "frequency",
-                           _finite(w, "frequency", self.frequency, minimum=0.0, strict=True))
-        object.__setattr__(self, "cutoff",
-                           _finite(w, "cutoff", self.cutoff, minimum=0.0, strict=True, maximum=1.0))
+        _set_checked(self, "transient 'sinusoid'", gain=_NONNEG, decay_time=_POS,
+                     frequency=_POS, cutoff=_FRACTION)
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         import numpy as np
@@ -261,14 +258,8 @@ class AccelSinusoid(Transient):
     cutoff: float = 0.01
 
     def __post_init__(self) -> None:
-        w = "transient 'q_sinusoid'"
-        object.__setattr__(self, "slope", _finite(w, "slope", self.slope))
-        object.__setattr__(self, "decay",
-                           _finite(w, "decay", self.decay, minimum=0.0, strict=True))
-        object.__setattr__(self, "frequency",
-                           _finite(w, "frequency", self.frequency, minimum=0.0, strict=True))
-        object.__setattr__(self, "cutoff",
-                           _finite(w, "cutoff", self.cutoff, minimum=0.0, strict=True, maximum=1.0))
+        _set_checked(self, "transient 'q_sinusoid'", slope=_ANY, decay=_POS, frequency=_POS,
+                     cutoff=_FRACTION)
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         import numpy as np
