@@ -45,6 +45,64 @@ def _device_selftest(args: argparse.Namespace) -> int:
     return 0 if report["failed"] == 0 else 1
 
 
+def _load_protocol(path: str, device_spec: str | None = None):
+    from device import DeviceError, open_device
+    from protocols import ProtocolError, load_protocol
+
+    info = None
+    if device_spec:
+        try:
+            with open_device(device_spec) as dev:
+                info = dev.info
+        except (DeviceError, ValueError) as exc:
+            raise UserError(str(exc)) from None
+    try:
+        return load_protocol(path, device=info)
+    except ProtocolError as exc:
+        raise UserError(str(exc)) from None
+
+
+def _protocol_validate(args: argparse.Namespace) -> int:
+    p = _load_protocol(args.file, args.device)
+    n_items = sum(len(ph.samples) * ph.repetitions if ph.kind != "identification"
+                  else ph.repetitions for ph in p.phases)
+    print(f"{p.source}: valid protocol '{p.name}' — {len(p.samples)} samples, "
+          f"{len(p.phases)} phases, {n_items} trials without redraws"
+          + (f"; checked against device '{args.device}'" if args.device else ""))
+    return 0
+
+
+def _protocol_show(args: argparse.Namespace) -> int:
+    from protocols import SessionEngine
+
+    p = _load_protocol(args.file)
+    try:
+        engine = SessionEngine(p, args.seed, args.participant, args.row)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    phases: list[dict] = []
+    for item in engine.plan():
+        if not phases or phases[-1]["name"] != item.phase:
+            phases.append({"name": item.phase, "trials": []})
+        trial = {"sample": item.samples[0] if len(item.samples) == 1 else list(item.samples),
+                 "item": item.key}
+        if item.block is not None:
+            trial["block"] = item.block
+        phases[-1]["trials"].append(trial)
+    plan = {"protocol": p.name, "source": p.source, "sha256": p.sha256, "seed": args.seed,
+            "participant": args.participant, "phases": phases}
+    if args.json:
+        print(json.dumps(plan, indent=2))
+        return 0
+    print(f"{p.title} ({p.source}, sha256 {p.sha256[:12]}…), seed {args.seed}")
+    for ph in phases:
+        print(f"\n{ph['name']} ({len(ph['trials'])} trials)")
+        for i, t in enumerate(ph["trials"], 1):
+            s = t["sample"] if isinstance(t["sample"], str) else " / ".join(t["sample"])
+            print(f"  {i:3d}  {s}")
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     import importlib
 
@@ -73,6 +131,21 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("spec", help="device spec, e.g. sim or serial:/dev/ttyACM0")
     st.add_argument("--json", action="store_true", help="print a JSON summary")
     st.set_defaults(func=_device_selftest)
+
+    pr = sub.add_parser("protocol", help="protocol files (validate, show)")
+    psub = pr.add_subparsers(dest="protocol_command", required=True, metavar="ACTION")
+    pv = psub.add_parser("validate", help="check a protocol file; exit 0 when valid")
+    pv.add_argument("file", help="built-in name (realism, factorial, identification) or a path")
+    pv.add_argument("--device", help="also check forces and currents against this device")
+    pv.set_defaults(func=_protocol_validate)
+    ps = psub.add_parser("show", help="print the resolved trial plan for a seed")
+    ps.add_argument("file", help="built-in name or a path")
+    ps.add_argument("--seed", type=int, required=True)
+    ps.add_argument("--participant", default="P00", help="participant id (default P00)")
+    ps.add_argument("--row", type=int, default=None,
+                    help="counterbalance row for Williams-ordered blocks")
+    ps.add_argument("--json", action="store_true")
+    ps.set_defaults(func=_protocol_show)
 
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
     b.add_argument("what", help="which benchmark: sim")

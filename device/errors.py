@@ -13,7 +13,20 @@ class DeviceError(Exception):
 
 
 class SceneError(DeviceError, ValueError):
-    """A scene description is invalid; the message names the field, value and what is allowed."""
+    """A scene description is invalid; the message names the field, value and what is allowed.
+
+    Attributes
+    ----------
+    part : tuple of str
+        Where in the scene the field sits, e.g. ``("transient",)`` or ``("material", "ringing")``.
+    field : str or None
+        The offending field's name.
+    """
+
+    def __init__(self, message: str, field: str | None = None, part: tuple[str, ...] = ()):
+        super().__init__(message)
+        self.field = field
+        self.part = tuple(part)
 
 
 class UnknownBackendError(DeviceError, ValueError):

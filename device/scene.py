@@ -37,15 +37,15 @@ def _finite(where: str, name: str, value: Any, *, minimum: float | None = None,
             strict: bool = False, maximum: float | None = None) -> float:
     """Return ``value`` as a float after checking it is a finite number in range."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{where}: field '{name}' must be a number, got {value!r}")
+        raise SceneError(f"{where}: field '{name}' must be a number, got {value!r}", name)
     v = float(value)
     if not math.isfinite(v):
-        raise SceneError(f"{where}: field '{name}' must be finite, got {value!r}")
+        raise SceneError(f"{where}: field '{name}' must be finite, got {value!r}", name)
     if minimum is not None and (v <= minimum if strict else v < minimum):
         op = ">" if strict else ">="
-        raise SceneError(f"{where}: field '{name}' must be {op} {minimum:g}, got {v:g}")
+        raise SceneError(f"{where}: field '{name}' must be {op} {minimum:g}, got {v:g}", name)
     if maximum is not None and v > maximum:
-        raise SceneError(f"{where}: field '{name}' must be <= {maximum:g}, got {v:g}")
+        raise SceneError(f"{where}: field '{name}' must be <= {maximum:g}, got {v:g}", name)
     return v
 
 
@@ -70,10 +70,12 @@ def _check_keys(where: str, data: Mapping[str, Any], allowed: set[str], required
             hint = difflib.get_close_matches(key, sorted(allowed), n=1)
             extra = f" (did you mean '{hint[0]}'?)" if hint else ""
             raise SceneError(
-                f"{where}: unknown field '{key}'{extra}; allowed: {', '.join(sorted(allowed))}")
+                f"{where}: unknown field '{key}'{extra}; allowed: {', '.join(sorted(allowed))}",
+                key)
     missing = sorted(required - set(data))
     if missing:
-        raise SceneError(f"{where}: missing field(s) {', '.join(repr(m) for m in missing)}")
+        raise SceneError(f"{where}: missing field(s) {', '.join(repr(m) for m in missing)}",
+                         missing[0])
 
 
 @dataclass(frozen=True)
@@ -280,7 +282,7 @@ def _dataclass_parser(cls) -> Callable[[str, Mapping[str, Any]], Transient]:
         try:
             return cls(**data)
         except SceneError as exc:
-            raise SceneError(f"{where}: {exc}") from None
+            raise SceneError(f"{where}: {exc}", exc.field) from None
 
     return parse
 
@@ -326,10 +328,11 @@ class Scene:
                            _finite(where, "surface_height", self.surface_height))
         if self.material is None and self.spring is None:
             raise SceneError(f"{where}: a scene needs either 'material' (real sample) "
-                             "or 'spring' (virtual sample)")
+                             "or 'spring' (virtual sample)", "spring")
         if self.material is not None and (self.spring is not None or self.transient is not None):
             raise SceneError(f"{where}: a real sample ('material') cannot also have "
-                             "'spring' or 'transient'; real samples are touched, not rendered")
+                             "'spring' or 'transient'; real samples are touched, not rendered",
+                             "spring" if self.spring is not None else "transient")
         if self.spring is not None:
             object.__setattr__(self, "spring",
                                _finite(where, "spring", self.spring, minimum=0.0))
@@ -379,14 +382,17 @@ class Scene:
         if "spring" in data:
             kwargs["spring"] = data["spring"]
         if "transient" in data:
-            kwargs["transient"] = _parse_transient(f"{where}.transient", data["transient"])
+            kwargs["transient"] = _in_part(("transient",), _parse_transient,
+                                           f"{where}.transient", data["transient"])
         if "material" in data:
-            kwargs["material"] = _parse_material(f"{where}.material", data["material"])
+            kwargs["material"] = _in_part(("material",), _parse_material,
+                                          f"{where}.material", data["material"])
         try:
             return cls(**kwargs)
         except SceneError as exc:
             msg = str(exc)
-            raise SceneError(msg if msg.startswith(where) else f"{where}: {msg}") from None
+            raise SceneError(msg if msg.startswith(where) else f"{where}: {msg}",
+                             exc.field, exc.part) from None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-data form accepted by :meth:`from_dict`."""
@@ -405,6 +411,14 @@ class Scene:
         return out
 
 
+def _in_part(part: tuple[str, ...], parse: Callable[[str, Any], Any], where: str, data: Any):
+    """Run a sub-parser, recording in any SceneError which part of the scene failed."""
+    try:
+        return parse(where, data)
+    except SceneError as exc:
+        raise SceneError(str(exc), exc.field, (*part, *exc.part)) from None
+
+
 def _parse_transient(where: str, data: Any) -> Transient | None:
     if not isinstance(data, Mapping):
         raise SceneError(f"{where}: expected a table with 'kind', got {data!r}")
@@ -412,12 +426,12 @@ def _parse_transient(where: str, data: Any) -> Transient | None:
     if kind in (None, "none"):
         if kind is None:
             raise SceneError(f"{where}: missing field 'kind'; allowed: none, "
-                             + ", ".join(transient_kinds()))
+                             + ", ".join(transient_kinds()), "kind")
         _check_keys(where, data, {"kind"}, set())
         return None
     if kind not in _TRANSIENTS:
         raise SceneError(f"{where}: transient kind {kind!r} is not available; allowed: none, "
-                         + ", ".join(transient_kinds()))
+                         + ", ".join(transient_kinds()), "kind")
     rest = {k: v for k, v in data.items() if k != "kind"}
     return _TRANSIENTS[kind](where, rest)
 
@@ -431,14 +445,12 @@ def _parse_material(where: str, data: Any) -> Material:
         r = data["ringing"]
         if not isinstance(r, Mapping):
             raise SceneError(f"{where}.ringing: expected a table, got {r!r}")
-        _check_keys(f"{where}.ringing", r, {"slope", "decay", "frequency"},
-                    {"slope", "decay", "frequency"})
-        try:
-            ringing = Ringing(**r)
-        except SceneError as exc:
-            raise SceneError(f"{where}.{exc}") from None
+        _in_part(("ringing",), lambda w, d: _check_keys(w, d, {"slope", "decay", "frequency"},
+                                                        {"slope", "decay", "frequency"}),
+                 f"{where}.ringing", r)
+        ringing = _in_part(("ringing",), lambda w, d: Ringing(**d), f"{where}.ringing", r)
     try:
         return Material(stiffness=data["stiffness"], damping=data.get("damping", 0.0),
                         ringing=ringing)
     except SceneError as exc:
-        raise SceneError(f"{where}: {str(exc).removeprefix('material: ')}") from None
+        raise SceneError(f"{where}: {str(exc).removeprefix('material: ')}", exc.field) from None

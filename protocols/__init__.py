@@ -1,0 +1,40 @@
+"""Protocols as validated data (``*.toml`` beside this file) and the pure session engine.
+
+Imports only :mod:`device` types (scenes, device ratings); no I/O at import time.
+"""
+
+from .engine import (
+    DONE,
+    FINAL_STATUSES,
+    PAUSED,
+    RNG_ALGORITHM,
+    STATUSES,
+    Attempt,
+    Done,
+    LogMismatch,
+    Paused,
+    ResumeMismatch,
+    SessionEngine,
+    Trial,
+    seed_from_entropy,
+)
+from .loader import BUILTIN, ProtocolError, load_protocol, parse_protocol, protocol_text
+from .model import (
+    Answer,
+    Limits,
+    Phase,
+    Protocol,
+    RatingScale,
+    Sample,
+    SaturationPolicy,
+    Window,
+)
+from .williams import williams_square
+
+__all__ = [
+    "Answer", "Attempt", "BUILTIN", "DONE", "Done", "FINAL_STATUSES", "Limits", "LogMismatch",
+    "PAUSED", "Paused", "Phase", "Protocol", "ProtocolError", "RNG_ALGORITHM", "RatingScale",
+    "ResumeMismatch", "STATUSES", "Sample", "SaturationPolicy", "SessionEngine", "Trial",
+    "Window", "load_protocol", "parse_protocol", "protocol_text", "seed_from_entropy",
+    "williams_square",
+]

@@ -1,0 +1,341 @@
+"""The session engine: a pure function of (protocol, seed, participant, attempt log).
+
+It has no UI, no device and no clock. :meth:`SessionEngine.next_trial` replays the
+log from the start every time, so the state of a session is its log alone: resuming
+after a crash is the same computation as continuing, and for every prefix of a log the
+remaining order equals that of the uninterrupted run.
+
+Randomness comes from two ``numpy.random.Generator`` streams spawned from the
+session seed: one draws the plan (block order, item order, surface order of
+identification trials), the other the positions at which redrawn items go back.
+
+Statuses of an attempt
+----------------------
+``valid``
+    done; the item leaves the queue.
+``saturated``
+    the participant exceeded the current limit: the item goes back among the remaining
+    items of its block at a random position.
+``excluded_saturated``
+    the saturated attempt that reached the protocol's cap: the item leaves the queue.
+``requeued``
+    the operator sent the item back (with a reason): random position, like a redraw,
+    not counted against the saturation cap.
+``aborted_device``
+    the device failed mid-trial: the item stays first in the queue and is retried.
+``skipped``
+    the operator skipped the item: it leaves the queue.
+
+Operator pauses are log entries with status ``paused`` / ``resumed``; while paused,
+:meth:`SessionEngine.next_trial` returns :data:`PAUSED`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .model import Phase, Protocol
+from .williams import williams_square
+
+__all__ = ["SessionEngine", "Trial", "Attempt", "Done", "Paused", "DONE", "PAUSED",
+           "LogMismatch", "ResumeMismatch", "STATUSES", "FINAL_STATUSES"]
+
+STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "aborted_device", "skipped")
+FINAL_STATUSES = ("valid", "excluded_saturated", "skipped")
+_CONTROL = ("paused", "resumed")
+RNG_ALGORITHM = "numpy PCG64 via SeedSequence(seed).spawn(2): [plan, redraw]"
+
+
+class LogMismatch(ValueError):
+    """The attempt log does not fit this protocol/seed (an entry names the wrong item)."""
+
+
+class ResumeMismatch(ValueError):
+    """Resuming with a different protocol, seed or participant than the session recorded."""
+
+
+@dataclass(frozen=True)
+class Item:
+    """One queued unit of work (a sample repetition, or an identification repetition)."""
+
+    key: str
+    phase: str
+    kind: str
+    samples: tuple[str, ...]
+    block: str | None
+    repetition: int
+
+
+@dataclass(frozen=True)
+class Trial:
+    """What the runner should do next.
+
+    Attributes
+    ----------
+    item : str
+        Stable key of the queued item (``phase/sample#repetition``); log attempts by it.
+    phase, kind : str
+        Phase name and kind (``rated``, ``free``, ``identification``).
+    trial_index : int
+        1-based position of this attempt in the session.
+    attempt : int
+        1-based attempt number of this item.
+    samples : tuple of str
+        The sample (one) or the surfaces in order (identification).
+    block : str or None
+        Block (factorial material) of the item.
+    placement : str or None
+        What the operator places: a real sample, a placeholder block, or None.
+    repetition : int
+        1-based repetition of the sample within its phase.
+    """
+
+    item: str
+    phase: str
+    kind: str
+    trial_index: int
+    attempt: int
+    samples: tuple[str, ...]
+    block: str | None
+    placement: str | None
+    repetition: int
+
+    @property
+    def sample(self) -> str:
+        """The single sample of a non-identification trial."""
+        return self.samples[0] if len(self.samples) == 1 else "+".join(self.samples)
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One log entry: the outcome of an attempt at ``item``, or a pause/resume marker."""
+
+    item: str
+    status: str
+    reason: str = ""
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES + _CONTROL:
+            raise ValueError(f"attempt status must be one of {', '.join(STATUSES + _CONTROL)}; "
+                             f"got {self.status!r}")
+
+
+@dataclass(frozen=True)
+class Done:
+    """The session is complete."""
+
+
+@dataclass(frozen=True)
+class Paused:
+    """The operator paused the session."""
+
+
+DONE, PAUSED = Done(), Paused()
+
+
+@dataclass
+class _State:
+    queue: list[Item]
+    attempts: dict[str, int] = field(default_factory=dict)
+    saturations: dict[str, int] = field(default_factory=dict)
+    n_attempts: int = 0
+    paused: bool = False
+    last_placement: str | None = None
+    finished: dict[str, str] = field(default_factory=dict)
+
+
+class SessionEngine:
+    """Sequences the trials of one session.
+
+    Parameters
+    ----------
+    protocol : Protocol
+    seed : int
+        Session seed (recorded); every random choice derives from it.
+    participant : str
+        Participant id (part of the session identity checked on resume).
+    counterbalance_row : int, optional
+        Row of the Williams square for phases with ``block_order = "williams"``
+        (typically the participant's 0-based enrolment number; taken modulo the rows).
+    """
+
+    def __init__(self, protocol: Protocol, seed: int, participant: str,
+                 counterbalance_row: int | None = None):
+        if not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        self.protocol = protocol
+        self.seed = int(seed)
+        self.participant = participant
+        self.counterbalance_row = counterbalance_row
+        needs_row = any(p.block_order == "williams" for p in protocol.phases)
+        if needs_row and counterbalance_row is None:
+            raise ValueError(f"protocol '{protocol.name}' counterbalances block order with a "
+                             "Williams square: give the participant's counterbalance row")
+        self._plan = self._build_plan()
+
+    # ------------------------------------------------------------------ identity
+    @property
+    def identity(self) -> dict:
+        """What a resumed session must match: protocol hash, seed, participant, row."""
+        return {"protocol_sha256": self.protocol.sha256, "seed": self.seed,
+                "participant": self.participant, "counterbalance_row": self.counterbalance_row}
+
+    def check_resume(self, recorded: Mapping) -> None:
+        """Refuse to resume a session recorded under a different identity.
+
+        Raises
+        ------
+        ResumeMismatch
+            Naming each field that differs, with both values.
+        """
+        diffs = [f"{k}: session has {recorded.get(k)!r}, now {v!r}"
+                 for k, v in self.identity.items() if recorded.get(k) != v]
+        if diffs:
+            raise ResumeMismatch("cannot resume: the session was recorded with a different "
+                                 + "; ".join(diffs))
+
+    # ------------------------------------------------------------------ plan
+    def _build_plan(self) -> list[Item]:
+        plan_ss, _ = np.random.SeedSequence(self.seed).spawn(2)
+        rng = np.random.default_rng(plan_ss)
+        items: list[Item] = []
+        for phase in self.protocol.phases:
+            items.extend(self._phase_items(phase, rng))
+        return items
+
+    def _phase_items(self, phase: Phase, rng: np.random.Generator) -> list[Item]:
+        samples = self.protocol.samples
+        if phase.kind == "identification":
+            out = []
+            for rep in range(1, phase.repetitions + 1):
+                order = [phase.samples[i] for i in rng.permutation(len(phase.samples))]
+                out.append(Item(f"{phase.name}/#{rep}", phase.name, phase.kind, tuple(order),
+                                None, rep))
+            return out
+        if phase.blocks:
+            names: list[str | None] = list(dict.fromkeys(samples[s].block for s in phase.samples))
+        else:
+            names = [None]
+        if phase.block_order == "random":
+            names = [names[i] for i in rng.permutation(len(names))]
+        elif phase.block_order == "williams":
+            rows = williams_square(len(names))
+            names = [names[i] for i in rows[self.counterbalance_row % len(rows)]]
+        out = []
+        for block in names:
+            members = [s for s in phase.samples if block is None or samples[s].block == block]
+            block_items = [Item(f"{phase.name}/{s}#{rep}", phase.name, phase.kind, (s,), block, rep)
+                           for rep in range(1, phase.repetitions + 1) for s in members]
+            if phase.order == "random":
+                block_items = [block_items[i] for i in rng.permutation(len(block_items))]
+            out.extend(block_items)
+        return out
+
+    def plan(self) -> list[Item]:
+        """The uninterrupted order of items (no saturations, no operator actions)."""
+        return list(self._plan)
+
+    # ------------------------------------------------------------------ replay
+    def _replay(self, log: Iterable[Attempt]) -> _State:
+        _, redraw_ss = np.random.SeedSequence(self.seed).spawn(2)
+        rng = np.random.default_rng(redraw_ss)
+        st = _State(queue=list(self._plan))
+        cap = self.protocol.saturation.max_attempts
+        for n, entry in enumerate(log):
+            if not isinstance(entry, Attempt):
+                raise LogMismatch(f"log entry {n + 1}: expected an Attempt, got {entry!r}")
+            if entry.status == "paused":
+                st.paused = True
+                continue
+            if entry.status == "resumed":
+                st.paused = False
+                continue
+            if not st.queue:
+                raise LogMismatch(f"log entry {n + 1} ({entry.item}, {entry.status}) comes after "
+                                  "the session was complete")
+            head = st.queue[0]
+            if entry.item != head.key:
+                raise LogMismatch(f"log entry {n + 1} is for item {entry.item!r} but the session's "
+                                  f"order has {head.key!r} next: the log does not belong to this "
+                                  "protocol, seed and participant, or was edited")
+            st.n_attempts += 1
+            st.attempts[head.key] = st.attempts.get(head.key, 0) + 1
+            st.last_placement = self._placement(head, st.last_placement)
+            status = entry.status
+            if status == "saturated":
+                st.saturations[head.key] = st.saturations.get(head.key, 0) + 1
+                if st.saturations[head.key] >= cap:
+                    raise LogMismatch(f"log entry {n + 1}: attempt {st.saturations[head.key]} of "
+                                      f"{head.key!r} saturated at the cap of {cap}; it must be "
+                                      "logged 'excluded_saturated'")
+            if status == "excluded_saturated":
+                st.saturations[head.key] = st.saturations.get(head.key, 0) + 1
+            if status in FINAL_STATUSES:
+                st.queue.pop(0)
+                st.finished[head.key] = status
+            elif status in ("saturated", "requeued"):
+                st.queue.pop(0)
+                self._reinsert(st.queue, head, rng)
+            # aborted_device: the item stays first and is retried
+        return st
+
+    @staticmethod
+    def _reinsert(queue: list[Item], item: Item, rng: np.random.Generator) -> None:
+        """Put ``item`` back at a random position among the remaining items of its block."""
+        span = 0
+        while span < len(queue) and queue[span].phase == item.phase \
+                and queue[span].block == item.block:
+            span += 1
+        queue.insert(int(rng.integers(0, span + 1)), item)
+
+    def _placement(self, item: Item, previous: str | None) -> str | None:
+        if item.kind == "identification":
+            return None
+        s = self.protocol.samples[item.samples[0]]
+        if s.placement is not None:
+            return s.placement
+        blocks = self.protocol.placeholders
+        if not blocks:
+            return None
+        # a different placeholder from what is on the stand, so every trial is a swap
+        return blocks[1] if previous == blocks[0] else blocks[0]
+
+    # ------------------------------------------------------------------ API
+    def next_trial(self, log: Sequence[Attempt]) -> Trial | Done | Paused:
+        """The next trial given everything logged so far, or :data:`DONE` / :data:`PAUSED`."""
+        st = self._replay(log)
+        if st.paused:
+            return PAUSED
+        if not st.queue:
+            return DONE
+        head = st.queue[0]
+        return Trial(item=head.key, phase=head.phase, kind=head.kind,
+                     trial_index=st.n_attempts + 1, attempt=st.attempts.get(head.key, 0) + 1,
+                     samples=head.samples, block=head.block,
+                     placement=self._placement(head, st.last_placement),
+                     repetition=head.repetition)
+
+    def saturated_status(self, trial: Trial, log: Sequence[Attempt]) -> str:
+        """Status to log for a saturated attempt: ``saturated`` or, at the cap, the exclusion."""
+        if self.protocol.saturation.action == "keep":
+            return "valid"
+        st = self._replay(log)
+        n = st.saturations.get(trial.item, 0) + 1
+        return "excluded_saturated" if n >= self.protocol.saturation.max_attempts else "saturated"
+
+    def outcomes(self, log: Sequence[Attempt]) -> dict[str, str]:
+        """Final status of every finished item (``valid``, ``excluded_saturated``, ``skipped``)."""
+        return dict(self._replay(log).finished)
+
+    def remaining(self, log: Sequence[Attempt]) -> list[Item]:
+        """Items still to do, in order."""
+        return list(self._replay(log).queue)
+
+
+def seed_from_entropy() -> int:
+    """A fresh session seed (recorded in the session; 63 bits so JSON and TSV keep it exact)."""
+    return int(np.random.SeedSequence().entropy % (2**63))
+

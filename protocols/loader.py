@@ -1,0 +1,444 @@
+"""Load and validate protocol files.
+
+Every problem raises :class:`ProtocolError` naming the file, the line, the field, the
+offending value and what is allowed; nothing is half-loaded.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import itertools
+import math
+import re
+import tomllib
+from collections.abc import Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from device import DeviceInfo, Material, Ringing, Scene, SceneError
+from device.scene import AccelSinusoid
+
+from ._toml_lines import key_lines, line_of
+from .model import (
+    Answer,
+    Limits,
+    Phase,
+    Protocol,
+    RatingScale,
+    Sample,
+    SaturationPolicy,
+    Window,
+)
+
+__all__ = ["ProtocolError", "BUILTIN", "load_protocol", "parse_protocol", "protocol_text"]
+
+BUILTIN = ("realism", "factorial", "identification")
+_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+_MISSING = object()
+
+
+class ProtocolError(ValueError):
+    """A protocol file is invalid.
+
+    Attributes
+    ----------
+    source : str
+        File name (or built-in name).
+    line : int or None
+        1-based line of the offending key, when known.
+    field : str
+        Dotted path of the field, e.g. ``phases[2].repetitions``.
+    """
+
+    def __init__(self, source: str, line: int | None, field: str, message: str):
+        self.source, self.line, self.field = source, line, field
+        where = f"{source}:{line}" if line else source
+        super().__init__(f"{where}: {field}: {message}" if field else f"{where}: {message}")
+
+
+def protocol_text(name_or_path: str | Path) -> tuple[str, str]:
+    """Return (source name, text) of a built-in protocol name or a file path."""
+    s = str(name_or_path)
+    if s in BUILTIN:
+        return f"{s}.toml", resources.files("protocols").joinpath(f"{s}.toml").read_text("utf-8")
+    path = Path(s)
+    if not path.is_file():
+        hint = f"; built-in protocols: {', '.join(BUILTIN)}" if "/" not in s else ""
+        raise ProtocolError(s, None, "", f"no such protocol file{hint}")
+    try:
+        return str(path), path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ProtocolError(s, None, "", f"not a UTF-8 text file ({exc.reason})") from None
+
+
+def load_protocol(name_or_path: str | Path, device: DeviceInfo | None = None) -> Protocol:
+    """Load a built-in protocol (``realism``, ``factorial``, ``identification``) or a file.
+
+    Parameters
+    ----------
+    name_or_path : str or path
+    device : DeviceInfo, optional
+        When given, the protocol's limits and each virtual sample's peak force at the
+        design speed are checked against this device's rating.
+    """
+    source, text = protocol_text(name_or_path)
+    return parse_protocol(text, source, device)
+
+
+def _fmt_path(path: tuple) -> str:
+    out = ""
+    for p in path:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out
+
+
+class _Ctx:
+    def __init__(self, source: str, text: str):
+        self.source = source
+        self.lines = key_lines(text)
+
+    def error(self, path: tuple, message: str) -> ProtocolError:
+        return ProtocolError(self.source, line_of(self.lines, path), _fmt_path(path), message)
+
+    def table(self, path: tuple, data: Any, allowed: set[str], required: set[str] = frozenset()
+              ) -> Mapping[str, Any]:
+        if not isinstance(data, Mapping):
+            raise self.error(path, f"expected a table, got {data!r}")
+        for key in data:
+            if key not in allowed:
+                hint = difflib.get_close_matches(key, sorted(allowed), n=1, cutoff=0.5)
+                extra = f"; did you mean '{hint[0]}'?" if hint else ""
+                raise self.error((*path, key), f"unknown key{extra} (allowed: "
+                                 f"{', '.join(sorted(allowed))})")
+        for key in sorted(required):
+            if key not in data:
+                raise self.error(path, f"missing required key '{key}'")
+        return data
+
+    def number(self, path: tuple, value: Any, *, minimum: float | None = None,
+               strict: bool = False, maximum: float | None = None,
+               integer: bool = False) -> float:
+        kind = "an integer" if integer else "a number"
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                (integer and not isinstance(value, int)):
+            raise self.error(path, f"must be {kind}, got {value!r}")
+        if not math.isfinite(value):
+            raise self.error(path, f"must be finite, got {value!r}")
+        if minimum is not None and (value <= minimum if strict else value < minimum):
+            raise self.error(path, f"must be {'>' if strict else '>='} {minimum:g}, got {value!r}")
+        if maximum is not None and value > maximum:
+            raise self.error(path, f"must be <= {maximum:g}, got {value!r}")
+        return value
+
+    def string(self, path: tuple, value: Any, choices: tuple[str, ...] | None = None) -> str:
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(path, f"must be a non-empty string, got {value!r}")
+        if choices is not None and value not in choices:
+            raise self.error(path, f"must be one of {', '.join(choices)}; got {value!r}")
+        return value
+
+    def boolean(self, path: tuple, value: Any) -> bool:
+        if not isinstance(value, bool):
+            raise self.error(path, f"must be true or false, got {value!r}")
+        return value
+
+    def ident(self, path: tuple, value: Any) -> str:
+        s = self.string(path, value)
+        if not _ID.match(s):
+            raise self.error(path, f"must be letters, digits, '_', '-' or '.', got {s!r}")
+        return s
+
+
+_TOP = {"protocol", "window", "rating", "answer", "saturation", "operator", "limits", "display",
+        "samples", "designs", "phases"}
+
+
+def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | None = None
+                   ) -> Protocol:
+    """Parse and validate protocol TOML ``text`` (see :func:`load_protocol`)."""
+    if not text.strip():
+        raise ProtocolError(source, None, "", "the file is empty; a protocol needs at least "
+                            "[protocol], samples and [[phases]]")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise ProtocolError(source, int(m.group(1)) if m else None, "",
+                            f"not valid TOML: {exc}") from None
+    cx = _Ctx(source, text)
+    cx.table((), data, _TOP, {"protocol", "phases"})
+    head = cx.table(("protocol",), data["protocol"], {"name", "title", "description"}, {"name"})
+    name = cx.ident(("protocol", "name"), head["name"])
+    title = cx.string(("protocol", "title"), head.get("title", name))
+    description = head.get("description", "")
+    if not isinstance(description, str):
+        raise cx.error(("protocol", "description"), "must be a string")
+
+    window = _window(cx, data.get("window", {}))
+    rating = _rating(cx, data["rating"]) if "rating" in data else None
+    answer = _answer(cx, data["answer"]) if "answer" in data else None
+    if rating is None and answer is None:
+        raise cx.error((), "a protocol needs a [rating] scale or an [answer] table")
+    saturation = _saturation(cx, data.get("saturation", {}))
+    op = cx.table(("operator",), data.get("operator", {}), {"placeholders"})
+    placeholders = tuple(op.get("placeholders", ()))
+    for i, p in enumerate(placeholders):
+        cx.string(("operator", "placeholders", i), p)
+    if placeholders and (len(placeholders) < 2 or len(set(placeholders)) != len(placeholders)):
+        raise cx.error(("operator", "placeholders"), "needs at least two distinct blocks so "
+                       f"every virtual trial gets a physical swap, got {list(placeholders)}")
+    limits = _limits(cx, data.get("limits", {}))
+    disp = cx.table(("display",), data.get("display", {}), {"cursor"})
+    cursor = cx.boolean(("display", "cursor"), disp.get("cursor", False))
+
+    samples: dict[str, Sample] = {}
+    for i, raw in enumerate(_array(cx, ("samples",), data.get("samples", []))):
+        _add(cx, samples, _sample(cx, i, raw), ("samples", i, "id"))
+    for i, raw in enumerate(_array(cx, ("designs",), data.get("designs", []))):
+        for path, s in _design(cx, i, raw):
+            _add(cx, samples, s, path)
+    if not samples:
+        raise cx.error((), "no samples: add [[samples]] or a [[designs]] table")
+
+    phases = tuple(_phase(cx, i, raw, samples, answer, rating)
+                   for i, raw in enumerate(_array(cx, ("phases",), data["phases"])))
+    if not phases:
+        raise cx.error(("phases",), "needs at least one phase")
+    names = [p.name for p in phases]
+    for i, n in enumerate(names):
+        if names.index(n) != i:
+            raise cx.error(("phases", i, "name"), f"duplicate phase name {n!r}")
+
+    proto = Protocol(
+        name=name, title=title, description=description.strip(), source=source,
+        sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), samples=samples,
+        phases=phases, window=window, rating=rating, answer=answer, saturation=saturation,
+        placeholders=placeholders, limits=limits, cursor=cursor)
+    if device is not None:
+        _check_device(cx, proto, device)
+    return proto
+
+
+def _array(cx: _Ctx, path: tuple, value: Any) -> list:
+    if not isinstance(value, list):
+        raise cx.error(path, f"expected an array of tables ([[{path[-1]}]]), got {value!r}")
+    return value
+
+
+def _add(cx: _Ctx, samples: dict, s: Sample, path: tuple) -> None:
+    if s.id in samples:
+        raise cx.error(path, f"duplicate sample id {s.id!r}")
+    samples[s.id] = s
+
+
+def _window(cx: _Ctx, raw: Any) -> Window:
+    w = cx.table(("window",), raw, {"duration", "timeout"})
+    return Window(
+        duration=float(cx.number(("window", "duration"), w.get("duration", 5.0),
+                                 minimum=0, strict=True)),
+        timeout=float(cx.number(("window", "timeout"), w.get("timeout", 30.0),
+                                minimum=0, strict=True)))
+
+
+def _rating(cx: _Ctx, raw: Any) -> RatingScale:
+    r = cx.table(("rating",), raw, {"min", "max", "question", "anchors"},
+                 {"min", "max", "question"})
+    lo = int(cx.number(("rating", "min"), r["min"], integer=True))
+    hi = int(cx.number(("rating", "max"), r["max"], integer=True))
+    if lo >= hi:
+        raise cx.error(("rating", "max"), f"scale max must be greater than min ({lo}), got {hi}")
+    if hi - lo > 99:
+        raise cx.error(("rating", "max"), f"a scale of {hi - lo + 1} points cannot be typed")
+    anchors: dict[int, str] = {}
+    raw_anchors = r.get("anchors", {})
+    if not isinstance(raw_anchors, Mapping):
+        raise cx.error(("rating", "anchors"), "must be a table of \"value\" = \"text\"")
+    for key, text in raw_anchors.items():
+        try:
+            k = int(key)
+        except ValueError:
+            raise cx.error(("rating", "anchors", key), "anchor keys must be scale values "
+                           f"{lo}–{hi}, got {key!r}") from None
+        if not lo <= k <= hi:
+            raise cx.error(("rating", "anchors", key), f"anchor {k} is outside the scale {lo}–{hi}")
+        anchors[k] = cx.string(("rating", "anchors", key), text)
+    return RatingScale(lo, hi, cx.string(("rating", "question"), r["question"]), anchors)
+
+
+def _answer(cx: _Ctx, raw: Any) -> Answer:
+    a = cx.table(("answer",), raw, {"kind", "choices"}, {"kind", "choices"})
+    kind = cx.string(("answer", "kind"), a["kind"], ("identify",))
+    choices = a["choices"]
+    if not isinstance(choices, list) or len(choices) < 2:
+        raise cx.error(("answer", "choices"), f"needs at least two names, got {choices!r}")
+    names = tuple(cx.ident(("answer", "choices", i), c) for i, c in enumerate(choices))
+    if len(set(names)) != len(names):
+        raise cx.error(("answer", "choices"), f"names must be distinct, got {list(names)}")
+    return Answer(kind, names)
+
+
+def _saturation(cx: _Ctx, raw: Any) -> SaturationPolicy:
+    s = cx.table(("saturation",), raw, {"action", "tone", "max_attempts"})
+    cap = s.get("max_attempts", 3)
+    if isinstance(cap, int) and not isinstance(cap, bool) and cap < 1:
+        raise cx.error(("saturation", "max_attempts"), f"a redraw cap of {cap} would never run "
+                       "the item; must be >= 1")
+    return SaturationPolicy(
+        action=cx.string(("saturation", "action"), s.get("action", "redraw"), ("redraw", "keep")),
+        tone=cx.boolean(("saturation", "tone"), s.get("tone", True)),
+        max_attempts=int(cx.number(("saturation", "max_attempts"), cap, minimum=1, integer=True)))
+
+
+def _limits(cx: _Ctx, raw: Any) -> Limits:
+    li = cx.table(("limits",), raw, {"max_current", "design_speed"})
+    mc = li.get("max_current")
+    return Limits(
+        max_current=None if mc is None else float(
+            cx.number(("limits", "max_current"), mc, minimum=0, strict=True)),
+        design_speed=float(cx.number(("limits", "design_speed"), li.get("design_speed", 0.11),
+                                     minimum=0, strict=True)))
+
+
+def _scene(cx: _Ctx, path: tuple, name: str, raw: Any) -> Scene:
+    if not isinstance(raw, Mapping):
+        raise cx.error(path, f"expected a scene table, got {raw!r}")
+    try:
+        return Scene.from_dict({"name": name, **raw}, where="scene")
+    except SceneError as exc:
+        p = (*path, *exc.part, *((exc.field,) if exc.field else ()))
+        # the loader names the place itself: keep what the scene said after its own prefix
+        raise cx.error(p, re.sub(r"^scene( '[^']*')?[\w.]*: ", "", str(exc))) from None
+
+
+def _sample(cx: _Ctx, i: int, raw: Any) -> Sample:
+    path = ("samples", i)
+    s = cx.table(path, raw, {"id", "scene", "placement"}, {"id", "scene"})
+    sid = cx.ident((*path, "id"), s["id"])
+    scene = _scene(cx, (*path, "scene"), sid, s["scene"])
+    placement = s.get("placement", sid if scene.is_real else None)
+    if placement is not None:
+        placement = cx.string((*path, "placement"), placement)
+    return Sample(id=sid, scene=scene, placement=placement)
+
+
+_FACTORS = ("frequency", "decay", "slope")
+
+
+def _design(cx: _Ctx, i: int, raw: Any) -> list[tuple[tuple, Sample]]:
+    path = ("designs", i)
+    d = cx.table(path, raw, {"kind", "spring", "factors", "materials"},
+                 {"kind", "spring", "factors", "materials"})
+    cx.string((*path, "kind"), d["kind"], ("factorial",))
+    spring = float(cx.number((*path, "spring"), d["spring"], minimum=0))
+    factors = d["factors"]
+    if not isinstance(factors, list) or sorted(factors) != sorted(_FACTORS):
+        raise cx.error((*path, "factors"), f"a factorial design varies {', '.join(_FACTORS)}; "
+                       f"got {factors!r}")
+    out: list[tuple[tuple, Sample]] = []
+    for j, m in enumerate(_array(cx, (*path, "materials"), d["materials"])):
+        mp = (*path, "materials", j)
+        m = cx.table(mp, m, {"id", "reference", *_FACTORS}, {"id", *_FACTORS})
+        mid = cx.ident((*mp, "id"), m["id"])
+        levels = {}
+        for f in _FACTORS:
+            pair = m[f]
+            if not isinstance(pair, list) or len(pair) != 2:
+                raise cx.error((*mp, f), f"needs two levels [a, b], got {pair!r}")
+            a, b = (float(cx.number((*mp, f, k), v)) for k, v in enumerate(pair))
+            if abs(a) == abs(b):
+                raise cx.error((*mp, f), f"the two levels must differ, got {pair!r}")
+            levels[f] = sorted((a, b), key=abs)  # low, high by magnitude
+        ref_id = None
+        if "reference" in m:
+            ref_id = f"{mid}-real"
+            ref_scene = _scene(cx, (*mp, "reference"), ref_id, {"material": m["reference"]})
+            out.append(((*mp, "reference"), Sample(
+                id=ref_id, scene=ref_scene, placement=f"real {mid} block", block=mid,
+                rated=False)))
+        for combo in itertools.product((0, 1), repeat=3):
+            vals = {f: levels[f][c] for f, c in zip(_FACTORS, combo, strict=True)}
+            code = "".join("LH"[c] for c in combo)
+            try:
+                tr = AccelSinusoid(slope=vals["slope"], decay=vals["decay"],
+                                   frequency=vals["frequency"])
+            except SceneError as exc:
+                raise cx.error(mp, str(exc)) from None
+            sid = f"{mid}-{code}"
+            out.append(((*mp, "id"), Sample(
+                id=sid, scene=Scene(sid, spring=spring, transient=tr), block=mid,
+                factors={f: ("low", "high")[c] for f, c in zip(_FACTORS, combo, strict=True)},
+                params=vals, reference=ref_id)))
+    return out
+
+
+def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: Answer | None,
+           rating: RatingScale | None) -> Phase:
+    path = ("phases", i)
+    p = cx.table(path, raw, {"name", "kind", "samples", "repetitions", "order", "blocks",
+                             "block_order"}, {"name", "samples"})
+    name = cx.ident((*path, "name"), p["name"])
+    kind = cx.string((*path, "kind"), p.get("kind", "rated"), ("rated", "free", "identification"))
+    sel = p["samples"]
+    if sel == "all":
+        ids = tuple(s.id for s in samples.values() if s.rated)
+    elif isinstance(sel, list) and sel:
+        ids = []
+        for k, sid in enumerate(sel):
+            if sid not in samples:
+                hint = difflib.get_close_matches(str(sid), list(samples), n=1)
+                raise cx.error((*path, "samples", k), f"unknown sample {sid!r}"
+                               + (f"; did you mean '{hint[0]}'?" if hint else ""))
+            ids.append(sid)
+        ids = tuple(ids)
+    else:
+        raise cx.error((*path, "samples"), f"must be \"all\" or a list of sample ids, got {sel!r}")
+    reps = int(cx.number((*path, "repetitions"), p.get("repetitions", 1), minimum=1,
+                         integer=True))
+    order = cx.string((*path, "order"), p.get("order", "random"), ("random", "fixed"))
+    blocks = p.get("blocks")
+    if blocks is not None:
+        cx.string((*path, "blocks"), blocks, ("material",))
+        missing = [s for s in ids if samples[s].block is None]
+        if missing:
+            raise cx.error((*path, "blocks"), f"samples {missing} belong to no material")
+    block_order = cx.string((*path, "block_order"), p.get("block_order", "random"),
+                            ("random", "fixed", "williams"))
+    if kind == "identification":
+        if answer is None:
+            raise cx.error((*path, "kind"), "an identification phase needs an [answer] table")
+        if set(ids) != set(answer.choices):
+            raise cx.error((*path, "samples"), f"the surfaces {sorted(ids)} must be the answer "
+                           f"choices {sorted(answer.choices)}")
+    elif kind == "rated" and rating is None:
+        raise cx.error((*path, "kind"), "a rated phase needs a [rating] scale")
+    return Phase(name=name, kind=kind, samples=ids, repetitions=reps, order=order,
+                 blocks=blocks, block_order=block_order)
+
+
+def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:
+    limit = device.current_limit
+    if proto.limits.max_current is not None:
+        if proto.limits.max_current > limit:
+            raise cx.error(("limits", "max_current"),
+                           f"{proto.limits.max_current:g} A exceeds the rating of the device "
+                           f"'{device.backend}' ({limit:g} A)")
+        limit = proto.limits.max_current
+    f_max = limit * device.force_constant
+    v = proto.limits.design_speed
+    for i, s in enumerate(proto.samples.values()):
+        tr = s.scene.transient
+        if tr is None:
+            continue
+        table = tr.unit_table(device.servo_rate_hz, device.effective_mass)
+        peak = float(max(abs(table.max()), abs(table.min()))) * v
+        if peak > f_max:
+            raise cx.error(("samples", i, "scene", "transient"),
+                           f"sample '{s.id}': transient peak {peak:.2f} N at {v:g} m/s exceeds "
+                           f"the {f_max:.2f} N the device can deliver ({limit:g} A × "
+                           f"{device.force_constant:g} N/A)")
+
+
+# keep names used by type checkers of callers
+_ = (Material, Ringing)
