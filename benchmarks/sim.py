@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import contextlib
 import time
-import tomllib
-from importlib import resources
 
 import numpy as np
 
@@ -37,16 +35,10 @@ SPEED_SCENES = ("wood", "wood_on_foam", "firm_spring", "pulse_firm", "sinusoid_f
 
 
 def realism_scenes() -> dict:
-    from device import Scene, SceneError
+    """The realism protocol's scenes by sample id (matched libraries linked to their source)."""
+    from protocols import load_protocol
 
-    text = resources.files("protocols").joinpath("realism.toml").read_text(encoding="utf-8")
-    out = {}
-    for s in tomllib.loads(text)["samples"]:
-        try:
-            out[s["id"]] = Scene.from_dict({"name": s["id"], **s["scene"]})
-        except SceneError:
-            continue  # kinds this installation cannot build yet (e.g. libraries)
-    return out
+    return {k: s.scene for k, s in load_protocol("realism").samples.items()}
 
 
 def _tap_accel(scene, rate_hz: float, speed: float = 0.11):

@@ -17,11 +17,13 @@ from .events import (
 from .scene import (
     AccelSinusoid,
     ForceSinusoid,
+    LibraryTransient,
     Material,
     Pulse,
     Ringing,
     Scene,
     Transient,
+    TransientTable,
     register_transient,
     transient_kinds,
 )
@@ -36,6 +38,8 @@ __all__ = [
     "Flags",
     "ForceSinusoid",
     "HapticDevice",
+    "LibraryTransient",
+    "TransientTable",
     "Material",
     "Pulse",
     "Ringing",

@@ -21,6 +21,8 @@ from typing import Any, ClassVar
 from .errors import SceneError
 
 __all__ = [
+    "TransientTable",
+    "LibraryTransient",
     "Scene",
     "Material",
     "Ringing",
@@ -54,6 +56,7 @@ _ANY: dict[str, Any] = {}
 _NONNEG: dict[str, Any] = {"minimum": 0.0}
 _POS: dict[str, Any] = {"minimum": 0.0, "strict": True}
 _FRACTION: dict[str, Any] = {"minimum": 0.0, "strict": True, "maximum": 1.0}
+_FRACTION_2: dict[str, Any] = {"minimum": 0.0, "strict": True, "maximum": 2.0}
 
 
 def _set_checked(obj: Any, where: str, **rules: dict[str, Any]) -> None:
@@ -132,19 +135,88 @@ class Material:
         _set_checked(self, "material", stiffness=_POS, damping=_NONNEG)
 
 
+BLENDS = ("scale", "nearest", "linear")
+
+
+@dataclass(frozen=True, eq=False)
+class TransientTable:
+    """Force transients to play at a contact, one row per reference speed.
+
+    Parameters
+    ----------
+    velocities : ndarray, shape (n,) [m/s]
+        Incoming speed of each row, ascending.
+    forces : ndarray, shape (n, L) [N]
+        Force per servo tick after contact for each row.
+    blend : str
+        How a contact at speed v uses the rows: ``scale`` (row 0 × v/v0), ``nearest``
+        (nearest row × v/v_i) or ``linear`` (the two bracketing rows weighted linearly;
+        outside the range the end row × v/v_end).
+    attenuation : float
+        Factor on everything played (0.8 for the acceleration-matched library).
+    """
+
+    velocities: Any
+    forces: Any
+    blend: str = "scale"
+    attenuation: float = 1.0
+
+    def __post_init__(self) -> None:
+        import numpy as np
+
+        v = np.ascontiguousarray(self.velocities, dtype=float).reshape(-1)
+        f = np.ascontiguousarray(self.forces, dtype=float)
+        if f.ndim == 1:
+            f = f[None, :]
+        if f.shape[0] != v.size or v.size == 0 or f.shape[1] == 0:
+            raise SceneError(f"transient table: {v.size} velocities for {f.shape[0]} rows "
+                             f"of {f.shape[1] if f.ndim == 2 else 0} ticks")
+        if not (np.all(np.isfinite(v)) and np.all(v > 0) and np.all(np.diff(v) > 0)):
+            raise SceneError("transient table: velocities must be finite, > 0 and ascending")
+        if not np.all(np.isfinite(f)):
+            raise SceneError("transient table: forces must be finite")
+        if self.blend not in BLENDS:
+            raise SceneError(f"transient table: blend must be one of {', '.join(BLENDS)}, "
+                             f"got {self.blend!r}")
+        object.__setattr__(self, "velocities", v)
+        object.__setattr__(self, "forces", f)
+
+    def force_at(self, speed: float):
+        """The force transient [N] a contact at ``speed`` [m/s] plays (reference for tests)."""
+        v, f = self.velocities, self.forces
+        if self.blend == "scale" or len(v) == 1:
+            out = f[0] * speed / v[0]
+        elif self.blend == "nearest":
+            i = int(abs(v - speed).argmin())
+            out = f[i] * speed / v[i]
+        elif speed <= v[0]:
+            out = f[0] * speed / v[0]
+        elif speed >= v[-1]:
+            out = f[-1] * speed / v[-1]
+        else:
+            j = int((v < speed).sum()) - 1
+            w = (speed - v[j]) / (v[j + 1] - v[j])
+            out = (1 - w) * f[j] + w * f[j + 1]
+        return self.attenuation * out
+
+
 class Transient:
     """Base of open-loop contact transients; subclasses register a ``kind`` name.
 
-    A transient knows how to become a force table at a servo rate (see
-    :meth:`unit_table`): the force [N] to play per tick for a contact at 1 m/s.
-    The device scales it by its own estimate of the incoming speed.
+    A transient becomes a :class:`TransientTable` at a servo rate. Parametric kinds
+    define :meth:`unit_table`, the force [N] per tick for a contact at 1 m/s, scaled
+    by the device's own estimate of the incoming speed.
     """
 
     kind: ClassVar[str] = ""
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         """Force per unit incoming speed [N/(m/s)] at each servo tick after contact."""
-        raise NotImplementedError
+        raise NotImplementedError(f"transient kind {self.kind!r} has no unit table")
+
+    def table(self, rate_hz: float, effective_mass: float) -> TransientTable:
+        """What the device plays (see :class:`TransientTable`)."""
+        return TransientTable([1.0], self.unit_table(rate_hz, effective_mass), "scale")
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": self.kind}
@@ -272,6 +344,54 @@ class AccelSinusoid(Transient):
         return effective_mass * ring.acceleration(t, 1.0)
 
 
+@dataclass(frozen=True)
+class LibraryTransient(Transient):
+    """Acceleration-matched transients from a library built on the device itself.
+
+    Parameters
+    ----------
+    source : str
+        Id of the real sample whose taps the library reproduces (e.g. ``wood_on_foam``).
+    attenuation : float [1]
+        Factor on the whole library at playback (0.8 in the study: the unscaled
+        library felt "active").
+    blend : str
+        ``linear`` (two nearest entries by velocity), ``nearest`` or ``scale``.
+    path : str or None
+        Library file, required for a real device (a library is refused on any device
+        but the one it was made on). The simulated device builds its own from the
+        source sample's scene on first use and caches it by content hash.
+    source_scene : Scene or None
+        The source sample's scene, filled in by the protocol loader.
+    """
+
+    kind: ClassVar[str] = "library"
+    source: str
+    attenuation: float = 0.8
+    blend: str = "linear"
+    path: str | None = None
+    source_scene: Scene | None = None
+
+    def __post_init__(self) -> None:
+        w = "transient 'library'"
+        if not isinstance(self.source, str) or not self.source:
+            raise SceneError(f"{w}: field 'source' must name the real sample the library "
+                             f"matches, got {self.source!r}", "source")
+        _set_checked(self, w, attenuation=_FRACTION_2)
+        if self.blend not in BLENDS:
+            raise SceneError(f"{w}: field 'blend' must be one of {', '.join(BLENDS)}, "
+                             f"got {self.blend!r}", "blend")
+        if self.path is not None and (not isinstance(self.path, str) or not self.path):
+            raise SceneError(f"{w}: field 'path' must be a file name, got {self.path!r}", "path")
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": self.kind, "source": self.source,
+                               "attenuation": self.attenuation, "blend": self.blend}
+        if self.path is not None:
+            out["path"] = self.path
+        return out
+
+
 def _dataclass_parser(cls) -> Callable[[str, Mapping[str, Any]], Transient]:
     names = {f.name for f in fields(cls)}
     required = {f.name for f in fields(cls)
@@ -289,6 +409,17 @@ def _dataclass_parser(cls) -> Callable[[str, Mapping[str, Any]], Transient]:
 
 for _cls in (Pulse, ForceSinusoid, AccelSinusoid):
     register_transient(_cls.kind, _dataclass_parser(_cls))
+
+
+def _parse_library(where: str, data: Mapping[str, Any]) -> Transient:
+    _check_keys(where, data, {"source", "attenuation", "blend", "path"}, {"source"})
+    try:
+        return LibraryTransient(**data)
+    except SceneError as exc:
+        raise SceneError(f"{where}: {exc}", exc.field) from None
+
+
+register_transient("library", _parse_library)
 
 
 @dataclass(frozen=True)

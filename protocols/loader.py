@@ -6,6 +6,7 @@ offending value and what is allowed; nothing is half-loaded.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import hashlib
 import itertools
@@ -17,7 +18,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from device import DeviceInfo, Material, Ringing, Scene, SceneError
+from device import DeviceInfo, LibraryTransient, Scene, SceneError
 from device.scene import AccelSinusoid
 
 from ._toml_lines import key_lines, line_of
@@ -196,6 +197,7 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
     samples: dict[str, Sample] = {}
     for i, raw in enumerate(_array(cx, ("samples",), data.get("samples", []))):
         _add(cx, samples, _sample(cx, i, raw), ("samples", i, "id"))
+    _link_libraries(cx, samples)
     for i, raw in enumerate(_array(cx, ("designs",), data.get("designs", []))):
         for path, s in _design(cx, i, raw):
             _add(cx, samples, s, path)
@@ -231,6 +233,23 @@ def _add(cx: _Ctx, samples: dict, s: Sample, path: tuple) -> None:
     if s.id in samples:
         raise cx.error(path, f"duplicate sample id {s.id!r}")
     samples[s.id] = s
+
+
+def _link_libraries(cx: _Ctx, samples: dict[str, Sample]) -> None:
+    """Give each library transient the scene of the real sample it reproduces."""
+    for i, (sid, s) in enumerate(list(samples.items())):
+        tr = s.scene.transient
+        if not isinstance(tr, LibraryTransient):
+            continue
+        src = samples.get(tr.source)
+        if src is None or not src.is_real:
+            real = [k for k, v in samples.items() if v.is_real]
+            raise cx.error(("samples", i, "scene", "transient", "source"),
+                           f"a library reproduces a real sample of this protocol; {tr.source!r} "
+                           f"is {'not real' if src else 'unknown'} (real samples: "
+                           f"{', '.join(real) or 'none'})")
+        linked = dataclasses.replace(tr, source_scene=src.scene)
+        samples[sid] = dataclasses.replace(s, scene=dataclasses.replace(s.scene, transient=linked))
 
 
 def _window(cx: _Ctx, raw: Any) -> Window:
@@ -429,8 +448,8 @@ def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:
     v = proto.limits.design_speed
     for i, s in enumerate(proto.samples.values()):
         tr = s.scene.transient
-        if tr is None:
-            continue
+        if tr is None or isinstance(tr, LibraryTransient):
+            continue  # a library's forces exist only once it is built on the device
         table = tr.unit_table(device.servo_rate_hz, device.effective_mass)
         peak = float(max(abs(table.max()), abs(table.min()))) * v
         if peak > f_max:
@@ -439,6 +458,3 @@ def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:
                            f"the {f_max:.2f} N the device can deliver ({limit:g} A × "
                            f"{device.force_constant:g} N/A)")
 
-
-# keep names used by type checkers of callers
-_ = (Material, Ringing)

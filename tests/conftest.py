@@ -1,5 +1,7 @@
 """Shared test settings."""
 
+import os
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -10,6 +12,12 @@ settings.register_profile("ci", deadline=None, max_examples=60,
 settings.load_profile("ci")
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config):
+    """Build transient libraries into a fresh cache per run (subprocesses inherit it)."""
+    if "HAPTICLAB_CACHE" not in os.environ:
+        os.environ["HAPTICLAB_CACHE"] = tempfile.mkdtemp(prefix="hapticlab-cache-")
 
 
 @pytest.fixture(scope="session")

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -13,11 +15,11 @@ import numpy as np
 from ..base import DeviceInfo, HapticDevice
 from ..errors import DeviceError, DeviceFaultError
 from ..events import ContactEvent, FaultEvent, Flags, SaturationEvent, WindowResult
-from ..scene import Scene
+from ..scene import LibraryTransient, Scene, Transient, TransientTable
 from . import kernel as K
 from .params import DeviceParams, HandParams
 from .plant import N_INPUTS, Plant, build_plant, piece_propagators, zoh
-from .tapper import Tapper
+from .tapper import HoldPlan, Tapper
 
 __all__ = ["SimDevice", "CompiledScene", "compile_scene"]
 
@@ -32,7 +34,8 @@ class CompiledScene:
     contact-switch propagators; spring-only scenes no transient table.
     """
 
-    def __init__(self, scene: Scene, dev: DeviceParams, hand: HandParams):
+    def __init__(self, scene: Scene, dev: DeviceParams, hand: HandParams,
+                 table_for: Callable[[Transient], TransientTable] | None = None):
         self.scene = scene
         self.plant: Plant = build_plant(dev, hand, scene.material, scene.surface_height)
         p = self.plant
@@ -53,15 +56,26 @@ class CompiledScene:
             self.render = 2
         self.spring = float(scene.spring or 0.0)
         if self.render == 2:
-            self.table = np.ascontiguousarray(
-                scene.transient.unit_table(dev.servo_rate_hz, dev.effective_mass), dtype=float)
+            tr = scene.transient
+            self.transient_table = (table_for(tr) if table_for is not None
+                                    else tr.table(dev.servo_rate_hz, dev.effective_mass))
         else:
-            self.table = np.zeros(1)
+            self.transient_table = TransientTable([1.0], np.zeros((1, 1)))
+        tt = self.transient_table
+        self.table = tt.forces
+        self.table_v = tt.velocities
+        self.blend = _BLEND_CODES[tt.blend]
+        self.attenuation = float(tt.attenuation)
 
 
-def compile_scene(scene: Scene, dev: DeviceParams, hand: HandParams) -> CompiledScene:
+_BLEND_CODES = {"scale": K.BLEND_SCALE, "nearest": K.BLEND_NEAREST, "linear": K.BLEND_LINEAR}
+
+
+def compile_scene(scene: Scene, dev: DeviceParams, hand: HandParams,
+                  table_for: Callable[[Transient], TransientTable] | None = None
+                  ) -> CompiledScene:
     """Build the kernel inputs of ``scene`` (see :class:`CompiledScene`)."""
-    return CompiledScene(scene, dev, hand)
+    return CompiledScene(scene, dev, hand, table_for)
 
 
 def velocity_weights(dev: DeviceParams) -> np.ndarray:
@@ -109,8 +123,13 @@ class SimDevice(HapticDevice):
         self.rng_tapping, self.rng_noise = (np.random.default_rng(c) for c in ss.spawn(2))
         self.live = bool(live)
         self.noise = bool(noise)
+        # the serial number names the configuration, so a transient library built for
+        # another simulated device (other mechanics, hand or rate) is refused like a
+        # library from another physical device
+        config = json.dumps([dev.to_dict(), asdict(self.hand)], sort_keys=True)
+        serial = "SIM-" + hashlib.sha256(config.encode()).hexdigest()[:10]
         self._info = DeviceInfo(
-            backend="sim", model="hapticlab simulated stylus device", serial_number="SIM-0001",
+            backend="sim", model="hapticlab simulated stylus device", serial_number=serial,
             firmware="sim", servo_rate_hz=dev.servo_rate_hz, current_limit=dev.current_limit,
             force_constant=dev.force_constant, effective_mass=dev.effective_mass,
             watchdog_s=dev.watchdog_s, encoder_resolution=dev.encoder_resolution,
@@ -121,6 +140,7 @@ class SimDevice(HapticDevice):
                             dev.motor_mass + dev.tip_mass + self.hand.mass)
         self._cache: dict[Scene, CompiledScene] = {}
         self._scene: CompiledScene | None = None
+        self._free_air: CompiledScene | None = None
         self._x: np.ndarray | None = None
         self._ist = np.zeros(K.IST, dtype=np.int64)
         self._fst = np.zeros(K.FST)
@@ -177,11 +197,18 @@ class SimDevice(HapticDevice):
         if not isinstance(scene, Scene):
             raise TypeError(f"load_scene expects a device.Scene, got {type(scene).__name__}")
         if scene not in self._cache:
-            self._cache[scene] = compile_scene(scene, self.params, self.hand)
+            self._cache[scene] = compile_scene(scene, self.params, self.hand, self._table_for)
         self._scene = self._cache[scene]
         self._enabled = False
         self._homed_clearance = None
         self._output_force = 0.0
+
+    def _table_for(self, transient: Transient) -> TransientTable:
+        if isinstance(transient, LibraryTransient):
+            from ..matching.library import library_table
+
+            return library_table(transient, self)
+        return transient.table(self.params.servo_rate_hz, self.params.effective_mass)
 
     def home(self, clearance: float | None = None) -> None:
         """Put the stylus at rest ``clearance`` [m] above the surface (default: the
@@ -202,6 +229,14 @@ class SimDevice(HapticDevice):
         x = np.zeros(p.n_states)
         x[K.Z1] = x[K.Z2] = z
         self._x = x
+        self._reset_loop_state(z)
+        self._homed_clearance = c
+        self._enabled = True
+        self._output_force = 0.0
+        self.heartbeat()
+
+    def _reset_loop_state(self, z: float) -> None:
+        """Servo-loop state after enabling at rest at height ``z`` [m]."""
         self._ist[:] = 0
         self._ist[K.IST_ARMED] = 1
         self._ist[K.IST_PLAY] = -1
@@ -210,10 +245,6 @@ class SimDevice(HapticDevice):
         self._ist[K.IST_FAULT_TICK] = -1
         self._rb[:] = np.floor(z / self.params.encoder_resolution + 0.5) * \
             self.params.encoder_resolution
-        self._homed_clearance = c
-        self._enabled = True
-        self._output_force = 0.0
-        self.heartbeat()
 
     def heartbeat(self) -> None:
         self._t_heartbeat = self.time
@@ -256,20 +287,49 @@ class SimDevice(HapticDevice):
         if not (duration > 0 and math.isfinite(duration)):
             raise ValueError(f"window duration must be finite and > 0 s, got {duration!r}")
         dev, cs = self.params, self._scene
-        dt = dev.dt
         total_s = (timeout + duration) if from_first_contact else duration
         plan = replace(self.tapper, top=self._homed_clearance).plan(
             self.rng_tapping, total_s + 1.0, cs.plant.surface_height)
-        n_max = int(math.ceil(total_s / dt))
-        stop_after = int(round(duration / dt)) if from_first_contact else -1
-        if not from_first_contact:
-            self._ist[K.IST_STOP] = n_max
-        else:
-            self._ist[K.IST_STOP] = -1
+        n_max = int(math.ceil(total_s / dev.dt))
+        stop_after = int(round(duration / dev.dt)) if from_first_contact else -1
+        res = self._run(cs, plan, n_max, stop_after, _EMPTY, on_progress, heartbeats,
+                        timeout if from_first_contact else None, duration + 2.0)
+        res.timed_out = from_first_contact and res.t_first_contact is None
+        return res
+
+    def play_force(self, force, *, heartbeats: bool = True) -> WindowResult:
+        """Play an open-loop force command [N per servo tick] while the hand holds still.
+
+        Each call starts with the stylus at rest in free air (no surface within reach) and
+        output enabled; the command still goes through the ramp, watchdog and current
+        clamp. Used for system identification. Afterwards, home again before a window.
+        """
+        self._check_open()
+        if self._fault is not None:
+            raise DeviceFaultError(f"fault latched ({self._fault.code}): clear it first")
+        f = np.ascontiguousarray(force, dtype=float).reshape(-1)
+        if f.size == 0 or not np.all(np.isfinite(f)):
+            raise ValueError("force command must be a non-empty array of finite values [N]")
+        if self._free_air is None:
+            self._free_air = compile_scene(Scene("free-air", surface_height=-1e3, spring=0.0),
+                                           self.params, self.hand)
+        self._x = np.zeros(self._free_air.plant.n_states)
+        self._reset_loop_state(0.0)
+        self._enabled = False  # a window needs home() afterwards
+        self.heartbeat()
+        return self._run(self._free_air, HoldPlan(0.0), f.size, -1, f, None, heartbeats, None,
+                         f.size * self.params.dt)
+
+    def _run(self, cs: CompiledScene, plan, n_max: int, stop_after: int, f_ext: np.ndarray,
+             on_progress, heartbeats: bool, timeout: float | None, initial_s: float
+             ) -> WindowResult:
+        dev = self.params
+        dt = dev.dt
+        self._ist[K.IST_STOP] = -1 if stop_after >= 0 else n_max
         self._ist[K.IST_FIRST] = -1
         self._ist[K.IST_NEV] = 0
         tick0 = self._tick
-        buf = _Buffers(min(n_max, int(round((duration + 2.0) / dt))), plan, self._pull_gains, dt)
+        buf = _Buffers(min(n_max, int(round(initial_s / dt))), plan, self._pull_gains, dt)
         ev_tick = np.zeros(4096, dtype=np.int64)
         ev_vel = np.zeros(4096)
         chunk = max(1, int(round((_LIVE_CHUNK_S if self.live else _CHUNK_S) / dt)))
@@ -290,9 +350,9 @@ class SimDevice(HapticDevice):
                 n, n1, self._x, self._ist, self._fst, self._rb,
                 cs.tick_prop, cs.pieces, cs.plant.n_sub, cs.plant.accel_row,
                 cs.plant.surface_height, cs.plant.contact_stiffness, cs.plant.contact_damping,
-                cs.plant.ring_gain, buf.u_hand, _EMPTY,
+                cs.plant.ring_gain, buf.u_hand, f_ext,
                 cs.render, cs.spring, dev.encoder_resolution, self._vel_w,
-                dev.contact_hysteresis, cs.table,
+                dev.contact_hysteresis, cs.table, cs.table_v, cs.blend, cs.attenuation,
                 dev.force_constant, dev.current_limit, ramp_ticks, zero_from, stop_after,
                 dev.servo_rate_hz,
                 buf.pos, buf.fcmd, buf.fout, buf.cur, buf.acc, buf.flags, buf.z2, buf.v2, buf.a2,
@@ -301,18 +361,16 @@ class SimDevice(HapticDevice):
             n = n_done
             if self.live:
                 target = wall0 + n * dt
-                now = time.perf_counter()
-                late.append(now - target)
+                late.append(time.perf_counter() - target)
                 while time.perf_counter() < target:  # busy-wait: sleep is too coarse
                     pass
             if n_done < n1:
                 break  # window complete
-            if from_first_contact and self._ist[K.IST_FIRST] < 0 and n * dt >= timeout:
+            if timeout is not None and self._ist[K.IST_FIRST] < 0 and n * dt >= timeout:
                 break  # nobody tapped
             if on_progress is not None:
                 on_progress(n * dt, self._result(buf, n, tick0, ev_tick, ev_vel))
         res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True)
-        res.timed_out = from_first_contact and res.t_first_contact is None
         if self.live:
             wall = time.perf_counter() - wall0
             lat = np.asarray(late)

@@ -30,11 +30,13 @@ __all__ = ["run_ticks", "propagate_linear", "IST", "FST"]
 
 # integer state slots
 IST_MODE, IST_ARMED, IST_PLAY, IST_SINCE_ENABLE, IST_FIRST, IST_NEV, IST_RB, IST_FAULT, \
-    IST_STOP, IST_FAULT_TICK, IST_SAT = range(11)
-IST = 11
-# float state slots
-FST_SCALE = 0
-FST = 1
+    IST_STOP, IST_FAULT_TICK, IST_ROW1, IST_ROW2 = range(12)
+IST = 12
+# float state slots: the two table rows' coefficients of the transient playing
+FST_C1, FST_C2 = 0, 1
+FST = 2
+# how a contact speed picks table rows (TransientTable.blend)
+BLEND_SCALE, BLEND_NEAREST, BLEND_LINEAR = 0, 1, 2
 
 F_CONTACT, F_SAT, F_TRANSIENT, F_ZEROED, F_RAMP = 1, 2, 4, 8, 16
 
@@ -107,11 +109,49 @@ def _advance_switching(pieces, x, u, ist, h, ks, bs, ring_gain, has_ring, tmp):
 
 
 @lazy_njit
+def _pick_rows(speed, tbl_v, blend, atten, ist, fst):
+    """Rows and coefficients of the table to play for a contact at ``speed`` [m/s].
+
+    ``scale``: row 0 × speed / v0. ``nearest``: the row of the nearest speed, scaled by
+    speed / v_i. ``linear``: the two rows bracketing the speed, weighted linearly; below
+    the slowest or above the fastest row, that end row scaled by speed / v_end (impact
+    transients grow about linearly with the momentum brought in).
+    """
+    n = tbl_v.shape[0]
+    i1, i2, c1, c2 = 0, 0, 0.0, 0.0
+    if blend == BLEND_SCALE or n == 1:
+        c1 = speed / tbl_v[0]
+    elif blend == BLEND_NEAREST:
+        best = 0
+        for i in range(1, n):
+            if abs(tbl_v[i] - speed) < abs(tbl_v[best] - speed):
+                best = i
+        i1 = best
+        c1 = speed / tbl_v[best]
+    else:
+        if speed <= tbl_v[0]:
+            c1 = speed / tbl_v[0]
+        elif speed >= tbl_v[n - 1]:
+            i1 = n - 1
+            c1 = speed / tbl_v[n - 1]
+        else:
+            j = 0
+            while tbl_v[j + 1] < speed:
+                j += 1
+            w = (speed - tbl_v[j]) / (tbl_v[j + 1] - tbl_v[j])
+            i1, i2, c1, c2 = j, j + 1, 1.0 - w, w
+    ist[IST_ROW1] = i1
+    ist[IST_ROW2] = i2
+    fst[FST_C1] = c1 * atten
+    fst[FST_C2] = c2 * atten
+
+
+@lazy_njit
 def run_ticks(n0, n1, x, ist, fst, rb,
               tick_prop, pieces, n_sub, accel_row,
               h, ks, bs, ring_gain,
               u_hand, f_ext,
-              render, K, enc_res, vel_w, hyst, table,
+              render, K, enc_res, vel_w, hyst, table, tbl_v, blend, atten,
               kt, i_max, ramp_ticks, zero_from, stop_after, rate,
               o_pos, o_fcmd, o_fout, o_cur, o_acc, o_flags, o_z2, o_v2, o_a2,
               ev_tick, ev_vel):
@@ -128,7 +168,7 @@ def run_ticks(n0, n1, x, ist, fst, rb,
     has_ring = ns > Q
     n_modes = tick_prop.shape[0]
     inv_res = 1.0 / enc_res
-    n_tab = table.shape[0]
+    n_tab = table.shape[1]
     has_ext = f_ext.shape[0] > 0
     for n in range(n0, n1):
         if ist[IST_STOP] >= 0 and n >= ist[IST_STOP]:
@@ -160,7 +200,7 @@ def run_ticks(n0, n1, x, ist, fst, rb,
                         ist[IST_STOP] = n + stop_after
                 if render == 2:
                     ist[IST_PLAY] = 0
-                    fst[FST_SCALE] = speed
+                    _pick_rows(speed, tbl_v, blend, atten, ist, fst)
         elif enc > h + hyst:
             ist[IST_ARMED] = 1
         # 3. rendering
@@ -169,7 +209,8 @@ def run_ticks(n0, n1, x, ist, fst, rb,
             if enc < h:
                 fc = K * (h - enc)
             if render == 2 and ist[IST_PLAY] >= 0:
-                fc += fst[FST_SCALE] * table[ist[IST_PLAY]]
+                k = ist[IST_PLAY]
+                fc += fst[FST_C1] * table[ist[IST_ROW1], k] + fst[FST_C2] * table[ist[IST_ROW2], k]
                 flags |= F_TRANSIENT
                 ist[IST_PLAY] += 1
                 if ist[IST_PLAY] >= n_tab:

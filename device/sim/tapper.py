@@ -30,7 +30,7 @@ import numpy as np
 
 from ._jit import lazy_njit
 
-__all__ = ["Tapper", "TapPlan"]
+__all__ = ["Tapper", "TapPlan", "HoldPlan"]
 
 
 @dataclass(frozen=True)
@@ -144,6 +144,17 @@ class TapPlan:
         a = np.empty_like(t)
         _reference(t, self.strokes, self.top, -self.press_depth, self.surface_height, z, v, a)
         return z, v, a
+
+
+@dataclass
+class HoldPlan:
+    """The hand holding the stylus still at ``height`` [m] (for identification runs)."""
+
+    height: float
+
+    def reference(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(t, dtype=float)
+        return np.full_like(t, self.height), np.zeros_like(t), np.zeros_like(t)
 
 
 @lazy_njit

@@ -41,9 +41,9 @@ def test_demo_runs_every_available_sample():
     out = run("demo", env=None)
     assert out.returncode == 0, out.stderr
     for sample in ("wood", "wood_on_foam", "foam", "firm_spring", "soft_spring", "pulse_firm",
-                   "pulse_soft", "sinusoid_firm", "sinusoid_soft"):
+                   "pulse_soft", "sinusoid_firm", "sinusoid_soft", "matched_firm", "matched_soft"):
         assert sample in out.stdout
-    assert "matched_firm: not simulated" in out.stdout
+    assert "simulated 11 samples" in out.stdout
 
 
 @pytest.mark.slow

@@ -58,6 +58,7 @@ def test_transient_is_scaled_by_the_encoder_estimate_not_the_true_speed():
     _, res = window(SINE, noise=False)
     tr = res.traces
     table = SINE.transient.unit_table(res.rate_hz, 0.055)
+    tt = SINE.transient.table(res.rate_hz, 0.055)
     errs = []
     for c in res.contacts:
         i = int(round((c.t - tr["t"][0]) * res.rate_hz))
@@ -65,6 +66,7 @@ def test_transient_is_scaled_by_the_encoder_estimate_not_the_true_speed():
         spring = 680.0 * np.maximum(-tr["position"][i:i + n], 0.0)
         played = tr["force_cmd"][i:i + n] - spring
         np.testing.assert_allclose(played, c.velocity * table[:n], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(played, tt.force_at(c.velocity)[:n], rtol=0, atol=1e-9)
         # the estimate is close to, but not, the true incoming speed
         v_true = -tr["true_velocity"][i]
         errs.append(abs(c.velocity - v_true) / v_true)
@@ -182,7 +184,7 @@ def test_per_tick_work_follows_the_scene():
     spring = compile_scene(FIRM, dev, hand)
     assert spring.render == 1 and spring.plant.n_modes == 1 and spring.table.size == 1
     sine = compile_scene(SINE, dev, hand)
-    assert sine.render == 2 and sine.table.size == math.ceil(0.055 * math.log(100) * 10_000)
+    assert sine.render == 2 and sine.table.shape == (1, math.ceil(0.055 * math.log(100) * 10_000))
 
 
 @pytest.mark.parametrize("rate", [999, 20_001, float("nan")])

@@ -59,7 +59,8 @@ def _segment(scene: Scene, rate: float, duration: float, x0_fn, pull_fn) -> tupl
                 cs.plant.accel_row, cs.plant.surface_height, cs.plant.contact_stiffness,
                 cs.plant.contact_damping, cs.plant.ring_gain, pull_fn(t), np.zeros(0),
                 cs.render, cs.spring, dev.encoder_resolution, w, dev.contact_hysteresis,
-                cs.table, dev.force_constant, dev.current_limit, 0, 2**62, -1, rate,
+                cs.table, cs.table_v, cs.blend, cs.attenuation, dev.force_constant,
+                dev.current_limit, 0, 2**62, -1, rate,
                 outs[0], outs[1], outs[2], outs[3], outs[4], flags, outs[5], outs[6], outs[7],
                 np.zeros(16, dtype=np.int64), np.zeros(16))
     return t[:n], outs[5], outs[6]

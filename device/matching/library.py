@@ -1,0 +1,299 @@
+"""Transient libraries: record taps on a real sample, invert them, play them back.
+
+Pipeline (:func:`build_library`): identify the device (:func:`~device.matching.sysid.identify`)
+→ record tapping windows on the real sample → segment contacts at the encoder's
+position threshold (the device's contact events) → 100-ms acceleration windows with
+their incoming speeds, keeping taps not followed by another contact inside the window →
+an even spread of speeds → invert each (:func:`~device.matching.inversion.invert`) →
+:class:`TransientLibrary`.
+
+File format (``.npz``, version 1): arrays ``velocities`` (n) [m/s], ``forces`` (n, L) [N],
+``meta_json`` (UTF-8 JSON: format version, device identity and servo rate, the
+identified model, inversion method and parameters, source sample and recordings) and
+``sha256`` (hex digest over the canonical JSON and the arrays' little-endian bytes).
+Loading checks the version and the hash (a corrupt file is refused) and, given a
+device, that the library was made on that very device (model, serial number, rate).
+
+The simulated device builds the library of a :class:`~device.scene.LibraryTransient`
+on first use, from the source sample's scene, and caches it by content hash in
+``$HAPTICLAB_CACHE`` (default ``~/.cache/hapticlab``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import tempfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..base import DeviceInfo
+from ..errors import DeviceError
+from ..scene import LibraryTransient, Scene, TransientTable
+from .inversion import METHODS, discretize, invert
+from .sysid import TFModel, identify
+
+__all__ = ["TransientLibrary", "LibraryError", "build_library", "record_taps", "segment_taps",
+           "even_spread", "library_table", "cache_dir", "FORMAT_VERSION", "Tap"]
+
+FORMAT_VERSION = 1
+PIPELINE_VERSION = "matching-1"
+
+
+class LibraryError(DeviceError):
+    """A library file is corrupt, of an unknown version, or from another device."""
+
+
+@dataclass(frozen=True)
+class Tap:
+    """One segmented contact: incoming speed [m/s] and the acceleration window [m/s²]."""
+
+    velocity: float
+    accel: np.ndarray
+    t: float
+
+
+@dataclass
+class TransientLibrary:
+    """Velocity-indexed force transients for one device.
+
+    Attributes
+    ----------
+    velocities : ndarray (n,) [m/s]
+        Ascending incoming speeds.
+    forces : ndarray (n, L) [N]
+        Transient per speed at the servo rate.
+    meta : dict
+        ``device`` (DeviceInfo dict), ``servo_rate_hz``, ``model`` (identified TF),
+        ``inversion`` (method, λ, band, tapers, in-window errors), ``source`` (sample
+        scene and recordings), ``pipeline``.
+    """
+
+    velocities: np.ndarray
+    forces: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def rate_hz(self) -> float:
+        return float(self.meta["servo_rate_hz"])
+
+    @property
+    def sha256(self) -> str:
+        return _digest(self.velocities, self.forces, self.meta)
+
+    @property
+    def nbytes(self) -> int:
+        """What the device must hold: the force table as float32 plus the speeds."""
+        return int(self.forces.size * 4 + self.velocities.size * 4)
+
+    def table(self, attenuation: float = 0.8, blend: str = "linear") -> TransientTable:
+        return TransientTable(self.velocities, self.forces, blend, attenuation)
+
+    # ---------------------------------------------------------------- file
+    def save(self, path: str | Path) -> Path:
+        """Write atomically (temporary file, fsync, rename)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        buf = io.BytesIO()
+        np.savez(buf, velocities=self.velocities.astype("<f8"), forces=self.forces.astype("<f8"),
+                 meta_json=np.array(_canonical(self.meta)), sha256=np.array(self.sha256))
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(buf.getvalue())
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path, device: DeviceInfo | None = None) -> TransientLibrary:
+        """Read and verify a library; with ``device``, refuse one made on another device."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                v, f = z["velocities"], z["forces"]
+                meta = json.loads(str(z["meta_json"]))
+                stored = str(z["sha256"])
+        except FileNotFoundError:
+            raise LibraryError(f"{path}: no such library file") from None
+        except (OSError, ValueError, KeyError) as exc:
+            raise LibraryError(f"{path}: not a transient library file ({exc})") from None
+        version = meta.get("format_version")
+        if version != FORMAT_VERSION:
+            raise LibraryError(f"{path}: library format version {version!r}; this hapticlab "
+                               f"reads version {FORMAT_VERSION}")
+        lib = cls(np.asarray(v, float), np.asarray(f, float), meta)
+        if lib.sha256 != stored:
+            raise LibraryError(f"{path}: content hash mismatch (stored {stored[:12]}…, computed "
+                               f"{lib.sha256[:12]}…): the file is corrupt or was edited")
+        if device is not None:
+            lib.check_device(device, str(path))
+        return lib
+
+    def check_device(self, device: DeviceInfo, where: str = "library") -> None:
+        made = self.meta.get("device", {})
+        mine = (device.model, device.serial_number, float(device.servo_rate_hz))
+        theirs = (made.get("model"), made.get("serial_number"),
+                  float(made.get("servo_rate_hz", -1)))
+        if mine != theirs:
+            raise LibraryError(
+                f"{where}: made on '{theirs[0]}' serial {theirs[1]} at {theirs[2]:g} Hz, but this "
+                f"is '{mine[0]}' serial {mine[1]} at {mine[2]:g} Hz; acceleration matching "
+                "inverts one device's dynamics, so build a library on this device "
+                "(hapticlab library build)")
+
+
+def _canonical(meta: dict) -> str:
+    return json.dumps(meta, sort_keys=True, separators=(",", ":"), default=float)
+
+
+def _digest(v: np.ndarray, f: np.ndarray, meta: dict) -> str:
+    h = hashlib.sha256()
+    h.update(_canonical(meta).encode())
+    h.update(np.ascontiguousarray(v, "<f8").tobytes())
+    h.update(np.ascontiguousarray(f, "<f8").tobytes())
+    return h.hexdigest()
+
+
+# --------------------------------------------------------------------- pipeline
+def record_taps(device, scene: Scene, windows: int = 8, duration: float = 5.0) -> list:
+    """Tap windows on ``scene``: list of WindowResult (traces and contact events)."""
+    device.load_scene(scene)
+    out = []
+    for _ in range(windows):
+        device.home()
+        out.append(device.run_window(duration))
+    return out
+
+
+def segment_taps(results, window: float = 0.100, baseline: float = 0.005) -> list[Tap]:
+    """Acceleration windows from each contact, keeping taps with no other contact inside.
+
+    The contact instant is the device's position-threshold crossing (its contact event);
+    the acceleration's mean over ``baseline`` seconds before it is removed.
+    """
+    taps = []
+    for res in results:
+        tr = res.traces
+        rate = res.rate_hz
+        n = int(round(window * rate))
+        nb = max(1, int(round(baseline * rate)))
+        times = [c.t for c in res.contacts]
+        for k, c in enumerate(res.contacts):
+            if k + 1 < len(times) and times[k + 1] - c.t < window:
+                continue  # a bounce or the next tap inside the window
+            i = int(round((c.t - tr["t"][0]) * rate))
+            if i - nb < 0 or i + n > len(tr["t"]):
+                continue
+            a = tr["accel"][i: i + n] - np.mean(tr["accel"][i - nb: i])
+            taps.append(Tap(float(c.velocity), a.astype(float), float(c.t)))
+    return taps
+
+
+def even_spread(velocities: np.ndarray, n: int) -> np.ndarray:
+    """Indices of ``n`` taps whose speeds are closest to an even grid over their range."""
+    v = np.asarray(velocities, float)
+    if n >= v.size:
+        return np.argsort(v)
+    grid = np.linspace(v.min(), v.max(), n)
+    chosen: list[int] = []
+    for g in grid:
+        order = np.argsort(np.abs(v - g))
+        for i in order:
+            if int(i) not in chosen and not np.any(np.isclose(v[chosen], v[i])):
+                chosen.append(int(i))
+                break
+    return np.array(sorted(chosen, key=lambda i: v[i]))
+
+
+def build_library(device, source: Scene, entries: int = 12, method: str = "regularized",
+                  lam: float = 1e-4, windows: int = 8, order: int = 7, relative_degree: int = 4,
+                  model: TFModel | None = None) -> TransientLibrary:
+    """Run the whole pipeline on ``device`` for the real sample ``source``.
+
+    Parameters
+    ----------
+    device : HapticDevice
+        Needs ``play_force`` for identification (unless ``model`` is given).
+    source : Scene
+        The real sample whose taps the library reproduces.
+    entries : int
+        Library size (an even spread of the recorded speeds).
+    method : {'regularized', 'stable'}
+    lam : float
+        Regularization of the ``regularized`` inversion.
+    windows : int
+        5-s tapping windows recorded on the source.
+    """
+    if not source.is_real:
+        raise ValueError(f"a library reproduces a real sample; '{source.name}' is virtual")
+    if method not in METHODS:
+        raise ValueError(f"inversion method must be one of {', '.join(METHODS)}")
+    info = device.info
+    if model is None:
+        model = identify(device, order=order, relative_degree=relative_degree).model
+    dm = discretize(model, info.servo_rate_hz)
+    taps = segment_taps(record_taps(device, source, windows))
+    if len(taps) < 2:
+        raise LibraryError(f"only {len(taps)} clean taps recorded on '{source.name}'")
+    pick = even_spread(np.array([t.velocity for t in taps]), entries)
+    invs = [invert(dm, taps[i].accel, method, lam=lam) for i in pick]
+    meta: dict[str, Any] = {
+        "format_version": FORMAT_VERSION,
+        "pipeline": PIPELINE_VERSION,
+        "device": {**info.to_dict(), "servo_rate_hz": float(info.servo_rate_hz)},
+        "servo_rate_hz": float(info.servo_rate_hz),
+        "model": model.to_dict(),
+        "inversion": {"method": method, "lambda": lam, "band_hz": [10.0, 500.0],
+                      "taper_s": [0.001, 0.01], "window_s": 0.1,
+                      "in_window_error": [v.in_window_error for v in invs],
+                      "energy_outside": [v.energy_outside for v in invs]},
+        "source": {"sample": source.name, "scene": source.to_dict(), "windows": windows,
+                   "taps_recorded": len(taps), "tap_times_s": [taps[i].t for i in pick]},
+    }
+    return TransientLibrary(np.array([taps[i].velocity for i in pick]),
+                            np.stack([v.force for v in invs]), meta)
+
+
+# --------------------------------------------------------------------- device use
+def cache_dir() -> Path:
+    """Where built libraries are cached: ``$HAPTICLAB_CACHE`` or ``~/.cache/hapticlab``."""
+    return Path(os.environ.get("HAPTICLAB_CACHE") or Path.home() / ".cache" / "hapticlab")
+
+
+def library_table(transient: LibraryTransient, sim_device) -> TransientTable:
+    """The table a simulated device plays for ``transient``: from its file, or built and cached."""
+    info = sim_device.info
+    if transient.path is not None:
+        lib = TransientLibrary.load(transient.path, info)
+        return lib.table(transient.attenuation, transient.blend)
+    if transient.source_scene is None:
+        raise LibraryError(f"library transient for '{transient.source}' has neither a file "
+                           "('path') nor its source sample's scene (load it through a protocol)")
+    key = hashlib.sha256(json.dumps({
+        "pipeline": PIPELINE_VERSION, "device": sim_device.params.to_dict(),
+        "hand": asdict(sim_device.hand), "source": transient.source_scene.to_dict(),
+    }, sort_keys=True).encode()).hexdigest()[:16]
+    path = cache_dir() / f"library-{transient.source}-{key}.npz"
+    try:
+        lib = TransientLibrary.load(path, info)
+    except LibraryError:
+        lib = build_library(_twin(sim_device), transient.source_scene)
+        lib.save(path)
+    return lib.table(transient.attenuation, transient.blend)
+
+
+def _twin(sim_device):
+    """A fresh simulated device like ``sim_device`` (own seed and clock) for building."""
+    from ..sim.backend import SimDevice
+
+    return SimDevice(device=sim_device.params, hand=sim_device.hand, seed=20_260_001)
