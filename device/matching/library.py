@@ -38,8 +38,8 @@ from ..scene import LibraryTransient, Scene, TransientTable
 from .inversion import METHODS, discretize, invert
 from .sysid import TFModel, identify
 
-__all__ = ["TransientLibrary", "LibraryError", "build_library", "record_taps", "segment_taps",
-           "even_spread", "library_table", "cache_dir", "FORMAT_VERSION", "Tap"]
+__all__ = ["TransientLibrary", "LibraryError", "build_library", "usable_band", "record_taps",
+           "segment_taps", "even_spread", "library_table", "cache_dir", "FORMAT_VERSION", "Tap"]
 
 FORMAT_VERSION = 1
 PIPELINE_VERSION = "matching-1"
@@ -165,6 +165,11 @@ def _digest(v: np.ndarray, f: np.ndarray, meta: dict) -> str:
 
 
 # --------------------------------------------------------------------- pipeline
+def usable_band(rate_hz: float, band: tuple[float, float] = (10.0, 500.0)) -> tuple[float, float]:
+    """The matching band at a servo rate: 10–500 Hz, the top clipped to 0.4 of the rate."""
+    return (band[0], min(band[1], 0.4 * rate_hz))
+
+
 def record_taps(device, scene: Scene, windows: int = 8, duration: float = 5.0) -> list:
     """Tap windows on ``scene``: list of WindowResult (traces and contact events)."""
     device.load_scene(scene)
@@ -239,21 +244,22 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     if method not in METHODS:
         raise ValueError(f"inversion method must be one of {', '.join(METHODS)}")
     info = device.info
+    band = usable_band(info.servo_rate_hz)
     if model is None:
-        model = identify(device, order=order, relative_degree=relative_degree).model
+        model = identify(device, order=order, relative_degree=relative_degree, band=band).model
     dm = discretize(model, info.servo_rate_hz)
     taps = segment_taps(record_taps(device, source, windows))
     if len(taps) < 2:
         raise LibraryError(f"only {len(taps)} clean taps recorded on '{source.name}'")
     pick = even_spread(np.array([t.velocity for t in taps]), entries)
-    invs = [invert(dm, taps[i].accel, method, lam=lam) for i in pick]
+    invs = [invert(dm, taps[i].accel, method, lam=lam, band=band) for i in pick]
     meta: dict[str, Any] = {
         "format_version": FORMAT_VERSION,
         "pipeline": PIPELINE_VERSION,
         "device": {**info.to_dict(), "servo_rate_hz": float(info.servo_rate_hz)},
         "servo_rate_hz": float(info.servo_rate_hz),
         "model": model.to_dict(),
-        "inversion": {"method": method, "lambda": lam, "band_hz": [10.0, 500.0],
+        "inversion": {"method": method, "lambda": lam, "band_hz": list(band),
                       "taper_s": [0.001, 0.01], "window_s": 0.1,
                       "in_window_error": [v.in_window_error for v in invs],
                       "energy_outside": [v.energy_outside for v in invs]},
