@@ -103,13 +103,38 @@ def _protocol_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _open_spec(spec: str):
+    from device import DeviceError, open_device
+
+    try:
+        return open_device(spec)
+    except (DeviceError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+
+
+def _matching(args: argparse.Namespace) -> int:
+    from app import matching_cli as mc
+    from device import DeviceError
+
+    try:
+        if args.action == "identify":
+            return mc.device_identify(args, _open_spec)
+        if args.action == "identify-grasp":
+            return mc.device_identify_grasp(args)
+        if args.action == "library-build":
+            return mc.library_build(args, _open_spec, lambda p: _load_protocol(p))
+        return mc.library_show(args, _open_spec)
+    except (DeviceError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+
+
 def _bench(args: argparse.Namespace) -> int:
     import importlib
 
     try:
         module = importlib.import_module(f"benchmarks.{args.what}")
     except ModuleNotFoundError:
-        raise UserError(f"no benchmark named {args.what!r}; available: sim") from None
+        raise UserError(f"no benchmark named {args.what!r}; available: sim, matching") from None
     return module.main(args)
 
 
@@ -125,12 +150,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="Psychophysics of haptic contact realism: devices, protocols, analysis.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    dev = sub.add_parser("device", help="device tools (selftest)")
+    dev = sub.add_parser("device", help="device tools (selftest, identify, identify-grasp)")
     dsub = dev.add_subparsers(dest="device_command", required=True, metavar="ACTION")
     st = dsub.add_parser("selftest", help="run the backend-independent checks against a device")
     st.add_argument("spec", help="device spec, e.g. sim or serial:/dev/ttyACM0")
     st.add_argument("--json", action="store_true", help="print a JSON summary")
     st.set_defaults(func=_device_selftest)
+    from app.matching_cli import add_parsers
+
+    add_parsers(dsub, sub, _matching)
 
     pr = sub.add_parser("protocol", help="protocol files (validate, show)")
     psub = pr.add_subparsers(dest="protocol_command", required=True, metavar="ACTION")
@@ -171,6 +199,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("hapticlab: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into `head` and the like
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -23,6 +23,9 @@ from .errors import SceneError
 __all__ = [
     "TransientTable",
     "LibraryTransient",
+    "GraspModel",
+    "GraspTransient",
+    "PUBLISHED_GRASP",
     "Scene",
     "Material",
     "Ringing",
@@ -392,6 +395,70 @@ class LibraryTransient(Transient):
         return out
 
 
+@dataclass(frozen=True)
+class GraspModel:
+    """m, c, k linear in grasp force: value = intercept + slope·F_g."""
+
+    m: tuple[float, float] = (0.023, -0.00032)
+    c: tuple[float, float] = (14.0, -0.19)
+    k: tuple[float, float] = (75_000.0, -1_000.0)
+
+    def at(self, grasp_force: float) -> tuple[float, float, float]:
+        """(m [kg], c [N·s/m], k [N/m]) at ``grasp_force`` [N]."""
+        m, c, k = (p[0] + p[1] * grasp_force for p in (self.m, self.c, self.k))
+        if min(m, c, k) <= 0:
+            raise ValueError(f"grasp force {grasp_force} N is outside the model's range "
+                             f"(m={m:.4g} kg, c={c:.4g} N·s/m, k={k:.4g} N/m must be > 0)")
+        return m, c, k
+
+
+PUBLISHED_GRASP = GraspModel()
+
+
+@dataclass(frozen=True)
+class GraspTransient(Transient):
+    """Contact transient of a gripper scene, scaled by grasp force (SPEC §3).
+
+    The grasped handle's acceleration after an impact that stops it from unit speed
+    (impulse m·v) is ẍ(t) = v·e^(−σt)·[(σ² − ω_d²)·sin(ω_d t) − 2σω_d·cos(ω_d t)]/ω_d with
+    m, c, k at the scene's grasp force; the device plays effective mass × that.
+
+    Parameters
+    ----------
+    grasp_force : float [N]
+    cutoff : float [1]
+        Playback stops when the envelope falls to this fraction.
+    """
+
+    kind = "grasp"
+    grasp_force: float
+    cutoff: float = 0.01
+
+    def __post_init__(self) -> None:
+        _set_checked(self, "transient 'grasp'", grasp_force=_NONNEG)
+        if not 0 < self.cutoff <= 1:
+            raise SceneError(f"transient 'grasp': field 'cutoff' must be in (0, 1], got "
+                             f"{self.cutoff!r}", "cutoff")
+        try:
+            PUBLISHED_GRASP.at(self.grasp_force)
+        except ValueError as exc:
+            raise SceneError(f"transient 'grasp': {exc}", "grasp_force") from None
+
+    def unit_table(self, rate_hz: float, effective_mass: float):
+        m, c, k = PUBLISHED_GRASP.at(self.grasp_force)
+        wn = math.sqrt(k / m)
+        zeta = c / (2 * math.sqrt(k * m))
+        sigma = zeta * wn
+        wd = wn * math.sqrt(max(1e-12, (1 - zeta) * (1 + zeta)))
+        n = max(1, int(math.ceil(math.log(1 / self.cutoff) / sigma * rate_hz)))
+        import numpy as np
+
+        t = np.arange(n) / rate_hz
+        acc = np.exp(-sigma * t) * ((sigma**2 - wd**2) * np.sin(wd * t)
+                                    - 2 * sigma * wd * np.cos(wd * t)) / wd
+        return -effective_mass * acc  # the first push is out of the surface
+
+
 def _dataclass_parser(cls) -> Callable[[str, Mapping[str, Any]], Transient]:
     names = {f.name for f in fields(cls)}
     required = {f.name for f in fields(cls)
@@ -420,6 +487,17 @@ def _parse_library(where: str, data: Mapping[str, Any]) -> Transient:
 
 
 register_transient("library", _parse_library)
+
+
+def _parse_grasp(where: str, data: Mapping[str, Any]) -> Transient:
+    _check_keys(where, data, {"grasp_force", "cutoff"}, {"grasp_force"})
+    try:
+        return GraspTransient(**data)
+    except SceneError as exc:
+        raise SceneError(f"{where}: {exc}", exc.field) from None
+
+
+register_transient("grasp", _parse_grasp)
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,12 @@ milliseconds (:func:`direct_inverse` shows it). Two stable inverses:
   target begins, which a contact-triggered playback cannot give; that part is reported
   as energy outside the window.
 
-Both are followed by the same conditioning: a zero-phase band limit to 10–500 Hz of the
+* ``windowed`` — the causal force inside the window that minimises
+  ‖H·u − a‖² + λ·max|H|²·‖u‖² over the window, with H the model's convolution matrix:
+  optimal for playback from contact (no non-causal part to lose), at the cost of a
+  dense n×n solve (~50 ms for a 100-ms window at 10 kHz instead of ~1.5 ms).
+
+The first two are followed by the same conditioning: a zero-phase band limit to 10–500 Hz of the
 whole (untruncated) inverse, then the 100-ms window with half-cosine tapers so the
 transient starts and ends at zero. Band-passing after the truncation instead doubled
 the in-window error (a 10-Hz high-pass over a 100-ms window distorts its edges).
@@ -33,7 +38,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
+from scipy import linalg, signal
 from scipy.linalg import expm
 
 from .sysid import TFModel
@@ -41,7 +46,7 @@ from .sysid import TFModel
 __all__ = ["DiscreteModel", "discretize", "invert", "direct_inverse", "verify", "Inversion",
            "condition_target", "METHODS"]
 
-METHODS = ("regularized", "stable")
+METHODS = ("regularized", "stable", "windowed")
 
 
 @dataclass(frozen=True)
@@ -229,7 +234,7 @@ def invert(dm: DiscreteModel, accel: np.ndarray, method: str = "regularized",
         The identified model at the servo rate.
     accel : ndarray [m/s²]
         Acceleration after contact (the window, e.g. 100 ms), sample 0 at contact.
-    method : {'regularized', 'stable'}
+    method : {'regularized', 'stable', 'windowed'}
     lam : float
         Regularization of the ``regularized`` method, relative to max |H|².
     band : (float, float) [Hz]
@@ -244,6 +249,10 @@ def invert(dm: DiscreteModel, accel: np.ndarray, method: str = "regularized",
     rate = dm.rate_hz
     target = condition_target(np.asarray(accel, float), rate, band)
     n = len(target)
+    if method == "windowed":
+        force = _windowed_inverse(dm, target, lam) * _taper(n, rate, taper_start, taper_end)
+        v = verify(forward or dm, force, target)
+        return Inversion(force, target, v[0], v[1], 0.0, method)
     pad = n
     if method == "regularized":
         raw = _regularized_inverse(dm, target, pad, lam, band)
@@ -256,6 +265,18 @@ def invert(dm: DiscreteModel, accel: np.ndarray, method: str = "regularized",
     win *= _taper(n, rate, taper_start, taper_end)
     v = verify(forward or dm, win, target)
     return Inversion(win, target, v[0], v[1], outside, method)
+
+
+def _windowed_inverse(dm: DiscreteModel, target: np.ndarray, lam: float) -> np.ndarray:
+    """min ‖H·u − a‖² + λ·max|H|²·‖u‖² over the window (H: Toeplitz of the impulse response)."""
+    n = len(target)
+    imp = np.zeros(n)
+    imp[0] = 1.0
+    h = dm.simulate(imp)
+    H = linalg.toeplitz(h, np.zeros(n))
+    gain2 = float(np.max(np.abs(np.fft.rfft(h, 4 * n))) ** 2)
+    A = H.T @ H + lam * gain2 * np.eye(n)
+    return linalg.solve(A, H.T @ target, assume_a="pos")
 
 
 def _bandlimit(u: np.ndarray, rate: float, band: tuple[float, float]) -> np.ndarray:

@@ -26,6 +26,7 @@ import io
 import json
 import os
 import tempfile
+import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -125,8 +126,9 @@ class TransientLibrary:
                 stored = str(z["sha256"])
         except FileNotFoundError:
             raise LibraryError(f"{path}: no such library file") from None
-        except (OSError, ValueError, KeyError) as exc:
-            raise LibraryError(f"{path}: not a transient library file ({exc})") from None
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+            raise LibraryError(f"{path}: corrupt, or not a transient library file ({exc})"
+                               ) from None
         version = meta.get("format_version")
         if version != FORMAT_VERSION:
             raise LibraryError(f"{path}: library format version {version!r}; this hapticlab "

@@ -124,9 +124,11 @@ def etfe(u: np.ndarray, ys: np.ndarray, rate_hz: float, smooth_hz: float = 2.0,
         across neighbouring frequencies (0: raw ratio).
     method : str
         ``sync`` — average the repeats in time first (synchronous averaging: noise falls
-        as 1/√r while the response stays), then one smoothed ratio; ``mean`` — ratio
-        per repeat, averaged in the complex domain (noise in each ratio is not reduced
-        before dividing).
+        as 1/√r while the response stays), then one smoothed ratio. With the same
+        excitation in every repeat this equals averaging the repeats' ETFEs in the
+        complex domain, as the paper did. ``polar`` — average the repeats' ETFEs as
+        magnitude in dB and phase (circular mean) separately, a common alternative; the
+        mean of log-magnitudes is biased low by noise.
     """
     u = np.asarray(u, dtype=float)
     ys = np.atleast_2d(np.asarray(ys, dtype=float))
@@ -149,10 +151,13 @@ def etfe(u: np.ndarray, ys: np.ndarray, rate_hz: float, smooth_hz: float = 2.0,
     if method == "sync":
         Ym = Ys.mean(axis=0)
         H = smooth(Ym * np.conj(U)) / Suu
-    elif method == "mean":
-        H = np.mean([smooth(Y * np.conj(U)) / Suu for Y in Ys], axis=0)
+    elif method == "polar":
+        each = [smooth(Y * np.conj(U)) / Suu for Y in Ys]
+        db = np.mean([20 * np.log10(np.abs(h) + 1e-300) for h in each], axis=0)
+        ph = np.angle(np.mean([h / np.abs(h) for h in each], axis=0))  # circular mean
+        H = 10 ** (db / 20) * np.exp(1j * ph)
     else:
-        raise ValueError(f"etfe method must be 'sync' or 'mean', got {method!r}")
+        raise ValueError(f"etfe method must be 'sync' or 'polar', got {method!r}")
     r = Ys.shape[0]
     if r > 1:
         num = smooth(np.abs(Ys.sum(axis=0) * np.conj(U)) ** 2)

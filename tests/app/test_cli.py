@@ -58,3 +58,42 @@ def test_bench_sim_json_shape():
     wall = {r["rate_hz"]: r["restitution"] for r in data["restitution"]
             if r["scene"] == "wall_10kN"}
     assert wall[1_000] > 1.0 > wall[10_000]
+
+
+def test_identify_grasp_json():
+    out = run("device", "identify-grasp", "--simulated", "--impacts", "100", "--seed", "3",
+              "--json")
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout)
+    for p in ("m", "c", "k"):
+        assert set(r[p]) == {"intercept", "slope"}
+    # published intercepts within 3 % (the least-squares estimate; see tests/device/test_grasp)
+    assert abs(r["m"]["intercept"] / 0.023 - 1) < 0.03
+    assert abs(r["k"]["intercept"] / 75_000 - 1) < 0.03
+    assert r["fit_percent"]["median"] > 80
+
+
+def test_identify_json_and_plot(artifacts):
+    png = artifacts / "identify_sim.png"
+    out = run("device", "identify", "--device", "sim", "--json", "--png", str(png))
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout)
+    assert r["model"]["order"] == 7 and r["model"]["relative_degree"] == 4
+    assert 120 < r["resonance_hz"] < 136
+    assert png.stat().st_size > 10_000
+
+
+def test_library_build_show_and_refusals(tmp_path, artifacts):
+    lib = tmp_path / "lib.npz"
+    out = run("library", "build", "--device", "sim", "--out", str(lib), "--entries", "6",
+              "--windows", "4")
+    assert out.returncode == 0, out.stderr
+    assert "6 transients for wood_on_foam" in out.stdout
+    png = artifacts / "library_wood_on_foam.png"
+    show = run("library", "show", str(lib), "--png", str(png), "--device", "sim")
+    assert show.returncode == 0 and "entries 6" in show.stdout and png.exists()
+    other = run("library", "show", str(lib), "--device", "sim:2000")
+    assert other.returncode == 2 and "build a library on this device" in other.stderr
+    bad = run("library", "build", "--source", "firm_spring", "--out", str(tmp_path / "x.npz"))
+    assert bad.returncode == 2 and "--source must be a real sample" in bad.stderr
+    assert "Traceback" not in bad.stderr + other.stderr

@@ -1,0 +1,196 @@
+"""Command-line actions for acceleration matching and the grasp model (with their plots)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["device_identify", "device_identify_grasp", "library_build", "library_show"]
+
+
+def _agg():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def device_identify(args: argparse.Namespace, open_spec) -> int:
+    from device.matching.library import usable_band
+    from device.matching.sysid import identify
+
+    with open_spec(args.device) as dev:
+        band = usable_band(dev.info.servo_rate_hz)
+        idn = identify(dev, levels=tuple(args.levels), repeats=args.repeats, band=band,
+                       order=args.order, relative_degree=args.relative_degree,
+                       delay=None if args.delay is None else args.delay * 1e-3)
+    m = idn.model
+    e = idn.etfe.in_band(band)
+    report = {"device": args.device, "rate_hz": idn.rate_hz, "levels_n": list(idn.levels),
+              "repeats": idn.repeats, "model": m.to_dict(),
+              "coherence": {"min": float(e.coherence.min()), "median": float(np.median(
+                  e.coherence))},
+              "resonance_hz": float(e.freq[np.argmax(np.abs(e.H))])}
+    if args.png:
+        plt = _agg()
+        fig, ax = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+        for lvl, est in idn.per_level.items():
+            b = est.in_band(band)
+            ax[0].semilogx(b.freq, 20 * np.log10(np.abs(b.H)), lw=0.7, alpha=0.6,
+                           label=f"ETFE {lvl:g} N")
+        ax[0].semilogx(e.freq, 20 * np.log10(np.abs(e.H)), "k", lw=1.2, label="ETFE mean")
+        ax[0].semilogx(e.freq, 20 * np.log10(np.abs(m.response(e.freq))), "r--",
+                       label=f"model {m.order}/{m.relative_degree}, τ={m.delay * 1e3:.3g} ms")
+        ax[0].set_ylabel("|a/F| [dB re 1 (m/s²)/N]")
+        ax[0].legend(fontsize=7)
+        ax[1].semilogx(e.freq, np.degrees(np.unwrap(np.angle(e.H))), "k")
+        ax[1].semilogx(e.freq, np.degrees(np.unwrap(np.angle(m.response(e.freq)))), "r--")
+        ax[1].set_ylabel("phase [deg]")
+        ax[2].semilogx(e.freq, e.coherence, "k")
+        ax[2].set_ylabel("coherence")
+        ax[2].set_xlabel("frequency [Hz]")
+        fig.suptitle(f"force → acceleration, {args.device} (hand holding the stylus)")
+        fig.tight_layout()
+        fig.savefig(args.png, dpi=110)
+        report["png"] = str(args.png)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(f"identified {args.device}: {m.order}th order, relative degree "
+              f"{m.relative_degree}, delay {m.delay * 1e3:.3g} ms; fit over "
+              f"{band[0]:g}–{band[1]:g} Hz: {m.err_db_rms:.2f} dB rms ({m.err_db_max:.2f} max), "
+              f"{m.err_deg_rms:.1f}° rms ({m.err_deg_max:.1f}° max); resonance "
+              f"{report['resonance_hz']:.0f} Hz; coherence ≥ {report['coherence']['min']:.2f}")
+    return 0
+
+
+def device_identify_grasp(args: argparse.Namespace) -> int:
+    from device.matching.grasp import PUBLISHED, GraspRig, identify_grasp
+
+    if not args.simulated:
+        raise SystemExit("hapticlab: error: only --simulated grasp impacts are available; a "
+                         "real grasping interface needs its own recording driver")
+    result = identify_grasp(GraspRig().impacts(args.impacts, args.seed), estimate=args.estimate)
+    result["published"] = {"m": dict(zip(("intercept", "slope"), PUBLISHED.m, strict=True)),
+                           "c": dict(zip(("intercept", "slope"), PUBLISHED.c, strict=True)),
+                           "k": dict(zip(("intercept", "slope"), PUBLISHED.k, strict=True))}
+    result["seed"] = args.seed
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        for p, unit in (("m", "kg"), ("c", "N·s/m"), ("k", "N/m")):
+            r, pub = result[p], result["published"][p]
+            print(f"{p} = {r['intercept']:.5g} {r['slope']:+.4g}·F_g {unit}   (published "
+                  f"{pub['intercept']:g} {pub['slope']:+g}·F_g)")
+        fp = result["fit_percent"]
+        print(f"fit % median {fp['median']:.1f} ({args.estimate}); by estimate: "
+              + ", ".join(f"{k} {v:.1f}" for k, v in fp["by_estimate"].items()))
+    return 0
+
+
+def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
+    from device.matching.library import build_library
+
+    protocol = load_protocol(args.protocol)
+    if args.source not in protocol.samples or not protocol.samples[args.source].is_real:
+        real = [k for k, s in protocol.samples.items() if s.is_real]
+        raise ValueError(f"--source must be a real sample of {protocol.source}: "
+                         f"{', '.join(real)}; got {args.source!r}")
+    with open_spec(args.device) as dev:
+        lib = build_library(dev, protocol.samples[args.source].scene, entries=args.entries,
+                            method=args.method, windows=args.windows)
+    path = lib.save(args.out)
+    errs = lib.meta["inversion"]["in_window_error"]
+    print(f"wrote {path}: {len(lib.velocities)} transients for {args.source} on {args.device} "
+          f"({lib.velocities.min():.3f}–{lib.velocities.max():.3f} m/s), {args.method} "
+          f"inversion, in-window error median {np.median(errs):.2f}; sha256 {lib.sha256[:16]}…")
+    return 0
+
+
+def library_show(args: argparse.Namespace, open_spec) -> int:
+    from device.matching.library import TransientLibrary
+
+    info = None
+    if args.device:
+        with open_spec(args.device) as dev:
+            info = dev.info
+    lib = TransientLibrary.load(args.file, info)
+    meta = lib.meta
+    print(f"{args.file}: format {meta['format_version']}, sha256 {lib.sha256[:16]}…")
+    print(f"  device  {meta['device']['model']} serial {meta['device']['serial_number']} at "
+          f"{lib.rate_hz:g} Hz")
+    print(f"  source  {meta['source']['sample']} ({meta['source']['taps_recorded']} clean taps "
+          f"from {meta['source']['windows']} windows)")
+    inv = meta["inversion"]
+    print(f"  inverse {inv['method']}, λ = {inv['lambda']:g}, band {inv['band_hz']} Hz; "
+          f"in-window error median {np.median(inv['in_window_error']):.2f}")
+    print(f"  entries {len(lib.velocities)}: " + ", ".join(f"{v:.3f}" for v in lib.velocities)
+          + f" m/s; {lib.nbytes} bytes on the device")
+    if args.png:
+        plt = _agg()
+        t = np.arange(lib.forces.shape[1]) / lib.rate_hz * 1e3
+        fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+        cmap = plt.get_cmap("viridis")
+        for i, (v, f) in enumerate(zip(lib.velocities, lib.forces, strict=True)):
+            ax[0].plot(t, f, color=cmap(i / max(1, len(lib.velocities) - 1)), lw=0.8,
+                       label=f"{v:.3f} m/s" if i in (0, len(lib.velocities) - 1) else None)
+        ax[0].set_xlabel("time after contact [ms]")
+        ax[0].set_ylabel("force [N]")
+        ax[0].legend()
+        ax[0].set_title(f"transients for {meta['source']['sample']}")
+        ax[1].plot(lib.velocities, np.abs(lib.forces).max(axis=1), "o-")
+        ax[1].set_xlabel("incoming speed [m/s]")
+        ax[1].set_ylabel("peak force [N]")
+        ax[1].set_title("peak force against speed")
+        fig.tight_layout()
+        fig.savefig(args.png, dpi=110)
+        print(f"  plot    {args.png}")
+    return 0
+
+
+def add_parsers(device_sub, sub, func) -> None:
+    """Register the matching commands on the ``device`` sub-parser and a ``library`` command.
+
+    ``func(args)`` runs them (it dispatches on ``args.action``).
+    """
+    di = device_sub.add_parser("identify", help="identify force → acceleration on a device")
+    di.add_argument("--device", default="sim")
+    di.add_argument("--order", type=int, default=7)
+    di.add_argument("--relative-degree", type=int, default=4)
+    di.add_argument("--delay", type=float, default=None, help="fixed delay [ms]; default: fit it")
+    di.add_argument("--levels", type=float, nargs="+", default=[0.5, 1.0, 1.5],
+                    help="sweep force amplitudes [N]")
+    di.add_argument("--repeats", type=int, default=4)
+    di.add_argument("--png", type=Path)
+    di.add_argument("--json", action="store_true")
+    di.set_defaults(action="identify", func=func)
+
+    dg = device_sub.add_parser("identify-grasp", help="grasp-force model from impacts (SPEC §3)")
+    dg.add_argument("--simulated", action="store_true", help="use the simulated grasping rig")
+    dg.add_argument("--impacts", type=int, default=100)
+    dg.add_argument("--seed", type=int, default=1)
+    dg.add_argument("--estimate", choices=("ls", "manual", "rls"), default="ls")
+    dg.add_argument("--json", action="store_true")
+    dg.set_defaults(action="identify-grasp", func=func)
+
+    lib = sub.add_parser("library", help="acceleration-matched transient libraries")
+    lsub = lib.add_subparsers(dest="library_command", required=True, metavar="ACTION")
+    lb = lsub.add_parser("build", help="record, identify, invert: build a library on a device")
+    lb.add_argument("--device", default="sim")
+    lb.add_argument("--protocol", default="realism", help="protocol holding the source sample")
+    lb.add_argument("--source", default="wood_on_foam", help="real sample to reproduce")
+    lb.add_argument("--entries", type=int, default=12)
+    lb.add_argument("--windows", type=int, default=8, help="5-s tap windows to record")
+    lb.add_argument("--method", choices=("regularized", "stable"), default="regularized")
+    lb.add_argument("--out", type=Path, required=True)
+    lb.set_defaults(action="library-build", func=func)
+    ls = lsub.add_parser("show", help="describe a library file and plot it")
+    ls.add_argument("file", type=Path)
+    ls.add_argument("--png", type=Path)
+    ls.add_argument("--device", help="also check the library belongs to this device")
+    ls.set_defaults(action="library-show", func=func)

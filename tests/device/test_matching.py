@@ -1,0 +1,337 @@
+"""Acceleration matching: identification, inversion, libraries, vibration fits."""
+
+import os
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from device import LibraryTransient, Material, Ringing, Scene, TransientTable
+from device.matching.compare import scene_distances
+from device.matching.inversion import (
+    DiscreteModel,
+    _stable_inverse,
+    direct_inverse,
+    discretize,
+    invert,
+)
+from device.matching.library import (
+    LibraryError,
+    Tap,
+    TransientLibrary,
+    build_library,
+    cache_dir,
+    even_spread,
+    library_table,
+    record_taps,
+    segment_taps,
+)
+from device.matching.sysid import (
+    ETFE,
+    etfe,
+    fit_transfer_function,
+    identify,
+    swept_sine,
+    true_response,
+)
+from device.matching.vibration import fit_vibration
+from device.sim.backend import SimDevice
+from device.sim.plant import Y, build_plant
+from protocols import load_protocol
+
+RATE = 10_000.0
+
+
+@pytest.fixture(scope="module")
+def ident():
+    return identify(SimDevice(seed=1))
+
+
+@pytest.fixture(scope="module")
+def realism():
+    return load_protocol("realism")
+
+
+def true_plant(dev):
+    p = build_plant(dev.params, dev.hand)
+    row = np.zeros(p.n_states + 3)
+    row[Y] = 1.0
+    return p, row
+
+
+def test_swept_sine_design():
+    sw = swept_sine(RATE, (10.0, 500.0), 2.5, amplitude=1.5, extend=1.5, silence=0.5)
+    f = sw.force
+    assert np.max(np.abs(f)) <= 1.5 + 1e-12
+    assert np.all(f[-int(0.5 * RATE):] == 0)  # trailing silence
+    assert abs(f[0]) < 1e-3 * 1.5  # faded in
+    # the sweep spends 2.5 s inside the band: it starts below 10 Hz and ends above 500 Hz
+    n_sweep = len(f) - int(0.5 * RATE)
+    assert n_sweep / RATE > 2.5
+    spec = np.abs(np.fft.rfft(f))
+    freq = np.fft.rfftfreq(len(f), 1 / RATE)
+    band = (freq > 15) & (freq < 450)
+    pink = spec[band] * np.sqrt(freq[band])  # an exponential sweep's amplitude goes as 1/√f
+    assert pink.min() > 0.8 * pink.max()
+    with pytest.raises(ValueError, match="band must satisfy"):
+        swept_sine(1000.0, (10.0, 500.0))
+
+
+def test_etfe_recovers_a_known_filter_and_averaging_helps():
+    b, a = signal.butter(2, 150, fs=RATE)
+    sw = swept_sine(RATE)
+    rng = np.random.default_rng(0)
+    y = signal.lfilter(b, a, sw.force)
+    ys = y + rng.normal(0, 0.05, (8, y.size))
+    _, htrue = signal.freqz(b, a, worN=np.fft.rfftfreq(y.size, 1 / RATE), fs=RATE)
+    one = etfe(sw.force, ys[:1], RATE)
+    eight = etfe(sw.force, ys, RATE)
+    band = (one.freq > 10) & (one.freq < 500)
+    err1 = np.median(np.abs(one.H[band] / htrue[band] - 1))
+    err8 = np.median(np.abs(eight.H[band] / htrue[band] - 1))
+    assert err8 < err1 / 2  # noise falls about as 1/√8 ≈ 0.35
+    assert err8 < 0.02
+    assert np.all((eight.coherence >= 0) & (eight.coherence <= 1))
+    passband = (eight.freq > 10) & (eight.freq < 150)
+    stopband = (eight.freq > 400) & (eight.freq < 500)
+    assert eight.coherence[passband].min() > 0.99
+    assert eight.coherence[stopband].mean() < eight.coherence[passband].mean()  # SNR falls
+
+
+def test_fit_is_exact_on_noise_free_plant_response():
+    dev = SimDevice()
+    p, row = true_plant(dev)
+    f = np.linspace(1, 1000, 2000)
+    est = ETFE(f, true_response(p.A[0], p.B[0], row, f), np.ones_like(f))
+    m = fit_transfer_function(est, 7, 4, delay=0.0)
+    assert m.order == 7 and m.relative_degree == 4
+    assert m.err_db_max < 1e-6 and m.err_deg_max < 1e-6
+    # the numerator is s²·(b_l·s + k_l): zeros at 0, 0 and −k_l/b_l = −5250 rad/s
+    z = np.sort(np.abs(np.roots(np.trim_zeros(m.num, "f"))))
+    assert z[:2] == pytest.approx([0, 0], abs=1e-2) and z[2] == pytest.approx(5250, rel=1e-6)
+    with pytest.raises(ValueError, match="relative degree"):
+        fit_transfer_function(est, 3, 5)
+
+
+def test_identified_model_matches_the_true_plant_not_just_the_estimate(ident):
+    """Judged against the simulator's known plant (coherence alone does not certify it):
+    within 1.5 dB and 3° over 10–500 Hz (measured: 1.0 dB, 0.4°)."""
+    dev = SimDevice()
+    p, row = true_plant(dev)
+    e = ident.etfe.in_band((10, 500))
+    ht = true_response(p.A[0], p.B[0], row, e.freq, RATE)  # with the ZOH of the command
+    r = ident.model.response(e.freq) / ht
+    assert np.max(np.abs(20 * np.log10(np.abs(r)))) < 1.5
+    assert np.max(np.abs(np.degrees(np.angle(r)))) < 3.0
+    assert e.freq[np.argmax(np.abs(e.H))] == pytest.approx(128, abs=4)  # the 130-Hz resonance
+
+
+def test_discretization_matches_the_continuous_model_with_its_delay(ident):
+    m = ident.model
+    from dataclasses import replace
+
+    for delay in (0.0, 0.25e-3, 0.33e-3):
+        md = replace(m, delay=delay)
+        dm = discretize(md, RATE)
+        f = np.array([20.0, 60.0, 130.0, 300.0])
+        T = 1 / RATE
+        expected = md.response(f) * np.exp(-1j * np.pi * f * T) * np.sinc(f * T)
+        np.testing.assert_allclose(dm.response(f), expected, rtol=0.01)
+
+
+def test_sampled_rel_degree_4_has_unstable_zeros_and_the_direct_inverse_diverges(ident):
+    from dataclasses import replace
+
+    dm = discretize(replace(ident.model, delay=0.25e-3), RATE)
+    assert np.any(np.abs(dm.zeros) > 1.0)
+    t = np.arange(1000) / RATE
+    target = 10 * np.exp(-18 * t) * np.sin(2 * np.pi * 66 * t)
+    with np.errstate(all="ignore"):
+        u = direct_inverse(dm, target)
+    assert not np.all(np.isfinite(u[:100])) or np.nanmax(np.abs(u[:100])) > 1e6  # within 10 ms
+    for method in ("regularized", "stable", "windowed"):
+        inv = invert(dm, target, method)
+        assert np.all(np.isfinite(inv.force)) and np.max(np.abs(inv.force)) < 5.0
+
+
+def test_stable_inverse_is_exact_on_a_nonminimum_phase_system():
+    b = np.convolve([0, 1], np.convolve([1, -0.5], [1, 3]))  # zeros at 0.5 and −3
+    a = np.array([1, -0.9])
+    dm = DiscreteModel(b, a, RATE)
+    y = np.zeros(400)
+    y[100:200] = np.sin(np.linspace(0, 6 * np.pi, 100))
+    u = _stable_inverse(dm, y, 400, 10.0, 4000.0)
+    np.testing.assert_allclose(signal.lfilter(b, a, u)[400:800], y, atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["regularized", "stable"])
+def test_inversion_through_the_forward_model(ident, method):
+    """A 66-Hz decaying target: in-window error ≤ 0.35 (measured 0.30–0.31; half of it in
+    the first 5 ms, which a relative-degree-4 device cannot follow), and ≤ 10 % of the
+    force energy outside the window (measured 4 %)."""
+    dm = discretize(ident.model, RATE)
+    t = np.arange(1000) / RATE
+    inv = invert(dm, 10 * np.exp(-18 * t) * np.sin(2 * np.pi * 66 * t), method)
+    assert inv.in_window_error < 0.35
+    assert inv.energy_outside < 0.10
+    assert inv.force[0] == 0.0 and abs(inv.force[-1]) < 1e-9  # tapered
+    with pytest.raises(ValueError, match="inversion method"):
+        invert(dm, t, "magic")
+
+
+def test_transient_table_blend_policies():
+    v = np.array([0.05, 0.10, 0.20])
+    f = np.stack([np.full(4, 1.0), np.full(4, 2.0), np.full(4, 4.0)])
+    lin = TransientTable(v, f, "linear", 0.8)
+    assert lin.force_at(0.15)[0] == pytest.approx(0.8 * 3.0)  # halfway between rows 2 and 3
+    assert lin.force_at(0.025)[0] == pytest.approx(0.8 * 0.5)  # below: slowest × v/v0
+    assert lin.force_at(0.40)[0] == pytest.approx(0.8 * 8.0)  # above: fastest × v/vmax
+    near = TransientTable(v, f, "nearest")
+    assert near.force_at(0.12)[0] == pytest.approx(2.0 * 0.12 / 0.10)
+    with pytest.raises(Exception, match="ascending"):
+        TransientTable([0.2, 0.1], np.ones((2, 3)))
+
+
+def test_kernel_plays_the_blend_the_table_describes(tmp_path):
+    """The compiled servo loop and TransientTable.force_at agree at every contact."""
+    dev = SimDevice(seed=8)
+    rng = np.random.default_rng(1)
+    v = np.array([0.06, 0.09, 0.12, 0.15])
+    forces = rng.normal(0, 0.5, (4, 300))
+    lib = TransientLibrary(v, forces, {"format_version": 1, "servo_rate_hz": RATE,
+                                       "device": {**dev.info.to_dict(), "servo_rate_hz": RATE}})
+    path = lib.save(tmp_path / "lib.npz")
+    scene = Scene("m", spring=680.0, transient=LibraryTransient("x", 0.8, "linear", str(path)))
+    dev.load_scene(scene)
+    dev.home()
+    res = dev.run_window(2.0)
+    tr = res.traces
+    table = lib.table(0.8, "linear")
+    assert len(res.contacts) >= 2
+    for c in res.contacts:
+        i = int(round((c.t - tr["t"][0]) * RATE))
+        n = min(300, len(tr["t"]) - i)
+        spring = 680.0 * np.maximum(-tr["position"][i:i + n], 0.0)
+        np.testing.assert_allclose(tr["force_cmd"][i:i + n] - spring,
+                                   table.force_at(c.velocity)[:n], atol=1e-9)
+
+
+def test_library_file_round_trip_and_refusals(tmp_path):
+    dev = SimDevice()
+    meta = {"format_version": 1, "servo_rate_hz": RATE,
+            "device": {**dev.info.to_dict(), "servo_rate_hz": RATE}}
+    lib = TransientLibrary(np.array([0.05, 0.1]), np.arange(20.0).reshape(2, 10), meta)
+    path = lib.save(tmp_path / "a.npz")
+    back = TransientLibrary.load(path, dev.info)
+    assert back.sha256 == lib.sha256
+    np.testing.assert_array_equal(back.forces, lib.forces)
+    # another device (other servo rate → other configuration) is refused
+    with pytest.raises(LibraryError, match="made on .* but this is"):
+        TransientLibrary.load(path, SimDevice(rate_hz=1000).info)
+    # a corrupt byte in the data
+    raw = bytearray(path.read_bytes())
+    k = raw.find(np.float64(13.0).tobytes())
+    raw[k] ^= 0x01
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(bytes(raw))
+    with pytest.raises(LibraryError, match="content hash mismatch|corrupt"):
+        TransientLibrary.load(bad)
+    # truncated file, unknown version, missing file
+    (tmp_path / "cut.npz").write_bytes(bytes(raw[:100]))
+    with pytest.raises(LibraryError, match="corrupt, or not a transient library"):
+        TransientLibrary.load(tmp_path / "cut.npz")
+    v2 = TransientLibrary(lib.velocities, lib.forces, {**meta, "format_version": 99})
+    with pytest.raises(LibraryError, match="version 99"):
+        TransientLibrary.load(v2.save(tmp_path / "v2.npz"))
+    with pytest.raises(LibraryError, match="no such library file"):
+        TransientLibrary.load(tmp_path / "nothing.npz")
+
+
+def test_even_spread_and_segmentation(realism):
+    v = np.array([0.05, 0.051, 0.08, 0.11, 0.112, 0.14, 0.2])
+    pick = even_spread(v, 4)
+    assert len(pick) == 4 and v[pick[0]] == 0.05 and v[pick[-1]] == 0.2
+    assert np.all(np.diff(v[pick]) > 0)
+    taps = segment_taps(record_taps(SimDevice(seed=4), realism.samples["wood_on_foam"].scene, 2))
+    assert len(taps) >= 8
+    assert all(len(t.accel) == 1000 and t.velocity > 0 for t in taps)
+
+
+def test_sim_builds_the_library_on_first_use_and_caches_it(realism):
+    scene = realism.samples["matched_firm"].scene
+    dev = SimDevice(seed=5)
+    dev.load_scene(scene)  # builds (or finds) the library
+    files = sorted(cache_dir().glob("library-wood_on_foam-*.npz"))
+    assert files
+    mtimes = [f.stat().st_mtime_ns for f in files]
+    SimDevice(seed=6).load_scene(realism.samples["matched_soft"].scene)
+    assert [f.stat().st_mtime_ns for f in files] == mtimes  # reused, not rebuilt
+    mine = []
+    for f in files:  # the cache also holds libraries for other simulated configurations
+        try:
+            mine.append(TransientLibrary.load(f, dev.info))
+        except LibraryError:
+            pass
+    assert len(mine) == 1
+    lib = mine[0]
+    assert lib.meta["source"]["sample"] == "wood_on_foam"
+    assert 8 <= len(lib.velocities) <= 12
+    # peak force grows with the incoming speed (momentum), roughly linearly
+    peaks = np.abs(lib.forces).max(axis=1)
+    assert np.corrcoef(lib.velocities, peaks)[0, 1] > 0.8
+    with pytest.raises(LibraryError, match="neither a file"):
+        library_table(LibraryTransient("wood_on_foam"), dev)
+
+
+def test_build_library_refuses_virtual_sources():
+    with pytest.raises(ValueError, match="real sample"):
+        build_library(SimDevice(), Scene("v", spring=100.0))
+
+
+def test_matched_scenes_are_closer_to_wood_on_foam_than_pulse_or_sinusoid(realism):
+    """Acceptance (SPEC §1): spectral distance (device.matching.compare) to real
+    wood_on_foam taps. Measured: matched 1.8–2.0 dB; pulse 6.3; sinusoid 6.5."""
+    names = ("matched_firm", "matched_soft", "pulse_firm", "pulse_soft", "sinusoid_firm",
+             "sinusoid_soft")
+    d = scene_distances(lambda: SimDevice(seed=11), {n: realism.samples[n].scene for n in names},
+                        realism.samples["wood_on_foam"].scene, windows=4)
+    worst_matched = max(d["matched_firm"], d["matched_soft"])
+    best_other = min(d[n] for n in names[2:])
+    assert worst_matched < best_other - 2.0
+
+
+@pytest.mark.parametrize("A, B, f", [(-1500, 600, 592), (-800, 150, 300), (-300, 90, 250),
+                                     (-100, 18.2, 66), (-116.7, 40, 18), (-240, 60, 30)])
+def test_vibration_fit_recovers_known_models(A, B, f):
+    """Taps that are the model: Q through the accelerometer (2nd-order 1 kHz) plus 0.3 m/s²
+    noise, speeds N(0.11, 0.033). Tolerances: f within 1.5 %, B and A within 7 %
+    (measured: ≤ 1.2 %, ≤ 4.8 %, ≤ 5.3 %)."""
+    rng = np.random.default_rng(0)
+    sos = signal.butter(2, 1000, fs=RATE, output="sos")
+    t = np.arange(1000) / RATE
+    ring = Ringing(A, B, f)
+    taps = [Tap(v, signal.sosfilt(sos, ring.acceleration(t, v)) + rng.normal(0, 0.3, t.size), 0.0)
+            for v in np.clip(rng.normal(0.11, 0.033, 40), 0.03, 0.3)]
+    fit = fit_vibration(taps, RATE, band=(0.5 * f, 2 * f), accel_bandwidth=1000)
+    assert fit.frequency == pytest.approx(f, rel=0.015)
+    assert fit.decay == pytest.approx(B, rel=0.07)
+    assert fit.slope == pytest.approx(A, rel=0.07)
+
+
+def test_vibration_fit_on_device_taps_of_real_wood():
+    """Taps simulated through the device on a wood block ringing with SPEC §2's model.
+    The stylus's own dynamics and the contact pulse colour the measurement: f within 2 %
+    and B within 10 % (measured 1.4 %, 7.5 %); A reads ~25 % high, so only its sign and
+    order of magnitude are asserted."""
+    wood = Scene("wood", material=Material(70_000.0, 40.0, Ringing(-1500.0, 600.0, 592.0)))
+    taps = segment_taps(record_taps(SimDevice(seed=2), wood, 6))
+    fit = fit_vibration(taps, RATE, band=(296, 1184), accel_bandwidth=1000)
+    assert fit.frequency == pytest.approx(592, rel=0.02)
+    assert fit.decay == pytest.approx(600, rel=0.10)
+    assert -3000 < fit.slope < -1000
+
+
+def test_cache_dir_follows_the_environment(tmp_path, monkeypatch):
+    monkeypatch.setenv("HAPTICLAB_CACHE", str(tmp_path))
+    assert cache_dir() == tmp_path
+    assert os.environ["HAPTICLAB_CACHE"] == str(tmp_path)
