@@ -118,6 +118,15 @@ class HapticDevice(ABC):
         """
 
     @abstractmethod
+    def play_force(self, force, *, heartbeats: bool = True) -> WindowResult:
+        """Play an open-loop force command [N per servo tick] while the hand holds still.
+
+        The stylus is in free air; the command still passes the enable ramp, watchdog and
+        current clamp. Used for system identification (swept sines) and for checking
+        transients. Home again before the next tapping window.
+        """
+
+    @abstractmethod
     def heartbeat(self) -> None:
         """Tell the device the host is alive (resets the watchdog)."""
 

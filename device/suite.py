@@ -204,6 +204,25 @@ def check_zero_on_exit(opener: Opener) -> str:
     return "closed with zero output after an exception"
 
 
+def check_play_force(opener: Opener) -> str:
+    with opener() as dev:
+        rate = dev.info.servo_rate_hz
+        n = int(0.3 * rate)
+        t = np.arange(n) / rate
+        force = np.where(t > 0.1, 0.5 * np.sin(2 * np.pi * 100 * t), 0.0)  # after the ramp
+        res = dev.play_force(force)
+        tr = res.traces
+        _require(len(tr["t"]) == n, f"{len(tr['t'])} ticks recorded for {n} commanded")
+        on = t > 0.1
+        err = np.max(np.abs(tr["force_cmd"][on] - force[on]))
+        _require(err <= 1e-9, f"commanded force differs from the request by {err:.3g} N")
+        a_on = np.std(tr["accel"][t > 0.15])
+        a_off = np.std(tr["accel"][(t > 0.06) & (t < 0.1)])
+        _require(a_on > 5 * a_off, f"no acceleration response: {a_on:.3g} vs {a_off:.3g} m/s²")
+        _require(not res.contacts, "free-air playback reported a contact")
+        return f"100-Hz force played open loop: accel {a_on:.2f} m/s² rms vs {a_off:.2f} at rest"
+
+
 def check_bad_input(opener: Opener) -> str:
     with opener() as dev:
         for call, exc in ((lambda: dev.load_scene("wood"), TypeError),
@@ -236,6 +255,7 @@ CHECKS: dict[str, Callable[[Opener], str]] = {
     "watchdog": check_watchdog,
     "ramp": check_ramp,
     "zero_on_exit": check_zero_on_exit,
+    "play_force": check_play_force,
     "bad_input": check_bad_input,
 }
 

@@ -49,6 +49,9 @@ class _Lying(HapticDevice):
             res.faults = []
         return res
 
+    def play_force(self, force, **kw):
+        return self.inner.play_force(force, **kw)
+
     def heartbeat(self):
         self.inner.heartbeat()
 
