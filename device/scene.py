@@ -430,7 +430,7 @@ class GraspTransient(Transient):
         Playback stops when the envelope falls to this fraction.
     """
 
-    kind = "grasp"
+    kind: ClassVar[str] = "grasp"
     grasp_force: float
     cutoff: float = 0.01
 
@@ -459,10 +459,12 @@ class GraspTransient(Transient):
         return -effective_mass * acc  # the first push is out of the surface
 
 
-def _dataclass_parser(cls) -> Callable[[str, Mapping[str, Any]], Transient]:
-    names = {f.name for f in fields(cls)}
+def _dataclass_parser(cls, exclude: tuple[str, ...] = ()
+                      ) -> Callable[[str, Mapping[str, Any]], Transient]:
+    """Parser for a transient dataclass: its fields (less ``exclude``) are the allowed keys."""
+    names = {f.name for f in fields(cls)} - set(exclude)
     required = {f.name for f in fields(cls)
-                if f.default is MISSING and f.default_factory is MISSING}
+                if f.default is MISSING and f.default_factory is MISSING} - set(exclude)
 
     def parse(where: str, data: Mapping[str, Any]) -> Transient:
         _check_keys(where, data, names, required)
@@ -474,30 +476,10 @@ def _dataclass_parser(cls) -> Callable[[str, Mapping[str, Any]], Transient]:
     return parse
 
 
-for _cls in (Pulse, ForceSinusoid, AccelSinusoid):
+for _cls in (Pulse, ForceSinusoid, AccelSinusoid, GraspTransient):
     register_transient(_cls.kind, _dataclass_parser(_cls))
-
-
-def _parse_library(where: str, data: Mapping[str, Any]) -> Transient:
-    _check_keys(where, data, {"source", "attenuation", "blend", "path"}, {"source"})
-    try:
-        return LibraryTransient(**data)
-    except SceneError as exc:
-        raise SceneError(f"{where}: {exc}", exc.field) from None
-
-
-register_transient("library", _parse_library)
-
-
-def _parse_grasp(where: str, data: Mapping[str, Any]) -> Transient:
-    _check_keys(where, data, {"grasp_force", "cutoff"}, {"grasp_force"})
-    try:
-        return GraspTransient(**data)
-    except SceneError as exc:
-        raise SceneError(f"{where}: {exc}", exc.field) from None
-
-
-register_transient("grasp", _parse_grasp)
+# a library's source scene comes from the protocol, never from the transient's own data
+register_transient(LibraryTransient.kind, _dataclass_parser(LibraryTransient, ("source_scene",)))
 
 
 @dataclass(frozen=True)
