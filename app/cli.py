@@ -128,6 +128,17 @@ def _matching(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
 
 
+def _device_emulate(args: argparse.Namespace) -> int:
+    from device.serial.emulator import main as emulate
+
+    if not 1_000 <= args.rate <= 20_000:
+        raise UserError(f"--rate must be 1,000–20,000 Hz, got {args.rate:g}")
+    if not 0 < args.speed <= 3:
+        raise UserError(f"--speed must be in (0, 3] (the host heartbeats in wall time), "
+                        f"got {args.speed:g}")
+    return emulate(args.rate, args.seed, args.speed)
+
+
 def _bench(args: argparse.Namespace) -> int:
     import importlib
 
@@ -150,12 +161,19 @@ def build_parser() -> argparse.ArgumentParser:
         description="Psychophysics of haptic contact realism: devices, protocols, analysis.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    dev = sub.add_parser("device", help="device tools (selftest, identify, identify-grasp)")
+    dev = sub.add_parser("device",
+                         help="device tools (selftest, emulate, identify, identify-grasp)")
     dsub = dev.add_subparsers(dest="device_command", required=True, metavar="ACTION")
     st = dsub.add_parser("selftest", help="run the backend-independent checks against a device")
     st.add_argument("spec", help="device spec, e.g. sim or serial:/dev/ttyACM0")
     st.add_argument("--json", action="store_true", help="print a JSON summary")
     st.set_defaults(func=_device_selftest)
+    em = dsub.add_parser("emulate", help="serve the wire protocol on a pseudo-terminal "
+                         "(simulated plant); prints the port first")
+    em.add_argument("--rate", type=float, default=10_000.0, help="servo rate [Hz]")
+    em.add_argument("--seed", type=int, default=0)
+    em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
+    em.set_defaults(func=_device_emulate)
     from app.matching_cli import add_parsers
 
     add_parsers(dsub, sub, _matching)

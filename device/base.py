@@ -167,6 +167,7 @@ class HapticDevice(ABC):
 _Factory = Callable[..., HapticDevice]
 _BACKENDS: dict[str, _Factory | str] = {
     "sim": "device.sim.backend:SimDevice.from_spec",
+    "serial": "device.serial.backend:SerialDevice.from_spec",
 }
 
 

@@ -23,6 +23,7 @@ from .errors import SceneError
 __all__ = [
     "TransientTable",
     "LibraryTransient",
+    "TableTransient",
     "GraspModel",
     "GraspTransient",
     "PUBLISHED_GRASP",
@@ -457,6 +458,21 @@ class GraspTransient(Transient):
         acc = np.exp(-sigma * t) * ((sigma**2 - wd**2) * np.sin(wd * t)
                                     - 2 * sigma * wd * np.cos(wd * t)) / wd
         return -effective_mass * acc  # the first push is out of the surface
+
+
+@dataclass(frozen=True, eq=False)
+class TableTransient(Transient):
+    """A transient given directly as a :class:`TransientTable` (e.g. received by an emulator
+    over the wire). Not built from protocol data."""
+
+    kind: ClassVar[str] = "table"
+    transient_table: TransientTable
+
+    def table(self, rate_hz: float, effective_mass: float) -> TransientTable:
+        return self.transient_table
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "rows": int(len(self.transient_table.velocities))}
 
 
 def _dataclass_parser(cls, exclude: tuple[str, ...] = ()

@@ -84,7 +84,8 @@ def check_spring_law(opener: Opener) -> str:
         steady = (tr["flags"] & Flags.RAMP) == 0
         expect = sc.spring * pen
         err = np.abs(tr["force_cmd"] - expect)[steady]
-        _require(err.size > 0 and float(err.max()) <= 1e-9 * max(1.0, float(expect.max())),
+        # 1 ppm: traces cross a serial link as IEEE-754 binary32
+        _require(err.size > 0 and float(err.max()) <= 1e-6 * max(1.0, float(expect.max())),
                  f"force_cmd differs from K·penetration by up to {err.max():.3g} N")
         _require(float(expect.max()) > 0, "the stylus never penetrated the virtual spring")
         return f"F = K·p holds on {int(steady.sum())} ticks (peak {expect.max():.2f} N)"
@@ -106,7 +107,7 @@ def check_transient_scaling(opener: Opener) -> str:
             on = (tr["flags"][i:i + n_pulse + 2] & Flags.TRANSIENT) != 0
             _require(int(on.sum()) == n_pulse,
                      f"pulse played {int(on.sum())} ticks, expected {n_pulse}")
-        _require(worst <= 1e-6, f"pulse force differs from A·v by {worst:.3g} N")
+        _require(worst <= 1e-5, f"pulse force differs from A·v by {worst:.3g} N")
         return f"{len(res.contacts)} pulses of A·v (error {worst:.1e} N), {n_pulse} ticks each"
 
 
@@ -171,6 +172,7 @@ def check_watchdog(opener: Opener) -> str:
         after = res.traces["t"] >= res.faults[0].t
         _require(bool(np.all(res.traces["current"][after] == 0)), "output not zero after trip")
         _require(dev.fault is not None, "watchdog fault not latched")
+        dev.clear_fault()  # a device keeps its fault across connections; leave it clean
         return f"output zeroed {dt_f * 1e3:.1f} ms into a silent window (T_wd {wd * 1e3:g} ms)"
 
 
@@ -215,7 +217,8 @@ def check_play_force(opener: Opener) -> str:
         _require(len(tr["t"]) == n, f"{len(tr['t'])} ticks recorded for {n} commanded")
         on = t > 0.1
         err = np.max(np.abs(tr["force_cmd"][on] - force[on]))
-        _require(err <= 1e-9, f"commanded force differs from the request by {err:.3g} N")
+        # the wire carries force commands in 1-mN steps
+        _require(err <= 5e-4 + 1e-9, f"commanded force differs from the request by {err:.3g} N")
         a_on = np.std(tr["accel"][t > 0.15])
         a_off = np.std(tr["accel"][(t > 0.06) & (t < 0.1)])
         _require(a_on > 5 * a_off, f"no acceleration response: {a_on:.3g} vs {a_off:.3g} m/s²")

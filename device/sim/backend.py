@@ -102,13 +102,15 @@ class SimDevice(HapticDevice):
         Servo rate, 1,000–20,000 Hz (default 10,000).
     live : bool
         Pace the simulation to the wall clock (busy-wait), for interactive dry runs.
+    speed : float
+        In live mode, device seconds per wall second (1: real time).
     noise : bool
         Add accelerometer noise (turn off for reference comparisons).
     """
 
     def __init__(self, device: DeviceParams | None = None, hand: HandParams | None = None,
                  tapper: Tapper | None = None, seed: int = 0, rate_hz: float | None = None,
-                 live: bool = False, noise: bool = True):
+                 live: bool = False, noise: bool = True, speed: float = 1.0):
         dev = device or DeviceParams()
         if rate_hz is not None:
             if not 1_000 <= float(rate_hz) <= 20_000:
@@ -122,6 +124,10 @@ class SimDevice(HapticDevice):
         ss = np.random.SeedSequence(self.seed)
         self.rng_tapping, self.rng_noise = (np.random.default_rng(c) for c in ss.spawn(2))
         self.live = bool(live)
+        if not (speed > 0 and math.isfinite(speed)):
+            raise ValueError(f"live speed must be finite and > 0, got {speed!r}")
+        self.speed = float(speed)
+        self._stop_requested = False
         self.noise = bool(noise)
         # the serial number names the configuration, so a transient library built for
         # another simulated device (other mechanics, hand or rate) is refused like a
@@ -182,6 +188,11 @@ class SimDevice(HapticDevice):
     @property
     def output_force(self) -> float:
         return self._output_force
+
+    @property
+    def enabled(self) -> bool:
+        """Output enabled (homed, no fault, not zeroed)."""
+        return self._enabled
 
     @property
     def scene(self) -> Scene | None:
@@ -248,6 +259,19 @@ class SimDevice(HapticDevice):
 
     def heartbeat(self) -> None:
         self._t_heartbeat = self.time
+
+    def request_stop(self) -> None:
+        """End the running window at the next chunk (from another thread or a callback)."""
+        self._stop_requested = True
+
+    def trip_watchdog(self) -> None:
+        """Latch a watchdog fault now (used by an emulator when the host falls silent
+        between windows; inside a window the servo loop trips it itself)."""
+        self._output_force = 0.0
+        if self._fault is None:
+            self._fault = FaultEvent(self.time, "watchdog",
+                                     f"no heartbeat for {self.params.watchdog_s:g} s: output "
+                                     "zeroed")
 
     def estop(self) -> None:
         self._estop_requested = True
@@ -337,7 +361,8 @@ class SimDevice(HapticDevice):
         wall0 = time.perf_counter()
         late: list[float] = []
         n = 0
-        while n < n_max:
+        self._stop_requested = False
+        while n < n_max and not self._stop_requested:
             if heartbeats:
                 self.heartbeat()
             n1 = min(n + chunk, n_max)
@@ -360,7 +385,7 @@ class SimDevice(HapticDevice):
             self._tick = tick0 + n_done
             n = n_done
             if self.live:
-                target = wall0 + n * dt
+                target = wall0 + n * dt / self.speed
                 late.append(time.perf_counter() - target)
                 while time.perf_counter() < target:  # busy-wait: sleep is too coarse
                     pass

@@ -1,0 +1,3 @@
+"""The serial backend, the wire protocol (docs/wire-protocol.md) and the device emulator."""
+
+__all__: list[str] = []

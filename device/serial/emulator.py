@@ -1,0 +1,357 @@
+"""A device emulator: the wire protocol served on a pseudo-terminal, the simulator as plant.
+
+``hapticlab device emulate`` prints the pty's path as the first line of stdout and runs
+until stopped. Windows and playbacks run live (paced to the wall clock, ``speed`` × real
+time) in a worker thread while the main loop keeps reading commands, so heartbeats,
+e-stop and STOP_WINDOW act during a window. The watchdog is the simulator's own inside a
+window and the emulator's between windows (no heartbeat for the device's T_wd → output
+latched off, FAULT sent).
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import threading
+import time
+import tty
+import zlib
+
+import numpy as np
+
+from ..scene import Material, Ringing, Scene, TableTransient, TransientTable
+from ..sim.backend import SimDevice
+from . import messages as M
+from .framing import FrameDecoder
+
+__all__ = ["Emulator", "open_pty"]
+
+_BLENDS = ("scale", "nearest", "linear")
+_FAULT = {"watchdog": M.FaultCode.WATCHDOG, "estop": M.FaultCode.ESTOP}
+
+
+def open_pty() -> tuple[int, int, str]:
+    """A raw pseudo-terminal: (master fd, slave fd, slave path)."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    tty.setraw(master)
+    return master, slave, os.ttyname(slave)
+
+
+class Emulator:
+    """Serve the protocol on ``fd`` (a pty master) with ``sim`` as the plant.
+
+    Parameters
+    ----------
+    sim : SimDevice
+        Run in live mode by the emulator.
+    fd : int
+        File descriptor to read commands from and write replies to.
+    status_hz : float [Hz]
+        STATUS rate.
+    """
+
+    def __init__(self, sim: SimDevice, fd: int, status_hz: float = 40.0):
+        sim.live = True
+        self.sim = sim
+        self.fd = fd
+        self.status_period = 1.0 / status_hz
+        self.decoder = FrameDecoder()
+        self._wlock = threading.Lock()
+        self._seq = 0
+        self._last: tuple[int, int, bytes, int] | None = None  # seq, type, body, status
+        self._scenes: dict[int, dict] = {}
+        self._play = np.zeros(0)
+        self._traces: dict[int, dict] = {}
+        self._worker: threading.Thread | None = None
+        self._last_heartbeat = time.monotonic()
+        self._stop = threading.Event()
+        self._fault_sent = False
+        self.frames_in = 0
+
+    # ------------------------------------------------------------------ io
+    def send(self, msg: M.Message) -> None:
+        with self._wlock:
+            self._seq = (self._seq + 1) & 0xFFFF
+            data = M.encode(msg, self._seq)
+            try:
+                os.write(self.fd, data)
+            except OSError:
+                self._stop.set()  # the host side is gone
+
+    def _device_time_us(self) -> int:
+        return int(self.sim.time * 1e6)
+
+    # ------------------------------------------------------------------ loop
+    def serve_forever(self) -> None:
+        next_status = time.monotonic()
+        while not self._stop.is_set():
+            r, _, _ = select.select([self.fd], [], [], 0.002)
+            if r:
+                try:
+                    data = os.read(self.fd, 65536)
+                except OSError:
+                    data = b""
+                if data:
+                    for frame in self.decoder.feed(data):
+                        self.frames_in += 1
+                        self._handle(frame)
+            now = time.monotonic()
+            busy = self._worker is not None and self._worker.is_alive()
+            wd = self.sim.info.watchdog_s
+            silent = now - self._last_heartbeat > wd
+            if not busy and self.sim.fault is None and self.sim.enabled and silent:
+                self.sim.trip_watchdog()
+                self._report_fault()
+            if now >= next_status:
+                self._status()
+                next_status = now + self.status_period
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.sim.request_stop()
+
+    def _status(self) -> None:
+        busy = self._worker is not None and self._worker.is_alive()
+        state = (M.State.FAULT if self.sim.fault else M.State.WINDOW if busy
+                 else M.State.HOMED if self.sim.enabled else M.State.IDLE)
+        self.send(M.StatusReport(self._device_time_us(), state,
+                                 int(round(self.sim.output_force * 1000))))
+
+    def _report_fault(self) -> None:
+        f = self.sim.fault
+        if f is not None and not self._fault_sent:
+            self._fault_sent = True
+            self.send(M.Fault(_FAULT.get(f.code, 0), int(f.t * 1e6)))
+
+    # ------------------------------------------------------------------ commands
+    def _handle(self, frame) -> None:
+        try:
+            msg = M.decode(frame)
+        except M.MessageError:
+            self.send(M.Ack(frame.seq, M.Status.BAD_MESSAGE))
+            return
+        if isinstance(msg, M.Heartbeat):
+            self._last_heartbeat = time.monotonic()
+            self.sim.heartbeat()
+            return
+        if isinstance(msg, M.Ping):
+            self.send(M.Pong(msg.stamp))
+            return
+        last = self._last
+        if last is not None and last[:3] == (frame.seq, frame.type, frame.body):
+            # the host did not hear our ACK and sent the same command again: answer, don't redo
+            self.send(M.Ack(frame.seq, last[3]))
+            return
+        self._last_heartbeat = time.monotonic()
+        self.sim.heartbeat()
+        if isinstance(msg, M.Hello):
+            self._last = None  # a new host session starts its sequence numbers again
+        status = self._execute(msg)
+        if status is not None:
+            self._last = (frame.seq, frame.type, frame.body, status)
+            self.send(M.Ack(frame.seq, status))
+            if isinstance(msg, M.TraceRequest) and status == M.Status.OK:
+                self._send_trace(msg)
+
+    def _busy(self) -> bool:
+        return self._worker is not None and self._worker.is_alive()
+
+    def _execute(self, msg: M.Message) -> int | None:
+        S = M.Status
+        sim = self.sim
+        if isinstance(msg, M.Hello):
+            i = sim.info
+            self.send(M.HelloAck(
+                1, int(i.servo_rate_hz), int(round(i.current_limit * 1000)),
+                int(round(i.force_constant * 1000)), int(round(i.effective_mass * 1e6)),
+                int(round(i.watchdog_s * 1000)), int(round(i.encoder_resolution * 1e9)),
+                int(round(i.accel_range * 1000)), b"hapticlab emulator (sim plant)",
+                i.serial_number.encode(), b"emulator-1"))
+            return None
+        if isinstance(msg, M.EStop):
+            sim.estop()
+            self._report_fault()
+            return S.OK
+        if isinstance(msg, M.ClearFault):
+            sim.clear_fault()
+            self._fault_sent = False
+            return S.OK
+        if isinstance(msg, M.Zero):
+            sim.zero()
+            return S.OK
+        if isinstance(msg, M.StopWindow):
+            sim.request_stop()
+            return S.OK
+        if isinstance(msg, M.TraceRequest):
+            tr = self._traces.get(msg.window_id)
+            if tr is None or msg.channel >= len(M.Channel.NAMES):
+                return S.BAD_MESSAGE
+            name = M.Channel.NAMES[msg.channel]
+            if name not in tr or msg.start + msg.count > len(tr[name]):
+                return S.BAD_MESSAGE
+            return S.OK
+        if self._busy():
+            return S.BUSY
+        if isinstance(msg, M.SceneBegin):
+            if msg.kind not in (0, 1, 2) or msg.blend > 2:
+                return S.BAD_MESSAGE
+            self._scenes[msg.scene_id] = {"begin": msg, "v": None,
+                                          "table": np.zeros(msg.rows * msg.row_len, np.int16),
+                                          "scene": None}
+            return S.OK
+        if isinstance(msg, (M.SceneVelocities, M.SceneChunk, M.SceneCommit)):
+            sc = self._scenes.get(msg.scene_id)
+            if sc is None:
+                return S.UNKNOWN_SCENE
+            if isinstance(msg, M.SceneVelocities):
+                if len(msg.items) != sc["begin"].rows:
+                    return S.BAD_MESSAGE
+                sc["v"] = np.array(msg.items, float)
+                return S.OK
+            if isinstance(msg, M.SceneChunk):
+                if msg.offset + msg.n > sc["table"].size:
+                    return S.BAD_MESSAGE
+                sc["table"][msg.offset: msg.offset + msg.n] = msg.items
+                return S.OK
+            crc = zlib.crc32(sc["table"].astype("<i2").tobytes()) & 0xFFFFFFFF
+            if sc["begin"].rows and crc != msg.crc32:
+                return S.TABLE_CRC
+            try:
+                sc["scene"] = self._build_scene(sc)
+            except (ValueError, TypeError):
+                return S.BAD_MESSAGE
+            sim.load_scene(sc["scene"])
+            return S.OK
+        if sim.fault is not None and isinstance(msg, (M.Home, M.StartWindow, M.PlayStart)):
+            return S.FAULT_LATCHED
+        if isinstance(msg, M.Home):
+            if sim.scene is None:
+                return S.BAD_STATE
+            sim.home(msg.clearance_um * 1e-6)
+            return S.OK
+        if isinstance(msg, M.StartWindow):
+            if sim.scene is None or not sim.enabled:
+                return S.BAD_STATE
+            self._start(self._run_window, msg)
+            return S.OK
+        if isinstance(msg, M.PlayChunk):
+            end = msg.offset + msg.n
+            if end > 10_000_000:
+                return S.BAD_MESSAGE
+            if end > self._play.size:
+                self._play = np.concatenate([self._play, np.zeros(end - self._play.size)])
+            self._play[msg.offset:end] = np.array(msg.items, float) * 1e-3
+            return S.OK
+        if isinstance(msg, M.PlayStart):
+            if msg.n_samples == 0 or msg.n_samples > self._play.size:
+                return S.BAD_MESSAGE
+            self._start(self._run_play, msg)
+            return S.OK
+        return S.BAD_MESSAGE  # a device → host message sent to the device
+
+    def _build_scene(self, sc: dict) -> Scene:
+        b: M.SceneBegin = sc["begin"]
+        h = b.surface_um * 1e-6
+        name = f"scene-{b.scene_id}"
+        if b.kind == 0:
+            ring = (Ringing(b.ring_slope, b.ring_decay, b.ring_freq) if b.ring_freq > 0 else None)
+            return Scene(name, surface_height=h, material=Material(b.stiffness, b.damping, ring))
+        if b.kind == 1:
+            return Scene(name, surface_height=h, spring=b.spring)
+        forces = sc["table"].reshape(b.rows, b.row_len).astype(float) * 1e-3
+        table = TransientTable(sc["v"], forces, _BLENDS[b.blend], b.attenuation)
+        return Scene(name, surface_height=h, spring=b.spring, transient=TableTransient(table))
+
+    def _start(self, target, msg) -> None:
+        self._worker = threading.Thread(target=target, args=(msg,), daemon=True)
+        self._worker.start()
+
+    def _finish(self, window_id: int, res, t0_us: int) -> None:
+        rate = self.sim.info.servo_rate_hz
+        t0 = res.traces["t"][0] if len(res.traces["t"]) else 0.0
+        for s in res.saturations:
+            self.send(M.Saturation(window_id, int(round((s.t - t0) * rate)),
+                                   int(round(s.duration * rate)),
+                                   int(round(s.peak_current * 1000))))
+        if res.faults:
+            self._report_fault()
+        first = -1 if res.t_first_contact is None else int(round((res.t_first_contact - t0)
+                                                                  * rate))
+        self._traces = {window_id: res.traces}
+        self.send(M.WindowDone(window_id, t0_us, len(res.traces["t"]), first, len(res.contacts),
+                               len(res.saturations), int(res.timed_out), int(bool(res.faults))))
+
+    def _run_window(self, msg: M.StartWindow) -> None:
+        sent = 0
+        t0_us = self._device_time_us()
+        rate = self.sim.info.servo_rate_hz
+        tick0 = self.sim.time
+
+        def progress(_t, partial) -> None:
+            nonlocal sent
+            for c in partial.contacts[sent:]:
+                self.send(M.Contact(msg.window_id, int(round((c.t - tick0) * rate)),
+                                    int(round(c.velocity * 1e9))))
+            sent = len(partial.contacts)
+            if self.sim.fault is not None:
+                self._report_fault()
+
+        res = self.sim.run_window(msg.duration_ms / 1000,
+                                  from_first_contact=bool(msg.from_contact),
+                                  timeout=msg.timeout_ms / 1000, on_progress=progress,
+                                  heartbeats=False)
+        for c in res.contacts[sent:]:
+            self.send(M.Contact(msg.window_id, int(round((c.t - tick0) * rate)),
+                                int(round(c.velocity * 1e9))))
+        self._finish(msg.window_id, res, t0_us)
+
+    def _run_play(self, msg: M.PlayStart) -> None:
+        t0_us = self._device_time_us()
+        res = self.sim.play_force(self._play[: msg.n_samples], heartbeats=False)
+        self._play = np.zeros(0)
+        self._finish(msg.window_id, res, t0_us)
+
+    def _send_trace(self, req: M.TraceRequest) -> None:
+        arr = np.asarray(self._traces[req.window_id][M.Channel.NAMES[req.channel]], dtype=float)
+        end = req.start + req.count
+        for a in range(req.start, end, M.TRACE_ITEMS):
+            b = min(end, a + M.TRACE_ITEMS)
+            self.send(M.TraceBlock(req.window_id, req.channel, a, b - a,
+                                   tuple(np.float32(arr[a:b]).tolist())))
+
+
+def warm_up(rate_hz: float) -> None:
+    """Load the compiled servo loop once (virtual time), so the first window on the wire
+    does not stall the emulator for the time it takes to load machine code."""
+    dev = SimDevice(rate_hz=rate_hz)
+    for scene in (Scene("w", material=Material(70_000.0, 40.0, Ringing(-1500, 600, 592))),
+                  Scene("s", spring=680.0)):
+        dev.load_scene(scene)
+        dev.home()
+        dev.run_window(0.05, from_first_contact=False)
+    dev.play_force(np.zeros(10))
+
+
+def main(rate_hz: float = 10_000.0, seed: int = 0, speed: float = 1.0) -> int:
+    """Serve on a new pty until SIGTERM/SIGINT; the first stdout line is the port."""
+    import signal
+    import sys
+
+    warm_up(rate_hz)
+    master, slave, path = open_pty()
+    sim = SimDevice(rate_hz=rate_hz, seed=seed, live=True, speed=speed)
+    emu = Emulator(sim, master)
+    stop = lambda *_: emu.stop()  # noqa: E731
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    print(path, flush=True)
+    print(f"emulating a {rate_hz:g}-Hz device (sim plant, seed {seed}, speed ×{speed:g}); "
+          "stop with Ctrl-C", file=sys.stderr, flush=True)
+    try:
+        emu.serve_forever()
+    finally:
+        os.close(master)
+        os.close(slave)
+    return 0
+

@@ -1,0 +1,139 @@
+"""Frames on the wire: COBS-encoded payloads with a CRC-32, delimited by 0x00.
+
+    payload = version (u8) · type (u8) · seq (u16 LE) · body · crc32 (u32 LE)
+    frame   = COBS(payload) · 0x00
+
+The CRC is CRC-32/ISO-HDLC (the zlib/Ethernet CRC: polynomial 0x04C11DB7 reflected,
+initial value and final XOR 0xFFFFFFFF) over version..body. See docs/wire-protocol.md.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass
+
+__all__ = ["cobs_encode", "cobs_decode", "encode_frame", "decode_payload", "FrameDecoder",
+           "FramingError", "PROTOCOL_VERSION", "MAX_PAYLOAD", "Frame"]
+
+PROTOCOL_VERSION = 1
+MAX_PAYLOAD = 1024  # bytes before COBS, CRC included
+_HEAD = struct.Struct("<BBH")
+_CRC = struct.Struct("<I")
+
+
+class FramingError(ValueError):
+    """A frame could not be decoded (bad COBS, length, CRC or version)."""
+
+
+def cobs_encode(data: bytes) -> bytes:
+    """Consistent Overhead Byte Stuffing: the result contains no zero byte."""
+    out = bytearray()
+    block = bytearray()
+    for b in data:
+        if b == 0:
+            out.append(len(block) + 1)
+            out += block
+            block.clear()
+        else:
+            block.append(b)
+            if len(block) == 254:
+                out.append(255)
+                out += block
+                block.clear()
+    out.append(len(block) + 1)
+    out += block
+    return bytes(out)
+
+
+def cobs_decode(data: bytes) -> bytes:
+    """Inverse of :func:`cobs_encode`; raises FramingError on malformed input."""
+    out = bytearray()
+    i, n = 0, len(data)
+    while i < n:
+        code = data[i]
+        if code == 0:
+            raise FramingError("zero byte inside a COBS frame")
+        end = i + code
+        if end > n:
+            raise FramingError("COBS block runs past the end of the frame")
+        block = data[i + 1: end]
+        if 0 in block:
+            raise FramingError("zero byte inside a COBS block")
+        out += block
+        i = end
+        if code < 255 and i < n:
+            out.append(0)
+    return bytes(out)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A decoded frame: message type, sequence number and body bytes."""
+
+    type: int
+    seq: int
+    body: bytes
+
+
+def encode_frame(mtype: int, seq: int, body: bytes = b"") -> bytes:
+    """COBS-encoded, delimited frame for (type, seq, body)."""
+    payload = _HEAD.pack(PROTOCOL_VERSION, mtype, seq & 0xFFFF) + body
+    payload += _CRC.pack(zlib.crc32(payload) & 0xFFFFFFFF)
+    if len(payload) > MAX_PAYLOAD:
+        raise FramingError(f"payload of {len(payload)} bytes exceeds the maximum {MAX_PAYLOAD}")
+    return cobs_encode(payload) + b"\x00"
+
+
+def decode_payload(encoded: bytes) -> Frame:
+    """Decode one frame (without its delimiter): COBS, length, CRC, version."""
+    if len(encoded) > MAX_PAYLOAD + MAX_PAYLOAD // 254 + 2:
+        raise FramingError(f"frame of {len(encoded)} bytes is longer than any valid frame")
+    payload = cobs_decode(encoded)
+    if len(payload) < _HEAD.size + _CRC.size:
+        raise FramingError(f"frame of {len(payload)} bytes is shorter than header + CRC")
+    if len(payload) > MAX_PAYLOAD:
+        raise FramingError(f"payload of {len(payload)} bytes exceeds the maximum {MAX_PAYLOAD}")
+    body, (crc,) = payload[:-4], _CRC.unpack(payload[-4:])
+    if zlib.crc32(body) & 0xFFFFFFFF != crc:
+        raise FramingError("CRC mismatch")
+    version, mtype, seq = _HEAD.unpack(body[:4])
+    if version != PROTOCOL_VERSION:
+        raise FramingError(f"protocol version {version}, expected {PROTOCOL_VERSION}")
+    return Frame(mtype, seq, body[4:])
+
+
+class FrameDecoder:
+    """Streaming decoder: feed bytes, get frames; bad frames are counted and skipped.
+
+    Resynchronisation is at the next 0x00 delimiter: after garbage or a corrupt frame,
+    the first complete frame that follows is decoded.
+    """
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self.frames_ok = 0
+        self.errors: dict[str, int] = {"crc": 0, "cobs": 0, "length": 0, "version": 0}
+
+    def feed(self, data: bytes) -> list[Frame]:
+        out = []
+        self._buf += data
+        while True:
+            k = self._buf.find(0)
+            if k < 0:
+                if len(self._buf) > 4 * MAX_PAYLOAD:  # no delimiter in sight: drop junk
+                    self._buf.clear()
+                    self.errors["length"] += 1
+                return out
+            chunk = bytes(self._buf[:k])
+            del self._buf[: k + 1]
+            if not chunk:
+                continue
+            try:
+                out.append(decode_payload(chunk))
+                self.frames_ok += 1
+            except FramingError as exc:
+                msg = str(exc)
+                key = ("crc" if "CRC" in msg else "version" if "version" in msg
+                       else "cobs" if "COBS" in msg else "length")
+                self.errors[key] += 1

@@ -1,0 +1,424 @@
+"""Messages of the hapticlab wire protocol, version 1 (docs/wire-protocol.md).
+
+Each message is a frozen dataclass with a fixed little-endian layout (``FMT``) and,
+for some, a trailing array (``ARRAY`` = struct code of its items). Units and
+fixed-point encodings are stated per field.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import astuple, dataclass
+from typing import ClassVar
+
+from .framing import Frame, FramingError, encode_frame
+
+__all__ = ["MESSAGES", "encode", "decode", "Status", "Channel", "FaultCode", "State",
+           "MessageError"]
+
+
+class MessageError(FramingError):
+    """A frame decoded but its body does not fit its message type."""
+
+
+class Status:
+    """ACK status codes."""
+
+    OK = 0
+    BAD_MESSAGE = 1  #: body does not fit the type, or a field is out of range
+    BAD_STATE = 2  #: not allowed now (e.g. a window before HOME, a chunk without BEGIN)
+    FAULT_LATCHED = 3  #: output is latched off (e-stop, watchdog); CLEAR_FAULT first
+    UNKNOWN_SCENE = 4  #: scene id not begun or not committed
+    TABLE_CRC = 5  #: SCENE_COMMIT's CRC-32 differs from the table received
+    BUSY = 6  #: a window or playback is running
+
+    NAMES: ClassVar[dict[int, str]] = {0: "ok", 1: "bad message", 2: "bad state",
+                                       3: "fault latched", 4: "unknown scene",
+                                       5: "table CRC mismatch", 6: "busy"}
+
+
+class FaultCode:
+    WATCHDOG = 1
+    ESTOP = 2
+    NAMES: ClassVar[dict[int, str]] = {1: "watchdog", 2: "estop"}
+
+
+class State:
+    IDLE, HOMED, WINDOW, PLAYING, FAULT = range(5)
+
+
+class Channel:
+    """Trace channels (TRACE_REQUEST / TRACE_BLOCK), all IEEE-754 binary32, SI units."""
+
+    NAMES: ClassVar[tuple[str, ...]] = ("position", "velocity", "force_cmd", "force_out",
+                                        "current", "accel", "flags", "true_position",
+                                        "true_velocity", "true_accel")
+
+
+@dataclass(frozen=True)
+class Message:
+    TYPE: ClassVar[int] = -1
+    FMT: ClassVar[str] = ""
+    ARRAY: ClassVar[str | None] = None  # struct code of a trailing array field "items"
+
+    def body(self) -> bytes:
+        vals = astuple(self)
+        if self.ARRAY is None:
+            return struct.pack("<" + self.FMT, *vals)
+        head, items = vals[:-1], vals[-1]
+        return struct.pack("<" + self.FMT, *head) + struct.pack(f"<{len(items)}{self.ARRAY}",
+                                                                 *items)
+
+    @classmethod
+    def from_body(cls, body: bytes) -> Message:
+        size = struct.calcsize("<" + cls.FMT)
+        if cls.ARRAY is None:
+            if len(body) != size:
+                raise MessageError(f"{cls.__name__}: body of {len(body)} bytes, expected {size}")
+            return cls(*struct.unpack("<" + cls.FMT, body))
+        item = struct.calcsize("<" + cls.ARRAY)
+        if len(body) < size or (len(body) - size) % item:
+            raise MessageError(f"{cls.__name__}: body of {len(body)} bytes does not fit "
+                               f"{size} + n×{item}")
+        head = struct.unpack("<" + cls.FMT, body[:size])
+        n = (len(body) - size) // item
+        items = struct.unpack(f"<{n}{cls.ARRAY}", body[size:])
+        obj = cls(*head, tuple(items))
+        obj.check_count()
+        return obj
+
+    def check_count(self) -> None:
+        n = getattr(self, "n", None)
+        if n is not None and n != len(self.items):  # type: ignore[attr-defined]
+            raise MessageError(f"{type(self).__name__}: n = {n} but "
+                               f"{len(self.items)} items follow")  # type: ignore[attr-defined]
+
+
+def _str(b: bytes) -> str:
+    return b.rstrip(b"\x00").decode("utf-8", "replace")
+
+
+# ---------------------------------------------------------------- host → device
+@dataclass(frozen=True)
+class Hello(Message):
+    """Open a session. host_protocol: the protocol version the host speaks."""
+
+    TYPE = 0x01
+    FMT = "B"
+    host_protocol: int = 1
+
+
+@dataclass(frozen=True)
+class Heartbeat(Message):
+    """Host is alive; resets the device watchdog. No reply."""
+
+    TYPE = 0x02
+    FMT = ""
+
+
+@dataclass(frozen=True)
+class Ping(Message):
+    """Round-trip probe; the device answers PONG with the same stamp. stamp: host µs (u32)."""
+
+    TYPE = 0x03
+    FMT = "I"
+    stamp: int = 0
+
+
+@dataclass(frozen=True)
+class SceneBegin(Message):
+    """Start a scene upload.
+
+    kind: 0 real sample (no rendering), 1 spring, 2 spring + transient table.
+    surface_um: surface height [µm, i32]. spring: [N/m, f32].
+    stiffness, damping, ring_slope, ring_decay, ring_freq: the real sample's contact
+    [N/m], [N·s/m], [1/s], [1/s], [Hz] (f32) — firmware ignores them; an emulator
+    simulates the physical sample with them.
+    rows, row_len: transient table size; blend: 0 scale, 1 nearest, 2 linear;
+    attenuation: [1, f32].
+    """
+
+    TYPE = 0x10
+    FMT = "HBifffffffBHBf"
+    scene_id: int = 0
+    kind: int = 0
+    surface_um: int = 0
+    spring: float = 0.0
+    stiffness: float = 0.0
+    damping: float = 0.0
+    ring_slope: float = 0.0
+    ring_decay: float = 0.0
+    ring_freq: float = 0.0
+    reserved: float = 0.0
+    rows: int = 0
+    row_len: int = 0
+    blend: int = 0
+    attenuation: float = 1.0
+
+
+@dataclass(frozen=True)
+class SceneVelocities(Message):
+    """Reference speed of each table row [m/s, f32], ascending."""
+
+    TYPE = 0x11
+    FMT = "H"
+    ARRAY = "f"
+    scene_id: int = 0
+    items: tuple = ()
+
+
+@dataclass(frozen=True)
+class SceneChunk(Message):
+    """Part of the force table, row-major: offset [samples, u32], n, items [i16, 1 mN LSB]."""
+
+    TYPE = 0x12
+    FMT = "HIH"
+    ARRAY = "h"
+    scene_id: int = 0
+    offset: int = 0
+    n: int = 0
+    items: tuple = ()
+
+
+@dataclass(frozen=True)
+class SceneCommit(Message):
+    """Finish the upload; crc32 over the table's i16 LE bytes (0 when there is no table)."""
+
+    TYPE = 0x13
+    FMT = "HI"
+    scene_id: int = 0
+    crc32: int = 0
+
+
+@dataclass(frozen=True)
+class Home(Message):
+    """Move to rest clearance_um [µm, u32] above the surface; enable output with a ramp."""
+
+    TYPE = 0x20
+    FMT = "I"
+    clearance_um: int = 20_000
+
+
+@dataclass(frozen=True)
+class StartWindow(Message):
+    """Run a tapping window: duration_ms from the first contact (or from now when
+    from_contact = 0); timeout_ms to wait for a first contact."""
+
+    TYPE = 0x21
+    FMT = "HIIB"
+    window_id: int = 0
+    duration_ms: int = 5000
+    timeout_ms: int = 30000
+    from_contact: int = 1
+
+
+@dataclass(frozen=True)
+class StopWindow(Message):
+    TYPE = 0x22
+    FMT = ""
+
+
+@dataclass(frozen=True)
+class PlayChunk(Message):
+    """Open-loop force buffer: offset [samples, u32], n, items [i16, 1 mN LSB]."""
+
+    TYPE = 0x23
+    FMT = "IH"
+    ARRAY = "h"
+    offset: int = 0
+    n: int = 0
+    items: tuple = ()
+
+
+@dataclass(frozen=True)
+class PlayStart(Message):
+    """Play the buffer's first n_samples in free air with the hand holding the stylus."""
+
+    TYPE = 0x24
+    FMT = "HI"
+    window_id: int = 0
+    n_samples: int = 0
+
+
+@dataclass(frozen=True)
+class EStop(Message):
+    TYPE = 0x30
+    FMT = ""
+
+
+@dataclass(frozen=True)
+class ClearFault(Message):
+    TYPE = 0x31
+    FMT = ""
+
+
+@dataclass(frozen=True)
+class Zero(Message):
+    TYPE = 0x32
+    FMT = ""
+
+
+@dataclass(frozen=True)
+class TraceRequest(Message):
+    """Ask for count samples of a channel of a finished window, from sample start."""
+
+    TYPE = 0x40
+    FMT = "HBII"
+    window_id: int = 0
+    channel: int = 0
+    start: int = 0
+    count: int = 0
+
+
+# ---------------------------------------------------------------- device → host
+@dataclass(frozen=True)
+class Ack(Message):
+    """Reply to every command: the command's seq and a Status code."""
+
+    TYPE = 0x80
+    FMT = "HB"
+    ack_seq: int = 0
+    status: int = 0
+
+
+@dataclass(frozen=True)
+class HelloAck(Message):
+    """Device identity and ratings.
+
+    servo_rate_hz [u32]; current_limit_ma [mA, u16]; force_constant [mN/A, u16];
+    effective_mass [mg, u32]; watchdog_ms [u16]; encoder_nm [nm, u32];
+    accel_range [mm/s², u32]; model (32 bytes), serial (16), firmware (16): UTF-8,
+    zero-padded.
+    """
+
+    TYPE = 0x81
+    FMT = "BIHHIHII32s16s16s"
+    protocol: int = 1
+    servo_rate_hz: int = 10_000
+    current_limit_ma: int = 1400
+    force_constant: int = 2150
+    effective_mass: int = 55_000
+    watchdog_ms: int = 100
+    encoder_nm: int = 10_000
+    accel_range: int = 490_333
+    model: bytes = b""
+    serial: bytes = b""
+    firmware: bytes = b""
+
+    @property
+    def strings(self) -> tuple[str, str, str]:
+        return _str(self.model), _str(self.serial), _str(self.firmware)
+
+    @classmethod
+    def from_body(cls, body: bytes) -> Message:
+        m = super().from_body(body)
+        return cls(*astuple(m)[:8], *(b.rstrip(b"\x00") for b in astuple(m)[8:]))
+
+
+@dataclass(frozen=True)
+class Pong(Message):
+    TYPE = 0x83
+    FMT = "I"
+    stamp: int = 0
+
+
+@dataclass(frozen=True)
+class Contact(Message):
+    """A contact: window tick [u32] and incoming speed [nm/s, i32; ±2.1 m/s]."""
+
+    TYPE = 0x90
+    FMT = "HIi"
+    window_id: int = 0
+    tick: int = 0
+    velocity_nm_s: int = 0
+
+
+@dataclass(frozen=True)
+class Saturation(Message):
+    """A run of clamped ticks: start tick, duration [ticks], peak commanded current [mA, i32]."""
+
+    TYPE = 0x91
+    FMT = "HIIi"
+    window_id: int = 0
+    tick: int = 0
+    duration: int = 0
+    peak_ma: int = 0
+
+
+@dataclass(frozen=True)
+class Fault(Message):
+    """Output latched off: FaultCode, device time [µs, u64] when output was zeroed."""
+
+    TYPE = 0x92
+    FMT = "BQ"
+    code: int = 0
+    time_us: int = 0
+
+
+@dataclass(frozen=True)
+class StatusReport(Message):
+    """Sent at 20 Hz: device time [µs, u64], State, output force [mN, i32]."""
+
+    TYPE = 0x93
+    FMT = "QBi"
+    time_us: int = 0
+    state: int = 0
+    output_mn: int = 0
+
+
+@dataclass(frozen=True)
+class WindowDone(Message):
+    """End of a window or playback: t0 [µs, u64] of tick 0, ticks recorded, first contact
+    tick (−1: none), event counts, timed_out and fault flags."""
+
+    TYPE = 0x94
+    FMT = "HQIiHHBB"
+    window_id: int = 0
+    t0_us: int = 0
+    n_ticks: int = 0
+    first_contact: int = -1
+    n_contacts: int = 0
+    n_saturations: int = 0
+    timed_out: int = 0
+    fault: int = 0
+
+
+@dataclass(frozen=True)
+class TraceBlock(Message):
+    """Samples start..start+n−1 of a channel [binary32, SI units]."""
+
+    TYPE = 0x95
+    FMT = "HBIH"
+    ARRAY = "f"
+    window_id: int = 0
+    channel: int = 0
+    start: int = 0
+    n: int = 0
+    items: tuple = ()
+
+
+MESSAGES: dict[int, type[Message]] = {
+    m.TYPE: m for m in (Hello, Heartbeat, Ping, SceneBegin, SceneVelocities, SceneChunk,
+                        SceneCommit, Home, StartWindow, StopWindow, PlayChunk, PlayStart, EStop,
+                        ClearFault, Zero, TraceRequest, Ack, HelloAck, Pong, Contact, Saturation,
+                        Fault, StatusReport, WindowDone, TraceBlock)}
+
+CHUNK_ITEMS = 480  # i16 items per SceneChunk / PlayChunk (960 bytes of data)
+TRACE_ITEMS = 250  # f32 items per TraceBlock
+
+
+def encode(msg: Message, seq: int) -> bytes:
+    """The delimited frame carrying ``msg``."""
+    return encode_frame(msg.TYPE, seq, msg.body())
+
+
+def decode(frame: Frame) -> Message:
+    """The message in a decoded frame; MessageError for unknown types or misfit bodies."""
+    cls = MESSAGES.get(frame.type)
+    if cls is None:
+        raise MessageError(f"unknown message type 0x{frame.type:02x}")
+    try:
+        return cls.from_body(frame.body)
+    except struct.error as exc:
+        raise MessageError(f"{cls.__name__}: {exc}") from None
+
