@@ -145,7 +145,8 @@ def _bench(args: argparse.Namespace) -> int:
     try:
         module = importlib.import_module(f"benchmarks.{args.what}")
     except ModuleNotFoundError:
-        raise UserError(f"no benchmark named {args.what!r}; available: sim, matching") from None
+        raise UserError(f"no benchmark named {args.what!r}; "
+                        "available: sim, matching, link") from None
     return module.main(args)
 
 
@@ -194,9 +195,11 @@ def build_parser() -> argparse.ArgumentParser:
     ps.set_defaults(func=_protocol_show)
 
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
-    b.add_argument("what", help="which benchmark: sim")
+    b.add_argument("what", help="which benchmark: sim, matching, link")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
+    b.add_argument("--fuzz", type=int, default=100_000,
+                   help="link: mutated frames to push through the decoder")
     b.set_defaults(func=_bench)
 
     d = sub.add_parser("demo", help="what `make demo` runs: a simulated tap window per sample")

@@ -138,20 +138,22 @@ def check_estop(opener: Opener) -> str:
             if t >= 0.3:
                 dev.estop()
 
-        res = _window(dev, SUITE_SCENES["pulse_firm"], 1.5, on_progress=stop)
-        _require(bool(res.faults) and res.faults[0].code == "estop", f"faults: {res.faults}")
-        tr = res.traces
-        after = tr["t"] >= res.faults[0].t
-        _require(bool(np.all(tr["current"][after] == 0)), "current not zero after the e-stop")
-        _require(dev.output_force == 0.0, "output not zero after the e-stop")
-        for call in (dev.home, lambda: dev.run_window(0.5)):
-            try:
-                call()
-            except DeviceFaultError:
-                pass
-            else:
-                raise CheckFailed("the e-stop did not stay latched")
-        dev.clear_fault()
+        try:
+            res = _window(dev, SUITE_SCENES["pulse_firm"], 1.5, on_progress=stop)
+            _require(bool(res.faults) and res.faults[0].code == "estop", f"faults: {res.faults}")
+            tr = res.traces
+            after = tr["t"] >= res.faults[0].t
+            _require(bool(np.all(tr["current"][after] == 0)), "current not zero after the e-stop")
+            _require(dev.output_force == 0.0, "output not zero after the e-stop")
+            for call in (dev.home, lambda: dev.run_window(0.5)):
+                try:
+                    call()
+                except DeviceFaultError:
+                    pass
+                else:
+                    raise CheckFailed("the e-stop did not stay latched")
+        finally:
+            dev.clear_fault()  # a device keeps its fault across connections; leave it clean
         dev.home()
         again = dev.run_window(0.5)
         _require(not again.faults, "fault came back after clearing")
@@ -163,16 +165,21 @@ def check_watchdog(opener: Opener) -> str:
         sc = SUITE_SCENES["firm_spring"]
         dev.load_scene(sc)
         dev.home()
-        res = dev.run_window(1.0, from_first_contact=False, heartbeats=False)
-        wd = dev.info.watchdog_s
-        _require(bool(res.faults) and res.faults[0].code == "watchdog", f"faults: {res.faults}")
-        t0 = res.traces["t"][0]
-        dt_f = res.faults[0].t - t0
-        _require(dt_f <= wd + 2.0 / res.rate_hz + 0.05, f"watchdog tripped after {dt_f:.4f} s")
-        after = res.traces["t"] >= res.faults[0].t
-        _require(bool(np.all(res.traces["current"][after] == 0)), "output not zero after trip")
-        _require(dev.fault is not None, "watchdog fault not latched")
-        dev.clear_fault()  # a device keeps its fault across connections; leave it clean
+        try:
+            res = dev.run_window(1.0, from_first_contact=False, heartbeats=False)
+            wd = dev.info.watchdog_s
+            _require(bool(res.faults) and res.faults[0].code == "watchdog",
+                     f"faults: {res.faults}")
+            t0 = res.traces["t"][0]
+            dt_f = res.faults[0].t - t0
+            _require(dt_f <= wd + 2.0 / res.rate_hz + 0.05,
+                     f"watchdog tripped after {dt_f:.4f} s")
+            after = res.traces["t"] >= res.faults[0].t
+            _require(bool(np.all(res.traces["current"][after] == 0)),
+                     "output not zero after trip")
+            _require(dev.fault is not None, "watchdog fault not latched")
+        finally:
+            dev.clear_fault()  # a device keeps its fault across connections; leave it clean
         return f"output zeroed {dt_f * 1e3:.1f} ms into a silent window (T_wd {wd * 1e3:g} ms)"
 
 

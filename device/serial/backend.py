@@ -37,7 +37,16 @@ __all__ = ["SerialDevice", "DeviceGoneError", "DeviceTimeoutError", "PortBusyErr
 
 
 class DeviceGoneError(DeviceError):
-    """The device was unplugged or stopped talking; the current trial is aborted."""
+    """The device was unplugged or stopped talking; the current trial is aborted.
+
+    Attributes
+    ----------
+    partial : WindowResult or None
+        What the window had delivered before the device went (contacts, saturations), so
+        nothing received is lost.
+    """
+
+    partial: WindowResult | None = None
 
 
 class DeviceTimeoutError(DeviceError):
@@ -101,6 +110,8 @@ class SerialDevice(HapticDevice):
         self._window_id = 0
         self._loaded: Scene | None = None
         self._hb_pause = threading.Event()
+        self.last_status: tuple[float, float] | None = None  # (host perf time, device time)
+        self.contact_rx: list[tuple[float, int]] = []  # (host perf time, tick) per CONTACT
         self.stats = {"frames_sent": 0, "frames_ok": 0, "crc_errors": 0, "other_errors": 0,
                       "timeouts": 0, "retries": 0, "lost": 0, "duplicates": 0,
                       "out_of_order": 0}
@@ -159,7 +170,13 @@ class SerialDevice(HapticDevice):
     def _read_loop(self) -> None:
         while not self._closed and self._gone is None:
             try:
-                data = self._ser.read(4096)
+                # pyserial's read(n) waits for n bytes or its timeout: ask for one byte (returns
+                # as soon as it arrives), then for whatever else is already waiting
+                data = self._ser.read(1)
+                if data:
+                    waiting = getattr(self._ser, "in_waiting", 0)
+                    if waiting:
+                        data += self._ser.read(waiting)
             except Exception as exc:  # SerialException or OSError: unplugged
                 self._mark_gone(f"{self.port}: device gone ({type(exc).__name__}: {exc})")
                 return
@@ -199,15 +216,19 @@ class SerialDevice(HapticDevice):
         self._dev_seq = seq
 
     def _dispatch(self, msg: M.Message) -> None:
+        if isinstance(msg, M.Contact):
+            self.contact_rx.append((time.perf_counter(), msg.tick))
         with self._cv:
             if isinstance(msg, M.Ack):
                 self._acks[msg.ack_seq] = msg.status
             elif isinstance(msg, M.StatusReport):
                 self._output = msg.output_mn / 1000.0
+                self.last_status = (time.perf_counter(), msg.time_us * 1e-6)
                 if msg.state == M.State.FAULT and self._fault is None:
                     # e.g. latched before this host connected: a real device keeps it
-                    self._fault = FaultEvent(msg.time_us * 1e-6, "latched",
-                                             "the device reports a latched fault")
+                    code = M.FaultCode.NAMES.get(msg.fault, "latched")
+                    self._fault = FaultEvent(msg.time_us * 1e-6, code,
+                                             f"the device reports a latched {code} fault")
             else:
                 if isinstance(msg, M.Fault):
                     code = M.FaultCode.NAMES.get(msg.code, f"fault {msg.code}")
@@ -315,6 +336,27 @@ class SerialDevice(HapticDevice):
     @property
     def output_force(self) -> float:
         return 0.0 if (self._closed or self._gone) else self._output
+
+    def ping(self, timeout: float = 0.5) -> float:
+        """One PING/PONG round trip [s] (also counted in the link statistics)."""
+        self._check()
+        stamp = int(time.monotonic() * 1e6) & 0xFFFFFFFF
+        t0 = time.perf_counter()
+        self._write(M.encode(M.Ping(stamp), 0))
+        with self._cv:
+            ok = self._cv.wait_for(lambda: any(isinstance(e, M.Pong) and e.stamp == stamp
+                                               for e in self._events) or self._gone is not None,
+                                   timeout=timeout)
+            if self._gone:
+                raise DeviceGoneError(self._gone)
+            if not ok:
+                self.stats["timeouts"] += 1
+                raise DeviceTimeoutError(f"{self.port}: no PONG within {timeout * 1e3:.0f} ms")
+            self._events = deque(e for e in self._events
+                                 if not (isinstance(e, M.Pong) and e.stamp == stamp))
+        rtt = time.perf_counter() - t0
+        self._rtt.append(rtt)
+        return rtt
 
     def link_stats(self) -> dict:
         """Frames sent/ok, CRC and other errors, timeouts, retries, lost/duplicate/out-of-order
@@ -471,8 +513,11 @@ class SerialDevice(HapticDevice):
                     elif isinstance(e, M.WindowDone) and e.window_id == wid:
                         done = e
                 if gone:
-                    raise DeviceGoneError(f"{gone}; the window was aborted after "
+                    err = DeviceGoneError(f"{gone}; the window was aborted after "
                                           f"{len(contacts)} contacts")
+                    err.partial = WindowResult(rate, None, list(contacts), list(sats),
+                                               [f for f in faults if f is not None][:1])
+                    raise err
                 if time.monotonic() > deadline:
                     self._stop_window()
                     raise DeviceTimeoutError(f"{self.port}: window {wid} did not end in time")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import select
+import sys
 import threading
 import time
 import tty
@@ -28,6 +29,10 @@ __all__ = ["Emulator", "open_pty"]
 
 _BLENDS = ("scale", "nearest", "linear")
 _FAULT = {"watchdog": M.FaultCode.WATCHDOG, "estop": M.FaultCode.ESTOP}
+
+
+def _log(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
 
 
 def open_pty() -> tuple[int, int, str]:
@@ -115,14 +120,20 @@ class Emulator:
         busy = self._worker is not None and self._worker.is_alive()
         state = (M.State.FAULT if self.sim.fault else M.State.WINDOW if busy
                  else M.State.HOMED if self.sim.enabled else M.State.IDLE)
+        f = self.sim.fault
         self.send(M.StatusReport(self._device_time_us(), state,
-                                 int(round(self.sim.output_force * 1000))))
+                                 int(round(self.sim.output_force * 1000)),
+                                 _FAULT.get(f.code, 0) if f is not None else 0))
 
     def _report_fault(self) -> None:
         f = self.sim.fault
         if f is not None and not self._fault_sent:
             self._fault_sent = True
             self.send(M.Fault(_FAULT.get(f.code, 0), int(f.t * 1e6)))
+            # for people and tests: how long after the host's last heartbeat output went off
+            since = f.t - self.sim.last_heartbeat
+            _log(f"FAULT {f.code} at device time {f.t:.4f} s, {since * 1e3:.1f} ms after the "
+                 "last heartbeat")
 
     # ------------------------------------------------------------------ commands
     def _handle(self, frame) -> None:
@@ -147,6 +158,9 @@ class Emulator:
         self.sim.heartbeat()
         if isinstance(msg, M.Hello):
             self._last = None  # a new host session starts its sequence numbers again
+            if self._busy():  # a window left running by a host that went away
+                self.sim.request_stop()
+                self._worker.join(timeout=2.0)
         status = self._execute(msg)
         if status is not None:
             self._last = (frame.seq, frame.type, frame.body, status)
@@ -171,7 +185,9 @@ class Emulator:
             return None
         if isinstance(msg, M.EStop):
             sim.estop()
-            self._report_fault()
+            if not self._busy():  # in a window the loop reports it, timed at the zeroing tick
+                self._report_fault()
+            _log("host: ESTOP")
             return S.OK
         if isinstance(msg, M.ClearFault):
             sim.clear_fault()
@@ -179,6 +195,8 @@ class Emulator:
             return S.OK
         if isinstance(msg, M.Zero):
             sim.zero()
+            sim.request_stop()
+            _log("host: ZERO")
             return S.OK
         if isinstance(msg, M.StopWindow):
             sim.request_stop()
@@ -294,8 +312,9 @@ class Emulator:
                 self.send(M.Contact(msg.window_id, int(round((c.t - tick0) * rate)),
                                     int(round(c.velocity * 1e9))))
             sent = len(partial.contacts)
-            if self.sim.fault is not None:
-                self._report_fault()
+            if self.sim.fault is not None and self.sim.output_latched_off:
+                self._report_fault()  # output is latched off: the window is over
+                self.sim.request_stop()
 
         res = self.sim.run_window(msg.duration_ms / 1000,
                                   from_first_contact=bool(msg.from_contact),
@@ -336,7 +355,6 @@ def warm_up(rate_hz: float) -> None:
 def main(rate_hz: float = 10_000.0, seed: int = 0, speed: float = 1.0) -> int:
     """Serve on a new pty until SIGTERM/SIGINT; the first stdout line is the port."""
     import signal
-    import sys
 
     warm_up(rate_hz)
     master, slave, path = open_pty()

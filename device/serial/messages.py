@@ -357,13 +357,15 @@ class Fault(Message):
 
 @dataclass(frozen=True)
 class StatusReport(Message):
-    """Sent at 20 Hz: device time [µs, u64], State, output force [mN, i32]."""
+    """Sent at ≥ 20 Hz: device time [µs, u64], State, output force [mN, i32], latched
+    FaultCode (0: none)."""
 
     TYPE = 0x93
-    FMT = "QBi"
+    FMT = "QBiB"
     time_us: int = 0
     state: int = 0
     output_mn: int = 0
+    fault: int = 0
 
 
 @dataclass(frozen=True)

@@ -190,6 +190,12 @@ class SimDevice(HapticDevice):
         return self._output_force
 
     @property
+    def output_latched_off(self) -> bool:
+        """True once the servo loop has zeroed output for a latched fault in this window
+        (the fault's time is then the zeroing tick)."""
+        return bool(self._ist[K.IST_FAULT_TICK] >= 0)
+
+    @property
     def enabled(self) -> bool:
         """Output enabled (homed, no fault, not zeroed)."""
         return self._enabled
@@ -259,6 +265,11 @@ class SimDevice(HapticDevice):
 
     def heartbeat(self) -> None:
         self._t_heartbeat = self.time
+
+    @property
+    def last_heartbeat(self) -> float:
+        """Device time [s] of the last heartbeat."""
+        return self._t_heartbeat
 
     def request_stop(self) -> None:
         """End the running window at the next chunk (from another thread or a callback)."""
@@ -384,6 +395,15 @@ class SimDevice(HapticDevice):
                 ev_tick, ev_vel)
             self._tick = tick0 + n_done
             n = n_done
+            ft = int(self._ist[K.IST_FAULT_TICK])
+            if ft >= 0:  # latch now, so callers see it mid-window, timed at the zeroing tick
+                t_f = (tick0 + ft) * dt
+                if self._fault is None:
+                    self._fault = FaultEvent(t_f, "watchdog", f"no heartbeat for "
+                                             f"{dev.watchdog_s:g} s: output zeroed")
+                elif self._fault.code == "estop" and self._fault.t != t_f:
+                    self._fault = FaultEvent(t_f, "estop", "emergency stop (latched): output "
+                                             "zeroed")
             if self.live:
                 target = wall0 + n * dt / self.speed
                 late.append(time.perf_counter() - target)

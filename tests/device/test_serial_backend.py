@@ -1,0 +1,150 @@
+"""The serial backend against the emulator over a real pseudo-terminal."""
+
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from device import DeviceFaultError, Scene, open_device
+from device.serial.backend import DeviceGoneError, PortBusyError, ProtocolMismatchError
+from device.serial.emulator import open_pty
+
+from .conftest import start_emulator, stop_emulator
+
+FIRM = Scene("firm", spring=680.0)
+
+HOST = r"""
+import sys
+from device import Scene, open_device
+with open_device("serial:" + sys.argv[1]) as dev:
+    dev.load_scene(Scene("firm", spring=680.0))
+    dev.home()
+    print("started", flush=True)
+    dev.run_window(30.0, from_first_contact=False)
+"""
+
+
+def _wait_for(pred, limit=15.0, what="condition"):
+    end = time.monotonic() + limit
+    while time.monotonic() < end:
+        if pred():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_exclusive_open(emulator):
+    with open_device(f"serial:{emulator.port}") as dev:
+        assert dev.info.backend == "serial" and dev.info.servo_rate_hz == 10_000
+        with pytest.raises(PortBusyError, match="in use"):
+            open_device(f"serial:{emulator.port}")
+    open_device(f"serial:{emulator.port}").close()  # free again once closed
+
+
+def test_window_over_the_link_and_link_statistics(emulator):
+    with open_device(f"serial:{emulator.port}") as dev:
+        dev.load_scene(FIRM)
+        dev.home()
+        res = dev.run_window(0.5)
+        assert res.contacts and set(res.traces) >= {"t", "position", "force_cmd", "accel",
+                                                    "flags", "true_position"}
+        n = len(res.traces["t"])
+        assert all(len(v) == n for v in res.traces.values())
+        assert np.all(np.isfinite(res.traces["accel"]))
+        st = dev.link_stats()
+        assert st["frames_sent"] > 5 and st["frames_ok"] > 5
+        assert st["crc_errors"] == 0 and st["lost"] == 0
+        assert np.isfinite(st["rtt_p50_ms"]) and st["rtt_p99_ms"] >= st["rtt_p50_ms"]
+
+
+def test_selftest_cli_passes_against_the_emulator(emulator):
+    import json
+
+    out = subprocess.run([sys.executable, "-m", "app", "device", "selftest",
+                          f"serial:{emulator.port}", "--json"], capture_output=True, text=True,
+                         timeout=300)
+    report = json.loads(out.stdout)
+    failed = [c for c in report["checks"] if not c["ok"]]
+    assert out.returncode == 0 and not failed, failed
+    assert report["passed"] == 12
+
+
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
+def test_device_gone_mid_window_is_typed_and_keeps_what_arrived(how):
+    emu = start_emulator("--seed", "7")
+    try:
+        dev = open_device(f"serial:{emu.port}")
+        dev.load_scene(FIRM)
+        dev.home()
+        got = []
+
+        def progress(t, partial):
+            got.append(len(partial.contacts))
+            if t > 1.0:
+                emu.proc.send_signal(how)  # the emulator dies (or closes its pty) mid-window
+
+        with pytest.raises(DeviceGoneError) as err:
+            dev.run_window(20.0, on_progress=progress)
+        assert err.value.partial is not None
+        assert len(err.value.partial.contacts) >= max(got)  # nothing received is lost
+        assert dev.output_force == 0.0
+        with pytest.raises(DeviceGoneError):
+            dev.home()
+        dev.close()
+    finally:
+        stop_emulator(emu)
+
+
+def test_watchdog_zeroes_output_when_the_host_is_killed(own_emulator):
+    host = subprocess.Popen([sys.executable, "-c", HOST, own_emulator.port],
+                            stdout=subprocess.PIPE, text=True)
+    assert host.stdout.readline().strip() == "started"
+    time.sleep(0.5)
+    host.kill()  # kill -9: no goodbye, no ZERO
+    host.wait()
+    _wait_for(lambda: "FAULT watchdog" in own_emulator.stderr(), what="the watchdog")
+    line = re.search(r"FAULT watchdog .* ([\d.]+) ms after the last heartbeat",
+                     own_emulator.stderr())
+    # inside a window the servo loop trips it at the tick T_wd after the last heartbeat
+    assert float(line.group(1)) <= 100.0 + 0.1
+    with open_device(f"serial:{own_emulator.port}") as dev:
+        _wait_for(lambda: dev.fault is not None, what="the latched fault")
+        assert dev.fault.code == "watchdog"
+        dev.load_scene(FIRM)
+        with pytest.raises(DeviceFaultError):
+            dev.home()
+        dev.clear_fault()
+        dev.home()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_host_signals_zero_the_output(own_emulator, sig):
+    host = subprocess.Popen([sys.executable, "-c", HOST, own_emulator.port],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert host.stdout.readline().strip() == "started"
+    time.sleep(0.3)
+    host.send_signal(sig)
+    host.wait(timeout=20)
+    _wait_for(lambda: "host: ZERO" in own_emulator.stderr(), what="ZERO from the host")
+    assert "FAULT watchdog" not in own_emulator.stderr()  # zeroed by the host, not the watchdog
+
+
+def test_a_port_that_does_not_speak_the_protocol():
+    master, slave, path = open_pty()
+    try:
+        with pytest.raises(ProtocolMismatchError, match="no HELLO answer"):
+            open_device(f"serial:{path}", timeout=0.05)
+    finally:
+        import os
+
+        os.close(master)
+        os.close(slave)
+
+
+def test_missing_port_is_a_clear_error():
+    with pytest.raises(DeviceGoneError, match="cannot open"):
+        open_device("serial:/dev/does-not-exist")
