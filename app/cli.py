@@ -156,6 +156,31 @@ def _demo(args: argparse.Namespace) -> int:
     return run_demo(seed=args.seed)
 
 
+def _run(args: argparse.Namespace) -> int:
+    from app.ids import ParticipantIdError
+    from app.session_cli import run
+    from device import DeviceError
+    from protocols import ProtocolError
+
+    try:
+        return run(args)
+    except (ParticipantIdError, ProtocolError, DeviceError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+
+
+def _resume(args: argparse.Namespace) -> int:
+    from app.recorder import TrialsFileError
+    from app.session_cli import resume
+    from device import DeviceError
+    from protocols import ProtocolError, ResumeMismatch
+
+    try:
+        return resume(args)
+    except (ProtocolError, DeviceError, ValueError, ResumeMismatch, TrialsFileError,
+            FileNotFoundError) as exc:
+        raise UserError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="hapticlab",
@@ -179,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_parsers(dsub, sub, _matching)
 
+    from app.session_cli import add_parsers as add_session
+
+    add_session(sub, _run, _resume)
     pr = sub.add_parser("protocol", help="protocol files (validate, show)")
     psub = pr.add_subparsers(dest="protocol_command", required=True, metavar="ACTION")
     pv = psub.add_parser("validate", help="check a protocol file; exit 0 when valid")

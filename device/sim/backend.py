@@ -271,6 +271,12 @@ class SimDevice(HapticDevice):
         """Device time [s] of the last heartbeat."""
         return self._t_heartbeat
 
+    def reseed(self, entropy) -> None:
+        """Restart the tapping and sensor-noise streams from ``entropy`` (e.g. [seed, trial,
+        attempt]), so an attempt repeats exactly however the session got there."""
+        ss = np.random.SeedSequence(entropy)
+        self.rng_tapping, self.rng_noise = (np.random.default_rng(c) for c in ss.spawn(2))
+
     def request_stop(self) -> None:
         """End the running window at the next chunk (from another thread or a callback)."""
         self._stop_requested = True
