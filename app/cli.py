@@ -146,7 +146,7 @@ def _bench(args: argparse.Namespace) -> int:
         module = importlib.import_module(f"benchmarks.{args.what}")
     except ModuleNotFoundError:
         raise UserError(f"no benchmark named {args.what!r}; "
-                        "available: sim, matching, link") from None
+                        "available: sim, matching, link, crash") from None
     return module.main(args)
 
 
@@ -223,11 +223,12 @@ def build_parser() -> argparse.ArgumentParser:
     ps.set_defaults(func=_protocol_show)
 
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
-    b.add_argument("what", help="which benchmark: sim, matching, link")
+    b.add_argument("what", help="which benchmark: sim, matching, link, crash")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
     b.add_argument("--fuzz", type=int, default=100_000,
                    help="link: mutated frames to push through the decoder")
+    b.add_argument("--kills", type=int, default=1000, help="crash: kill -9 count")
     b.set_defaults(func=_bench)
 
     d = sub.add_parser("demo", help="what `make demo` runs: a simulated tap window per sample")

@@ -13,8 +13,6 @@ from device import DeviceFaultError, Scene, open_device
 from device.serial.backend import DeviceGoneError, PortBusyError, ProtocolMismatchError
 from device.serial.emulator import open_pty
 
-from .conftest import start_emulator, stop_emulator
-
 FIRM = Scene("firm", spring=680.0)
 
 HOST = r"""
@@ -74,29 +72,26 @@ def test_selftest_cli_passes_against_the_emulator(emulator):
 
 
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
-def test_device_gone_mid_window_is_typed_and_keeps_what_arrived(how):
-    emu = start_emulator("--seed", "7")
-    try:
-        dev = open_device(f"serial:{emu.port}")
-        dev.load_scene(FIRM)
+def test_device_gone_mid_window_is_typed_and_keeps_what_arrived(how, emulator_factory):
+    emu = emulator_factory(7)
+    dev = open_device(f"serial:{emu.port}")
+    dev.load_scene(FIRM)
+    dev.home()
+    got = []
+
+    def progress(t, partial):
+        got.append(len(partial.contacts))
+        if t > 1.0:
+            emu.proc.send_signal(how)  # the emulator dies (or closes its pty) mid-window
+
+    with pytest.raises(DeviceGoneError) as err:
+        dev.run_window(20.0, on_progress=progress)
+    assert err.value.partial is not None
+    assert len(err.value.partial.contacts) >= max(got)  # nothing received is lost
+    assert dev.output_force == 0.0
+    with pytest.raises(DeviceGoneError):
         dev.home()
-        got = []
-
-        def progress(t, partial):
-            got.append(len(partial.contacts))
-            if t > 1.0:
-                emu.proc.send_signal(how)  # the emulator dies (or closes its pty) mid-window
-
-        with pytest.raises(DeviceGoneError) as err:
-            dev.run_window(20.0, on_progress=progress)
-        assert err.value.partial is not None
-        assert len(err.value.partial.contacts) >= max(got)  # nothing received is lost
-        assert dev.output_force == 0.0
-        with pytest.raises(DeviceGoneError):
-            dev.home()
-        dev.close()
-    finally:
-        stop_emulator(emu)
+    dev.close()
 
 
 def test_watchdog_zeroes_output_when_the_host_is_killed(own_emulator):

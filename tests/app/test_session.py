@@ -1,0 +1,236 @@
+"""Sessions on test day: run, record, crash, resume."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from app.recorder import COLUMNS, SessionFiles, TrialsFileError, read_trials
+from benchmarks.crash import kill_and_resume
+
+CLI = [sys.executable, "-m", "app"]
+HEADLESS = ["--device", "sim", "--ui", "none", "--responder", "scripted", "--no-audio",
+            "--quiet"]
+
+MINI = """
+[protocol]
+name = "mini"
+[window]
+duration = 1.0
+timeout = 10.0
+[rating]
+min = 1
+max = 7
+question = "How real?"
+[operator]
+placeholders = ["block A", "block B"]
+[[samples]]
+id = "wood"
+scene.material = { stiffness = 70000.0, damping = 40.0 }
+[[samples]]
+id = "firm"
+scene.spring = 680.0
+[[samples]]
+id = "pulse"
+scene.spring = 680.0
+scene.transient = { kind = "pulse", gain = 5.7, duration = 0.02 }
+[[phases]]
+name = "testing"
+samples = "all"
+repetitions = 2
+"""
+
+
+def run(*args, **kw):
+    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=600, **kw)
+
+
+@pytest.fixture(scope="module")
+def realism_session(tmp_path_factory):
+    data = tmp_path_factory.mktemp("data")
+    out = run("run", "realism", "--participant", "P01", "--seed", "1", "--data", str(data),
+              *HEADLESS)
+    assert out.returncode == 0, out.stderr
+    return data / "sub-P01" / "ses-1"
+
+
+def test_realism_session_files_and_counts(realism_session):
+    files = SessionFiles(realism_session)
+    assert (realism_session / "traces").is_dir()
+    rows, torn = read_trials(files.trials)
+    assert torn is None
+    valid = [r for r in rows if r["status"] == "valid"]
+    by_phase = {p: [r for r in valid if r["phase"] == p] for p in ("demonstration", "testing")}
+    assert len(by_phase["demonstration"]) == 11 and len(by_phase["testing"]) == 33
+    assert {r["sample"] for r in by_phase["demonstration"]} == {r["sample"]
+                                                                 for r in by_phase["testing"]}
+    assert all(1 <= int(r["rating"]) <= 7 for r in valid if r["phase"] != "familiarization")
+    redraws = [r for r in rows if r["status"] in ("saturated", "excluded_saturated")]
+    assert len(rows) == 45 + len(redraws)
+    for r in rows:
+        assert set(r) == set(COLUMNS)
+        if r["trace_file"]:
+            assert (realism_session / r["trace_file"]).exists()
+    meta = json.loads(files.meta.read_text())
+    assert meta["status"] == "complete" and meta["seed"] == 1
+    assert meta["protocol"]["sha256"] and meta["app"]["git_sha"]
+    assert meta["device"]["current_limit"] == 1.4 and meta["packages"]["numpy"]
+    assert meta["times"]["created_utc"] and meta["times"]["finished_utc"]
+
+
+def test_placements_never_reveal_and_always_swap(realism_session):
+    rows, _ = read_trials(realism_session / "trials.tsv")
+    for r in rows:
+        if r["sample"] in ("wood", "wood_on_foam", "foam"):
+            assert r["placement"] == r["sample"]
+        else:
+            assert r["placement"] in ("block A", "block B")
+
+
+def test_an_existing_session_is_never_overwritten(tmp_path):
+    for n in (1, 2):
+        out = run("run", "identification", "--participant", "P02", "--seed", "3", "--data",
+                  str(tmp_path), *HEADLESS)
+        assert out.returncode == 0, out.stderr
+        assert (tmp_path / "sub-P02" / f"ses-{n}" / "trials.tsv").exists()
+
+
+def test_seed_is_drawn_and_recorded_when_not_given(tmp_path):
+    out = run("run", "identification", "--participant", "P03", "--data", str(tmp_path),
+              *HEADLESS)
+    assert out.returncode == 0
+    meta = json.loads((tmp_path / "sub-P03" / "ses-1" / "session.json").read_text())
+    assert isinstance(meta["seed"], int) and meta["seed"] >= 0
+
+
+@pytest.mark.parametrize("pid, fragment", [
+    ("../x", "path separator"), ("a/b", "path separator"), ("P..1", "'..'"),
+    ("CON", "reserved device name"), ("nul", "reserved device name"),
+    ("P\x0701", "control characters"), ("", "empty"), ("P 01", "use letters"),
+    ("x" * 40, "longer than 32"),
+])
+def test_bad_participant_ids(tmp_path, pid, fragment):
+    out = run("run", "realism", "--participant", pid, "--data", str(tmp_path), *HEADLESS)
+    assert out.returncode == 2
+    assert fragment in out.stderr and "Traceback" not in out.stderr
+    assert not any(tmp_path.iterdir())
+
+
+def _copy_session(src: Path, dst: Path) -> Path:
+    import shutil
+
+    shutil.copytree(src.parent.parent, dst)
+    return dst / src.parent.name / src.name
+
+
+def test_torn_last_line_is_set_aside_and_the_attempt_rerun(realism_session, tmp_path):
+    folder = _copy_session(realism_session, tmp_path / "d")
+    lines = (folder / "trials.tsv").read_text().splitlines(keepends=True)
+    full = "".join(lines)
+    # as if killed while writing row 20: keep 19 rows and half of the 20th
+    (folder / "trials.tsv").write_text("".join(lines[:20]) + lines[20][:30])
+    meta = json.loads((folder / "session.json").read_text())
+    meta["status"] = "interrupted"
+    (folder / "session.json").write_text(json.dumps(meta))
+    out = run("resume", str(folder))
+    assert out.returncode == 0, out.stderr
+    assert "torn last line" in out.stderr and "line 21" in out.stderr
+    assert (folder / "trials.torn.tsv").read_text().strip() == lines[20][:30].strip()
+    # the resumed session equals the uninterrupted one
+    strip = lambda text: [ln.split("\t")[:15] for ln in text.splitlines()]  # noqa: E731
+    assert strip((folder / "trials.tsv").read_text()) == strip(full)
+
+
+def test_a_corrupt_earlier_line_is_a_named_error(realism_session, tmp_path):
+    folder = _copy_session(realism_session, tmp_path / "d")
+    lines = (folder / "trials.tsv").read_text().splitlines(keepends=True)
+    lines[5] = "garbage\tline\n"
+    (folder / "trials.tsv").write_text("".join(lines))
+    with pytest.raises(TrialsFileError, match=r"trials.tsv:6: corrupt line"):
+        read_trials(folder / "trials.tsv")
+    meta = json.loads((folder / "session.json").read_text())
+    meta["status"] = "interrupted"
+    (folder / "session.json").write_text(json.dumps(meta))
+    out = run("resume", str(folder))
+    assert out.returncode == 2 and "trials.tsv:6: corrupt line" in out.stderr
+
+
+def test_resume_is_refused_when_the_protocol_changed(tmp_path):
+    proto = tmp_path / "mini.toml"
+    proto.write_text(MINI)
+    out = run("run", str(proto), "--participant", "P04", "--seed", "2", "--data",
+              str(tmp_path / "d"), *HEADLESS)
+    assert out.returncode == 0
+    folder = tmp_path / "d" / "sub-P04" / "ses-1"
+    meta = json.loads((folder / "session.json").read_text())
+    meta["status"] = "interrupted"
+    (folder / "session.json").write_text(json.dumps(meta))
+    proto.write_text(MINI.replace("repetitions = 2", "repetitions = 3"))
+    out = run("resume", str(folder))
+    assert out.returncode == 2 and "changed since the session started" in out.stderr
+
+
+@pytest.mark.slow
+def test_kill_harness_loses_nothing_and_resumes_exactly(tmp_path):
+    """≥ 30 kill -9 at random moments (1000 in `hapticlab bench crash`)."""
+    r = kill_and_resume(30, workdir=tmp_path)
+    assert r["kills"] == 30
+    assert r["lost_rows_events"] == 0
+    assert r["sequence_matches"], r["mismatched"]
+
+
+def test_headless_session_over_the_emulator(emulator, tmp_path):
+    proto = tmp_path / "mini.toml"
+    proto.write_text(MINI)
+    out = run("run", str(proto), "--participant", "P05", "--seed", "4", "--data", str(tmp_path),
+              "--device", f"serial:{emulator.port}", "--ui", "none", "--no-audio", "--quiet")
+    assert out.returncode == 0, out.stderr
+    folder = tmp_path / "sub-P05" / "ses-1"
+    rows, _ = read_trials(folder / "trials.tsv")
+    assert sum(r["status"] == "valid" for r in rows) == 6
+    meta = json.loads((folder / "session.json").read_text())
+    assert meta["device"]["backend"] == "serial"
+    assert meta["link"]["frames_sent"] > 0 and meta["link"]["crc_errors"] == 0
+
+
+def test_emulator_dies_mid_session_then_resume_on_a_new_one(tmp_path, emulator_factory):
+    proto = tmp_path / "mini.toml"
+    proto.write_text(MINI.replace("duration = 1.0", "duration = 2.0"))
+    emu = emulator_factory(8)
+    proc = subprocess.Popen([*CLI, "run", str(proto), "--participant", "P06", "--seed", "5",
+                             "--data", str(tmp_path), "--device", f"serial:{emu.port}",
+                             "--ui", "none", "--no-audio"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    folder = tmp_path / "sub-P06" / "ses-1"
+    import time
+
+    end = time.monotonic() + 60
+    while time.monotonic() < end:  # wait until two trials are recorded, then pull the plug
+        if (folder / "trials.tsv").exists() and len(read_trials(folder / "trials.tsv")[0]) >= 2:
+            break
+        time.sleep(0.1)
+    emu.proc.kill()
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 3, err
+    assert "resume with: hapticlab resume" in err
+    rows, _ = read_trials(folder / "trials.tsv")
+    assert rows[-1]["status"] == "aborted_device" and "device gone" in rows[-1]["reason"]
+    assert json.loads((folder / "session.json").read_text())["status"] == "interrupted"
+    emu2 = emulator_factory(9)
+    out = run("resume", str(folder), "--device", f"serial:{emu2.port}", "--quiet")
+    assert out.returncode == 0, out.stderr
+    rows, _ = read_trials(folder / "trials.tsv")
+    assert sum(r["status"] == "valid" for r in rows) == 6
+    aborted = [r for r in rows if r["status"] == "aborted_device"]
+    retried = [r for r in rows if r["item"] == aborted[0]["item"] and r["status"] == "valid"]
+    assert retried and int(retried[0]["attempt"]) == int(aborted[0]["attempt"]) + 1
+
+
+def test_real_device_sessions_refuse_to_run_without_audio(emulator, tmp_path):
+    out = run("run", "realism", "--participant", "P07", "--device", f"serial:{emulator.port}",
+              "--ui", "none", "--data", str(tmp_path))
+    if "no audio" not in out.stderr:
+        pytest.skip("this machine has working audio output")
+    assert out.returncode == 2 and "--no-audio" in out.stderr
