@@ -11,17 +11,17 @@ $(PY):
 	$(PY) -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,ui]'
 	touch $(STAMP)
 
 venv: $(STAMP)
 
 # Debian packages the tests need (virtual X server, Mesa GL, PortAudio); installed only when missing.
 system-deps:
-	@if ! command -v Xvfb >/dev/null 2>&1; then \
-	  echo "installing Xvfb, Mesa GL and PortAudio from Debian's packages"; \
+	@if ! command -v Xvfb >/dev/null 2>&1 || ! ldconfig -p | grep -q libportaudio; then \
+	  echo "installing Xvfb, Mesa GL, PortAudio and libsndfile from Debian's packages"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
-	    xvfb libgl1-mesa-dri libglu1-mesa libportaudio2 >/dev/null; \
+	    xvfb libgl1-mesa-dri libglu1-mesa libportaudio2 libasound2 libsndfile1 >/dev/null; \
 	fi
 
 demo: $(STAMP)

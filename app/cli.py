@@ -139,6 +139,29 @@ def _device_emulate(args: argparse.Namespace) -> int:
     return emulate(args.rate, args.seed, args.speed)
 
 
+def _device_check(args: argparse.Namespace) -> int:
+    from app.check import saturation_check
+
+    protocol = _load_protocol(args.protocol)
+    with _open_spec(args.device) as dev:
+        info = dev.info
+    rows = saturation_check(protocol, info, windows=args.windows, warn=args.warn)
+    if args.json:
+        print(json.dumps({"device": args.device, "rows": rows}, indent=2))
+        return 0
+    print(f"{protocol.name} on {args.device} ({info.current_limit:g} A × "
+          f"{info.force_constant:g} N/A = {info.max_force:.2f} N), simulated tapper "
+          f"0.11 ± 0.033 m/s, {args.windows} windows per sample:")
+    for r in rows:
+        if "error" in r:
+            print(f"  {r['sample']:16s} not checked: {r['error']}")
+            continue
+        flag = "  WARNING: saturates often" if r["warning"] else ""
+        print(f"  {r['sample']:16s} {100 * r['tap_rate']:5.1f} % of taps, "
+              f"{100 * r['trial_rate']:5.1f} % of trials saturate{flag}")
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     import importlib
 
@@ -194,6 +217,13 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("spec", help="device spec, e.g. sim or serial:/dev/ttyACM0")
     st.add_argument("--json", action="store_true", help="print a JSON summary")
     st.set_defaults(func=_device_selftest)
+    ck = dsub.add_parser("check", help="predict how often each virtual sample saturates")
+    ck.add_argument("protocol")
+    ck.add_argument("--device", default="sim")
+    ck.add_argument("--windows", type=int, default=12, help="5-s windows per sample")
+    ck.add_argument("--warn", type=float, default=0.2, help="warn above this share of trials")
+    ck.add_argument("--json", action="store_true")
+    ck.set_defaults(func=_device_check)
     em = dsub.add_parser("emulate", help="serve the wire protocol on a pseudo-terminal "
                          "(simulated plant); prints the port first")
     em.add_argument("--rate", type=float, default=10_000.0, help="servo rate [Hz]")

@@ -7,6 +7,7 @@ live panel and reads single keys from the terminal: ``r`` ready, ``p`` pause/res
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 from collections import deque
@@ -52,5 +53,79 @@ class PlainConsole:
         return None
 
 
-def make_console(kind: str = "plain", quiet: bool = False) -> PlainConsole:
+class KeyConsole(PlainConsole):
+    """The operator's terminal: prints like :class:`PlainConsole` and reads single keys.
+
+    Before each trial it waits for ``r`` (ready: the item is in place); at any time ``p``
+    pauses/resumes, ``e`` latches the e-stop on the device at once, ``q`` aborts and saves,
+    ``s`` skips and ``u`` re-queues the next item.
+    """
+
+    KEYS = {"p": "pause", "e": "estop", "q": "abort", "s": "skip", "u": "requeue", "r": "ready"}
+
+    def __init__(self, device, stream=None):
+        super().__init__(stream)
+        import termios
+        import tty
+
+        self.device = device
+        self._fd = sys.stdin.fileno()
+        self._saved = termios.tcgetattr(self._fd)
+        tty.setcbreak(self._fd)
+        self._stop = threading.Event()
+        self._cv = threading.Condition()
+        threading.Thread(target=self._read, daemon=True).start()
+        self.say("operator keys: r ready · p pause · e E-STOP · q abort & save · s skip · "
+                 "u re-queue")
+
+    def _read(self) -> None:
+        import select
+
+        while not self._stop.is_set():
+            r, _, _ = select.select([self._fd], [], [], 0.1)
+            if not r:
+                continue
+            ch = os.read(self._fd, 1).decode("utf-8", "ignore").lower()  # not the text buffer
+            action = self.KEYS.get(ch)
+            if action == "estop":  # at once, from this thread: never queued behind a trial
+                try:
+                    self.device.estop()
+                finally:
+                    self.say("E-STOP latched: output is zero")
+                continue
+            if action:
+                with self._cv:
+                    self.actions.append(action)
+                    self._cv.notify_all()
+
+    def _next(self) -> str:
+        with self._cv:
+            self._cv.wait_for(lambda: bool(self.actions))
+            return self.actions.popleft()
+
+    def wait_ready(self) -> str:
+        """Block until the operator is ready (``go``) or chose another action."""
+        self.say("  place the item, then press r")
+        a = self._next()
+        return "go" if a == "ready" else a
+
+    def wait_resume(self) -> str:
+        while True:
+            a = self._next()
+            if a == "pause":
+                return "go"
+            if a == "abort":
+                return a
+
+    def close(self) -> None:
+        import termios
+
+        self._stop.set()
+        termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+
+
+def make_console(kind: str = "plain", quiet: bool = False, device=None) -> PlainConsole:
+    """``keys`` when an operator sits at a terminal, ``plain`` otherwise."""
+    if kind == "keys" and device is not None and sys.stdin.isatty():
+        return KeyConsole(device)
     return PlainConsole(quiet=quiet)

@@ -52,6 +52,9 @@ class ScriptedResponder:
     def debrief(self) -> str:
         return "scripted responder: no criteria"
 
+    def keep_tapping(self) -> bool:
+        return False  # one familiarization window
+
 
 def make_participant(name: str, **options) -> Participant:
     if name == "scripted":

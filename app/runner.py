@@ -139,7 +139,13 @@ class SessionRunner:
                 continue
             done = len(self.engine.outcomes(self.log))
             self.console.place(trial, self._total(), done)
-            action = self.console.next_action()
+            action = self.console.wait_ready() if hasattr(self.console, "wait_ready") \
+                else self.console.next_action()
+            while action == "pause":
+                if hasattr(self.participant_ui, "pause"):
+                    self.participant_ui.pause()
+                self.console.say("paused — press p to resume")
+                action = self.console.wait_resume()
             if action in ("skip", "requeue"):
                 status = "skipped" if action == "skip" else "requeued"
                 self._record(trial, status, reason=f"operator {action}", t_start=utc_now())
@@ -158,8 +164,22 @@ class SessionRunner:
             self.audio.tap_cue()
         results = []
         try:
-            for sid in trial.samples:
-                results.append(self._window(trial, sid, rng))
+            if trial.kind == "identification" and hasattr(self.participant_ui, "choose_surface"):
+                # the participant switches between the surfaces before naming them
+                visited: set[int] = set()
+                by_surface: dict[int, Any] = {}
+                while (k := self.participant_ui.choose_surface(trial, visited)) is not None:
+                    by_surface[k] = self._window(trial, trial.samples[k], rng)
+                    visited.add(k)
+                results = [by_surface[k] for k in sorted(by_surface)]
+            elif trial.kind == "free":
+                # familiarization: windows on the sample until the participant is done
+                results.append(self._window(trial, trial.samples[0], rng))
+                while getattr(self.participant_ui, "keep_tapping", lambda: False)():
+                    results.append(self._window(trial, trial.samples[0], rng))
+            else:
+                for sid in trial.samples:
+                    results.append(self._window(trial, sid, rng))
         except DeviceError as exc:
             partial = getattr(exc, "partial", None)
             self._record(trial, "aborted_device", reason=str(exc)[:200], t_start=t_start,
@@ -168,6 +188,12 @@ class SessionRunner:
                                      ) from exc
         res = results[0]
         velocities = np.concatenate([r.velocities for r in results]) if results else []
+        if any(r.faults for r in results):  # an e-stop or the watchdog during the window
+            f = next(r.faults[0] for r in results if r.faults)
+            self._record(trial, "aborted_device", reason=f"{f.code}: {f.message}",
+                         t_start=t_start, result=res, results=results)
+            raise SessionInterrupted(f"{f.code} during trial {trial.trial_index}: output is off "
+                                     "and latched; resume with --clear-fault once it is safe")
         if any(r.timed_out for r in results):
             self._record(trial, "requeued", reason="no contact before the timeout",
                          t_start=t_start, result=res)
@@ -207,9 +233,11 @@ class SessionRunner:
         dev.home()
         w = self.protocol.window
 
-        def progress(_t, partial):
+        def progress(t, partial):
             for c in partial.contacts[-1:]:
                 self.console.contact(c.velocity)
+            if hasattr(self.participant_ui, "progress"):
+                self.participant_ui.progress(t, partial, w.duration)
 
         return dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
 

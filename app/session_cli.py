@@ -108,6 +108,8 @@ def run(args: argparse.Namespace) -> int:
     ui = _participant_ui(args.ui, args.responder, protocol, args.fullscreen)
     audio = _audio(args, args.device, console)
     with _open(args.device, seed) as dev:
+        if args.ui == "psychopy":  # an operator is at the terminal: ready, pause, e-stop keys
+            console = make_console("keys", args.quiet, dev)
         folder, n = new_session_dir(Path(args.data), participant)
         files = SessionFiles(folder)
         meta = session_meta(protocol, args.protocol, participant, n, seed, args.row, dev,
@@ -120,10 +122,9 @@ def run(args: argparse.Namespace) -> int:
         try:
             return _drive(runner, files, meta, console)
         finally:
-            if hasattr(ui, "close"):
-                ui.close()
-            if audio is not None:
-                audio.close()
+            for part in (ui, audio, console):
+                if part is not None and hasattr(part, "close"):
+                    part.close()
 
 
 def resume(args: argparse.Namespace) -> int:
@@ -153,9 +154,15 @@ def resume(args: argparse.Namespace) -> int:
         console.say(f"set aside a torn last line of trials.tsv (line {torn.line}, kept in "
                     "trials.torn.tsv): the attempt it belonged to will run again")
     spec = args.device or meta["device"]["spec"]
-    ui = _participant_ui(args.ui or meta["ui"], meta["responder"], protocol, False)
+    ui_kind = args.ui or meta["ui"]
+    ui = _participant_ui(ui_kind, meta["responder"], protocol, False)
     audio = _audio(args, spec, console) if meta.get("audio") else None
     with _open(spec, meta["seed"]) as dev:
+        if args.clear_fault and dev.fault is not None:
+            console.say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
+            dev.clear_fault()
+        if ui_kind == "psychopy":
+            console = make_console("keys", args.quiet, dev)
         runner = SessionRunner(protocol, engine, dev, files, ui, p["id"], meta["session"],
                                meta["seed"], console, audio, meta.get("traces_mode", "full"))
         runner.load_log()
@@ -172,10 +179,9 @@ def resume(args: argparse.Namespace) -> int:
         try:
             return _drive(runner, files, meta, console)
         finally:
-            if hasattr(ui, "close"):
-                ui.close()
-            if audio is not None:
-                audio.close()
+            for part in (ui, audio, console):
+                if part is not None and hasattr(part, "close"):
+                    part.close()
 
 
 def add_parsers(sub, func_run, func_resume) -> None:
@@ -201,6 +207,8 @@ def add_parsers(sub, func_run, func_resume) -> None:
     rs.add_argument("--device", default=None, help="override the recorded device spec")
     rs.add_argument("--ui", choices=("psychopy", "none"), default=None)
     rs.add_argument("--no-audio", action="store_true")
+    rs.add_argument("--clear-fault", action="store_true",
+                    help="clear a latched e-stop/watchdog fault first (when it is safe)")
     rs.add_argument("--quiet", action="store_true")
     rs.set_defaults(func=func_resume)
 

@@ -124,6 +124,7 @@ class WindowResult:
     traces: dict[str, np.ndarray] = field(default_factory=dict)
     timed_out: bool = False
     timing: dict[str, float] = field(default_factory=dict)
+    live_height: float | None = None  #: in progress callbacks: stylus above the surface [m]
 
     @property
     def velocities(self) -> np.ndarray:

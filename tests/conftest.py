@@ -100,3 +100,31 @@ def emulator_factory():
     yield start
     for emu in started:
         stop_emulator(emu)
+
+
+@pytest.fixture(scope="session")
+def xdisplay():
+    """A virtual X server (Xvfb) for PsychoPy windows; sets DISPLAY for the session."""
+    import shutil
+    import time
+
+    if shutil.which("Xvfb") is None:
+        pytest.fail("Xvfb is missing: `make test` installs it from Debian's packages")
+    for n in range(90, 130):
+        if not os.path.exists(f"/tmp/.X{n}-lock"):
+            break
+    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1280x1024x24", "-nolisten",
+                             "tcp"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    for _ in range(100):
+        if os.path.exists(f"/tmp/.X11-unix/X{n}"):
+            break
+        time.sleep(0.05)
+    old = os.environ.get("DISPLAY")
+    os.environ["DISPLAY"] = f":{n}"
+    yield f":{n}"
+    if old is None:
+        os.environ.pop("DISPLAY", None)
+    else:
+        os.environ["DISPLAY"] = old
+    proc.terminate()
+    proc.wait(timeout=5)

@@ -446,6 +446,8 @@ class SimDevice(HapticDevice):
                            t_first_contact=(tick0 + first) * dt if first >= 0 else None,
                            contacts=contacts)
         if not final:
+            if n:
+                res.live_height = float(buf.pos[n - 1] - self._scene.plant.surface_height)
             return res
         flags = buf.flags[:n].astype(np.uint16)
         fcmd = buf.fcmd[:n]

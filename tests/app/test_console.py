@@ -1,0 +1,93 @@
+"""The operator console's keys, through a real pseudo-terminal."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from app.console import KeyConsole
+from device import Scene, open_device
+
+
+@pytest.fixture
+def tty_stdin(monkeypatch):
+    master, slave = os.openpty()
+    f = os.fdopen(slave, "r", buffering=1)
+    monkeypatch.setattr(sys, "stdin", f)
+    yield master
+    os.close(master)
+
+
+def _until(pred, limit=5.0):
+    end = time.monotonic() + limit
+    while time.monotonic() < end and not pred():
+        time.sleep(0.01)
+    return pred()
+
+
+def test_keys_queue_actions_and_estop_acts_at_once(tty_stdin):
+    dev = open_device("sim")
+    dev.load_scene(Scene("firm", spring=680.0))
+    dev.home()
+    con = KeyConsole(dev)
+    try:
+        os.write(tty_stdin, b"x")  # not an operator key: ignored
+        os.write(tty_stdin, b"r")
+        assert con.wait_ready() == "go"
+        os.write(tty_stdin, b"s")
+        assert con.wait_ready() == "skip"
+        os.write(tty_stdin, b"p")
+        assert con.wait_ready() == "pause"
+        os.write(tty_stdin, b"p")
+        assert con.wait_resume() == "go"
+        os.write(tty_stdin, b"e")  # e-stop: on the device immediately, not queued
+        assert _until(lambda: dev.fault is not None)
+        assert dev.fault.code == "estop" and dev.output_force == 0.0
+        assert not con.actions
+    finally:
+        con.close()
+
+
+def test_device_check_reports_saturation_by_sample():
+    out = subprocess.run([sys.executable, "-m", "app", "device", "check", "realism", "--json",
+                          "--windows", "6"], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    rows = {r["sample"]: r for r in json.loads(out.stdout)["rows"]}
+    assert set(rows) == {"pulse_firm", "pulse_soft", "sinusoid_firm", "sinusoid_soft",
+                         "matched_firm", "matched_soft"}
+    # the pulses (≤ 1 N at the fastest taps) never reach the 3-N limit; sinusoids can
+    assert rows["pulse_firm"]["tap_rate"] == 0 and rows["pulse_soft"]["tap_rate"] == 0
+    assert max(rows["sinusoid_firm"]["tap_rate"], rows["sinusoid_soft"]["tap_rate"]) > 0
+
+
+def test_familiarization_runs_until_the_participant_is_done(tmp_path):
+    from app.recorder import SessionFiles, new_session_dir, read_trials
+    from app.runner import SessionRunner
+    from protocols import SessionEngine, load_protocol
+
+    class ThreeWindows:
+        n = 0
+
+        def before_window(self, *a):
+            pass
+
+        def keep_tapping(self):
+            self.n += 1
+            return self.n < 3
+
+        def rate(self, trial, scale, result, rng):
+            return 4, 1.0
+
+    p = load_protocol("realism")
+    folder, n = new_session_dir(tmp_path, "P01")
+    dev = open_device("sim", seed=1)
+    runner = SessionRunner(p, SessionEngine(p, 1, "P01"), dev, SessionFiles(folder),
+                           ThreeWindows(), "P01", n, 1, traces="none")
+    trial = runner.engine.next_trial([])
+    runner._attempt(trial)
+    rows, _ = read_trials(folder / "trials.tsv")
+    assert rows[0]["phase"] == "familiarization" and rows[0]["status"] == "valid"
+    assert int(rows[0]["n_taps"]) > 15  # three 5-s windows of taps
