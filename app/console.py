@@ -117,6 +117,9 @@ class KeyConsole(PlainConsole):
             if a == "abort":
                 return a
 
+    def contact(self, velocity: float) -> None:
+        self.say(f"    tap {velocity:.3f} m/s")
+
     def close(self) -> None:
         import termios
 

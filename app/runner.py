@@ -114,6 +114,7 @@ class SessionRunner:
     audio: Any = None
     traces: str = "full"
     log: list[Attempt] = field(default_factory=list)
+    timing: list[dict] = field(default_factory=list)
 
     def load_log(self) -> None:
         rows, torn = read_trials(self.files.trials)
@@ -233,13 +234,20 @@ class SessionRunner:
         dev.home()
         w = self.protocol.window
 
+        shown = 0
+
         def progress(t, partial):
-            for c in partial.contacts[-1:]:
+            nonlocal shown
+            for c in partial.contacts[shown:]:  # live incoming speeds for the operator
                 self.console.contact(c.velocity)
+            shown = len(partial.contacts)
             if hasattr(self.participant_ui, "progress"):
                 self.participant_ui.progress(t, partial, w.duration)
 
-        return dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
+        res = dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
+        if res.timing:
+            self.timing.append(res.timing)
+        return res
 
     # ------------------------------------------------------------------ recording
     def _record(self, trial: Trial, status: str, *, reason: str = "", t_start: str,

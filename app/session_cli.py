@@ -56,6 +56,10 @@ def _finish(files, meta, runner, outcome: str, console) -> int:
     dev = runner.device
     if hasattr(dev, "link_stats"):
         meta["link"] = dev.link_stats()
+    if runner.timing:  # live pacing (the simulator in live mode): achieved servo rate
+        rates = [t["achieved_rate_hz"] for t in runner.timing]
+        meta["timing"] = {"achieved_rate_hz_median": float(sorted(rates)[len(rates) // 2]),
+                          "lateness_p99_s_max": max(t["lateness_p99_s"] for t in runner.timing)}
     meta["participant"]["debrief"] = getattr(runner.participant_ui, "debrief", lambda: "")()
     files.write_meta(meta)
     return 0
