@@ -204,6 +204,25 @@ def _resume(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
 
 
+def _analyze(args: argparse.Namespace) -> int:
+    from analysis import LoadError, StatsError
+    from analysis.report import analyze
+
+    formats = tuple(f.strip() for f in args.format.split(","))
+    bad = set(formats) - {"html", "md", "json"}
+    if bad:
+        raise UserError(f"--format takes html, md, json; got {sorted(bad)}")
+    try:
+        rep = analyze(args.data_dir, args.out, formats)
+    except (LoadError, StatsError) as exc:
+        raise UserError(str(exc)) from None
+    studies = [k for k in ("realism", "factorial", "identification") if k in rep]
+    print(f"report for {', '.join(studies) or 'no study'} ({rep['provenance']['sessions']} "
+          f"sessions) written to {args.out}/ ({', '.join('report.' + f for f in formats)}, "
+          f"{len(rep['figures'])} figure files)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="hapticlab",
@@ -234,6 +253,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_parsers(dsub, sub, _matching)
 
+    an = sub.add_parser("analyze", help="statistics, figures and report from session folders")
+    an.add_argument("data_dir")
+    an.add_argument("--out", required=True)
+    an.add_argument("--format", default="html,md,json", help="comma-separated: html, md, json")
+    an.set_defaults(func=_analyze)
     from app.session_cli import add_parsers as add_session
 
     add_session(sub, _run, _resume)

@@ -27,7 +27,7 @@ __all__ = ["COLUMNS", "SessionFiles", "TrialsFileError", "read_trials", "new_ses
            "atomic_write", "TornLine"]
 
 COLUMNS = ("participant", "session", "phase", "trial_index", "item", "attempt", "sample",
-           "block", "placement", "status", "n_taps", "tap_velocities", "peak_current",
+           "block", "factors", "placement", "status", "n_taps", "tap_velocities", "peak_current",
            "rating", "response_time", "answer", "correct", "reason", "t_start", "t_end",
            "trace_file")
 

@@ -66,15 +66,20 @@ def _versions() -> dict[str, str]:
 
 def session_meta(protocol: Protocol, protocol_ref: str, participant: str, session: int, seed: int,
                  counterbalance_row: int | None, device: HapticDevice, device_spec: str,
-                 ui: str, responder: str, audio: bool) -> dict:
+                 ui: str, responder: str, audio: bool, group: str = "") -> dict:
     """The metadata DESIGN.md asks for, at session start."""
     return {
         "app": {"name": "hapticlab", "version": APP_VERSION, "git_sha": _git_sha()},
         "protocol": {"name": protocol.name, "ref": protocol_ref, "source": protocol.source,
-                     "sha256": protocol.sha256},
+                     "sha256": protocol.sha256,
+                     "rating": None if protocol.rating is None else
+                     {"min": protocol.rating.min, "max": protocol.rating.max},
+                     "answer_choices": None if protocol.answer is None
+                     else list(protocol.answer.choices)},
         "seed": seed,
         "rng": RNG_ALGORITHM + "; per attempt: SeedSequence([seed, trial_index, attempt])",
-        "participant": {"id": participant, "counterbalance_row": counterbalance_row},
+        "participant": {"id": participant, "counterbalance_row": counterbalance_row,
+                        "group": group},
         "session": session,
         "device": {"spec": device_spec, **device.info.to_dict()},
         "ui": ui, "responder": responder, "audio": audio,
@@ -267,8 +272,11 @@ class SessionRunner:
         row = {
             "participant": self.participant, "session": self.session, "phase": trial.phase,
             "trial_index": trial.trial_index, "item": trial.item, "attempt": trial.attempt,
-            "sample": trial.sample, "block": trial.block or "", "placement":
-                trial.placement or "",
+            "sample": trial.sample, "block": trial.block or "",
+            "factors": ";".join(f"{k}={v}" for k, v in
+                                self.protocol.samples[trial.samples[0]].factors.items())
+            if len(trial.samples) == 1 else "",
+            "placement": trial.placement or "",
             "status": status, "n_taps": len(vel),
             "tap_velocities": ";".join(f"{v:.5f}" for v in vel),
             "peak_current": round(max((r.peak_current for r in results), default=0.0), 4),

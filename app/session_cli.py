@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
         folder, n = new_session_dir(Path(args.data), participant)
         files = SessionFiles(folder)
         meta = session_meta(protocol, args.protocol, participant, n, seed, args.row, dev,
-                            args.device, args.ui, args.responder, audio is not None)
+                            args.device, args.ui, args.responder, audio is not None, args.group)
         meta["traces_mode"] = args.traces
         files.write_meta(meta)
         console.say(f"session {folder} (seed {seed})")
@@ -204,6 +204,7 @@ def add_parsers(sub, func_run, func_resume) -> None:
     r.add_argument("--traces", choices=("full", "contacts", "none"), default="full",
                    help="raw device streams kept per attempt")
     r.add_argument("--fullscreen", action="store_true")
+    r.add_argument("--group", default="", help="participant group label, e.g. expert or novice")
     r.add_argument("--quiet", action="store_true")
     r.set_defaults(func=func_run)
     rs = sub.add_parser("resume", help="continue an interrupted session exactly where it stopped")

@@ -1,0 +1,144 @@
+"""Figures (matplotlib, PNG and SVG)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["save_all"]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, out: Path, name: str) -> list[str]:
+    paths = []
+    for ext in ("png", "svg"):
+        p = out / f"{name}.{ext}"
+        fig.savefig(p, dpi=110, bbox_inches="tight", metadata={"Date": None} if ext == "svg"
+                    else None)
+        paths.append(p.name)
+    _plt().close(fig)
+    return paths
+
+
+def realism_means(r: dict, out: Path) -> list[str]:
+    plt = _plt()
+    s = pd.DataFrame(r["samples"])
+    fig, ax = plt.subplots(figsize=(8, 4))
+    x = np.arange(len(s))
+    ax.errorbar(x, s["mean"], yerr=[s["mean"] - s["ci_low"], s["ci_high"] - s["mean"]],
+                fmt="o", capsize=4)
+    ax.set_xticks(x, s["sample"], rotation=40, ha="right")
+    ax.set_ylabel("realism rating (mean ± 95 % CI)")
+    ax.set_title(f"Realism of the samples (n = {r['n_subjects']} participants)")
+    return _save(fig, out, "realism_means")
+
+
+def realism_pmatrix(r: dict, out: Path) -> list[str]:
+    plt = _plt()
+    order = [x["sample"] for x in r["samples"]]
+    m = pd.DataFrame(np.nan, index=order, columns=order)
+    for row in r["pairwise"].itertuples():
+        m.loc[row.A, row.B] = m.loc[row.B, row.A] = row.p_holm
+    fig, ax = plt.subplots(figsize=(7, 6))
+    im = ax.imshow(m.to_numpy(dtype=float), vmin=0, vmax=1, cmap="viridis")
+    ax.set_xticks(range(len(order)), order, rotation=60, ha="right")
+    ax.set_yticks(range(len(order)), order)
+    fig.colorbar(im, label="Holm-adjusted p (paired t-test)")
+    ax.set_title("Which samples differ")
+    return _save(fig, out, "realism_pvalues")
+
+
+def factorial_interactions(f: dict, out: Path) -> list[str]:
+    plt = _plt()
+    files = []
+    for material, res in f.items():
+        sets = res["sets"]
+        fig, axes = plt.subplots(1, 3, figsize=(11, 3.4), sharey=True)
+        pairs = [("frequency", "decay"), ("frequency", "slope"), ("decay", "slope")]
+        for ax, (a, b) in zip(axes, pairs, strict=True):
+            for lvl, g in sets.groupby(b):
+                mm = g.groupby(a)["mean"].mean().reindex(["low", "high"])
+                ax.plot(["low", "high"], mm.to_numpy(), "o-", label=f"{b} {lvl}")
+            ax.set_xlabel(a)
+            ax.legend(fontsize=8)
+        axes[0].set_ylabel("mean rating (z)")
+        fig.suptitle(f"{material}: interactions (most significant: {res['most_significant']})")
+        files += _save(fig, out, f"factorial_{material}")
+    return files
+
+
+def confusion(i: dict, out: Path) -> list[str]:
+    plt = _plt()
+    c = i["confusion"]
+    fig, ax = plt.subplots(figsize=(4.5, 4))
+    ax.imshow(c.to_numpy(), cmap="Blues")
+    for (y, x), v in np.ndenumerate(c.to_numpy()):
+        ax.text(x, y, str(v), ha="center", va="center")
+    ax.set_xticks(range(len(c.columns)), c.columns)
+    ax.set_yticks(range(len(c.index)), c.index)
+    ax.set_xlabel("answered")
+    ax.set_ylabel("presented")
+    ax.set_title("Identification: confusion")
+    return _save(fig, out, "identification_confusion")
+
+
+def accel_traces(data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str]:
+    """Acceleration after contact per sample, for the tap closest to a common speed."""
+    plt = _plt()
+    d = data[(data["protocol"] == "realism") & data["valid"] & (data["trace_file"] != "")]
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    drawn = 0
+    for sample, g in d.groupby("sample"):
+        best = None
+        for row in g.itertuples():
+            path = Path(row.session_dir) / row.trace_file
+            if not path.exists() or "*" in row.trace_file:
+                continue
+            with np.load(path) as z:
+                if not len(z["contacts_v"]):
+                    continue
+                k = int(np.argmin(np.abs(z["contacts_v"] - speed)))
+                err = abs(z["contacts_v"][k] - speed)
+                if best is None or err < best[0]:
+                    rate, t0 = float(z["rate_hz"]), float(z["t0"])
+                    idx = z["sample_index"] if "sample_index" in z else np.arange(
+                        len(z["accel_counts"]))
+                    i = int(round((z["contacts_t"][k] - t0) * rate))
+                    sel = (idx >= i) & (idx < i + int(0.1 * rate))
+                    a = z["accel_counts"][sel] * float(z["accel_lsb"])
+                    best = (err, a, float(z["contacts_v"][k]), rate)
+        if best is not None:
+            _, a, v, rate = best
+            ax.plot(np.arange(len(a)) / rate * 1e3, a / v * speed, lw=0.8,
+                    label=f"{sample} ({v:.3f} m/s)")
+            drawn += 1
+    ax.set_xlabel("time after contact [ms]")
+    ax.set_ylabel(f"acceleration scaled to {speed} m/s [m/s²]")
+    ax.set_title("Contact accelerations per sample at a common incoming speed")
+    if drawn:
+        ax.legend(fontsize=7, ncol=2)
+    return _save(fig, out, "accel_traces")
+
+
+def save_all(data, results: dict, out: Path) -> list[str]:
+    files = []
+    if isinstance(results.get("realism"), dict):
+        files += realism_means(results["realism"], out)
+        files += realism_pmatrix(results["realism"], out)
+        files += accel_traces(data, out)
+    if isinstance(results.get("factorial"), dict):
+        files += factorial_interactions(results["factorial"], out)
+    if isinstance(results.get("identification"), dict) and \
+            results["identification"].get("confusion") is not None:
+        files += confusion(results["identification"], out)
+    return files

@@ -1,0 +1,423 @@
+"""Statistics in the manner of pingouin: long-format DataFrame and column names in, tidy table out.
+
+Every function works on per-subject cell means (repeated ratings of a cell are averaged
+first), refuses to compute on data it cannot analyse honestly (see :func:`preflight`), and
+returns tables without NaN or infinity.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+__all__ = ["preflight", "zscore_by_subject", "pairwise_ttests", "rm_anova",
+           "identification_scores", "cell_means", "p_adjust", "StatsError"]
+
+PADJUST = ("none", "bonf", "holm", "fdr_bh")
+
+
+class StatsError(ValueError):
+    """The data cannot be analysed as asked (the message says why and what to do)."""
+
+
+def _as_list(within: str | Sequence[str]) -> list[str]:
+    return [within] if isinstance(within, str) else list(within)
+
+
+def _check_columns(data: pd.DataFrame, cols: Sequence[str]) -> None:
+    missing = [c for c in cols if c not in data.columns]
+    if missing:
+        raise StatsError(f"columns not in the data: {missing}; it has {list(data.columns)}")
+
+
+def cell_means(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: str
+               ) -> pd.DataFrame:
+    """Mean of ``dv`` per subject and within-cell (long format, one row per cell)."""
+    w = _as_list(within)
+    _check_columns(data, [dv, subject, *w])
+    return (data.groupby([subject, *w], observed=True, sort=True)[dv].mean()
+            .reset_index())
+
+
+# --------------------------------------------------------------------- preflight
+def preflight(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: str,
+              scale: str | None = None) -> pd.DataFrame:
+    """Check data for the analyses below; one row per problem found.
+
+    Parameters
+    ----------
+    data : DataFrame (long format)
+    dv, within, subject : column names
+    scale : str, optional
+        Column naming each row's rating scale (e.g. "1-7"); more than one value is flagged.
+
+    Returns
+    -------
+    DataFrame
+        ``check`` (missing_cells, nan, zero_variance, constant_differences, too_few_subjects,
+        duplicate_rows, mixed_scales), ``detail``, ``policy`` (what the analyses do about it),
+        ``subjects_excluded`` (comma-separated), ``n_excluded``. Empty when all is well.
+    """
+    w = _as_list(within)
+    _check_columns(data, [dv, subject, *w] + ([scale] if scale else []))
+    rows = []
+
+    def add(check, detail, policy, excluded=()):
+        ex = sorted({str(s) for s in excluded})
+        rows.append({"check": check, "detail": detail, "policy": policy,
+                     "subjects_excluded": ",".join(ex), "n_excluded": len(ex)})
+
+    vals = pd.to_numeric(data[dv], errors="coerce")
+    nan = data[vals.isna()]
+    if len(nan):
+        add("nan", f"{len(nan)} rows without a numeric {dv}",
+            "rows dropped before averaging cells", ())
+    dup = data[data.duplicated(keep="first")]
+    if len(dup):
+        add("duplicate_rows", f"{len(dup)} identical rows",
+            "kept: identical repeated ratings are averaged within their cell", ())
+    clean = data[vals.notna()].assign(**{dv: vals[vals.notna()]})
+    cells = clean.groupby(w, observed=True).size().index
+    n_cells = len(cells)
+    per_subject = clean.groupby(subject, observed=True).apply(
+        lambda g: g.groupby(w, observed=True).ngroups, include_groups=False)
+    incomplete = per_subject[per_subject < n_cells]
+    if len(incomplete):
+        add("missing_cells", "; ".join(f"{s}: {n_cells - k} of {n_cells} cells missing"
+                                       for s, k in incomplete.items()),
+            "subjects excluded from repeated-measures tests (listwise)", incomplete.index)
+    sd = clean.groupby(subject, observed=True)[dv].std(ddof=0)
+    zero = sd[sd == 0]
+    if len(zero):
+        add("zero_variance", f"{len(zero)} subject(s) gave the same {dv} everywhere",
+            "their z-scores are 0 (stated case); kept in raw analyses", zero.index)
+    n_subj = clean[subject].nunique() - len(incomplete)
+    if n_subj < 2:
+        add("too_few_subjects", f"{n_subj} complete subject(s)",
+            "no test is computed (needs n >= 2)", ())
+    if n_cells >= 2 and len(w) == 1 and n_subj >= 2:
+        cm = cell_means(clean[~clean[subject].isin(incomplete.index)], dv, w, subject)
+        wide = cm.pivot(index=subject, columns=w[0], values=dv)
+        for a, b in itertools.combinations(wide.columns, 2):
+            d = (wide[a] - wide[b]).dropna()
+            if len(d) >= 2 and d.std(ddof=1) == 0:
+                add("constant_differences", f"{a} − {b} is {d.iloc[0]:g} for every subject",
+                    "pair reported without t, p or d_z (undefined); listed here", ())
+    if scale:
+        scales = clean[scale].dropna().unique()
+        if len(scales) > 1:
+            add("mixed_scales", f"{dv} comes on scales {sorted(map(str, scales))}",
+                "refused: z-score per subject first, or analyse the scales apart", ())
+    return pd.DataFrame(rows, columns=["check", "detail", "policy", "subjects_excluded",
+                                       "n_excluded"])
+
+
+def _complete(data, dv, within, subject) -> pd.DataFrame:
+    """Cell means of subjects with every cell, NaN rows dropped."""
+    w = _as_list(within)
+    vals = pd.to_numeric(data[dv], errors="coerce")
+    clean = data[vals.notna()].assign(**{dv: vals[vals.notna()]})
+    cm = cell_means(clean, dv, w, subject)
+    n_cells = cm.groupby(w, observed=True).ngroups
+    counts = cm.groupby(subject, observed=True).size()
+    keep = counts[counts == n_cells].index
+    return cm[cm[subject].isin(keep)]
+
+
+# --------------------------------------------------------------------- z-scores
+def zscore_by_subject(data: pd.DataFrame, dv: str, subject: str) -> pd.Series:
+    """``dv`` normalised within each subject to mean 0 and SD 1 (population SD, ddof = 0).
+
+    A subject who gave the same value everywhere has SD 0: their z-scores are 0 — they
+    used no part of the scale to prefer anything — rather than NaN.
+
+    Returns
+    -------
+    Series aligned with ``data`` (name ``<dv>_z``).
+    """
+    _check_columns(data, [dv, subject])
+    v = pd.to_numeric(data[dv], errors="coerce")
+    g = v.groupby(data[subject], observed=True)
+    mean = g.transform("mean")
+    sd = g.transform(lambda x: x.std(ddof=0))
+    z = (v - mean) / sd.where(sd > 0, 1.0)
+    z = z.where(sd > 0, 0.0).where(v.notna())
+    return z.rename(f"{dv}_z")
+
+
+# --------------------------------------------------------------------- t-tests
+def p_adjust(p: np.ndarray, method: str) -> np.ndarray:
+    """Adjust p-values: none, bonf (Bonferroni), holm (Holm–Bonferroni), fdr_bh
+    (Benjamini–Hochberg)."""
+    p = np.asarray(p, float)
+    m = p.size
+    if method not in PADJUST:
+        raise StatsError(f"padjust must be one of {', '.join(PADJUST)}, got {method!r}")
+    if m == 0 or method == "none":
+        return p.copy()
+    if method == "bonf":
+        return np.minimum(1.0, p * m)
+    order = np.argsort(p)
+    ps = p[order]
+    if method == "holm":
+        adj = np.maximum.accumulate((m - np.arange(m)) * ps)
+    else:  # fdr_bh
+        adj = np.minimum.accumulate(m / np.arange(m, 0, -1) * ps[::-1])[::-1]
+    out = np.empty(m)
+    out[order] = np.minimum(1.0, adj)
+    return out
+
+
+def pairwise_ttests(data: pd.DataFrame, dv: str, within: str, subject: str,
+                    padjust: str = "holm", alpha: float = 0.05) -> pd.DataFrame:
+    """Paired t-tests between every pair of levels of ``within``, on per-subject means.
+
+    Subjects missing a level are dropped for the pairs involving it (pairwise complete).
+    A pair whose differences are identical for every subject has no t, p or d_z; it is
+    left out of the table and listed in ``result.attrs["constant_pairs"]`` (and by
+    :func:`preflight`).
+
+    Returns
+    -------
+    DataFrame, one row per pair (levels in order of first appearance)
+        ``A``, ``B``; ``mean_diff`` (mean of A − B); ``ci_low``, ``ci_high`` (its 1 − alpha
+        confidence interval, t distribution); ``t``; ``dof`` (n − 1); ``p_unc`` (two-sided);
+        ``p_corr`` (adjusted by ``padjust`` over the pairs in the table); ``p_adjust``
+        (the method); ``dz`` (Cohen's d_z = mean difference / SD of the differences); ``n``.
+    """
+    _check_columns(data, [dv, within, subject])
+    vals = pd.to_numeric(data[dv], errors="coerce")
+    clean = data[vals.notna()].assign(**{dv: vals[vals.notna()]})
+    levels = list(dict.fromkeys(clean[within]))
+    wide = cell_means(clean, dv, within, subject).pivot(index=subject, columns=within,
+                                                        values=dv)[levels]
+    rows, constant = [], []
+    for a, b in itertools.combinations(levels, 2):
+        d = (wide[a] - wide[b]).dropna().to_numpy()
+        n = d.size
+        if n < 2:
+            constant.append((a, b, "fewer than 2 subjects"))
+            continue
+        sd = d.std(ddof=1)
+        mean = d.mean()
+        if sd == 0:
+            constant.append((a, b, f"difference {mean:g} for every subject"))
+            continue
+        se = sd / math.sqrt(n)
+        t = mean / se
+        q = stats.t.ppf(1 - alpha / 2, n - 1)
+        rows.append({"A": a, "B": b, "mean_diff": mean, "ci_low": mean - q * se,
+                     "ci_high": mean + q * se, "t": t, "dof": n - 1,
+                     "p_unc": 2 * stats.t.sf(abs(t), n - 1), "dz": mean / sd, "n": n})
+    out = pd.DataFrame(rows, columns=["A", "B", "mean_diff", "ci_low", "ci_high", "t", "dof",
+                                      "p_unc", "dz", "n"])
+    out.insert(8, "p_corr", p_adjust(out["p_unc"].to_numpy(), padjust))
+    out.insert(9, "p_adjust", padjust)
+    out.attrs["constant_pairs"] = constant
+    return out
+
+
+# --------------------------------------------------------------------- ANOVA
+def _effect(arr: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
+    """Interaction contrast of the axes in ``axes`` (others averaged out), balanced data."""
+    others = tuple(i for i in range(arr.ndim) if i not in axes)
+    m = arr.mean(axis=others, keepdims=True) if others else arr
+    m = m - arr.mean()
+    for ax in axes:  # remove the lower-order terms by centring along each axis in turn
+        m = m - m.mean(axis=ax, keepdims=True)
+    return m
+
+
+def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: str
+             ) -> pd.DataFrame:
+    """Repeated-measures ANOVA with one to three within-subject factors (balanced data).
+
+    Subjects lacking any cell are excluded (listwise; :func:`preflight` reports them).
+    Each effect is tested against its interaction with subjects.
+
+    Returns
+    -------
+    DataFrame, one row per effect (main effects, then interactions), then ``Error`` rows
+        ``Source``; ``SS`` (sum of squares); ``DF``; ``MS``; ``F``; ``p_unc``; ``np2``
+        (partial η² = SS_effect / (SS_effect + SS_error)); ``ng2`` (generalized η²,
+        Olejnik & Algina 2003, all factors manipulated within subjects:
+        SS_effect / (SS_effect + SS_subjects + Σ SS_errors)); and, for a single factor with
+        more than two levels, ``W_mauchly``, ``p_spher`` (Mauchly's test), ``eps_gg``
+        (Greenhouse–Geisser ε), ``eps_hf`` (Huynh–Feldt ε, at most 1) and ``p_gg``
+        (p with both degrees of freedom × ε_GG).
+    """
+    w = _as_list(within)
+    if not 1 <= len(w) <= 3:
+        raise StatsError(f"rm_anova takes one to three within factors, got {len(w)}")
+    _check_columns(data, [dv, subject, *w])
+    cm = _complete(data, dv, w, subject)
+    subjects = list(dict.fromkeys(cm[subject]))
+    levels = [list(dict.fromkeys(cm[f])) for f in w]
+    if len(subjects) < 2:
+        raise StatsError(f"rm_anova needs at least 2 subjects with every cell, has "
+                         f"{len(subjects)}")
+    for f, lv in zip(w, levels, strict=True):
+        if len(lv) < 2:
+            raise StatsError(f"factor {f!r} has a single level ({lv}); nothing to test")
+    shape = (len(subjects), *(len(lv) for lv in levels))
+    arr = np.empty(shape)
+    idx = {s: i for i, s in enumerate(subjects)}
+    lidx = [{v: i for i, v in enumerate(lv)} for lv in levels]
+    for row in cm.itertuples(index=False):
+        r = row._asdict()
+        arr[(idx[r[subject]], *(li[r[f]] for f, li in zip(w, lidx, strict=True)))] = r[dv]
+    n_total = arr.size
+    nf = len(w)
+
+    def ss(axes):
+        eff = _effect(arr, axes)
+        return float((eff ** 2).sum() * n_total / eff.size)
+
+    ss_subj = ss((0,))
+    terms = [c for k in range(1, nf + 1) for c in itertools.combinations(range(1, nf + 1), k)]
+    rows = []
+    errors = {}
+    for t in terms:
+        ss_e = ss((0, *t))
+        df_e = (len(subjects) - 1) * math.prod(shape[i] - 1 for i in t)
+        errors[t] = (ss_e, df_e)
+    total_err = ss_subj + sum(e[0] for e in errors.values())
+    for t in terms:
+        ss_t = ss(t)
+        df_t = math.prod(shape[i] - 1 for i in t)
+        ss_e, df_e = errors[t]
+        ms_t, ms_e = ss_t / df_t, ss_e / df_e
+        F = ms_t / ms_e if ms_e > 0 else (0.0 if ms_t == 0 else float("nan"))
+        if not math.isfinite(F):
+            raise StatsError(f"no error variance for {' × '.join(w[i - 1] for i in t)}: every "
+                             "subject shows exactly the same effect; the F test is undefined")
+        rows.append({"Source": " * ".join(w[i - 1] for i in t), "SS": ss_t, "DF": df_t,
+                     "MS": ms_t, "F": F, "p_unc": float(stats.f.sf(F, df_t, df_e)),
+                     "np2": ss_t / (ss_t + ss_e) if ss_t + ss_e > 0 else 0.0,
+                     "ng2": ss_t / (ss_t + total_err) if ss_t + total_err > 0 else 0.0})
+    for t in terms:
+        ss_e, df_e = errors[t]
+        rows.append({"Source": "Error" if nf == 1 else
+                     f"Error({' * '.join(w[i - 1] for i in t)})", "SS": ss_e, "DF": df_e,
+                     "MS": ss_e / df_e, "F": 0.0, "p_unc": 1.0, "np2": 0.0, "ng2": 0.0})
+    out = pd.DataFrame(rows)
+    if nf == 1 and shape[1] > 2:
+        sph = _sphericity(arr)
+        for k, v in sph.items():
+            out[k] = 0.0
+            out.loc[0, k] = v
+        df1, df2 = rows[0]["DF"], errors[(1,)][1]
+        out.loc[0, "p_gg"] = float(stats.f.sf(rows[0]["F"], df1 * sph["eps_gg"],
+                                              df2 * sph["eps_gg"]))
+        out.loc[out.index[1:], ["W_mauchly", "p_spher", "eps_gg", "eps_hf", "p_gg"]] = 1.0
+    return out
+
+
+def _sphericity(arr: np.ndarray) -> dict[str, float]:
+    """Mauchly's W and the Greenhouse–Geisser / Huynh–Feldt epsilons (one factor)."""
+    n, k = arr.shape
+    p = k - 1
+    # orthonormal contrasts (Helmert, normalised)
+    C = np.zeros((k, p))
+    for j in range(p):
+        C[: j + 1, j] = 1.0
+        C[j + 1, j] = -(j + 1)
+        C[:, j] /= np.linalg.norm(C[:, j])
+    Y = arr @ C
+    S = np.cov(Y, rowvar=False, ddof=1)
+    tr = np.trace(S)
+    det = max(float(np.linalg.det(S)), 0.0)
+    W = det / (tr / p) ** p if tr > 0 else 1.0
+    # Bartlett's χ² with Anderson's second-order term (accurate at small n):
+    # P ≈ P(χ²_f ≥ z) + ω₂·[P(χ²_{f+4} ≥ z) − P(χ²_f ≥ z)]; the 3k (k conditions) in ω₂
+    # is as in R's mauchly.test, where Anderson writes 3p.
+    nu = n - 1
+    rho = 1 - (2 * p * p + p + 2) / (6 * p * nu)
+    chi2 = -nu * rho * math.log(W) if W > 0 else float("inf")
+    dfc = p * (p + 1) / 2 - 1
+    w2 = ((p + 2) * (p - 1) * (p - 2) * (2 * p ** 3 + 6 * p * p + 3 * k + 2)
+          / (288 * p * p * nu * nu * rho * rho))
+    if math.isfinite(chi2):
+        base = stats.chi2.sf(chi2, dfc)
+        p_spher = float(min(1.0, max(0.0, base + w2 * (stats.chi2.sf(chi2, dfc + 4) - base))))
+    else:
+        p_spher = 0.0
+    eps_gg = float(tr ** 2 / (p * np.trace(S @ S))) if tr > 0 else 1.0
+    eps_hf = (n * p * eps_gg - 2) / (p * (n - 1 - p * eps_gg))
+    eps_hf = float(min(1.0, max(eps_gg, eps_hf))) if math.isfinite(eps_hf) else 1.0
+    return {"W_mauchly": float(W), "p_spher": p_spher, "eps_gg": min(1.0, eps_gg),
+            "eps_hf": eps_hf}
+
+
+# --------------------------------------------------------------------- identification
+def identification_scores(data: pd.DataFrame, subject: str, correct: str,
+                          repetition: str | None = None, group: str | None = None,
+                          chance: float = 1 / 6, answer: str | None = None,
+                          truth: str | None = None) -> dict[str, pd.DataFrame]:
+    """Percent correct overall, per repetition and per group, with binomial tests against chance.
+
+    Parameters
+    ----------
+    correct : column of 0/1 (1: all surfaces named right)
+    chance : float
+        Probability of a correct answer by guessing: naming three surfaces at random is
+        right in 1 of 3! = 6 orders.
+    answer, truth : columns of comma-separated names (as answered, as presented), for the
+        confusion matrix.
+
+    Returns
+    -------
+    dict of DataFrames
+        ``summary``: ``scope`` (all, repetition k, last repetition, group g), ``n``,
+        ``correct``, ``incorrect``, ``percent``, ``chance_percent``, ``p_binom``
+        (one-sided exact binomial test, P(X ≥ correct) by chance);
+        ``confusion`` (when answer and truth are given): rows presented, columns answered,
+        counts per surface.
+    """
+    cols = [subject, correct] + [c for c in (repetition, group, answer, truth) if c]
+    _check_columns(data, cols)
+    c = pd.to_numeric(data[correct], errors="coerce")
+    if c.isna().any() or not c.isin([0, 1]).all():
+        raise StatsError(f"column {correct!r} must hold 0 or 1 for every answer")
+    rows = []
+
+    def add(scope, mask):
+        k = int(c[mask].sum())
+        n = int(mask.sum())
+        if n == 0:
+            return
+        rows.append({"scope": scope, "n": n, "correct": k, "incorrect": n - k,
+                     "percent": 100.0 * k / n, "chance_percent": 100.0 * chance,
+                     "p_binom": float(stats.binomtest(k, n, chance,
+                                                      alternative="greater").pvalue)})
+
+    all_rows = pd.Series(True, index=data.index)
+    add("all", all_rows)
+    if repetition:
+        reps = pd.to_numeric(data[repetition], errors="coerce")
+        for r in sorted(reps.dropna().unique()):
+            add(f"repetition {int(r)}", reps == r)
+        last = reps == reps.groupby(data[subject]).transform("max")
+        add("last repetition", last)
+    if group:
+        for g in sorted(data[group].dropna().astype(str).unique()):
+            if g:
+                add(f"group {g}", data[group].astype(str) == g)
+    out = {"summary": pd.DataFrame(rows)}
+    if answer and truth:
+        pairs = []
+        for a, t in zip(data[answer].astype(str), data[truth].astype(str), strict=True):
+            pairs += list(zip(t.split(","), a.split(","), strict=False))
+        names = sorted({p for pair in pairs for p in pair if p})
+        conf = pd.DataFrame(0, index=pd.Index(names, name="presented"),
+                            columns=pd.Index(names, name="answered"))
+        for t, a in pairs:
+            if t and a:
+                conf.loc[t, a] += 1
+        out["confusion"] = conf
+    return out

@@ -1,0 +1,150 @@
+"""The analyses of the three studies, from the long table of :func:`analysis.load_sessions`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from .load import tap_velocities
+from .stats import (
+    StatsError,
+    identification_scores,
+    pairwise_ttests,
+    preflight,
+    rm_anova,
+    zscore_by_subject,
+)
+
+__all__ = ["realism", "factorial", "identification", "device_summary", "mean_ci"]
+
+SUBJECT = "participant"
+
+
+def mean_ci(values: np.ndarray, alpha: float = 0.05) -> tuple[float, float, float]:
+    """Mean and its t-based 1 − alpha interval (the mean itself when n < 2)."""
+    v = np.asarray(values, float)
+    m = float(v.mean())
+    if v.size < 2:
+        return m, m, m
+    h = stats.t.ppf(1 - alpha / 2, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)
+    return m, m - h, m + h
+
+
+def _rated(data: pd.DataFrame, protocol: str, phase: str | None = None) -> pd.DataFrame:
+    d = data[(data["protocol"] == protocol) & data["valid"] & data["rating"].notna()]
+    if phase:
+        d = d[d["phase"] == phase]
+    if d.empty:
+        raise StatsError(f"no valid rated trials of protocol {protocol!r}"
+                         + (f" in phase {phase!r}" if phase else ""))
+    return d.copy()
+
+
+def _groups(levels: list[str], pw: pd.DataFrame, alpha: float) -> list[list[str]]:
+    """Samples not distinguishable at alpha: connected components of 'not different' pairs."""
+    parent = {s: s for s in levels}
+
+    def find(s):
+        while parent[s] != s:
+            parent[s] = parent[parent[s]]
+            s = parent[s]
+        return s
+
+    for r in pw.itertuples():
+        if r.p_corr >= alpha:
+            parent[find(r.A)] = find(r.B)
+    comp: dict[str, list[str]] = {}
+    for s in levels:
+        comp.setdefault(find(s), []).append(s)
+    return sorted(comp.values(), key=lambda g: -len(g))
+
+
+def realism(data: pd.DataFrame, alpha: float = 0.05) -> dict:
+    """Realism study: per-sample means with CIs (raw and z), per-subject averages, all
+    pairwise paired t-tests (Holm and FDR), groups not distinguishable, one-way RM ANOVA."""
+    d = _rated(data, "realism", "testing")
+    d["rating_z"] = zscore_by_subject(d, "rating", SUBJECT)
+    subj = d.groupby([SUBJECT, "sample"], observed=True)[["rating", "rating_z"]].mean()
+    samples = []
+    for s, g in subj.groupby(level="sample", observed=True):
+        m, lo, hi = mean_ci(g["rating"].to_numpy())
+        mz, loz, hiz = mean_ci(g["rating_z"].to_numpy())
+        samples.append({"sample": s, "n": int(len(g)), "mean": m, "ci_low": lo, "ci_high": hi,
+                        "mean_z": mz, "ci_low_z": loz, "ci_high_z": hiz})
+    samples.sort(key=lambda r: -r["mean"])
+    order = [r["sample"] for r in samples]
+    d["sample"] = pd.Categorical(d["sample"], categories=order, ordered=True)
+    d = d.sort_values("sample")
+    pre = preflight(d, "rating", "sample", SUBJECT, scale="scale")
+    holm = pairwise_ttests(d, "rating", "sample", SUBJECT, "holm", alpha)
+    fdr = pairwise_ttests(d, "rating", "sample", SUBJECT, "fdr_bh", alpha)
+    pw = holm.rename(columns={"p_corr": "p_holm"}).drop(columns="p_adjust")
+    pw["p_fdr"] = fdr["p_corr"].to_numpy()
+    pw["p_corr"] = pw["p_holm"]
+    anova = rm_anova(d, "rating", "sample", SUBJECT)
+    per_subject = (d.groupby([SUBJECT, "sample"], observed=True)["rating"].mean()
+                   .unstack("sample").reset_index())
+    return {"samples": samples, "pairwise": pw, "anova": anova,
+            "groups": _groups(order, holm, alpha), "per_subject": per_subject,
+            "preflight": pre, "constant_pairs": holm.attrs.get("constant_pairs", []),
+            "n_subjects": int(d[SUBJECT].nunique())}
+
+
+FACTORS = ("frequency", "decay", "slope")
+
+
+def factorial(data: pd.DataFrame) -> dict:
+    """Factorial study: per material, a 2×2×2 within-subject ANOVA on ratings z-scored per
+    subject, the most significant parameter, and the best set."""
+    d = _rated(data, "factorial")
+    d["rating_z"] = zscore_by_subject(d, "rating", SUBJECT)
+    out = {}
+    for material, g in d.groupby("block", observed=True):
+        anova = rm_anova(g, "rating_z", list(FACTORS), SUBJECT)
+        mains = anova[anova["Source"].isin(FACTORS)]
+        most = mains.sort_values(["p_unc", "F"], ascending=[True, False]).iloc[0]
+        means = (g.groupby(["sample", *FACTORS], observed=True)["rating_z"]
+                 .agg(["mean", "count"]).reset_index().sort_values("mean", ascending=False))
+        best = means.iloc[0]
+        out[str(material)] = {
+            "anova": anova, "most_significant": str(most["Source"]),
+            "most_significant_p": float(most["p_unc"]),
+            "best_set": {"sample": str(best["sample"]), "mean_z": float(best["mean"]),
+                         **{f: str(best[f]) for f in FACTORS}},
+            "sets": means, "preflight": preflight(g, "rating_z", list(FACTORS), SUBJECT),
+            "n_subjects": int(g[SUBJECT].nunique())}
+    return out
+
+
+def identification(data: pd.DataFrame) -> dict:
+    """Identification test: the paper's Table 3 (all, last repetition, by group), chance level
+    and a confusion matrix."""
+    d = data[(data["protocol"] == "identification") & data["valid"]].copy()
+    if d.empty:
+        raise StatsError("no valid identification answers")
+    d["truth"] = d["sample"].str.replace("+", ",", regex=False)
+    res = identification_scores(d, SUBJECT, "correct", repetition="repetition", group="group",
+                                answer="answer", truth="truth")
+    return {"table": res["summary"], "confusion": res.get("confusion"), "chance": 1 / 6,
+            "n_subjects": int(d[SUBJECT].nunique())}
+
+
+def device_summary(data: pd.DataFrame) -> dict:
+    """Incoming speeds over valid taps; saturations per participant and per sample."""
+    valid = data[data["valid"]]
+    v = tap_velocities(valid)
+    sat = data[data["status"].isin(["saturated", "excluded_saturated"])]
+    per_p = sat.groupby(SUBJECT).size().reindex(data[SUBJECT].unique(), fill_value=0)
+    return {"velocity_mean": float(v.mean()) if v.size else 0.0,
+            "velocity_sd": float(v.std(ddof=1)) if v.size > 1 else 0.0,
+            "n_taps": int(v.size),
+            "saturations_per_participant": {
+                "mean": float(per_p.mean()) if len(per_p) else 0.0,
+                "min": int(per_p.min()) if len(per_p) else 0,
+                "max": int(per_p.max()) if len(per_p) else 0,
+                "by_participant": {str(k): int(x) for k, x in per_p.items()}},
+            "saturations_per_sample": {str(k): int(x) for k, x in
+                                       sat.groupby("sample").size().items()}}

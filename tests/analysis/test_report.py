@@ -1,0 +1,90 @@
+"""The report from real (simulated, headless) session folders."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from analysis import load_sessions
+from analysis.report import analyze
+
+CLI = [sys.executable, "-m", "app"]
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    data = tmp_path_factory.mktemp("study")
+    common = ["--device", "sim", "--ui", "none", "--no-audio", "--quiet"]
+    for i in range(3):
+        for proto, pid, extra in (("realism", f"R{i}", ["--traces", "contacts"]),
+                                  ("factorial", f"F{i}", ["--traces", "none"]),
+                                  ("identification", f"I{i}", ["--traces", "none", "--group",
+                                                               "expert" if i else "novice"])):
+            out = subprocess.run([*CLI, "run", proto, "--participant", pid, "--seed", str(i + 1),
+                                  "--data", str(data), *common, *extra],
+                                 capture_output=True, text=True, timeout=600)
+            assert out.returncode == 0, out.stderr
+    return data
+
+
+def _no_nan(obj):
+    json.loads(json.dumps(obj), parse_constant=lambda c: pytest.fail(f"{c} in the report"))
+
+
+def test_load_sessions(study):
+    d = load_sessions(study)
+    assert d.attrs["sessions"] == 9 and d["participant"].nunique() == 9
+    assert set(d["protocol"]) == {"realism", "factorial", "identification"}
+    fac = d[d["protocol"] == "factorial"]
+    assert set(fac["frequency"]) == {"low", "high"} and set(fac["block"]) == {
+        "rubber", "wood", "aluminum"}
+    assert d.attrs["files"] and not d.attrs["torn"]
+
+
+def test_report_structure_and_numbers(study, tmp_path):
+    rep = analyze(study, tmp_path / "r")
+    _no_nan(rep)
+    r = rep["realism"]
+    assert {s["sample"] for s in r["samples"]} >= {"wood", "foam", "matched_firm"}
+    assert len(r["samples"]) == 11 and len(r["pairwise"]) == 55
+    assert set(r["samples"][0]) >= {"sample", "mean", "ci_low", "ci_high", "mean_z"}
+    assert set(r["pairwise"][0]) >= {"A", "B", "t", "dof", "p_unc", "p_corr", "dz"}
+    assert r["anova"][0]["Source"] == "sample" and "eps_gg" in r["anova"][0]
+    for m in ("rubber", "wood", "aluminum"):
+        f = rep["factorial"][m]
+        assert f["most_significant"] in ("frequency", "decay", "slope")
+        assert set(f["best_set"]) >= {"frequency", "decay", "slope", "sample"}
+        assert len(f["anova"]) == 14  # 7 effects + 7 error terms
+    t = {row["scope"]: row for row in rep["identification"]["table"]}
+    assert t["all"]["n"] == 9 and "last repetition" in t and "group expert" in t
+    assert rep["device"]["n_taps"] > 0 and 0.05 < rep["device"]["velocity_mean"] < 0.2
+    assert rep["provenance"]["seeds"] == [1, 2, 3]
+    out = tmp_path / "r"
+    for f in ("report.json", "report.md", "report.html", "realism_means.png",
+              "realism_means.svg", "realism_pvalues.png", "factorial_wood.png",
+              "identification_confusion.png", "accel_traces.png"):
+        assert (out / f).stat().st_size > 500, f
+    assert "Greenhouse–Geisser" in (out / "report.md").read_text()
+    assert "<table>" in (out / "report.html").read_text()
+
+
+def test_rerun_gives_identical_numbers(study, tmp_path):
+    a = analyze(study, tmp_path / "a", ("json",))
+    b = analyze(study, tmp_path / "b", ("json",))
+    assert (tmp_path / "a" / "report.json").read_text() == (tmp_path / "b" /
+                                                             "report.json").read_text()
+    assert a == b
+
+
+def test_cli_analyze_and_its_errors(study, tmp_path):
+    out = subprocess.run([*CLI, "analyze", str(study), "--out", str(tmp_path / "o"), "--format",
+                          "json"], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "o" / "report.json").exists()
+    bad = subprocess.run([*CLI, "analyze", str(tmp_path / "none"), "--out", str(tmp_path / "x")],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "no such folder" in bad.stderr
+    fmt = subprocess.run([*CLI, "analyze", str(study), "--out", str(tmp_path / "y"), "--format",
+                          "pdf"], capture_output=True, text=True)
+    assert fmt.returncode == 2 and "--format" in fmt.stderr

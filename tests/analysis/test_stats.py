@@ -1,0 +1,208 @@
+"""Statistics checked against values computed independently (call or formula beside each)."""
+
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+from statsmodels.stats.multitest import multipletests
+
+from analysis import (
+    StatsError,
+    identification_scores,
+    p_adjust,
+    pairwise_ttests,
+    preflight,
+    rm_anova,
+    zscore_by_subject,
+)
+
+# 6 subjects × 4 conditions
+Y = np.array([[5, 4, 6, 3], [6, 5, 7, 4], [4, 4, 5, 2], [7, 5, 6, 5], [5, 3, 6, 3],
+              [6, 6, 7, 3]], float)
+ONE = pd.DataFrame([{"subj": f"S{i}", "cond": f"c{j}", "y": Y[i, j]}
+                    for i in range(6) for j in range(4)])
+
+
+def test_one_way_matches_pingouin():
+    a = rm_anova(ONE, "y", "cond", "subj").iloc[0]
+    # pingouin 0.7.0: pg.rm_anova(data=ONE, dv="y", within="cond", subject="subj",
+    #                             correction=True, detailed=True, effsize="np2")
+    assert a["SS"] == pytest.approx(27.458333333333336, rel=1e-12)
+    assert a["DF"] == 3
+    assert a["F"] == pytest.approx(23.70503597122302, rel=1e-12)
+    assert a["p_unc"] == pytest.approx(6.054942251450185e-06, rel=1e-9)
+    assert a["np2"] == pytest.approx(0.8258145363408522, rel=1e-12)
+    assert a["eps_gg"] == pytest.approx(0.6029710077083917, rel=1e-10)
+    assert a["p_gg"] == pytest.approx(0.0003020198723841498, rel=1e-8)
+    assert a["W_mauchly"] == pytest.approx(0.18530699998771252, rel=1e-10)
+    # pg.sphericity(...): chi2 = 6.274703987931807, dof = 5, pval = 0.2950663273085372
+    assert a["p_spher"] == pytest.approx(0.2950663273085372, rel=1e-9)
+    # pg.rm_anova(..., effsize="ng2")["ng2"][0]
+    assert a["ng2"] == pytest.approx(0.5889186773905273, rel=1e-12)
+    # pg.epsilon(data=ONE, dv="y", within="cond", subject="subj", correction="hf")
+    assert a["eps_hf"] == pytest.approx(0.9248132065876458, rel=1e-10)
+
+
+def test_one_way_by_hand():
+    """SS_cond = n·Σ(column mean − grand mean)²; SS_error = SS_total − SS_subj − SS_cond."""
+    n, k = Y.shape
+    g = Y.mean()
+    ss_c = n * ((Y.mean(0) - g) ** 2).sum()
+    ss_s = k * ((Y.mean(1) - g) ** 2).sum()
+    ss_e = ((Y - g) ** 2).sum() - ss_s - ss_c
+    F = (ss_c / (k - 1)) / (ss_e / ((k - 1) * (n - 1)))
+    a = rm_anova(ONE, "y", "cond", "subj")
+    assert a.iloc[0]["SS"] == pytest.approx(ss_c) and a.iloc[1]["SS"] == pytest.approx(ss_e)
+    assert a.iloc[0]["F"] == pytest.approx(F)
+
+
+# 5 subjects, 2×2×2, frequency raises y by 0.8
+Z = np.array([[[[0.0, 0.3], [-0.27, -0.89]], [[-0.45, -0.99], [0.06, 1.34]]],
+              [[[-0.49, -0.62], [0.49, 0.36]], [[0.11, -0.93], [-0.03, 0.7]]],
+              [[[-1.34, -0.46], [-1.9, -1.29]], [[-1.84, -0.24], [-1.27, 0.27]]],
+              [[[0.16, -0.19], [-2.52, -0.54]], [[-0.05, 0.11], [-1.53, -0.48]]],
+              [[[-0.98, -0.81], [1.06, -0.81]], [[-0.03, 0.88], [-0.58, -0.11]]]])
+THREE = pd.DataFrame([{"subj": s, "frequency": f, "decay": d, "slope": sl,
+                       "y": Z[s, i, j, k] + 0.8 * (f == "H")}
+                      for s in range(5) for i, f in enumerate("LH") for j, d in enumerate("LH")
+                      for k, sl in enumerate("LH")])
+
+
+def test_three_way_matches_statsmodels():
+    # statsmodels 0.15: AnovaRM(THREE, "y", "subj", within=["frequency", "decay", "slope"])
+    #                   .fit().anova_table
+    ref = {"frequency": (181.675744, 0.000175), "decay": (0.000127, 0.991532),
+           "slope": (1.930445, 0.237051), "frequency * decay": (0.302275, 0.611715),
+           "frequency * slope": (2.883983, 0.164696), "decay * slope": (0.406415, 0.558458),
+           "frequency * decay * slope": (1.804921, 0.250273)}
+    a = rm_anova(THREE, "y", ["frequency", "decay", "slope"], "subj").set_index("Source")
+    for src, (F, p) in ref.items():
+        assert a.loc[src, "F"] == pytest.approx(F, abs=1e-5), src
+        assert a.loc[src, "p_unc"] == pytest.approx(p, abs=1e-6), src
+        assert a.loc[src, "DF"] == 1
+    # partial η² = SS / (SS + SS_error) row by row
+    e = a.loc["Error(frequency)"]
+    assert a.loc["frequency", "np2"] == pytest.approx(a.loc["frequency", "SS"]
+                                                     / (a.loc["frequency", "SS"] + e["SS"]))
+
+
+def test_pairwise_matches_scipy_and_pingouin():
+    pw = pairwise_ttests(ONE, "y", "cond", "subj", "holm")
+    assert len(pw) == 6
+    for r in pw.itertuples():
+        res = stats.ttest_rel(Y[:, int(r.A[1])], Y[:, int(r.B[1])])  # scipy, independent
+        assert r.t == pytest.approx(res.statistic) and r.p_unc == pytest.approx(res.pvalue)
+        d = Y[:, int(r.A[1])] - Y[:, int(r.B[1])]
+        assert r.dz == pytest.approx(d.mean() / d.std(ddof=1))
+        h = stats.t.ppf(0.975, 5) * d.std(ddof=1) / math.sqrt(6)
+        assert (r.ci_low, r.ci_high) == pytest.approx((d.mean() - h, d.mean() + h))
+    # pingouin 0.7.0: pg.pairwise_tests(data=ONE, dv="y", within="cond", subject="subj",
+    #                                  padjust="holm")["p_corr"]
+    assert pw["p_corr"].to_numpy() == pytest.approx(
+        [0.122578, 0.122578, 0.000288, 0.016419, 0.122578, 0.004410], abs=1e-6)
+
+
+@pytest.mark.parametrize("ours, theirs", [("bonf", "bonferroni"), ("holm", "holm"),
+                                          ("fdr_bh", "fdr_bh")])
+def test_p_adjust_matches_statsmodels(ours, theirs):
+    p = np.random.default_rng(0).uniform(0, 0.2, 55)
+    np.testing.assert_allclose(p_adjust(p, ours), multipletests(p, method=theirs)[1])
+    assert list(p_adjust(p, "none")) == list(p)
+    with pytest.raises(StatsError, match="padjust"):
+        p_adjust(p, "sidak")
+
+
+def test_zscores_and_the_zero_variance_case():
+    df = pd.DataFrame({"s": ["a"] * 4 + ["b"] * 4, "r": [1, 2, 3, 4, 5, 5, 5, 5]})
+    z = zscore_by_subject(df, "r", "s")
+    # subject a: mean 2.5, population SD √1.25
+    assert list(z[:4]) == pytest.approx([(x - 2.5) / math.sqrt(1.25) for x in (1, 2, 3, 4)])
+    assert list(z[4:]) == [0.0] * 4  # the stated case: no preference, not NaN
+
+
+def _degenerate():
+    base = [{"s": s, "c": c, "y": v} for s, row in zip("ABCD", [[1, 2, 3], [2, 3, 5], [3, 3, 3],
+                                                                 [1, 2, 4]], strict=True)
+            for c, v in zip("xyz", row, strict=True)]
+    return pd.DataFrame(base)
+
+
+@pytest.mark.parametrize("case, mutate, check", [
+    ("missing cells", lambda d: d.drop(index=[11]), "missing_cells"),
+    ("NaN", lambda d: d.assign(y=d["y"].where(d.index != 0, np.nan)), "nan"),
+    ("zero variance", lambda d: d, "zero_variance"),
+    ("constant differences", lambda d: d[d["s"] != "C"].assign(
+        y=lambda x: x["y"].where(x["c"] != "z", x["y"] + 1)), "constant_differences"),
+    ("n < 2", lambda d: d[d["s"] == "A"], "too_few_subjects"),
+    ("duplicate rows", lambda d: pd.concat([d, d.iloc[[0]]]), "duplicate_rows"),
+    ("mixed scales", lambda d: d.assign(scale=np.where(d["s"] == "A", "1-10", "1-7")),
+     "mixed_scales"),
+])
+def test_preflight_reports_every_degenerate_case(case, mutate, check):
+    d = mutate(_degenerate())
+    rep = preflight(d, "y", "c", "s", scale="scale" if "scale" in d else None)
+    assert check in set(rep["check"]), rep
+    row = rep[rep["check"] == check].iloc[0]
+    assert row["policy"] and row["detail"]
+
+
+def test_degenerate_inputs_are_named_not_nan():
+    d = _degenerate()
+    with pytest.raises(StatsError, match="at least 2 subjects"):
+        rm_anova(d[d["s"] == "A"], "y", "c", "s")
+    with pytest.raises(StatsError, match="columns not in the data"):
+        rm_anova(d, "rating", "c", "s")
+    with pytest.raises(StatsError, match="single level"):
+        rm_anova(d[d["c"] == "x"], "y", "c", "s")
+    # missing cells: the subject is excluded from the ANOVA, not silently imputed
+    a = rm_anova(d.drop(index=[11]), "y", "c", "s")
+    assert a.iloc[1]["DF"] == (3 - 1) * (3 - 1)  # 3 complete subjects remain
+    # constant differences: left out of the table and listed, never NaN or inf
+    const = d[d["s"] != "C"].copy()
+    const.loc[const["c"] == "z", "y"] = const.loc[const["c"] == "y", "y"].to_numpy() + 1
+    pw = pairwise_ttests(const, "y", "c", "s")
+    assert ("y", "z", "difference -1 for every subject") in pw.attrs["constant_pairs"]
+    assert np.isfinite(pw.select_dtypes("number").to_numpy()).all()
+
+
+def test_published_identification_counts():
+    """Table 3: 14 subjects × 3 answers; 35/42 correct, third attempt 12/14, experts 16/18,
+    novices 19/24."""
+    rows = []
+    wrong = {("E0", 1), ("E1", 3), ("N0", 1), ("N1", 1), ("N2", 2), ("N3", 2), ("N4", 3)}
+    for g, n in (("expert", 6), ("novice", 8)):
+        for i in range(n):
+            s = f"{g[0].upper()}{i}"
+            for rep in (1, 2, 3):
+                rows.append({"s": s, "rep": rep, "group": g, "ok": int((s, rep) not in wrong)})
+    t = identification_scores(pd.DataFrame(rows), "s", "ok", "rep", "group")["summary"]
+    t = t.set_index("scope")
+    assert round(t.loc["all", "percent"], 1) == 83.3
+    assert round(t.loc["last repetition", "percent"], 1) == 85.7
+    assert round(t.loc["group expert", "percent"], 1) == 88.9
+    assert round(t.loc["group novice", "percent"], 1) == 79.2
+    # exact binomial against chance 1/6: scipy.stats.binomtest(35, 42, 1/6, "greater")
+    assert t.loc["all", "p_binom"] == pytest.approx(
+        stats.binomtest(35, 42, 1 / 6, alternative="greater").pvalue)
+    assert t.loc["all", "p_binom"] < 1e-15
+    assert t.loc["all", "chance_percent"] == pytest.approx(100 / 6)
+
+
+def test_confusion_matrix():
+    df = pd.DataFrame({"s": ["a", "b"], "ok": [1, 0],
+                       "answer": ["wood,rubber,aluminum", "rubber,wood,aluminum"],
+                       "truth": ["wood,rubber,aluminum", "wood,rubber,aluminum"]})
+    c = identification_scores(df, "s", "ok", answer="answer", truth="truth")["confusion"]
+    assert c.loc["wood", "rubber"] == 1 and c.loc["rubber", "wood"] == 1
+    assert c.loc["aluminum", "aluminum"] == 2 and int(c.to_numpy().sum()) == 6
+
+
+def test_bad_correct_column():
+    with pytest.raises(StatsError, match="0 or 1"):
+        identification_scores(pd.DataFrame({"s": ["a"], "ok": [2]}), "s", "ok")
+
+
+
