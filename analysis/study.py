@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import special, stats
 
 from .load import tap_velocities
 from .stats import (
@@ -18,7 +18,7 @@ from .stats import (
     zscore_by_subject,
 )
 
-__all__ = ["realism", "factorial", "identification", "device_summary", "mean_ci"]
+__all__ = ["realism", "factorial", "identification", "device_summary", "mean_ci", "mean_cis"]
 
 SUBJECT = "participant"
 
@@ -31,6 +31,17 @@ def mean_ci(values: np.ndarray, alpha: float = 0.05) -> tuple[float, float, floa
         return m, m, m
     h = stats.t.ppf(1 - alpha / 2, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size)
     return m, m - h, m + h
+
+
+def mean_cis(m: np.ndarray, alpha: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Column means of a subject × level matrix and their t-based intervals, vectorised
+    (NaN cells left out per column)."""
+    n = (~np.isnan(m)).sum(axis=0)
+    mean = np.nanmean(m, axis=0)
+    sd = np.nanstd(m, axis=0, ddof=1)
+    h = special.stdtrit(np.maximum(n - 1, 1), 1 - alpha / 2) * sd / np.sqrt(np.maximum(n, 1))
+    h = np.where(n >= 2, h, 0.0)
+    return mean, mean - h, mean + h
 
 
 def _rated(data: pd.DataFrame, protocol: str, phase: str | None = None) -> pd.DataFrame:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Callable, Sequence
 
@@ -169,7 +170,7 @@ def _bench(args: argparse.Namespace) -> int:
         module = importlib.import_module(f"benchmarks.{args.what}")
     except ModuleNotFoundError:
         raise UserError(f"no benchmark named {args.what!r}; "
-                        "available: sim, matching, link, crash") from None
+                        "available: sim, matching, link, crash, analysis") from None
     return module.main(args)
 
 
@@ -223,6 +224,57 @@ def _analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+def _range(text: str) -> list[int]:
+    """'5..30' (step 5 for subjects, 1 otherwise is given by --step) or '5,10,20'."""
+    if ".." in text:
+        a, b = text.split("..", 1)
+        return list(range(int(a), int(b) + 1))
+    return [int(x) for x in text.split(",") if x]
+
+
+def _power(args: argparse.Namespace) -> int:
+    from analysis.power import power_table, variance_components
+
+    try:
+        subjects = _range(args.subjects)[:: args.step]
+        reps = _range(args.reps)
+    except ValueError:
+        raise UserError("--subjects and --reps take 'A..B' or 'a,b,c'") from None
+    if not subjects or min(subjects) < 2 or not reps or min(reps) < 1:
+        raise UserError("need at least 2 subjects and 1 repetition")
+    protocol = _load_protocol(args.protocol)
+    comparisons = math.comb(len([s for s in protocol.samples.values() if s.rated]), 2)
+    sd = {"sd_trial": args.sd_trial, "sd_interaction": args.sd_interaction,
+          "sd_subject": args.sd_subject}
+    if args.pilot:
+        from analysis import load_sessions
+
+        d = load_sessions(args.pilot)
+        d = d[d["valid"] & d["rating"].notna() & (d["protocol"] == protocol.name)]
+        sd = variance_components(d)
+    t = power_table(subjects, reps, args.effect, alpha=args.alpha, comparisons=comparisons,
+                    experiments=args.experiments, **sd)
+    if args.json:
+        print(json.dumps({"protocol": protocol.name, "effect": args.effect,
+                          "comparisons": comparisons, **sd,
+                          "rows": t.to_dict(orient="records")}, indent=2))
+        return 0
+    print(f"{protocol.name}: power of a {args.effect:g}-point paired difference at alpha "
+          f"{args.alpha:g}/{comparisons} (Bonferroni) and the 95 % CI half-width of a "
+          f"sample's mean, {args.experiments} simulated experiments per cell "
+          f"(sd trial {sd['sd_trial']:.2f}, subject×sample {sd['sd_interaction']:.2f}, "
+          f"subject {sd['sd_subject']:.2f})")
+    grid = t.pivot(index="subjects", columns="reps", values="power")
+    half = t.pivot(index="subjects", columns="reps", values="ci_halfwidth")
+    print("power            " + "".join(f"  r={r:<5d}" for r in grid.columns))
+    for n in grid.index:
+        print(f"  n = {n:3d}        " + "".join(f"  {grid.loc[n, r]:6.2f} " for r in grid.columns))
+    print("CI half-width    " + "".join(f"  r={r:<5d}" for r in half.columns))
+    for n in half.index:
+        print(f"  n = {n:3d}        " + "".join(f"  {half.loc[n, r]:6.2f} " for r in half.columns))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="hapticlab",
@@ -253,6 +305,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_parsers(dsub, sub, _matching)
 
+    pw = sub.add_parser("power", help="Monte-Carlo power and precision for session length")
+    pw.add_argument("protocol")
+    pw.add_argument("--subjects", default="5..30")
+    pw.add_argument("--step", type=int, default=5, help="step over the subjects range")
+    pw.add_argument("--reps", default="1..5")
+    pw.add_argument("--effect", type=float, default=1.0, help="key contrast [scale points]")
+    pw.add_argument("--alpha", type=float, default=0.05)
+    pw.add_argument("--sd-trial", type=float, default=0.9)
+    pw.add_argument("--sd-interaction", type=float, default=0.5)
+    pw.add_argument("--sd-subject", type=float, default=0.8)
+    pw.add_argument("--pilot", help="session folder to estimate the SDs from")
+    pw.add_argument("--experiments", type=int, default=10_000)
+    pw.add_argument("--json", action="store_true")
+    pw.set_defaults(func=_power)
     an = sub.add_parser("analyze", help="statistics, figures and report from session folders")
     an.add_argument("data_dir")
     an.add_argument("--out", required=True)
