@@ -96,8 +96,7 @@ def accel_traces(data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str
     """Acceleration after contact per sample, for the tap closest to a common speed."""
     plt = _plt()
     d = data[(data["protocol"] == "realism") & data["valid"] & (data["trace_file"] != "")]
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    drawn = 0
+    picked = []
     for sample, g in d.groupby("sample"):
         best = None
         for row in g.itertuples():
@@ -118,15 +117,24 @@ def accel_traces(data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str
                     a = z["accel_counts"][sel] * float(z["accel_lsb"])
                     best = (err, a, float(z["contacts_v"][k]), rate)
         if best is not None:
-            _, a, v, rate = best
-            ax.plot(np.arange(len(a)) / rate * 1e3, a / v * speed, lw=0.8,
-                    label=f"{sample} ({v:.3f} m/s)")
-            drawn += 1
-    ax.set_xlabel("time after contact [ms]")
-    ax.set_ylabel(f"acceleration scaled to {speed} m/s [m/s²]")
-    ax.set_title("Contact accelerations per sample at a common incoming speed")
-    if drawn:
-        ax.legend(fontsize=7, ncol=2)
+            picked.append((str(sample), *best[1:]))
+    # one panel per sample on a shared scale: 11 overlaid traces hide each other
+    cols = 4
+    rows = max(1, -(-len(picked) // cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(10, 1.9 * rows + 0.8), sharex=True,
+                             sharey=True, squeeze=False)
+    for ax, (sample, a, v, rate) in zip(axes.flat, picked, strict=False):
+        ax.plot(np.arange(len(a)) / rate * 1e3, a / v * speed, lw=0.7, color="C0")
+        ax.set_title(f"{sample} ({v:.3f} m/s)", fontsize=8)
+    for ax in axes.flat[len(picked):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("ms after contact", fontsize=8)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("m/s²", fontsize=8)
+    fig.suptitle(f"Contact acceleration per sample, scaled to {speed} m/s incoming speed",
+                 fontsize=10)
+    fig.tight_layout()
     return _save(fig, out, "accel_traces")
 
 

@@ -104,6 +104,7 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
             "samples": r["samples"], "anova": r["anova"], "groups": r["groups"],
             "pairwise": r["pairwise"][["A", "B", "mean_diff", "ci_low", "ci_high", "t", "dof",
                                        "p_unc", "p_holm", "p_fdr", "p_corr", "dz"]],
+            "anova_notes": r["anova"].attrs.get("notes", []),
             "n_subjects": r["n_subjects"], "exclusions": r["preflight"],
             "constant_pairs": [list(p) for p in r["constant_pairs"]],
             "per_subject": r["per_subject"]}
@@ -166,6 +167,7 @@ def _markdown(rep: dict) -> str:
             out.append(_table(r["samples"]))
             out.append("\n### One-way repeated-measures ANOVA\n")
             out.append(_table(r["anova"]))
+            out.extend(f"\n_{note}._\n" for note in r["anova_notes"])
             out.append("\n### Groups not distinguishable (Holm p ≥ .05)\n")
             out.append("\n".join("- " + ", ".join(g) for g in r["groups"]) + "\n")
             out.append("\n### Paired t-tests (d_z: Cohen's d for paired data)\n")

@@ -276,14 +276,17 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
 
     Returns
     -------
-    DataFrame, one row per effect (main effects, then interactions), then ``Error`` rows
+    DataFrame, one row per effect (main effects, then interactions); every cell is a number
         ``Source``; ``SS`` (sum of squares); ``DF``; ``MS``; ``F``; ``p_unc``; ``np2``
         (partial η² = SS_effect / (SS_effect + SS_error)); ``ng2`` (generalized η²,
         Olejnik & Algina 2003, all factors manipulated within subjects:
-        SS_effect / (SS_effect + SS_subjects + Σ SS_errors)); and, for a single factor with
-        more than two levels, ``W_mauchly``, ``p_spher`` (Mauchly's test), ``eps_gg``
-        (Greenhouse–Geisser ε), ``eps_hf`` (Huynh–Feldt ε, at most 1) and ``p_gg``
-        (p with both degrees of freedom × ε_GG).
+        SS_effect / (SS_effect + SS_subjects + Σ SS_errors)); ``SS_err``, ``DF_err``,
+        ``MS_err`` (the effect × subject error term the F is taken against); and, for a
+        single factor with more than two levels, ``eps_gg`` (Greenhouse–Geisser ε),
+        ``eps_hf`` (Huynh–Feldt ε, at most 1), ``p_gg`` (p with both degrees of freedom ×
+        ε_GG) and, when there are more subjects than levels (otherwise the contrast
+        covariance is singular and the test undefined), ``W_mauchly`` and ``p_spher``
+        (Mauchly's test). ``attrs["notes"]`` lists what was not computed and why.
     """
     w = _as_list(within)
     if not 1 <= len(w) <= 3:
@@ -339,19 +342,22 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
         rows.append({"Source": " * ".join(w[i - 1] for i in t), "SS": ss_t, "DF": df_t,
                      "MS": ms_t, "F": F, "p_unc": float(special.fdtrc(df_t, df_e, F)),
                      "np2": ss_t / (ss_t + ss_e) if ss_t + ss_e > 0 else 0.0,
-                     "ng2": ss_t / (ss_t + total_err) if ss_t + total_err > 0 else 0.0})
-    for t in terms:
-        ss_e, df_e = errors[t]
-        rows.append({"Source": "Error" if nf == 1 else
-                     f"Error({' * '.join(w[i - 1] for i in t)})", "SS": ss_e, "DF": df_e,
-                     "MS": ss_e / df_e, "F": 0.0, "p_unc": 1.0, "np2": 0.0, "ng2": 0.0})
+                     "ng2": ss_t / (ss_t + total_err) if ss_t + total_err > 0 else 0.0,
+                     "SS_err": ss_e, "DF_err": df_e, "MS_err": ms_e})
+    notes = []
     if nf == 1 and shape[1] > 2:
         sph = _sphericity(arr)
         df1, df2 = rows[0]["DF"], errors[(1,)][1]
         sph["p_gg"] = float(special.fdtrc(df1 * sph["eps_gg"], df2 * sph["eps_gg"], rows[0]["F"]))
+        if n_subj - 1 < shape[1] - 1:
+            del sph["W_mauchly"], sph["p_spher"]
+            notes.append(f"Mauchly's test not computed: {n_subj} subjects give a singular "
+                         f"covariance of the {shape[1] - 1} contrasts (it needs at least "
+                         f"{shape[1]}); use the Greenhouse–Geisser p")
         rows[0].update(sph)
-        rows[1].update({k: 1.0 for k in sph})  # the error row: no test, neutral values
-    return pd.DataFrame(rows)
+    out = pd.DataFrame(rows)
+    out.attrs["notes"] = notes
+    return out
 
 
 def _sphericity(arr: np.ndarray) -> dict[str, float]:

@@ -55,7 +55,7 @@ def test_one_way_by_hand():
     ss_e = ((Y - g) ** 2).sum() - ss_s - ss_c
     F = (ss_c / (k - 1)) / (ss_e / ((k - 1) * (n - 1)))
     a = rm_anova(ONE, "y", "cond", "subj")
-    assert a.iloc[0]["SS"] == pytest.approx(ss_c) and a.iloc[1]["SS"] == pytest.approx(ss_e)
+    assert a.iloc[0]["SS"] == pytest.approx(ss_c) and a.iloc[0]["SS_err"] == pytest.approx(ss_e)
     assert a.iloc[0]["F"] == pytest.approx(F)
 
 
@@ -84,9 +84,10 @@ def test_three_way_matches_statsmodels():
         assert a.loc[src, "p_unc"] == pytest.approx(p, abs=1e-6), src
         assert a.loc[src, "DF"] == 1
     # partial η² = SS / (SS + SS_error) row by row
-    e = a.loc["Error(frequency)"]
-    assert a.loc["frequency", "np2"] == pytest.approx(a.loc["frequency", "SS"]
-                                                     / (a.loc["frequency", "SS"] + e["SS"]))
+    f = a.loc["frequency"]
+    assert f["np2"] == pytest.approx(f["SS"] / (f["SS"] + f["SS_err"]))
+    assert f["F"] == pytest.approx(f["MS"] / f["MS_err"]) and f["DF_err"] == 4
+    assert len(a) == 7 and not a.isna().any().any()
 
 
 def test_pairwise_matches_scipy_and_pingouin():
@@ -159,7 +160,7 @@ def test_degenerate_inputs_are_named_not_nan():
         rm_anova(d[d["c"] == "x"], "y", "c", "s")
     # missing cells: the subject is excluded from the ANOVA, not silently imputed
     a = rm_anova(d.drop(index=[11]), "y", "c", "s")
-    assert a.iloc[1]["DF"] == (3 - 1) * (3 - 1)  # 3 complete subjects remain
+    assert a.iloc[0]["DF_err"] == (3 - 1) * (3 - 1)  # 3 complete subjects remain
     # constant differences: left out of the table and listed, never NaN or inf
     const = d[d["s"] != "C"].copy()
     const.loc[const["c"] == "z", "y"] = const.loc[const["c"] == "y", "y"].to_numpy() + 1
@@ -205,4 +206,15 @@ def test_bad_correct_column():
         identification_scores(pd.DataFrame({"s": ["a"], "ok": [2]}), "s", "ok")
 
 
+def test_mauchly_is_not_reported_when_it_is_undefined():
+    """3 subjects, 4 levels: the 3 contrasts' covariance has rank ≤ 2, so det = 0 and
+    Mauchly's χ² is infinite — a test that cannot be run, not a violation (p = 0)."""
+    d = pd.DataFrame([{"s": s, "c": c, "y": float(v)} for s, row in
+                      enumerate([[1, 3, 2, 5], [2, 2, 4, 6], [1, 4, 4, 4]])
+                      for c, v in zip("abcd", row, strict=True)])
+    a = rm_anova(d, "y", "c", "s")
+    assert "W_mauchly" not in a and "p_spher" not in a
+    assert "Mauchly" in a.attrs["notes"][0] and "3 subjects" in a.attrs["notes"][0]
+    # ε_GG is still defined and bounded by 1/(k − 1) ≤ ε ≤ 1
+    assert 1 / 3 <= a.loc[0, "eps_gg"] <= 1 and np.isfinite(a.loc[0, "p_gg"])
 
