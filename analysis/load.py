@@ -79,6 +79,7 @@ def load_sessions(path: str | Path) -> pd.DataFrame:
         df["group"] = meta.get("participant", {}).get("group", "") or ""
         df["scale"] = f"{rating['min']}-{rating['max']}" if rating else ""
         df["device_backend"] = meta.get("device", {}).get("backend", "")
+        df["responder"] = meta.get("responder", "") if meta.get("ui") == "none" else "person"
         df["session_dir"] = str(folder)
         frames.append(df)
     if not frames:

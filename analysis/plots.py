@@ -138,10 +138,31 @@ def accel_traces(data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str
     return _save(fig, out, "accel_traces")
 
 
+def session_length(realism: dict, out: Path) -> list[str]:
+    """Power of a 1-point contrast and CI half-width against participants, per repetitions."""
+    plt = _plt()
+    t = realism["session_length"]["table"]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
+    for r, g in t.groupby("reps"):
+        a1.plot(g["subjects"], g["power"], marker="o", ms=3, label=f"{r} rep.")
+        a2.plot(g["subjects"], g["ci_halfwidth"], marker="o", ms=3, label=f"{r} rep.")
+    a1.set_xlabel("participants")
+    a1.set_ylabel("power (1-point difference, Bonferroni)")
+    a1.set_ylim(0, 1)
+    a2.set_xlabel("participants")
+    a2.set_ylabel("95 % CI half-width of a mean [points]")
+    a1.legend(fontsize=7)
+    fig.suptitle("Session length against power and precision (variances from these data)",
+                 fontsize=10)
+    fig.tight_layout()
+    return _save(fig, out, "session_length")
+
+
 def save_all(data, results: dict, out: Path) -> list[str]:
     files = []
     if isinstance(results.get("realism"), dict):
         files += realism_means(results["realism"], out)
+        files += session_length(results["realism"], out)
         files += realism_pmatrix(results["realism"], out)
         files += accel_traces(data, out)
     if isinstance(results.get("factorial"), dict):

@@ -56,11 +56,19 @@ def variance_components(data: pd.DataFrame, dv: str = "rating", sample: str = "s
     moments on the two-way layout with repetitions)."""
     d = data[[subject, sample, dv]].dropna()
     cell = d.groupby([subject, sample], observed=True)[dv]
-    sd_trial = float(np.sqrt(cell.var(ddof=1).mean()))
+    sd_trial = float(np.sqrt(cell.var(ddof=1).dropna().mean()))
     reps = float(cell.size().mean())
-    means = cell.mean().unstack(sample)
-    resid = means.sub(means.mean(1), axis=0).sub(means.mean(0), axis=1) + means.to_numpy().mean()
-    var_int = max(0.0, float(np.nanvar(resid.to_numpy(), ddof=1)) - sd_trial ** 2 / reps)
-    sd_subject = float(means.mean(1).std(ddof=1))
+    means = cell.mean().unstack(sample).dropna()  # participants with every sample
+    if means.shape[0] < 2 or means.shape[1] < 2:
+        raise ValueError("variance components need at least 2 participants with every "
+                         "sample and 2 samples")
+    m = means.to_numpy()
+    n, k = m.shape
+    resid = m - m.mean(1, keepdims=True) - m.mean(0, keepdims=True) + m.mean()
+    # E[SS_resid / ((n−1)(k−1))] = sd_interaction² + sd_trial² / r
+    var_int = max(0.0, float((resid ** 2).sum()) / ((n - 1) * (k - 1)) - sd_trial ** 2 / reps)
+    # a participant's mean over the k samples carries (sd_int² + sd_trial²/r)/k of noise
+    var_subj = float(m.mean(1).var(ddof=1)) - (var_int + sd_trial ** 2 / reps) / k
+    sd_subject = float(np.sqrt(max(0.0, var_subj)))
     return {"sd_trial": sd_trial, "sd_interaction": float(np.sqrt(var_int)),
             "sd_subject": sd_subject}

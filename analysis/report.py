@@ -43,20 +43,28 @@ METHODS = (
     "repeated-measures tests (listwise); every exclusion is listed below.")
 
 
-def _clean(v):
-    """JSON-safe, finite, rounded (12 significant digits) values."""
+SIMULATED_NOTE = (
+    "These data come from simulated participants, not people: the ratings and answers "
+    "are those of a rehearsal model (app/simulated.py) that judges features of the "
+    "simulated device's signals. The report rehearses the study's analysis; its findings "
+    "are not claims about human perception.")
+
+
+def _clean(v, where: str = "report"):
+    """JSON-safe, finite, rounded (12 significant digits) values; a non-finite number is an
+    error naming where it is."""
     if isinstance(v, dict):
-        return {str(k): _clean(x) for k, x in v.items()}
+        return {str(k): _clean(x, f"{where}.{k}") for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
+        return [_clean(x, f"{where}[{i}]") for i, x in enumerate(v)]
     if isinstance(v, pd.DataFrame):
-        return [_clean(r) for r in v.to_dict(orient="records")]
+        return _clean(v.to_dict(orient="records"), where)
     if isinstance(v, (np.integer,)):
         return int(v)
     if isinstance(v, (float, np.floating)):
         f = float(v)
         if not math.isfinite(f):
-            raise ValueError(f"a non-finite number reached the report: {f}")
+            raise ValueError(f"a non-finite number reached the report at {where}: {f}")
         return float(f"{f:.12g}")
     if isinstance(v, np.bool_):
         return bool(v)
@@ -96,7 +104,12 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
             "input_files": data.attrs["files"], "seeds": sorted({int(s) for s in data["seed"]
                                                                  if s is not None}),
             "sessions": data.attrs["sessions"], "torn_lines_set_aside": data.attrs["torn"]}
-    report = {"methods": METHODS, "provenance": prov, "figures": figures,
+    responders = sorted(set(data["responder"])) if "responder" in data else []
+    prov["responders"] = responders
+    methods = METHODS
+    if any(r != "person" for r in responders):
+        methods = (f"{SIMULATED_NOTE} (responders: {', '.join(responders)}.) " + METHODS)
+    report = {"methods": methods, "provenance": prov, "figures": figures,
               "device": res["device"]}
     if "realism" in res:
         r = res["realism"]
@@ -105,9 +118,14 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
             "pairwise": r["pairwise"][["A", "B", "mean_diff", "ci_low", "ci_high", "t", "dof",
                                        "p_unc", "p_holm", "p_fdr", "p_corr", "dz"]],
             "anova_notes": r["anova"].attrs.get("notes", []),
+            "session_length": r["session_length"],
             "n_subjects": r["n_subjects"], "exclusions": r["preflight"],
             "constant_pairs": [list(p) for p in r["constant_pairs"]],
-            "per_subject": r["per_subject"]}
+            # a participant without a valid rating of a sample (every attempt saturated)
+            # has no mean there: null, and listed among the exclusions
+            "per_subject": [{k: (None if isinstance(x, float) and math.isnan(x) else x)
+                             for k, x in row.items()}
+                            for row in r["per_subject"].to_dict(orient="records")]}
     if "factorial" in res:
         f = res["factorial"]
         report["factorial"] = f if isinstance(f, str) else {
@@ -145,6 +163,8 @@ def _table(rows: list[dict], cols: list[str] | None = None) -> str:
     cols = cols or list(rows[0])
 
     def fmt(v):
+        if v is None:
+            return "—"
         if isinstance(v, float):
             return f"{v:.4g}"
         return str(v)
@@ -174,6 +194,15 @@ def _markdown(rep: dict) -> str:
             out.append(_table(r["pairwise"]))
             out.append("\n### Exclusions\n")
             out.append(_table(r["exclusions"]))
+            sl = r["session_length"]
+            vc = sl["variance_components"]
+            out.append("\n### Session length against power and precision\n")
+            out.append(f"Monte-Carlo, 10⁴ simulated studies per cell, with this study's SDs "
+                       f"(trial {vc['sd_trial']:.2f}, participant×sample "
+                       f"{vc['sd_interaction']:.2f}, participant {vc['sd_subject']:.2f}): "
+                       f"power of a {sl['effect']:g}-point paired difference (Bonferroni over "
+                       "all pairs) and the median 95 % CI half-width of a sample's mean.\n\n")
+            out.append(_table(sl["table"], ["subjects", "reps", "power", "ci_halfwidth"]))
     if "factorial" in rep:
         out.append("## Factorial study\n")
         f = rep["factorial"]

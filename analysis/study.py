@@ -9,6 +9,7 @@ import pandas as pd
 from scipy import special, stats
 
 from .load import tap_velocities
+from .power import power_table, variance_components
 from .stats import (
     StatsError,
     identification_scores,
@@ -98,7 +99,12 @@ def realism(data: pd.DataFrame, alpha: float = 0.05) -> dict:
     anova = rm_anova(d, "rating", "sample", SUBJECT)
     per_subject = (d.groupby([SUBJECT, "sample"], observed=True)["rating"].mean()
                    .unstack("sample").reset_index())
+    # session length against precision and power, from this study's own variance
+    vc = variance_components(d, "rating", "sample", SUBJECT)
+    length = power_table(range(5, 31, 5), range(1, 6), effect=1.0, alpha=alpha,
+                         comparisons=len(order) * (len(order) - 1) // 2, seed=0, **vc)
     return {"samples": samples, "pairwise": pw, "anova": anova,
+            "session_length": {"variance_components": vc, "effect": 1.0, "table": length},
             "groups": _groups(order, holm, alpha), "per_subject": per_subject,
             "preflight": pre, "constant_pairs": holm.attrs.get("constant_pairs", []),
             "n_subjects": int(d[SUBJECT].nunique())}

@@ -170,14 +170,26 @@ def _bench(args: argparse.Namespace) -> int:
         module = importlib.import_module(f"benchmarks.{args.what}")
     except ModuleNotFoundError:
         raise UserError(f"no benchmark named {args.what!r}; "
-                        "available: sim, matching, link, crash, analysis") from None
+                        "available: sim, matching, link, crash, analysis, demo") from None
     return module.main(args)
 
 
 def _demo(args: argparse.Namespace) -> int:
     from app.demo import run_demo
 
-    return run_demo(seed=args.seed)
+    return run_demo(seed=args.seed, out=args.out)
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from app.ids import ParticipantIdError
+    from app.simulate_cli import simulate
+    from device import DeviceError
+    from protocols import ProtocolError
+
+    try:
+        return simulate(args)
+    except (ParticipantIdError, ProtocolError, DeviceError, ValueError) as exc:
+        raise UserError(str(exc)) from None
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -327,6 +339,9 @@ def build_parser() -> argparse.ArgumentParser:
     from app.session_cli import add_parsers as add_session
 
     add_session(sub, _run, _resume)
+    from app.simulate_cli import add_parser as add_simulate
+
+    add_simulate(sub, _simulate)
     pr = sub.add_parser("protocol", help="protocol files (validate, show)")
     psub = pr.add_subparsers(dest="protocol_command", required=True, metavar="ACTION")
     pv = psub.add_parser("validate", help="check a protocol file; exit 0 when valid")
@@ -343,7 +358,7 @@ def build_parser() -> argparse.ArgumentParser:
     ps.set_defaults(func=_protocol_show)
 
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
-    b.add_argument("what", help="which benchmark: sim, matching, link, crash")
+    b.add_argument("what", help="which benchmark: sim, matching, link, crash, analysis, demo")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
     b.add_argument("--fuzz", type=int, default=100_000,
@@ -351,8 +366,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--kills", type=int, default=1000, help="crash: kill -9 count")
     b.set_defaults(func=_bench)
 
-    d = sub.add_parser("demo", help="what `make demo` runs: a simulated tap window per sample")
+    d = sub.add_parser("demo", help="what `make demo` runs: a whole simulated study and its "
+                       "report")
     d.add_argument("--seed", type=int, default=1)
+    d.add_argument("--out", default="out/demo", help="data/ and report/ go here")
     d.set_defaults(func=_demo)
     return p
 

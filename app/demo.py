@@ -1,43 +1,48 @@
-"""``make demo`` until the whole-study dry run exists: one simulated tap window per sample."""
+"""``make demo``: a whole study with simulated participants, analysed, with its report.
+
+Realism (9 participants), factorial (9) and identification (14) sessions run headless on
+the simulated device through the real runner, engine and recorder; the analysis then
+writes the report. Data go to ``OUT/data/``, the report to ``OUT/report/``.
+"""
 
 from __future__ import annotations
 
+import argparse
+import shutil
+import sys
 import time
+from pathlib import Path
 
-import numpy as np
+__all__ = ["run_demo", "STUDY"]
 
-__all__ = ["run_demo"]
+#: (protocol, participants, id prefix, group) of the demo study, as in the papers.
+STUDY = (("realism", 9, "R", ""), ("factorial", 9, "F", ""),
+         ("identification", 7, "IE", "expert"), ("identification", 7, "IN", "novice"))
 
 
-def run_demo(seed: int = 1) -> int:
-    """Run one 5-s simulated tapping window on each realism sample and print a summary."""
-    from rich.console import Console
-    from rich.table import Table
+def run_demo(seed: int = 1, out: str | Path = "out/demo") -> int:
+    """Simulate, analyse and report; returns 0 when the report is written."""
+    from analysis.report import analyze
+    from app.simulate_cli import simulate
 
-    from device import open_device
-    from protocols import load_protocol
-
-    console = Console()
-    protocol = load_protocol("realism")
-    table = Table(title=f"one simulated 5-s tap window per sample (sim device, seed {seed})")
-    for col in ("sample", "kind", "taps", "v [m/s]", "sat.", "I peak [A]", "a peak [g]"):
-        table.add_column(col, no_wrap=True)
+    out = Path(out)
+    data, report = out / "data", out / "report"
+    for d in (data, report):  # a demo always starts from nothing
+        if d.exists():
+            shutil.rmtree(d)
     t0 = time.perf_counter()
-    with open_device("sim", seed=seed) as dev:
-        for sample in protocol.samples.values():
-            scene = sample.scene
-            if scene.kind == "library":
-                console.print(f"[dim]{sample.id}: acceleration-matched library from "
-                              f"{scene.transient.source} (built on first use, then cached)[/]")
-            dev.load_scene(scene)
-            dev.home()
-            r = dev.run_window(protocol.window.duration)
-            v = r.velocities
-            table.add_row(sample.id, scene.kind, str(len(v)),
-                          f"{v.mean():.3f}±{v.std(ddof=1) if len(v) > 1 else 0:.3f}",
-                          str(len(r.saturations)), f"{r.peak_current:.2f}",
-                          f"{np.max(np.abs(r.traces['accel'])) / 9.80665:.1f}")
-    console.print(table)
-    console.print(f"simulated {len(protocol.samples)} samples in "
-                  f"{time.perf_counter() - t0:.1f} s")
+    for i, (protocol, n, prefix, group) in enumerate(STUDY):
+        print(f"simulating {protocol}: {n} participants{f' ({group})' if group else ''}",
+              file=sys.stderr, flush=True)
+        rc = simulate(argparse.Namespace(protocol=protocol, participants=n, seed=seed * 10 + i,
+                                         data=str(data), device="sim", traces="contacts",
+                                         prefix=prefix, group=group))
+        if rc != 0:
+            return rc
+    t_sim = time.perf_counter() - t0
+    print("analysing …", file=sys.stderr, flush=True)
+    analyze(data, report)
+    t_all = time.perf_counter() - t0
+    print(f"data:   {data}/\nreport: {report / 'report.html'} (and report.json, report.md)\n"
+          f"simulated in {t_sim:.0f} s, analysed in {t_all - t_sim:.0f} s")
     return 0

@@ -56,7 +56,12 @@ class ScriptedResponder:
         return False  # one familiarization window
 
 
-def make_participant(name: str, **options) -> Participant:
+def make_participant(name: str, protocol=None, seed: int = 0) -> Participant:
+    """``scripted`` (random answers) or ``simulated`` (see :mod:`app.simulated`)."""
     if name == "scripted":
         return ScriptedResponder()
-    raise ValueError(f"unknown responder {name!r}; available: scripted")
+    if name == "simulated":
+        from app.simulated import SimulatedParticipant
+
+        return SimulatedParticipant(protocol, seed)
+    raise ValueError(f"unknown responder {name!r}; available: scripted, simulated")

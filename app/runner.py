@@ -252,6 +252,8 @@ class SessionRunner:
         res = dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
         if res.timing:
             self.timing.append(res.timing)
+        if hasattr(self.participant_ui, "after_window"):  # what a simulated person felt
+            self.participant_ui.after_window(trial, sample_id, res)
         return res
 
     # ------------------------------------------------------------------ recording

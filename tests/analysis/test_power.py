@@ -59,3 +59,24 @@ def test_power_cli():
     bad = subprocess.run([sys.executable, "-m", "app", "power", "realism", "--subjects", "x"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "--subjects" in bad.stderr
+
+
+def test_variance_components_recover_known_sds():
+    """Method of moments on a two-way layout drawn with known SDs (400 subjects × 11 samples
+    × 3 repetitions; sampling error of each SD estimate is a few per cent)."""
+    import pandas as pd
+
+    from analysis.power import variance_components
+
+    rng = np.random.default_rng(7)
+    n, k, r = 400, 11, 3
+    b = rng.normal(0, 0.8, n)[:, None, None]
+    u = rng.normal(0, 0.5, (n, k))[:, :, None]
+    y = np.arange(k)[None, :, None] * 0.1 + b + u + rng.normal(0, 0.9, (n, k, r))
+    s, j, _ = np.indices(y.shape)
+    d = pd.DataFrame({"participant": s.ravel(), "sample": j.ravel(), "rating": y.ravel()})
+    d = d.drop(index=[0, 1, 2])  # one missing cell: that participant is left out, not NaN
+    vc = variance_components(d)
+    assert vc["sd_trial"] == pytest.approx(0.9, rel=0.03)
+    assert vc["sd_interaction"] == pytest.approx(0.5, rel=0.1)
+    assert vc["sd_subject"] == pytest.approx(0.8, rel=0.1)
