@@ -60,6 +60,8 @@ __all__ = ["SimulatedParticipant", "felt_features", "FEATURES", "JND"]
 FEATURES = ("stop", "jolt", "pitch", "ring")
 #: Per-feature spread that counts as one unit of perceived difference [log units].
 JND = np.array([0.5, 0.6, 0.5, 0.6])
+#: Below this the hand feels a push rather than a vibration [Hz].
+HIGHPASS_HZ = 10.0
 #: Weights of the features when naming a material: mostly by the pitch of the vibration,
 #: then how it dies out; the jolt depends on how hard one taps, the stop on the spring.
 ID_WEIGHT = np.array([0.5, 0.25, 1.0, 0.5])
@@ -89,12 +91,18 @@ def felt_features(result, window: float = 0.060) -> np.ndarray:
     # the hand feels the stylus' true acceleration (the simulator reports it); the
     # accelerometer's reading, which clips at 50 g, stands in on other backends
     t, vel, acc = tr["t"], tr["velocity"], tr.get("true_accel", tr["accel"])
+    from scipy import signal
+
+    # vibration only: the slow push of the hand and the spring is felt as force, not as
+    # vibration (zero-phase 2nd-order high-pass at HIGHPASS_HZ over the whole window)
+    sos = signal.butter(2, HIGHPASS_HZ, "highpass", fs=float(result.rate_hz), output="sos")
+    acc = signal.sosfiltfilt(sos, np.asarray(acc, dtype=float))
     rate = float(result.rate_hz)
     n = int(window * rate)
     k1, k2 = int(0.015 * rate), int(0.045 * rate)
     m = int(0.030 * rate)
     freqs = np.fft.rfftfreq(8 * m, 1 / rate)
-    band = (freqs >= 30.0) & (freqs <= 1500.0)  # vibration; slower content is the push
+    band = (freqs >= HIGHPASS_HZ) & (freqs <= 1500.0)
     onset = np.exp(-np.arange(m) / (0.010 * rate))  # the first milliseconds count most
     rows = []
     last = -np.inf
@@ -111,7 +119,7 @@ def felt_features(result, window: float = 0.060) -> np.ndarray:
         jolt = np.max(np.abs(a)) / c.velocity
         power = np.abs(np.fft.rfft(a[:m] * onset, 8 * m))[band] ** 2
         pitch = float(np.sum(power * np.log(freqs[band])) / np.sum(power)) if power.sum() > 0 \
-            else math.log(30.0)  # log of the spectral centroid on a log-frequency axis
+            else math.log(HIGHPASS_HZ)  # log of the spectral centroid on a log-frequency axis
         r1 = math.sqrt(float(np.mean(a[:k1] ** 2)) + 1e-12)
         r2 = math.sqrt(float(np.mean(a[k1:k2] ** 2)) + 1e-12)
         rows.append((math.log(stop), math.log(jolt + 1e-9), pitch, math.log(r1 / r2)))
