@@ -105,6 +105,10 @@ class Emulator:
             busy = self._worker is not None and self._worker.is_alive()
             wd = self.sim.info.watchdog_s
             silent = now - self._last_heartbeat > wd
+            if silent and not busy and select.select([self.fd], [], [], 0)[0]:
+                # bytes are waiting: we were busy writing (a long trace upload) and the
+                # host's heartbeats queued up unread; read them before judging the host
+                continue
             if not busy and self.sim.fault is None and self.sim.enabled and silent:
                 self.sim.trip_watchdog()
                 self._report_fault()

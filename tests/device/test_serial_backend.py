@@ -59,6 +59,23 @@ def test_window_over_the_link_and_link_statistics(emulator):
         assert np.isfinite(st["rtt_p50_ms"]) and st["rtt_p99_ms"] >= st["rtt_p50_ms"]
 
 
+def test_a_long_trace_upload_does_not_trip_the_watchdog(emulator_factory):
+    """A 20-s window (the identification protocol's) has 200,000 samples per channel: the
+    emulator is busy writing them for longer than the watchdog period while the host's
+    heartbeats queue up unread. It must read them before judging the host silent (it used
+    to latch a watchdog fault right after such a window)."""
+    emu = emulator_factory(4)  # real time: ~25 s
+    with open_device(f"serial:{emu.port}") as dev:
+        dev.load_scene(FIRM)
+        dev.home()
+        res = dev.run_window(20.0)
+        assert len(res.traces["t"]) >= 20.0 * dev.info.servo_rate_hz
+        assert not res.faults and dev.fault is None
+        dev.home()
+        assert dev.run_window(0.3).contacts  # the device still serves windows
+    assert not any("FAULT" in line for line in emu.stderr_lines), emu.stderr_lines
+
+
 def test_selftest_cli_passes_against_the_emulator(emulator):
     import json
 
