@@ -37,15 +37,6 @@ def test_unknown_benchmark():
     assert out.returncode == 2 and "no benchmark named 'nothing'" in out.stderr
 
 
-def test_demo_runs_every_available_sample():
-    out = run("demo", env=None)
-    assert out.returncode == 0, out.stderr
-    for sample in ("wood", "wood_on_foam", "foam", "firm_spring", "soft_spring", "pulse_firm",
-                   "pulse_soft", "sinusoid_firm", "sinusoid_soft", "matched_firm", "matched_soft"):
-        assert sample in out.stdout
-    assert "simulated 11 samples" in out.stdout
-
-
 @pytest.mark.slow
 def test_bench_sim_json_shape():
     out = run("bench", "sim", "--json", "--repeats", "1")
