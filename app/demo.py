@@ -13,17 +13,43 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["run_demo", "STUDY"]
+__all__ = ["run_demo", "simulate_study", "STUDY"]
 
 #: (protocol, participants, id prefix, group) of the demo study, as in the papers.
 STUDY = (("realism", 9, "R", ""), ("factorial", 9, "F", ""),
          ("identification", 7, "IE", "expert"), ("identification", 7, "IN", "novice"))
 
 
+class StudyStopped(RuntimeError):
+    """A simulated session did not complete; ``rc`` is its exit code."""
+
+    def __init__(self, rc: int):
+        super().__init__(f"a simulated session stopped with exit code {rc}")
+        self.rc = rc
+
+
+def simulate_study(data: str | Path, seed: int) -> dict[str, float]:
+    """Simulate every session of :data:`STUDY` into ``data``; returns seconds per stage."""
+    from app.simulate_cli import simulate
+
+    times = {}
+    for i, (protocol, n, prefix, group) in enumerate(STUDY):
+        print(f"simulating {protocol}: {n} participants{f' ({group})' if group else ''}",
+              file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        rc = simulate(argparse.Namespace(protocol=protocol, participants=n, seed=seed * 10 + i,
+                                         data=str(data), device="sim", traces="contacts",
+                                         prefix=prefix, group=group))
+        if rc != 0:
+            raise StudyStopped(rc)
+        times[f"simulate {protocol} ({n}{', ' + group if group else ''})"] = \
+            time.perf_counter() - t0
+    return times
+
+
 def run_demo(seed: int = 1, out: str | Path = "out/demo") -> int:
     """Simulate, analyse and report; returns 0 when the report is written."""
     from analysis.report import analyze
-    from app.simulate_cli import simulate
 
     out = Path(out)
     data, report = out / "data", out / "report"
@@ -31,14 +57,10 @@ def run_demo(seed: int = 1, out: str | Path = "out/demo") -> int:
         if d.exists():
             shutil.rmtree(d)
     t0 = time.perf_counter()
-    for i, (protocol, n, prefix, group) in enumerate(STUDY):
-        print(f"simulating {protocol}: {n} participants{f' ({group})' if group else ''}",
-              file=sys.stderr, flush=True)
-        rc = simulate(argparse.Namespace(protocol=protocol, participants=n, seed=seed * 10 + i,
-                                         data=str(data), device="sim", traces="contacts",
-                                         prefix=prefix, group=group))
-        if rc != 0:
-            return rc
+    try:
+        simulate_study(data, seed)
+    except StudyStopped as exc:
+        return exc.rc
     t_sim = time.perf_counter() - t0
     print("analysing …", file=sys.stderr, flush=True)
     analyze(data, report)

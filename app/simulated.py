@@ -166,6 +166,7 @@ class SimulatedParticipant:
         self.memory: dict[str, np.ndarray] = {}
         self._device = None
         self._familiar: list[np.ndarray] = []
+        self._real_blocks = None
 
     # ---------------------------------------------------------------- tapping
     def before_window(self, trial, sample_id, device, rng) -> None:
@@ -185,7 +186,7 @@ class SimulatedParticipant:
                 self.memory["reference"] = np.mean(self._familiar, axis=0)
 
     # ---------------------------------------------------------------- judging
-    def _feel_scene(self, key: str, scene, rng) -> np.ndarray:
+    def _feel_scene(self, key: str, scene) -> np.ndarray:
         """Tap a reference (a real block beside the device) once and remember it."""
         if key not in self.memory and self._device is not None:
             dev = self._device
@@ -195,17 +196,17 @@ class SimulatedParticipant:
             self.memory[key] = self._perceive(felt, self._mem_rng)
         return self.memory.get(key, _VOID)
 
-    def _reference(self, trial, rng) -> np.ndarray:
+    def _reference(self, trial) -> np.ndarray:
         sample = self.protocol.samples[trial.samples[0]]
         if sample.reference is not None:
             ref = self.protocol.samples[sample.reference]
-            return self._feel_scene(ref.id, ref.scene, rng)
+            return self._feel_scene(ref.id, ref.scene)
         if "reference" not in self.memory and self.protocol.phases:
             # a resumed session: tap the familiarization sample again before going on
             free = [p for p in self.protocol.phases if p.kind == "free"]
             if free:
                 ref = self.protocol.samples[free[0].samples[0]]
-                return self._feel_scene("reference", ref.scene, rng)
+                return self._feel_scene("reference", ref.scene)
         return self.memory.get("reference", _VOID)
 
     def _perceive(self, f: np.ndarray, rng) -> np.ndarray:
@@ -225,7 +226,7 @@ class SimulatedParticipant:
         return max(0.0, 1.0 - self.distance(felt, remembered, rng) / D_MAX)
 
     def rate(self, trial, scale, result, rng) -> tuple[int, float]:
-        s = self.similarity(felt_features(result), self._reference(trial, rng), rng)
+        s = self.similarity(felt_features(result), self._reference(trial), rng)
         lo, hi = scale.min, scale.max
         mid, span = (lo + hi) / 2, hi - lo
         y = mid + self.person.gain * span * (s - 0.5) + self.person.bias \
@@ -233,12 +234,13 @@ class SimulatedParticipant:
         return int(np.clip(round(y), lo, hi)), float(rng.lognormal(math.log(1.5), 0.3))
 
     def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:
-        from protocols import load_protocol
+        if self._real_blocks is None:  # read once per person, not per answer
+            from protocols import load_protocol
 
-        real = load_protocol("factorial").samples  # the real blocks: "<material>-real"
-        refs = {c: real[f"{c}-real"].scene for c in choices}
+            self._real_blocks = load_protocol("factorial").samples  # "<material>-real"
+        refs = {c: self._real_blocks[f"{c}-real"].scene for c in choices}
         felt = np.array([self._perceive(felt_features(r), rng) for r in results])
-        mem = np.array([self._feel_scene(f"material:{c}", refs[c], rng) for c in choices])
+        mem = np.array([self._feel_scene(f"material:{c}", refs[c]) for c in choices])
         # relative judgement: the pattern of differences among the three surfaces is matched
         # to the pattern among the remembered materials (every rendering is softer than any
         # real block, so absolute distances would call everything the softest material)

@@ -8,7 +8,6 @@ budget / measured: above 1 is within budget).
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import tempfile
 import time
@@ -21,21 +20,15 @@ BUDGET_S = 180.0
 
 def main(args) -> int:
     from analysis.report import analyze
-    from app.demo import STUDY
-    from app.simulate_cli import simulate
+    from app.demo import simulate_study
 
     runs: dict[str, list[float]] = {}
     for _ in range(max(1, min(args.repeats, 3))):
         with tempfile.TemporaryDirectory() as tmp:
             data = Path(tmp) / "data"
             total = time.perf_counter()
-            for i, (proto, n, prefix, group) in enumerate(STUDY):
-                t0 = time.perf_counter()
-                simulate(argparse.Namespace(protocol=proto, participants=n, seed=10 + i,
-                                            data=str(data), device="sim", traces="contacts",
-                                            prefix=prefix, group=group))
-                runs.setdefault(f"simulate {proto} ({n}{', ' + group if group else ''})",
-                                []).append(time.perf_counter() - t0)
+            for stage, s in simulate_study(data, seed=1).items():
+                runs.setdefault(stage, []).append(s)
             t0 = time.perf_counter()
             analyze(data, Path(tmp) / "report")
             runs.setdefault("analyze + report", []).append(time.perf_counter() - t0)

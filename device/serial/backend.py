@@ -483,6 +483,14 @@ class SerialDevice(HapticDevice):
         self._command(M.PlayStart(wid, q.size))
         return self._collect(wid, q.size / self._info.servo_rate_hz + 2.0, None, heartbeats)
 
+    def _take_events(self, timeout: float = 0.05) -> tuple[list, str | None]:
+        """Wait up to ``timeout`` [s] for events; take them all, with the gone reason."""
+        with self._cv:
+            self._cv.wait_for(lambda: self._events or self._gone is not None, timeout=timeout)
+            items = list(self._events)
+            self._events.clear()
+            return items, self._gone
+
     def _collect(self, wid: int, limit: float, on_progress, heartbeats: bool) -> WindowResult:
         rate = self._info.servo_rate_hz
         contacts: list[ContactEvent] = []
@@ -496,12 +504,7 @@ class SerialDevice(HapticDevice):
         next_progress = start + 0.1
         try:
             while done is None:
-                with self._cv:
-                    self._cv.wait_for(lambda: self._events or self._gone is not None,
-                                      timeout=0.05)
-                    items = list(self._events)
-                    self._events.clear()
-                    gone = self._gone
+                items, gone = self._take_events()
                 for e in items:
                     if isinstance(e, M.Contact) and e.window_id == wid:
                         contacts.append(ContactEvent(e.tick / rate, e.velocity_nm_s * 1e-9))
@@ -568,12 +571,7 @@ class SerialDevice(HapticDevice):
             got = 0
             deadline = time.monotonic() + 2.0 + n * 1e-5
             while got < n:
-                with self._cv:
-                    self._cv.wait_for(lambda: self._events or self._gone is not None,
-                                      timeout=0.05)
-                    items = list(self._events)
-                    self._events.clear()
-                    gone = self._gone
+                items, gone = self._take_events()
                 for e in items:
                     if isinstance(e, M.TraceBlock) and e.window_id == wid and e.channel == ch:
                         buf[e.start: e.start + e.n] = e.items
