@@ -26,14 +26,21 @@ rendering and they change.
 
 **Judging.** Each feature is perceived with Gaussian noise (``feature_noise`` in log
 units; a remembered reference is perceived once, when felt). The *distance* to it is the
-Euclidean distance of the features divided by per-feature spreads (``JND``). Realism is
-``max(0, 1 − d / D_MAX)`` with D_MAX = 12 JND units (linear: every virtual rendering is
-7–10 JNDs from a real surface, and a Gaussian or exponential curve would rate them all at
-the floor) mapped onto the protocol's scale through the person's own scale use:
-a gain in [0.7, 1.0] of the range, a bias N(0, 0.4²) scale points and rating noise
-N(0, 0.6²) points, rounded and clipped. The reference is what the protocol gives to
-compare with: the familiarization sample (realism), or the real block of the current
-material, tapped once per block (factorial).
+Euclidean distance of the features divided by per-feature spreads (``JND``).
+
+The distance becomes a position on the scale by the range principle (Parducci): the
+person anchors the scale on the nearest and farthest samples felt so far against the same
+reference — "most realistic" is the nearest, "least" the farthest — and places the
+current one linearly between them. Before the range is known, it is taken as
+``RANGE_PRIOR`` = 3 JND units wide around what has been felt (the first trial lands
+mid-scale). An absolute mapping (e.g. ``1 − d / 12``) put every aluminum rendering, 14–16
+JND from the real block, on the floor and every rubber rendering near the top: nobody uses
+a 1–10 scale that way when asked to rate eight sets against one block, and a study's
+ratings then carried no information about the sets. The position is mapped onto the
+protocol's scale through the person's own scale use: a gain in [0.7, 1.0] of the range, a
+bias N(0, 0.4²) scale points and rating noise N(0, 0.6²) points, rounded and clipped. The
+reference is what the protocol gives to compare with: the familiarization sample
+(realism), or the real block of the current material, tapped once per block (factorial).
 
 **Identification.** The person remembers rubber, wood and aluminum as the features of the
 real blocks of the factorial protocol (tapped before the session, as in the study's
@@ -65,8 +72,10 @@ HIGHPASS_HZ = 10.0
 #: Weights of the features when naming a material: mostly by the pitch of the vibration,
 #: then how it dies out; the jolt depends on how hard one taps, the stop on the spring.
 ID_WEIGHT = np.array([0.5, 0.25, 1.0, 0.5])
-#: Distance [JND units] at which nothing is left in common.
-D_MAX = 12.0
+#: Perceptual noise per feature [log units] by group; anyone else gets 0.15.
+FEATURE_NOISE = {"expert": 0.14, "novice": 0.25}
+#: Width of the range a person assumes before having felt it [JND units].
+RANGE_PRIOR = 3.0
 _VOID = np.full(4, np.nan)
 
 
@@ -140,10 +149,10 @@ class Person:
     feature_noise: float  # log units
 
     @classmethod
-    def draw(cls, rng: np.random.Generator) -> Person:
+    def draw(cls, rng: np.random.Generator, group: str = "") -> Person:
         return cls(tap_speed=float(np.clip(rng.normal(0.11, 0.02), 0.05, 0.2)), tap_sd=0.025,
                    gain=float(rng.uniform(0.7, 1.0)), bias=float(rng.normal(0.0, 0.4)),
-                   rating_noise=0.6, feature_noise=0.15)
+                   rating_noise=0.6, feature_noise=FEATURE_NOISE.get(group, 0.15))
 
 
 class SimulatedParticipant:
@@ -155,18 +164,22 @@ class SimulatedParticipant:
         The session's protocol (for the references to compare with).
     seed : int
         Session seed; the person's constants come from it alone.
+    group : str
+        ``expert`` (used to haptic devices: perceives with less noise), ``novice``
+        (more), or anything else (in between); see ``FEATURE_NOISE``.
     """
 
     name = "simulated"
 
-    def __init__(self, protocol, seed: int):
+    def __init__(self, protocol, seed: int, group: str = ""):
         self.protocol = protocol
         self._mem_rng = np.random.default_rng(np.random.SeedSequence([seed, 7919]))
-        self.person = Person.draw(self._mem_rng)
+        self.person = Person.draw(self._mem_rng, group)
         self.memory: dict[str, np.ndarray] = {}
         self._device = None
         self._familiar: list[np.ndarray] = []
         self._real_blocks = None
+        self._context: dict[str, list[float]] = {}  # distances felt so far, per reference
 
     # ---------------------------------------------------------------- tapping
     def before_window(self, trial, sample_id, device, rng) -> None:
@@ -196,37 +209,50 @@ class SimulatedParticipant:
             self.memory[key] = self._perceive(felt, self._mem_rng)
         return self.memory.get(key, _VOID)
 
-    def _reference(self, trial) -> np.ndarray:
+    def _reference(self, trial) -> tuple[str, np.ndarray]:
+        """The key and remembered features of what this trial is compared with."""
         sample = self.protocol.samples[trial.samples[0]]
         if sample.reference is not None:
             ref = self.protocol.samples[sample.reference]
-            return self._feel_scene(ref.id, ref.scene)
+            return ref.id, self._feel_scene(ref.id, ref.scene)
         if "reference" not in self.memory and self.protocol.phases:
             # a resumed session: tap the familiarization sample again before going on
             free = [p for p in self.protocol.phases if p.kind == "free"]
             if free:
                 ref = self.protocol.samples[free[0].samples[0]]
-                return self._feel_scene("reference", ref.scene)
-        return self.memory.get("reference", _VOID)
+                return "reference", self._feel_scene("reference", ref.scene)
+        return "reference", self.memory.get("reference", _VOID)
 
     def _perceive(self, f: np.ndarray, rng) -> np.ndarray:
         return f + rng.normal(0.0, self.person.feature_noise, f.shape)
 
     def distance(self, felt: np.ndarray, remembered: np.ndarray, rng) -> float:
         """JND-scaled distance between what is felt now (perceived with fresh noise) and
-        what is remembered (perceived once, when it was felt) [JND units]."""
+        what is remembered (perceived once, when it was felt) [JND units]; NaN when
+        nothing can be compared."""
         a = self._perceive(felt, rng)
         ok = np.isfinite(a) & np.isfinite(remembered)
         if not ok.any():
-            return D_MAX
+            return math.nan
         return math.sqrt(float(np.sum(((a[ok] - remembered[ok]) / JND[ok]) ** 2)))
 
-    def similarity(self, felt: np.ndarray, remembered: np.ndarray, rng) -> float:
-        """1 − d / D_MAX, at least 0 (see :meth:`distance`)."""
-        return max(0.0, 1.0 - self.distance(felt, remembered, rng) / D_MAX)
+    def position(self, key: str, d: float) -> float:
+        """Where distance ``d`` sits in the range felt so far against reference ``key``:
+        1 at the nearest, 0 at the farthest (range principle; see the module docstring).
+        A distance that cannot be computed (nothing felt) sits at the farthest."""
+        ctx = self._context.setdefault(key, [])
+        if math.isnan(d):
+            return 0.0
+        ctx.append(d)
+        lo, hi = min(ctx), max(ctx)
+        if hi - lo < RANGE_PRIOR:
+            mid = (lo + hi) / 2
+            lo, hi = mid - RANGE_PRIOR / 2, mid + RANGE_PRIOR / 2
+        return float(np.clip((hi - d) / (hi - lo), 0.0, 1.0))
 
     def rate(self, trial, scale, result, rng) -> tuple[int, float]:
-        s = self.similarity(felt_features(result), self._reference(trial), rng)
+        key, ref = self._reference(trial)
+        s = self.position(key, self.distance(felt_features(result), ref, rng))
         lo, hi = scale.min, scale.max
         mid, span = (lo + hi) / 2, hi - lo
         y = mid + self.person.gain * span * (s - 0.5) + self.person.bias \
@@ -257,6 +283,7 @@ class SimulatedParticipant:
     def debrief(self) -> str:
         p = self.person
         return (f"simulated participant (a rehearsal model, not a person): taps at "
-                f"{p.tap_speed:.3f} ± {p.tap_sd:.3f} m/s; rates by similarity of stop time, "
-                f"jolt, pitch and ring-down to the reference; scale gain {p.gain:.2f}, "
+                f"{p.tap_speed:.3f} ± {p.tap_sd:.3f} m/s; rates by the distance of stop time, "
+                f"jolt, pitch and ring-down from the reference, placed on the range felt so "
+                f"far; perception noise {p.feature_noise:.2f}; scale gain {p.gain:.2f}, "
                 f"bias {p.bias:+.2f}")

@@ -42,11 +42,44 @@ def test_a_changed_rendering_changes_the_rating():
     person = SimulatedParticipant(p, seed=3)
     ref = felt_features(_window(p.samples["wood"].scene, seed=1))
     person.memory["reference"] = ref
-    near = [person.similarity(felt_features(_window(p.samples["wood"].scene, seed=s)), ref,
-                              np.random.default_rng(s)) for s in range(3)]
-    far = [person.similarity(felt_features(_window(p.samples["soft_spring"].scene, seed=s)),
-                             ref, np.random.default_rng(s)) for s in range(3)]
-    assert min(near) > max(far) + 0.3
+    near = [person.distance(felt_features(_window(p.samples["wood"].scene, seed=s)), ref,
+                            np.random.default_rng(s)) for s in range(3)]
+    far = [person.distance(felt_features(_window(p.samples["soft_spring"].scene, seed=s)),
+                           ref, np.random.default_rng(s)) for s in range(3)]
+    assert max(near) + 3 < min(far)  # JND units
+    # on the scale (range principle): the first sample felt lands mid-scale; then the
+    # nearest so far is at the top, the farthest at the bottom
+    assert person.position("reference", far[0]) == 0.5
+    assert person.position("reference", near[0]) == 1.0
+    assert person.position("reference", far[1]) < 0.1
+    assert person.position("reference", near[1]) > 0.8
+
+
+def test_experts_identify_more_reliably_than_novices():
+    """Same surfaces felt, same remembered blocks: only the perceptual noise differs by group
+    (app.simulated.FEATURE_NOISE), so experts name the materials right more often (the
+    paper's Table 3: 88.9 % against 79.2 %)."""
+    from types import SimpleNamespace
+
+    p = load_protocol("identification")
+    order = ("wood", "aluminum", "rubber")
+    windows = [[_window(p.samples[s].scene, seed=10 * k + i) for i, s in enumerate(order)]
+               for k in range(3)]
+    trial = SimpleNamespace(samples=order)
+    score = {}
+    with open_device("sim", seed=0) as dev:
+        for group in ("expert", "novice"):
+            hits = 0
+            for person in range(40):
+                sp = SimulatedParticipant(p, seed=person, group=group)
+                sp._device = dev
+                for k, res in enumerate(windows):
+                    answer, _ = sp.identify(trial, p.answer.choices, res,
+                                            np.random.default_rng([person, k]))
+                    hits += list(answer) == list(order)
+            score[group] = hits / 120
+    assert score["expert"] > score["novice"] + 0.05, score
+    assert score["novice"] > 0.5, score  # chance is 1/6
 
 
 @pytest.fixture(scope="module")
@@ -97,15 +130,30 @@ def test_face_validity_identification(study):
     assert t["all"]["percent"] > 60 and t["all"]["p_binom"] < 1e-6
 
 
-def test_face_validity_factorial_wood(study):
-    """Wood: frequency is the parameter that matters most (as in the paper), and the best
-    set has the high frequency, toward the measured 592-Hz model. (Rubber and aluminum best
-    sets do not follow the paper here; see the issue note.)"""
+def test_face_validity_factorial(study):
+    """What emerges in every seed tried (1, 2, 3), as in the paper: for wood, frequency is
+    the parameter that matters most and its high level (toward the measured 592-Hz model)
+    is preferred, as is the higher slope; for aluminum, the higher slope (toward the
+    measured model's much larger amplitude) is preferred, significantly. What does not
+    emerge (aluminum's 300 Hz, rubber's direction) is explained in the README: the
+    simulated device's resonance, not the participant model."""
     from analysis.study import factorial
 
-    w = factorial(study)["wood"]
+    res = factorial(study)
+
+    def level_means(mat, factor):
+        return res[mat]["sets"].groupby(factor)["mean"].mean()
+
+    w = res["wood"]
     assert w["most_significant"] == "frequency" and w["most_significant_p"] < 0.05
-    assert w["best_set"]["frequency"] == "high"
+    assert level_means("wood", "frequency")["high"] > level_means("wood", "frequency")["low"]
+    assert level_means("wood", "slope")["high"] > level_means("wood", "slope")["low"]
+    al = res["aluminum"]["anova"].set_index("Source")
+    assert level_means("aluminum", "slope")["high"] > level_means("aluminum", "slope")["low"]
+    assert al.loc["slope", "p_unc"] < 0.05
+    # the range principle: no material's sets all sit on the floor or the ceiling
+    for mat in ("rubber", "wood", "aluminum"):
+        assert res[mat]["preflight"].empty, mat
 
 
 def test_simulate_is_reproducible(tmp_path):
