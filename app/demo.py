@@ -16,8 +16,9 @@ from pathlib import Path
 __all__ = ["run_demo", "simulate_study", "STUDY"]
 
 #: (protocol, participants, id prefix, group) of the demo study, as in the papers.
+#: Identification: 6 experts and 8 novices (Table 3: 18 and 24 answers of 3 each).
 STUDY = (("realism", 9, "R", ""), ("factorial", 9, "F", ""),
-         ("identification", 7, "IE", "expert"), ("identification", 7, "IN", "novice"))
+         ("identification", 6, "IE", "expert"), ("identification", 8, "IN", "novice"))
 
 
 class StudyStopped(RuntimeError):

@@ -56,12 +56,13 @@ class ScriptedResponder:
         return False  # one familiarization window
 
 
-def make_participant(name: str, protocol=None, seed: int = 0) -> Participant:
-    """``scripted`` (random answers) or ``simulated`` (see :mod:`app.simulated`)."""
+def make_participant(name: str, protocol=None, seed: int = 0, group: str = "") -> Participant:
+    """``scripted`` (random answers) or ``simulated`` (see :mod:`app.simulated`; ``group``
+    ``expert`` or ``novice`` sets how finely it perceives)."""
     if name == "scripted":
         return ScriptedResponder()
     if name == "simulated":
         from app.simulated import SimulatedParticipant
 
-        return SimulatedParticipant(protocol, seed)
+        return SimulatedParticipant(protocol, seed, group)
     raise ValueError(f"unknown responder {name!r}; available: scripted, simulated")

@@ -22,11 +22,11 @@ def _open(spec: str, seed: int):
 
 
 def _participant_ui(kind: str, responder: str, protocol, fullscreen: bool = False,
-                    seed: int = 0):
+                    seed: int = 0, group: str = ""):
     from app.participants import make_participant
 
     if kind == "none":
-        return make_participant(responder, protocol, seed)
+        return make_participant(responder, protocol, seed, group)
     if kind == "psychopy":
         from app.screen import PsychoPyScreen
 
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--seed must be >= 0, got {seed}")
     console = make_console(quiet=args.quiet)
     engine = SessionEngine(protocol, seed, participant, args.row)
-    ui = _participant_ui(args.ui, args.responder, protocol, args.fullscreen, seed)
+    ui = _participant_ui(args.ui, args.responder, protocol, args.fullscreen, seed, args.group)
     audio = _audio(args, args.device, console)
     with _open(args.device, seed) as dev:
         if args.ui == "psychopy":  # an operator is at the terminal: ready, pause, e-stop keys
@@ -160,7 +160,8 @@ def resume(args: argparse.Namespace) -> int:
                     "trials.torn.tsv): the attempt it belonged to will run again")
     spec = args.device or meta["device"]["spec"]
     ui_kind = args.ui or meta["ui"]
-    ui = _participant_ui(ui_kind, meta["responder"], protocol, False, meta["seed"])
+    ui = _participant_ui(ui_kind, meta["responder"], protocol, False, meta["seed"],
+                         meta.get("participant", {}).get("group", ""))
     audio = _audio(args, spec, console) if meta.get("audio") else None
     with _open(spec, meta["seed"]) as dev:
         if args.clear_fault and dev.fault is not None:
