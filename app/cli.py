@@ -261,8 +261,15 @@ def _power(args: argparse.Namespace) -> int:
     if args.pilot:
         from analysis import load_sessions
 
+        # the phase the study is analysed on: the last rated one (realism: testing; a
+        # demonstration phase is a first look, rated before the scale settles)
+        phase = [p.name for p in protocol.phases if p.kind == "rated"][-1]
         d = load_sessions(args.pilot)
-        d = d[d["valid"] & d["rating"].notna() & (d["protocol"] == protocol.name)]
+        d = d[d["valid"] & d["rating"].notna() & (d["protocol"] == protocol.name)
+              & (d["phase"] == phase)]
+        if d.empty:
+            raise UserError(f"--pilot {args.pilot}: no valid ratings of {protocol.name!r} "
+                            f"in phase {phase!r}")
         sd = variance_components(d)
     t = power_table(subjects, reps, args.effect, alpha=args.alpha, comparisons=comparisons,
                     experiments=args.experiments, **sd)

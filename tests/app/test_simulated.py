@@ -1,6 +1,7 @@
 """Simulated participants: ratings follow what is felt, studies are reproducible, and the
 papers' main findings emerge (or are listed in the issue note where they do not)."""
 
+import math
 import subprocess
 import sys
 from dataclasses import replace
@@ -83,7 +84,7 @@ def test_experts_identify_more_reliably_than_novices():
 
 
 @pytest.fixture(scope="module")
-def study(tmp_path_factory):
+def study_dir(tmp_path_factory):
     data = tmp_path_factory.mktemp("simstudy")
     for proto, n, prefix in (("realism", 9, "R"), ("identification", 14, "I"),
                              ("factorial", 9, "F")):
@@ -91,7 +92,12 @@ def study(tmp_path_factory):
                               "--data", str(data), "--prefix", prefix, "--traces", "none"],
                              capture_output=True, text=True, timeout=900)
         assert out.returncode == 0, out.stderr
-    return load_sessions(data)
+    return data
+
+
+@pytest.fixture(scope="module")
+def study(study_dir):
+    return load_sessions(study_dir)
 
 
 def test_face_validity_realism(study):
@@ -154,6 +160,55 @@ def test_face_validity_factorial(study):
     # the range principle: no material's sets all sit on the floor or the ceiling
     for mat in ("rubber", "wood", "aluminum"):
         assert res[mat]["preflight"].empty, mat
+
+
+def test_session_length_from_a_simulated_study(study_dir, study):
+    """`power --pilot` takes the SDs from the analysed (testing) phase of simulated
+    sessions, and the precision it predicts for the study's own size (9 participants, 3
+    repetitions) is the precision the study has: the median 95 % CI half-width of the 11
+    sample means, computed directly (t quantile × SD of participant means / √n)."""
+    import json
+
+    from analysis.power import variance_components
+
+    out = subprocess.run([*CLI, "power", "realism", "--pilot", str(study_dir), "--subjects",
+                          "9", "--reps", "3", "--json"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    testing = study[(study.protocol == "realism") & (study.phase == "testing") & study.valid]
+    vc = variance_components(testing)
+    assert got["sd_trial"] == pytest.approx(vc["sd_trial"])
+    assert got["sd_subject"] == pytest.approx(vc["sd_subject"])
+    predicted = got["rows"][0]["ci_halfwidth"]
+    observed = np.median([s["ci_high"] - s["mean"] for s in realism(study)["samples"]])
+    assert predicted == pytest.approx(observed, rel=0.25), (predicted, observed)
+
+
+def test_aluminum_300_hz_is_beyond_the_simulated_device():
+    """Why aluminum's 300-Hz sets lose to its 200-Hz ones (README): above the device's
+    ~130-Hz resonance the same commanded model is felt with well under half the jolt, and
+    both ring at the device's own frequency; compensating the response (the regularized
+    inverse of the identified model, as for the matched library) would need more than 3×
+    the force the current limit allows (3.0 N) at the mean tap speed."""
+    from device.matching.inversion import discretize, invert
+    from device.matching.sysid import identify
+    from device.scene import Ringing
+    from device.sim.backend import SimDevice
+
+    p = load_protocol("factorial")
+    low, high = (felt_features(_window(p.samples[s].scene)) for s in ("aluminum-LLL",
+                                                                      "aluminum-HLL"))
+    assert math.exp(high[1] - low[1]) < 0.5  # jolt ratio, 300 Hz against 200 Hz
+    assert abs(high[2] - low[2]) < math.log(1.2)  # felt pitch within one JND-ish step
+
+    dev = SimDevice(seed=20_260_001)
+    rate = dev.info.servo_rate_hz
+    dm = discretize(identify(dev).model, rate)
+    t = np.arange(int(0.1 * rate)) / rate
+    target = Ringing(-200.0, 60.0, 300.0).acceleration(t, 1.0)  # aluminum-HLL, per m/s
+    force = np.abs(invert(dm, target, "regularized").force).max() * 0.11  # N at 0.11 m/s
+    limit = dev.params.force_constant * dev.params.current_limit
+    assert force > 3 * limit, (force, limit)  # measured 12 N (the best set, A = −300: 17 N)
 
 
 def test_simulate_is_reproducible(tmp_path):
