@@ -25,7 +25,8 @@ Nothing here reads a sample's name: rename a sample and the ratings stay; change
 rendering and they change.
 
 **Judging.** Each feature is perceived with Gaussian noise (``feature_noise`` in log
-units; a remembered reference is perceived once, when felt). The *distance* to it is the
+units: 0.14 for experts, 0.25 for novices, 0.15 for anyone else — ``FEATURE_NOISE``;
+a remembered reference is perceived once, when felt). The *distance* to it is the
 Euclidean distance of the features divided by per-feature spreads (``JND``).
 
 The distance becomes a position on the scale by the range principle (Parducci): the
