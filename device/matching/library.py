@@ -289,7 +289,7 @@ def library_table(transient: LibraryTransient, sim_device) -> TransientTable:
                            "('path') nor its source sample's scene (load it through a protocol)")
     key = hashlib.sha256(json.dumps({
         "pipeline": PIPELINE_VERSION, "device": sim_device.params.to_dict(),
-        "hand": asdict(sim_device.hand), "source": transient.source_scene.to_dict(),
+        "hand": asdict(sim_device.nominal_hand), "source": transient.source_scene.to_dict(),
     }, sort_keys=True).encode()).hexdigest()[:16]
     path = cache_dir() / f"library-{transient.source}-{key}.npz"
     try:
@@ -301,7 +301,8 @@ def library_table(transient: LibraryTransient, sim_device) -> TransientTable:
 
 
 def _twin(sim_device):
-    """A fresh simulated device like ``sim_device`` (own seed and clock) for building."""
+    """A fresh simulated device like ``sim_device`` as it was set up (its nominal hand; own
+    seed and clock) for building."""
     from ..sim.backend import SimDevice
 
-    return SimDevice(device=sim_device.params, hand=sim_device.hand, seed=20_260_001)
+    return SimDevice(device=sim_device.params, hand=sim_device.nominal_hand, seed=20_260_001)

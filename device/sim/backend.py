@@ -118,6 +118,9 @@ class SimDevice(HapticDevice):
             dev = dev.with_rate(rate_hz)
         self.params = dev
         self.hand = hand or HandParams()
+        #: the hand the device was set up with: its identity and its transient libraries
+        #: belong to this one, whoever holds the stylus later (:meth:`set_hand`)
+        self.nominal_hand = self.hand
         self.tapper = tapper or Tapper()
         self.seed = int(seed)
         # independent streams, so switching sensor noise off does not change the taps
@@ -141,9 +144,7 @@ class SimDevice(HapticDevice):
             watchdog_s=dev.watchdog_s, encoder_resolution=dev.encoder_resolution,
             accel_range=dev.accel_range)
         self._vel_w = velocity_weights(dev)
-        # the hand's pull per intended position, velocity, acceleration (impedance + feedforward)
-        self._pull_gains = (self.hand.stiffness, self.hand.damping + dev.motor_damping,
-                            dev.motor_mass + dev.tip_mass + self.hand.mass)
+        self._pull_gains = self._hand_gains()
         self._cache: dict[Scene, CompiledScene] = {}
         self._scene: CompiledScene | None = None
         self._free_air: CompiledScene | None = None
@@ -159,6 +160,34 @@ class SimDevice(HapticDevice):
         self._estop_requested = False
         self._closed = False
         self._output_force = 0.0
+
+    def _hand_gains(self) -> tuple[float, float, float]:
+        """The hand's pull per intended position, velocity and acceleration (impedance +
+        feedforward of the moving mass and the device's friction)."""
+        dev, hand = self.params, self.hand
+        return (hand.stiffness, hand.damping + dev.motor_damping,
+                dev.motor_mass + dev.tip_mass + hand.mass)
+
+    def set_hand(self, hand: HandParams) -> None:
+        """Another hand on the stylus (another person, a firmer or looser grasp).
+
+        Takes effect from the next window; the loaded scene is reloaded (output off until
+        :meth:`home`). The serial number and the transient libraries stay those of
+        :attr:`nominal_hand`: a library is built once on a device and played to everyone,
+        as in the study.
+        """
+        self._check_open()
+        if not isinstance(hand, HandParams):
+            raise TypeError(f"set_hand expects HandParams, got {type(hand).__name__}")
+        if hand == self.hand:
+            return
+        self.hand = hand
+        self._pull_gains = self._hand_gains()
+        current = self._scene.scene if self._scene is not None else None
+        self._cache.clear()
+        self._free_air = None
+        if current is not None:
+            self.load_scene(current)
 
     @classmethod
     def from_spec(cls, arg: str | None = None, **options: Any) -> SimDevice:
