@@ -8,7 +8,11 @@ Model
 -----
 **Tapping.** Each person has their own intended tap speed, drawn once from the population
 N(0.11, 0.02²) m/s (SPEC §1 reports 0.11 ± 0.033 m/s over all taps) with a within-person
-SD of 0.025 m/s; the simulated device's hand taps with it (sim backend only).
+SD of 0.025 m/s; their own grasp, a factor exp(N(0, 0.2²)) (clipped to ±0.5 in the
+exponent) on the hand's stiffness and damping (a firmer grip is stiffer and more damped;
+the study asked for a consistent grasp, so the spread is modest); and their own rhythm, a
+factor U(0.6, 1.6) on the dwell and pause between taps. The simulated device's hand taps
+with them (sim backend only; over the serial link the emulator's hand keeps the defaults).
 
 **What is felt** (:func:`felt_features`), per contact, from the device's own traces and
 then the median over the window's taps (the first contact of each stroke):
@@ -148,12 +152,17 @@ class Person:
     bias: float  # scale points
     rating_noise: float  # scale points
     feature_noise: float  # log units
+    grasp: float = 1.0  # factor on the hand's stiffness and damping
+    rhythm: float = 1.0  # factor on the dwell and pause between taps
 
     @classmethod
     def draw(cls, rng: np.random.Generator, group: str = "") -> Person:
-        return cls(tap_speed=float(np.clip(rng.normal(0.11, 0.02), 0.05, 0.2)), tap_sd=0.025,
-                   gain=float(rng.uniform(0.7, 1.0)), bias=float(rng.normal(0.0, 0.4)),
-                   rating_noise=0.6, feature_noise=FEATURE_NOISE.get(group, 0.15))
+        person = cls(tap_speed=float(np.clip(rng.normal(0.11, 0.02), 0.05, 0.2)), tap_sd=0.025,
+                     gain=float(rng.uniform(0.7, 1.0)), bias=float(rng.normal(0.0, 0.4)),
+                     rating_noise=0.6, feature_noise=FEATURE_NOISE.get(group, 0.15))
+        # drawn last, so the constants above stay those of the same seed
+        return replace(person, grasp=float(np.exp(np.clip(rng.normal(0.0, 0.2), -0.5, 0.5))),
+                       rhythm=float(rng.uniform(0.6, 1.6)))
 
 
 class SimulatedParticipant:
@@ -185,9 +194,21 @@ class SimulatedParticipant:
     # ---------------------------------------------------------------- tapping
     def before_window(self, trial, sample_id, device, rng) -> None:
         self._device = device
+        self._hold(device)
+
+    def _hold(self, device) -> None:
+        """Take the stylus with this person's grasp and tapping (sim backend only)."""
+        p = self.person
+        if hasattr(device, "set_hand"):
+            nominal = device.nominal_hand
+            device.set_hand(replace(nominal, stiffness=nominal.stiffness * p.grasp,
+                                    damping=nominal.damping * p.grasp))
         if hasattr(device, "tapper"):
-            device.tapper = replace(device.tapper, velocity_mean=self.person.tap_speed,
-                                    velocity_sd=self.person.tap_sd)
+            base = type(device.tapper)()  # the population's rhythm, scaled by the person's
+            device.tapper = replace(device.tapper, velocity_mean=p.tap_speed,
+                                    velocity_sd=p.tap_sd,
+                                    dwell=tuple(x * p.rhythm for x in base.dwell),
+                                    pause=tuple(x * p.rhythm for x in base.pause))
 
     def keep_tapping(self) -> bool:
         return len(self._familiar) < 2  # two familiarization windows
@@ -204,6 +225,7 @@ class SimulatedParticipant:
         """Tap a reference (a real block beside the device) once and remember it."""
         if key not in self.memory and self._device is not None:
             dev = self._device
+            self._hold(dev)
             dev.load_scene(scene)
             dev.home()
             felt = felt_features(dev.run_window(3.0, timeout=30.0))

@@ -38,6 +38,27 @@ def test_features_follow_the_rendering_not_the_name():
     assert felt_features(_window(renamed)) == pytest.approx(f_spring)
 
 
+def test_each_person_holds_and_taps_the_stylus_their_own_way():
+    from device.sim.params import HandParams
+    from device.sim.tapper import Tapper
+
+    p = load_protocol("realism")
+    people = [SimulatedParticipant(p, seed=s) for s in (1, 2)]
+    held = []
+    with open_device("sim", seed=0) as dev:
+        dev.load_scene(p.samples["wood"].scene)
+        for person in people:
+            person.before_window(None, "wood", dev, None)
+            held.append((dev.hand, dev.tapper))
+        assert dev.nominal_hand == HandParams()
+    for person, (hand, tapper) in zip(people, held, strict=True):
+        g, r = person.person.grasp, person.person.rhythm
+        assert hand.stiffness == pytest.approx(300.0 * g) and hand.damping == pytest.approx(4 * g)
+        assert tapper.pause == pytest.approx(tuple(x * r for x in Tapper().pause))
+        assert tapper.velocity_mean == person.person.tap_speed
+    assert held[0][0] != held[1][0] and held[0][1].pause != held[1][1].pause
+
+
 def test_a_changed_rendering_changes_the_rating():
     p = load_protocol("realism")
     person = SimulatedParticipant(p, seed=3)
@@ -137,12 +158,12 @@ def test_face_validity_identification(study):
 
 
 def test_face_validity_factorial(study):
-    """What emerges in every seed tried (1, 2, 3), as in the paper: for wood, frequency is
-    the parameter that matters most and its high level (toward the measured 592-Hz model)
-    is preferred, as is the higher slope; for aluminum, the higher slope (toward the
-    measured model's much larger amplitude) is preferred, significantly. What does not
-    emerge (aluminum's 300 Hz, rubber's direction) is explained in the README: the
-    simulated device's resonance, not the participant model."""
+    """What emerges in every seed tried (1, 2, 3; p values below are the range over them):
+    for wood, frequency (p ≤ .006) and slope (p ≤ .048) matter and their high levels,
+    toward the measured 592-Hz, −1500-1/s model, are preferred — frequency matters most in
+    two seeds of three, as in the paper; for aluminum, the higher slope (toward the measured
+    model's far larger amplitude) is preferred (p ≤ .004). What does not emerge (aluminum's
+    300 Hz, rubber's direction) is explained in the README: mostly the simulated device."""
     from analysis.study import factorial
 
     res = factorial(study)
@@ -150,13 +171,13 @@ def test_face_validity_factorial(study):
     def level_means(mat, factor):
         return res[mat]["sets"].groupby(factor)["mean"].mean()
 
-    w = res["wood"]
-    assert w["most_significant"] == "frequency" and w["most_significant_p"] < 0.05
-    assert level_means("wood", "frequency")["high"] > level_means("wood", "frequency")["low"]
-    assert level_means("wood", "slope")["high"] > level_means("wood", "slope")["low"]
-    al = res["aluminum"]["anova"].set_index("Source")
-    assert level_means("aluminum", "slope")["high"] > level_means("aluminum", "slope")["low"]
-    assert al.loc["slope", "p_unc"] < 0.05
+    for mat, factors in (("wood", ("frequency", "slope")), ("aluminum", ("slope",))):
+        anova = res[mat]["anova"].set_index("Source")
+        for factor in factors:
+            means = level_means(mat, factor)
+            assert means["high"] > means["low"], (mat, factor)
+            assert anova.loc[factor, "p_unc"] < 0.05, (mat, factor)
+    assert res["wood"]["most_significant"] in ("frequency", "slope")
     # the range principle: no material's sets all sit on the floor or the ceiling
     for mat in ("rubber", "wood", "aluminum"):
         assert res[mat]["preflight"].empty, mat
@@ -165,8 +186,10 @@ def test_face_validity_factorial(study):
 def test_session_length_from_a_simulated_study(study_dir, study):
     """`power --pilot` takes the SDs from the analysed (testing) phase of simulated
     sessions, and the precision it predicts for the study's own size (9 participants, 3
-    repetitions) is the precision the study has: the median 95 % CI half-width of the 11
-    sample means, computed directly (t quantile × SD of participant means / √n)."""
+    repetitions) is close to the precision the study has: the median 95 % CI half-width of
+    the 11 sample means, computed directly (t quantile × SD of participant means / √n).
+    Measured: 0.434 predicted, 0.414 observed; the demo study's 0.37 against 0.44 shows the
+    model's limit (one variance for every sample), hence 25 %."""
     import json
 
     from analysis.power import variance_components
