@@ -89,11 +89,12 @@ def own_emulator():
 
 @pytest.fixture
 def emulator_factory():
-    """Start emulators on demand (``emulator_factory(seed)``); all are stopped afterwards."""
+    """Start emulators on demand (``emulator_factory(seed, *extra_args)``); all are stopped
+    afterwards."""
     started = []
 
-    def start(seed: int = 9) -> Emulated:
-        emu = start_emulator("--seed", str(seed))
+    def start(seed: int = 9, *extra: str) -> Emulated:
+        emu = start_emulator("--seed", str(seed), *extra)
         started.append(emu)
         return emu
 

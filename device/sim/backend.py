@@ -161,6 +161,13 @@ class SimDevice(HapticDevice):
         self._closed = False
         self._output_force = 0.0
 
+    @property
+    def _watchdog_device_s(self) -> float:
+        """The watchdog period in device time [s]. It is a wall-clock safety limit: a live
+        device paced at ``speed`` × real time lets ``speed`` × as much device time pass
+        (an emulator at ×3 otherwise tripped it between the host's heartbeats)."""
+        return self.params.watchdog_s * (self.speed if self.live else 1.0)
+
     def _hand_gains(self) -> tuple[float, float, float]:
         """The hand's pull per intended position, velocity and acceleration (impedance +
         feedforward of the moving mass and the device's friction)."""
@@ -413,7 +420,7 @@ class SimDevice(HapticDevice):
                 self.heartbeat()
             n1 = min(n + chunk, n_max)
             buf.ensure(n1)
-            wd = (self._t_heartbeat + dev.watchdog_s - tick0 * dt) / dt
+            wd = (self._t_heartbeat + self._watchdog_device_s - tick0 * dt) / dt
             zero_from = int(math.ceil(wd - 1e-9)) if wd < 2**62 else 2**62
             if self._estop_requested:
                 zero_from = min(zero_from, n)

@@ -63,8 +63,10 @@ def test_a_long_trace_upload_does_not_trip_the_watchdog(emulator_factory):
     """A 20-s window (the identification protocol's) has 200,000 samples per channel: the
     emulator is busy writing them for longer than the watchdog period while the host's
     heartbeats queue up unread. It must read them before judging the host silent (it used
-    to latch a watchdog fault right after such a window)."""
-    emu = emulator_factory(4)  # real time: ~25 s
+    to latch a watchdog fault right after such a window). The emulator runs at ×3 real
+    time, which also checks that its watchdog counts wall time: it used to count device
+    time and trip 0.8 s into the window, between two of the host's heartbeats."""
+    emu = emulator_factory(4, "--speed", "3")  # ~9 s
     with open_device(f"serial:{emu.port}") as dev:
         dev.load_scene(FIRM)
         dev.home()
