@@ -286,7 +286,15 @@ class Emulator:
         return Scene(name, surface_height=h, spring=b.spring, transient=TableTransient(table))
 
     def _start(self, target, msg) -> None:
-        self._worker = threading.Thread(target=target, args=(msg,), daemon=True)
+        def run() -> None:
+            try:
+                target(msg)
+            except Exception as exc:  # an emulator bug: stop, as a device that resets would
+                print(f"emulator: {type(exc).__name__} in {target.__name__}: {exc}; stopping",
+                      file=sys.stderr, flush=True)
+                self.stop()
+
+        self._worker = threading.Thread(target=run, daemon=True)
         self._worker.start()
 
     def _finish(self, window_id: int, res, t0_us: int) -> None:
@@ -314,7 +322,7 @@ class Emulator:
             nonlocal sent
             for c in partial.contacts[sent:]:
                 self.send(M.Contact(msg.window_id, int(round((c.t - tick0) * rate)),
-                                    int(round(c.velocity * 1e9))))
+                                    M.contact_velocity_nm_s(c.velocity)))
             sent = len(partial.contacts)
             if self.sim.fault is not None and self.sim.output_latched_off:
                 self._report_fault()  # output is latched off: the window is over
@@ -326,7 +334,7 @@ class Emulator:
                                   heartbeats=False)
         for c in res.contacts[sent:]:
             self.send(M.Contact(msg.window_id, int(round((c.t - tick0) * rate)),
-                                int(round(c.velocity * 1e9))))
+                                M.contact_velocity_nm_s(c.velocity)))
         self._finish(msg.window_id, res, t0_us)
 
     def _run_play(self, msg: M.PlayStart) -> None:

@@ -14,7 +14,7 @@ from typing import ClassVar
 from .framing import Frame, FramingError, encode_frame
 
 __all__ = ["MESSAGES", "encode", "decode", "Status", "Channel", "FaultCode", "State",
-           "MessageError"]
+           "MessageError", "contact_velocity_nm_s"]
 
 
 class MessageError(FramingError):
@@ -324,13 +324,21 @@ class Pong(Message):
 
 @dataclass(frozen=True)
 class Contact(Message):
-    """A contact: window tick [u32] and incoming speed [nm/s, i32; ±2.1 m/s]."""
+    """A contact: window tick [u32] and incoming speed [nm/s, i32; ±2.1 m/s, a device
+    saturates faster readings (:func:`contact_velocity_nm_s`)]."""
 
     TYPE = 0x90
     FMT = "HIi"
     window_id: int = 0
     tick: int = 0
     velocity_nm_s: int = 0
+
+
+def contact_velocity_nm_s(velocity: float) -> int:
+    """A contact's speed [m/s] as the wire's i32 nm/s, saturated at ±2.147 m/s. Such speeds
+    are not taps: the encoder's estimate during a hard block's ringing (aluminum's rebounds
+    read up to 3.7 m/s) would otherwise not be encodable."""
+    return int(max(-(2**31 - 1), min(2**31 - 1, round(velocity * 1e9))))
 
 
 @dataclass(frozen=True)

@@ -162,3 +162,41 @@ def test_a_port_that_does_not_speak_the_protocol():
 def test_missing_port_is_a_clear_error():
     with pytest.raises(DeviceGoneError, match="cannot open"):
         open_device("serial:/dev/does-not-exist")
+
+
+def test_an_emulator_that_fails_mid_window_goes_away_instead_of_hanging():
+    """A bug inside the emulator's window thread (it once could not encode a contact) used
+    to leave the host waiting for the whole window limit; now the emulator stops, like a
+    device that resets, and the host gets a typed error at once."""
+    import os
+    import threading
+
+    from device.serial.emulator import Emulator
+    from device.sim.backend import SimDevice
+
+    class Broken(SimDevice):
+        def run_window(self, *args, **kwargs):
+            raise RuntimeError("injected")
+
+    master, slave, path = open_pty()
+    emu = Emulator(Broken(seed=1), master)
+
+    def serve():  # as the emulator's main: serve, then close the port
+        try:
+            emu.serve_forever()
+        finally:
+            os.close(master)
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    try:
+        with open_device(f"serial:{path}") as dev:
+            dev.load_scene(FIRM)
+            dev.home()
+            # gone (the port closed), not DeviceTimeoutError after the 37-s window limit
+            with pytest.raises(DeviceGoneError):
+                dev.run_window(5.0, timeout=30.0)
+    finally:
+        emu.stop()
+        server.join(timeout=5)
+        os.close(slave)

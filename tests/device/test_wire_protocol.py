@@ -161,3 +161,12 @@ def test_fixed_point_encodings_keep_their_resolution():
     f = np.array([0.0005, -1.2344, 3.0])  # N → mN LSB
     q = np.round(f * 1000).astype("<i2")
     assert np.max(np.abs(q / 1000 - f)) <= 0.0005 + 1e-12
+
+
+@given(st.floats(-1e3, 1e3, allow_nan=False))
+def test_contact_speeds_beyond_the_wire_range_saturate_instead_of_failing(v):
+    """A hard block's ringing makes the encoder read rebounds faster than the i32 nm/s field
+    holds (aluminum: 3.7 m/s); the emulator used to crash encoding them."""
+    (frame,) = FrameDecoder().feed(M.encode(M.Contact(1, 5, M.contact_velocity_nm_s(v)), 3))
+    got = M.decode(frame).velocity_nm_s * 1e-9
+    assert got == pytest.approx(max(-2.147483647, min(2.147483647, v)), abs=1e-9)
