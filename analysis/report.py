@@ -46,8 +46,12 @@ METHODS = (
 SIMULATED_NOTE = (
     "These data come from simulated participants, not people: the ratings and answers "
     "are those of a rehearsal model (app/simulated.py) that judges features of the "
-    "simulated device's signals. The report rehearses the study's analysis; its findings "
-    "are not claims about human perception.")
+    "simulated device's signals. Each simulated person taps with their own speed, grasp "
+    "and rhythm, compares four felt features (stop time, jolt, onset pitch, ring-down) "
+    "with the reference it felt, and places that distance on the range of what it has "
+    "felt so far; the parameters are listed in app/simulated.py and the README. The "
+    "report rehearses the study's analysis; its findings are not claims about human "
+    "perception.")
 
 
 def _clean(v, where: str = "report"):

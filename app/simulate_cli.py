@@ -9,6 +9,7 @@ reproduced from S alone (each session.json records its own seed as usual).
 from __future__ import annotations
 
 import argparse
+import math
 import subprocess
 import sys
 import time
@@ -25,12 +26,14 @@ def session_seed(study_seed: int, k: int) -> int:
 
 
 @contextmanager
-def _device_spec(spec: str):
-    """``serial:emulator`` starts a device emulator on a pty for the run (real time)."""
+def _device_spec(spec: str, speed: float = 1.0):
+    """``serial:emulator`` starts a device emulator on a pty for the run, paced at ``speed``
+    × real time."""
     if spec != "serial:emulator":
         yield spec
         return
-    proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate"],
+    proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", "--speed",
+                             repr(float(speed))],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         port = proc.stdout.readline().strip()
@@ -49,8 +52,10 @@ def simulate(args: argparse.Namespace) -> int:
         raise ValueError(f"--participants must be at least 1, got {args.participants}")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if not (args.speed > 0 and math.isfinite(args.speed)):
+        raise ValueError(f"--speed must be a finite number > 0, got {args.speed}")
     t0 = time.perf_counter()
-    with _device_spec(args.device) as spec:
+    with _device_spec(args.device, args.speed) as spec:
         for k in range(1, args.participants + 1):
             pid = f"{args.prefix}{k:02d}"
             run_args = argparse.Namespace(
@@ -73,7 +78,9 @@ def add_parser(sub, func) -> None:
     p.add_argument("--seed", type=int, default=0, help="study seed (session seeds derive from it)")
     p.add_argument("--data", default="data", help="data folder (default ./data)")
     p.add_argument("--device", default="sim",
-                   help="sim, sim:RATE, serial:PORT or serial:emulator (real time)")
+                   help="sim, sim:RATE, serial:PORT or serial:emulator (paced by --speed)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="serial:emulator only: device seconds per wall second (default 1)")
     p.add_argument("--traces", choices=("full", "contacts", "none"), default="contacts")
     p.add_argument("--prefix", default="sim", help="participant ids are PREFIX01, PREFIX02, …")
     p.add_argument("--group", default="", help="group label of these participants")
