@@ -39,7 +39,8 @@ def simulate_study(data: str | Path, seed: int) -> dict[str, float]:
               file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         rc = simulate(argparse.Namespace(protocol=protocol, participants=n, seed=seed * 10 + i,
-                                         data=str(data), device="sim", traces="contacts",
+                                         data=str(data), device="sim", speed=1.0,
+                                         traces="contacts",
                                          prefix=prefix, group=group))
         if rc != 0:
             raise StudyStopped(rc)
