@@ -134,7 +134,8 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
         f = res["factorial"]
         report["factorial"] = f if isinstance(f, str) else {
             m: {"anova": v["anova"], "most_significant": v["most_significant"],
-                "best_set": v["best_set"], "sets": v["sets"], "exclusions": v["preflight"],
+                "best_set": v["best_set"], "main_effects": v["main_effects"],
+                "sets": v["sets"], "exclusions": v["preflight"],
                 "n_subjects": v["n_subjects"]} for m, v in f.items()}
     if "identification" in res:
         i = res["identification"]
@@ -218,6 +219,8 @@ def _markdown(rep: dict) -> str:
             out.append("### Best set per material (cf. the paper's Table 2)\n")
             out.append(_table(rows))
             for m, v in f.items():
+                out.append(f"\n### {m}: preferred level of each parameter (mean z)\n")
+                out.append(_table(v["main_effects"]))
                 out.append(f"\n### {m}: 2×2×2 ANOVA on z-scores\n")
                 out.append(_table(v["anova"]))
     if "identification" in rep:

@@ -115,7 +115,8 @@ FACTORS = ("frequency", "decay", "slope")
 
 def factorial(data: pd.DataFrame) -> dict:
     """Factorial study: per material, a 2×2×2 within-subject ANOVA on ratings z-scored per
-    subject, the most significant parameter, and the best set."""
+    subject, the most significant parameter, each parameter's preferred level (main
+    effects), and the best set."""
     d = _rated(data, "factorial")
     d["rating_z"] = zscore_by_subject(d, "rating", SUBJECT)
     out = {}
@@ -126,8 +127,19 @@ def factorial(data: pd.DataFrame) -> dict:
         means = (g.groupby(["sample", *FACTORS], observed=True)["rating_z"]
                  .agg(["mean", "count"]).reset_index().sort_values("mean", ascending=False))
         best = means.iloc[0]
+        # each factor's levels: a participant's mean z over the four sets at that level,
+        # averaged over participants (its 2-level F test is the paired t test of these)
+        p_of = mains.set_index("Source")["p_unc"]
+        effects = []
+        for f in FACTORS:
+            lv = g.groupby([SUBJECT, f], observed=True)["rating_z"].mean().unstack(f)
+            lo, hi = float(lv["low"].mean()), float(lv["high"].mean())
+            effects.append({"factor": f, "mean_z_low": lo, "mean_z_high": hi,
+                            "difference": hi - lo, "p_unc": float(p_of[f]),
+                            "preferred": "high" if hi > lo else "low"})
         out[str(material)] = {
             "anova": anova, "most_significant": str(most["Source"]),
+            "main_effects": pd.DataFrame(effects),
             "most_significant_p": float(most["p_unc"]),
             "best_set": {"sample": str(best["sample"]), "mean_z": float(best["mean"]),
                          **{f: str(best[f]) for f in FACTORS}},

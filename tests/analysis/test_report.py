@@ -58,6 +58,7 @@ def test_report_structure_and_numbers(study, tmp_path):
         assert f["most_significant"] in ("frequency", "decay", "slope")
         assert set(f["best_set"]) >= {"frequency", "decay", "slope", "sample"}
         assert len(f["anova"]) == 7 and all("DF_err" in row for row in f["anova"])
+        assert [e["factor"] for e in f["main_effects"]] == ["frequency", "decay", "slope"]
     t = {row["scope"]: row for row in rep["identification"]["table"]}
     assert t["all"]["n"] == 9 and "last repetition" in t and "group expert" in t
     assert rep["device"]["n_taps"] > 0 and 0.05 < rep["device"]["velocity_mean"] < 0.2

@@ -218,3 +218,32 @@ def test_mauchly_is_not_reported_when_it_is_undefined():
     # ε_GG is still defined and bounded by 1/(k − 1) ≤ ε ≤ 1
     assert 1 / 3 <= a.loc[0, "eps_gg"] <= 1 and np.isfinite(a.loc[0, "p_gg"])
 
+
+
+def test_factorial_main_effects_match_a_hand_computation():
+    """Each parameter's preferred level: per participant, the mean z (population SD, as the
+    study) over the four sets at a level; then over participants. For a 2-level factor the
+    ANOVA's p equals the paired t-test on those per-participant means (scipy ttest_rel)."""
+    import itertools
+
+    from analysis.study import factorial
+
+    rng = np.random.default_rng(3)
+    rows = []
+    for s in range(6):
+        for f, d, a in itertools.product(("low", "high"), repeat=3):
+            r = 5 + 2 * (f == "high") - 1 * (a == "high") + rng.integers(-1, 2) + s % 2
+            rows.append({"participant": f"P{s}", "protocol": "factorial", "valid": True,
+                         "phase": "rating", "block": "wood", "sample": f"wood-{f}{d}{a}",
+                         "frequency": f, "decay": d, "slope": a, "rating": float(r)})
+    data = pd.DataFrame(rows)
+    eff = factorial(data)["wood"]["main_effects"].set_index("factor")
+    # by hand with numpy
+    z = data.groupby("participant")["rating"].transform(lambda x: (x - x.mean()) / x.std(ddof=0))
+    for factor in ("frequency", "decay", "slope"):
+        per = data.assign(z=z).groupby(["participant", factor])["z"].mean().unstack()
+        assert eff.loc[factor, "mean_z_high"] == pytest.approx(per["high"].mean())
+        assert eff.loc[factor, "difference"] == pytest.approx((per["high"] - per["low"]).mean())
+        assert eff.loc[factor, "p_unc"] == pytest.approx(
+            stats.ttest_rel(per["high"], per["low"]).pvalue, rel=1e-6)
+    assert eff.loc["frequency", "preferred"] == "high" and eff.loc["slope", "preferred"] == "low"
