@@ -14,14 +14,15 @@ the study asked for a consistent grasp, so the spread is modest); and their own 
 factor U(0.6, 1.6) on the dwell and pause between taps. The simulated device's hand taps
 with them (sim backend only; over the serial link the emulator's hand keeps the defaults).
 
-**What is felt** (:func:`felt_features`), per contact, from the device's own traces and
-then the median over the window's taps (the first contact of each stroke):
+**What is felt** (:func:`felt_features`), per contact, from the device's own traces (the
+acceleration high-passed at ``HIGHPASS_HZ`` = 10 Hz: below that the hand feels a push, not
+a vibration) and then the median over the window's taps (the first contact of each
+stroke):
 
 ``stop``   log of the time from contact until the stylus stops [s] (how abruptly it stops);
 ``jolt``   log of the peak |acceleration| in the first 60 ms per incoming speed [1/s];
 ``pitch``  the spectral centroid of the acceleration's onset (first 30 ms, weighted by
-           exp(−t / 10 ms)) on a log-frequency
-           axis, 30–1500 Hz (below that the hand feels a push, not a vibration) [log Hz];
+           exp(−t / 10 ms)) on a log-frequency axis, 10–1500 Hz [log Hz];
 ``ring``   log of the ratio of the RMS acceleration in 0–15 ms to that in 15–45 ms
            (how quickly the vibration dies out).
 
