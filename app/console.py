@@ -74,7 +74,8 @@ class KeyConsole(PlainConsole):
         tty.setcbreak(self._fd)
         self._stop = threading.Event()
         self._cv = threading.Condition()
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
         self.say("operator keys: r ready · p pause · e E-STOP · q abort & save · s skip · "
                  "u re-queue")
 
@@ -82,10 +83,13 @@ class KeyConsole(PlainConsole):
         import select
 
         while not self._stop.is_set():
-            r, _, _ = select.select([self._fd], [], [], 0.1)
-            if not r:
-                continue
-            ch = os.read(self._fd, 1).decode("utf-8", "ignore").lower()  # not the text buffer
+            try:
+                r, _, _ = select.select([self._fd], [], [], 0.1)
+                if not r:
+                    continue
+                ch = os.read(self._fd, 1).decode("utf-8", "ignore").lower()  # not the buffer
+            except (OSError, ValueError):  # the terminal went away: nobody is at the keys
+                return
             action = self.KEYS.get(ch)
             if action == "estop":  # at once, from this thread: never queued behind a trial
                 try:
@@ -124,6 +128,7 @@ class KeyConsole(PlainConsole):
         import termios
 
         self._stop.set()
+        self._reader.join(timeout=1.0)  # it wakes every 0.1 s; never read a closed terminal
         termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
 
 

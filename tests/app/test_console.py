@@ -11,6 +11,10 @@ import pytest
 from app.console import KeyConsole
 from device import Scene, open_device
 
+# the key reader is a thread: an exception in it (it once read a closed terminal after
+# close()) fails these tests instead of becoming a warning on the next one
+pytestmark = pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")
+
 
 @pytest.fixture
 def tty_stdin(monkeypatch):
