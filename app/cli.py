@@ -255,6 +255,10 @@ def _power(args: argparse.Namespace) -> int:
     if not subjects or min(subjects) < 2 or not reps or min(reps) < 1:
         raise UserError("need at least 2 subjects and 1 repetition")
     protocol = _load_protocol(args.protocol)
+    rated = [p.name for p in protocol.phases if p.kind == "rated"]
+    if not rated:
+        raise UserError(f"power: protocol {protocol.name!r} has no rated phase; power and "
+                        "precision are computed for rating studies")
     comparisons = math.comb(len([s for s in protocol.samples.values() if s.rated]), 2)
     sd = {"sd_trial": args.sd_trial, "sd_interaction": args.sd_interaction,
           "sd_subject": args.sd_subject}
@@ -263,7 +267,7 @@ def _power(args: argparse.Namespace) -> int:
 
         # the phase the study is analysed on: the last rated one (realism: testing; a
         # demonstration phase is a first look, rated before the scale settles)
-        phase = [p.name for p in protocol.phases if p.kind == "rated"][-1]
+        phase = rated[-1]
         d = load_sessions(args.pilot)
         d = d[d["valid"] & d["rating"].notna() & (d["protocol"] == protocol.name)
               & (d["phase"] == phase)]

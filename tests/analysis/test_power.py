@@ -59,6 +59,9 @@ def test_power_cli():
     bad = subprocess.run([sys.executable, "-m", "app", "power", "realism", "--subjects", "x"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "--subjects" in bad.stderr
+    unrated = subprocess.run([sys.executable, "-m", "app", "power", "identification"],
+                             capture_output=True, text=True)
+    assert unrated.returncode == 2 and "no rated phase" in unrated.stderr
 
 
 def test_variance_components_recover_known_sds():
