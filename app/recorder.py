@@ -16,12 +16,13 @@ from __future__ import annotations
 import io
 import json
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from device.fileio import atomic_write  # the recorder's durable write (re-exported)
 
 __all__ = ["COLUMNS", "SessionFiles", "TrialsFileError", "read_trials", "new_session_dir",
            "atomic_write", "TornLine"]
@@ -42,29 +43,6 @@ class TornLine:
 
     line: int
     text: str
-
-
-def atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically.
-
-    Temporary file in the same folder, fsync, rename over the target, fsync the folder.
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    dfd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(dfd)
-    finally:
-        os.close(dfd)
 
 
 def new_session_dir(data: Path, participant: str) -> tuple[Path, int]:

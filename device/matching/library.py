@@ -25,7 +25,6 @@ import hashlib
 import io
 import json
 import os
-import tempfile
 import zipfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -35,6 +34,7 @@ import numpy as np
 
 from ..base import DeviceInfo
 from ..errors import DeviceError
+from ..fileio import atomic_write
 from ..scene import LibraryTransient, Scene, TransientTable
 from .inversion import METHODS, discretize, invert
 from .sysid import TFModel, identify
@@ -97,22 +97,13 @@ class TransientLibrary:
 
     # ---------------------------------------------------------------- file
     def save(self, path: str | Path) -> Path:
-        """Write atomically (temporary file, fsync, rename)."""
+        """Write atomically (:func:`device.fileio.atomic_write`)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         buf = io.BytesIO()
         np.savez(buf, velocities=self.velocities.astype("<f8"), forces=self.forces.astype("<f8"),
                  meta_json=np.array(_canonical(self.meta)), sha256=np.array(self.sha256))
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(buf.getvalue())
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        atomic_write(path, buf.getvalue())
         return path
 
     @classmethod
