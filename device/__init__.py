@@ -4,8 +4,16 @@ Importing this package does no I/O and imports no backend; ``open_device`` impor
 the backend it is asked for.
 """
 
-from .base import DeviceInfo, HapticDevice, backends, open_device, register_backend
-from .errors import DeviceError, DeviceFaultError, SceneError, UnknownBackendError
+from .base import DeviceInfo, HapticDevice, SimulatedHand, backends, open_device, register_backend
+from .codes import Blend, SceneKind
+from .errors import (
+    DeviceError,
+    DeviceFaultError,
+    DeviceSpecError,
+    HapticlabError,
+    SceneError,
+    UnknownBackendError,
+)
 from .events import (
     TRACE_CHANNELS,
     ContactEvent,
@@ -30,9 +38,14 @@ from .scene import (
 
 __all__ = [
     "AccelSinusoid",
+    "Blend",
+    "HapticlabError",
+    "SceneKind",
+    "SimulatedHand",
     "ContactEvent",
     "DeviceError",
     "DeviceFaultError",
+    "DeviceSpecError",
     "DeviceInfo",
     "FaultEvent",
     "Flags",

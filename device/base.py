@@ -9,66 +9,53 @@ backend's heavy imports happen only when it is opened.
 from __future__ import annotations
 
 import importlib
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
-from .errors import UnknownBackendError
-from .events import FaultEvent, WindowResult
-from .scene import Scene
+import numpy as np
 
-__all__ = ["DeviceInfo", "HapticDevice", "register_backend", "open_device", "backends"]
+from .errors import DeviceError, DeviceFaultError, UnknownBackendError
+from .events import FaultEvent, WindowResult
+from .info import DeviceInfo
+from .scene import Scene, Transient, TransientTable
+
+__all__ = ["DeviceInfo", "HapticDevice", "SimulatedHand", "register_backend", "open_device",
+           "backends"]
 
 
 @dataclass(frozen=True)
-class DeviceInfo:
-    """What a device says about itself (the handshake of a real device).
+class SimulatedHand:
+    """How a simulated person holds and taps the stylus of a simulated device.
+
+    Only a simulated device has a simulated hand (:meth:`HapticDevice.set_simulated_hand`);
+    on hardware a person holds the stylus and this is ignored.
 
     Attributes
     ----------
-    backend : str
-        Registered backend name.
-    model, serial_number, firmware : str
-        Identification.
-    servo_rate_hz : float [Hz]
-        Servo and sampling rate.
-    current_limit : float [A]
-        Amplifier current limit; commands above it are clamped and reported.
-    force_constant : float [N/A]
-        Force at the stylus tip per ampere.
-    effective_mass : float [kg]
-        Moving mass of the device at the tip (without the hand); scales
-        acceleration-specified transients into force.
-    watchdog_s : float [s]
-        Host-silence period after which output is zeroed and a fault latched.
-    encoder_resolution : float [m]
-        Position quantum at the tip.
-    accel_range : float [m/s²]
-        Accelerometer full scale (±).
+    grasp : float [1]
+        Factor on the hand's stiffness and damping (a firmer grip is stiffer and more damped).
+    tap_speed, tap_speed_sd : float [m/s]
+        Mean and SD of the person's intended tap speeds.
+    rhythm : float [1]
+        Factor on the dwell and pause between taps.
     """
 
-    backend: str
-    model: str
-    serial_number: str
-    firmware: str
-    servo_rate_hz: float
-    current_limit: float
-    force_constant: float
-    effective_mass: float
-    watchdog_s: float
-    encoder_resolution: float
-    accel_range: float
+    grasp: float = 1.0
+    tap_speed: float = 0.11
+    tap_speed_sd: float = 0.033
+    rhythm: float = 1.0
 
-    @property
-    def max_force(self) -> float:
-        """Largest force the amplifier can deliver [N]."""
-        return self.current_limit * self.force_constant
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["max_force"] = self.max_force
-        return d
+    def __post_init__(self) -> None:
+        for name in ("grasp", "tap_speed", "rhythm"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"simulated hand: {name} must be finite and > 0, got {v!r}")
+        if not (math.isfinite(self.tap_speed_sd) and self.tap_speed_sd >= 0):
+            raise ValueError(f"simulated hand: tap_speed_sd must be finite and >= 0, got "
+                             f"{self.tap_speed_sd!r}")
 
 
 class HapticDevice(ABC):
@@ -79,7 +66,20 @@ class HapticDevice(ABC):
     The life of a trial: :meth:`load_scene` → :meth:`home` → :meth:`run_window`
     (events and traces in a :class:`~device.events.WindowResult`). A latched fault
     (:meth:`estop`, watchdog) keeps output at zero until :meth:`clear_fault`.
+
+    The public methods are templates (in the manner of python-can's ``BusABC``): they do
+    the checks every backend shares once — device open, no latched fault, a scene loaded
+    and homed, arguments finite and in range — turn a scene's transient into the table
+    this device plays (:func:`device.render.transient_table`), and call the backend's
+    ``_load_scene``, ``_home``, ``_run_window`` and ``_play_force``. A backend renders
+    tables; it never builds them.
     """
+
+    def __init__(self) -> None:
+        self._closed = False
+        self._loaded: Scene | None = None
+        self._homed = False
+        self._tables: dict[Transient, TransientTable] = {}
 
     # ---------------------------------------------------------------- identity
     @property
@@ -87,16 +87,58 @@ class HapticDevice(ABC):
     def info(self) -> DeviceInfo:
         """Static description of the device."""
 
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has run."""
+        return self._closed
+
+    @property
+    def scene(self) -> Scene | None:
+        """The scene loaded last (None before any)."""
+        return self._loaded
+
     # ----------------------------------------------------------------- control
-    @abstractmethod
     def load_scene(self, scene: Scene) -> None:
-        """Prepare the device to render ``scene`` (uploads only what the scene needs)."""
+        """Prepare the device to render ``scene`` (uploads only what the scene needs).
 
-    @abstractmethod
-    def home(self, clearance: float = 0.02) -> None:
-        """Move the stylus to rest ``clearance`` [m] above the surface and enable output."""
+        Raises
+        ------
+        TypeError
+            ``scene`` is not a :class:`~device.scene.Scene`.
+        SceneError
+            The scene's transient cannot be played on this device (e.g. no library built
+            on it).
+        """
+        self._check_open()
+        if not isinstance(scene, Scene):
+            raise TypeError(f"load_scene expects a device.Scene, got {type(scene).__name__}")
+        table = None
+        if scene.transient is not None:
+            table = self._tables.get(scene.transient)
+            if table is None:
+                from .render import transient_table
 
-    @abstractmethod
+                table = self._tables[scene.transient] = transient_table(scene.transient,
+                                                                        self.info)
+        self._homed = False
+        self._load_scene(scene, table)
+        self._loaded = scene
+
+    def home(self, clearance: float | None = None) -> None:
+        """Move the stylus to rest ``clearance`` [m] above the surface (None: the backend's
+        default) and enable output with a ramp."""
+        self._check_open()
+        if self._loaded is None:
+            raise DeviceError("load a scene before homing")
+        self._check_fault()
+        if clearance is not None:
+            c = float(clearance)
+            if not (math.isfinite(c) and c > 0):
+                raise ValueError(f"home clearance must be finite and > 0 m, got {clearance!r}")
+            clearance = c
+        self._home(clearance)
+        self._homed = True
+
     def run_window(self, duration: float = 5.0, *, from_first_contact: bool = True,
                    timeout: float = 30.0,
                    on_progress: Callable[[float, WindowResult], None] | None = None,
@@ -116,8 +158,16 @@ class HapticDevice(ABC):
             Keep the host heartbeat going during the window (default). False makes the
             host go silent, which trips the watchdog: the device-safety test.
         """
+        self._check_open()
+        self._check_fault()
+        if self._loaded is None or not self._homed:
+            raise DeviceError("load a scene and home the device before running a window")
+        for name, v in (("duration", duration), ("timeout", timeout)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"window {name} must be finite and > 0 s, got {v!r}")
+        return self._run_window(float(duration), bool(from_first_contact), float(timeout),
+                                on_progress, bool(heartbeats))
 
-    @abstractmethod
     def play_force(self, force, *, heartbeats: bool = True) -> WindowResult:
         """Play an open-loop force command [N per servo tick] while the hand holds still.
 
@@ -125,18 +175,96 @@ class HapticDevice(ABC):
         current clamp. Used for system identification (swept sines) and for checking
         transients. Home again before the next tapping window.
         """
+        self._check_open()
+        self._check_fault()
+        f = np.ascontiguousarray(force, dtype=float).reshape(-1)
+        if f.size == 0 or not np.all(np.isfinite(f)):
+            raise ValueError("force command must be a non-empty array of finite values [N]")
+        self._homed = False
+        return self._play_force(f, bool(heartbeats))
+
+    def estop(self) -> None:
+        """Latched emergency stop: output to zero now and until :meth:`clear_fault`."""
+        self._homed = False
+        self._estop()
+
+    def clear_fault(self) -> None:
+        """Clear a latched fault; output resumes (ramped) at the next :meth:`home`."""
+        self._check_open()
+        self._homed = False
+        self._clear_fault()
+
+    def zero(self) -> None:
+        """Command zero output immediately (not latched); home again to enable."""
+        self._homed = False
+        self._zero()
+
+    def close(self) -> None:
+        """Zero output and release the device. Idempotent."""
+        if self._closed:
+            return
+        try:
+            self._close()
+        finally:
+            self._closed = True
+            self._homed = False
+
+    # ------------------------------------------------- optional, with defaults
+    def reseed(self, entropy) -> None:
+        """Restart the device's own randomness from ``entropy`` (a simulated device's
+        tapping hand and sensor noise), so an attempt repeats exactly. Hardware has none:
+        the default does nothing."""
+        return None
+
+    def set_simulated_hand(self, hand: SimulatedHand) -> bool:
+        """Hold the stylus with a simulated person's hand; True when the device has a
+        simulated hand (the simulated device), False otherwise (hardware: a person holds
+        it). Takes effect from the next window."""
+        return False
+
+    def link_stats(self) -> dict:
+        """Statistics of the link to the device (frames, errors, round trips); empty for a
+        device without one."""
+        return {}
+
+    # ------------------------------------------------------ backend interface
+    @abstractmethod
+    def _load_scene(self, scene: Scene, table: TransientTable | None) -> None:
+        """Prepare ``scene``; ``table`` is its transient as this device plays it (None for a
+        spring or a real sample)."""
+
+    @abstractmethod
+    def _home(self, clearance: float | None) -> None:
+        """Home above the loaded scene's surface (``clearance`` checked, or None)."""
+
+    @abstractmethod
+    def _run_window(self, duration: float, from_first_contact: bool, timeout: float,
+                    on_progress, heartbeats: bool) -> WindowResult:
+        """Run one window (arguments checked)."""
+
+    @abstractmethod
+    def _play_force(self, force: np.ndarray, heartbeats: bool) -> WindowResult:
+        """Play a checked force array [N per tick] open loop in free air."""
+
+    @abstractmethod
+    def _estop(self) -> None:
+        """Zero output now and latch an e-stop fault."""
+
+    @abstractmethod
+    def _clear_fault(self) -> None:
+        """Clear the latched fault (output stays off until the next home)."""
+
+    @abstractmethod
+    def _zero(self) -> None:
+        """Zero output now (not latched)."""
+
+    @abstractmethod
+    def _close(self) -> None:
+        """Zero output and release the device."""
 
     @abstractmethod
     def heartbeat(self) -> None:
         """Tell the device the host is alive (resets the watchdog)."""
-
-    @abstractmethod
-    def estop(self) -> None:
-        """Latched emergency stop: output to zero now and until :meth:`clear_fault`."""
-
-    @abstractmethod
-    def clear_fault(self) -> None:
-        """Clear a latched fault; output resumes (ramped) at the next :meth:`home`."""
 
     @property
     @abstractmethod
@@ -148,13 +276,15 @@ class HapticDevice(ABC):
     def output_force(self) -> float:
         """Force [N] the device is commanding right now (0 when idle, zeroed or closed)."""
 
-    @abstractmethod
-    def zero(self) -> None:
-        """Command zero output immediately (not latched)."""
+    # ----------------------------------------------------------- shared checks
+    def _check_open(self) -> None:
+        if self._closed:
+            raise DeviceError("device is closed")
 
-    @abstractmethod
-    def close(self) -> None:
-        """Zero output and release the device. Idempotent."""
+    def _check_fault(self) -> None:
+        f = self.fault
+        if f is not None:
+            raise DeviceFaultError(f"fault latched ({f.code}): clear it first")
 
     # ----------------------------------------------------------- conveniences
     def __enter__(self) -> HapticDevice:

@@ -18,6 +18,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, ClassVar
 
+from .codes import Blend
 from .errors import SceneError
 
 __all__ = [
@@ -36,6 +37,7 @@ __all__ = [
     "AccelSinusoid",
     "register_transient",
     "transient_kinds",
+    "unknown_key",
 ]
 
 
@@ -43,15 +45,15 @@ def _finite(where: str, name: str, value: Any, *, minimum: float | None = None,
             strict: bool = False, maximum: float | None = None) -> float:
     """Return ``value`` as a float after checking it is a finite number in range."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{where}: field '{name}' must be a number, got {value!r}", name)
+        raise SceneError(f"must be a number, got {value!r}", name, where=where)
     v = float(value)
     if not math.isfinite(v):
-        raise SceneError(f"{where}: field '{name}' must be finite, got {value!r}", name)
+        raise SceneError(f"must be finite, got {value!r}", name, where=where)
     if minimum is not None and (v <= minimum if strict else v < minimum):
         op = ">" if strict else ">="
-        raise SceneError(f"{where}: field '{name}' must be {op} {minimum:g}, got {v:g}", name)
+        raise SceneError(f"must be {op} {minimum:g}, got {v:g}", name, where=where)
     if maximum is not None and v > maximum:
-        raise SceneError(f"{where}: field '{name}' must be <= {maximum:g}, got {v:g}", name)
+        raise SceneError(f"must be <= {maximum:g}, got {v:g}", name, where=where)
     return v
 
 
@@ -69,20 +71,23 @@ def _set_checked(obj: Any, where: str, **rules: dict[str, Any]) -> None:
         object.__setattr__(obj, name, _finite(where, name, getattr(obj, name), **rule))
 
 
-def _check_keys(where: str, data: Mapping[str, Any], allowed: set[str], required: set[str]) -> None:
+def unknown_key(key: str, allowed) -> str:
+    """The one phrasing of an unknown key, for scenes and protocol files alike."""
     import difflib
 
+    hint = difflib.get_close_matches(str(key), sorted(allowed), n=1, cutoff=0.5)
+    extra = f" (did you mean '{hint[0]}'?)" if hint else ""
+    return f"unknown key{extra}; allowed: {', '.join(sorted(allowed))}"
+
+
+def _check_keys(where: str, data: Mapping[str, Any], allowed: set[str], required: set[str]) -> None:
     for key in data:
         if key not in allowed:
-            hint = difflib.get_close_matches(key, sorted(allowed), n=1)
-            extra = f" (did you mean '{hint[0]}'?)" if hint else ""
-            raise SceneError(
-                f"{where}: unknown field '{key}'{extra}; allowed: {', '.join(sorted(allowed))}",
-                key)
+            raise SceneError(unknown_key(key, allowed), key, where=where)
     missing = sorted(required - set(data))
     if missing:
-        raise SceneError(f"{where}: missing field(s) {', '.join(repr(m) for m in missing)}",
-                         missing[0])
+        raise SceneError(f"missing (required: {', '.join(sorted(required))})", missing[0],
+                         where=where)
 
 
 @dataclass(frozen=True)
@@ -139,7 +144,7 @@ class Material:
         _set_checked(self, "material", stiffness=_POS, damping=_NONNEG)
 
 
-BLENDS = ("scale", "nearest", "linear")
+BLENDS = tuple(b.label for b in Blend)
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,35 +167,42 @@ class TransientTable:
 
     velocities: Any
     forces: Any
-    blend: str = "scale"
+    blend: Blend | str = Blend.SCALE
     attenuation: float = 1.0
 
     def __post_init__(self) -> None:
         import numpy as np
 
+        w = "transient table"
         v = np.ascontiguousarray(self.velocities, dtype=float).reshape(-1)
         f = np.ascontiguousarray(self.forces, dtype=float)
         if f.ndim == 1:
             f = f[None, :]
-        if f.shape[0] != v.size or v.size == 0 or f.shape[1] == 0:
-            raise SceneError(f"transient table: {v.size} velocities for {f.shape[0]} rows "
-                             f"of {f.shape[1] if f.ndim == 2 else 0} ticks")
+        if f.ndim != 2 or f.shape[0] != v.size or v.size == 0 or f.shape[1] == 0:
+            raise SceneError(f"{v.size} velocities for {f.shape[0]} rows of "
+                             f"{f.shape[1] if f.ndim == 2 else 0} ticks", "forces", where=w)
         if not (np.all(np.isfinite(v)) and np.all(v > 0) and np.all(np.diff(v) > 0)):
-            raise SceneError("transient table: velocities must be finite, > 0 and ascending")
+            raise SceneError("must be finite, > 0 and ascending", "velocities", where=w)
         if not np.all(np.isfinite(f)):
-            raise SceneError("transient table: forces must be finite")
-        if self.blend not in BLENDS:
-            raise SceneError(f"transient table: blend must be one of {', '.join(BLENDS)}, "
-                             f"got {self.blend!r}")
+            bad = int(np.flatnonzero(~np.isfinite(f.reshape(-1)))[0])
+            raise SceneError(f"must be finite; row {bad // f.shape[1]}, tick "
+                             f"{bad % f.shape[1]} is {f.reshape(-1)[bad]}", "forces", where=w)
+        try:
+            blend = Blend.parse(self.blend)
+        except ValueError as exc:
+            raise SceneError(str(exc), "blend", where=w) from None
         object.__setattr__(self, "velocities", v)
         object.__setattr__(self, "forces", f)
+        object.__setattr__(self, "blend", blend)
+        object.__setattr__(self, "attenuation", _finite(w, "attenuation", self.attenuation,
+                                                        minimum=0.0))
 
     def force_at(self, speed: float):
         """The force transient [N] a contact at ``speed`` [m/s] plays (reference for tests)."""
         v, f = self.velocities, self.forces
-        if self.blend == "scale" or len(v) == 1:
+        if self.blend == Blend.SCALE or len(v) == 1:
             out = f[0] * speed / v[0]
-        elif self.blend == "nearest":
+        elif self.blend == Blend.NEAREST:
             i = int(abs(v - speed).argmin())
             out = f[i] * speed / v[i]
         elif speed <= v[0]:
@@ -362,9 +374,9 @@ class LibraryTransient(Transient):
     blend : str
         ``linear`` (two nearest entries by velocity), ``nearest`` or ``scale``.
     path : str or None
-        Library file, required for a real device (a library is refused on any device
-        but the one it was made on). The simulated device builds its own from the
-        source sample's scene on first use and caches it by content hash.
+        Library file. Without it, the library built on the device in use is looked up in
+        the library store (:func:`device.matching.library.find_library`); a library is
+        refused on any device but the one it was made on.
     source_scene : Scene or None
         The source sample's scene, filled in by the protocol loader.
     """
@@ -379,14 +391,14 @@ class LibraryTransient(Transient):
     def __post_init__(self) -> None:
         w = "transient 'library'"
         if not isinstance(self.source, str) or not self.source:
-            raise SceneError(f"{w}: field 'source' must name the real sample the library "
-                             f"matches, got {self.source!r}", "source")
+            raise SceneError("must name the real sample the library matches, got "
+                             f"{self.source!r}", "source", where=w)
         _set_checked(self, w, attenuation=_FRACTION_2)
         if self.blend not in BLENDS:
-            raise SceneError(f"{w}: field 'blend' must be one of {', '.join(BLENDS)}, "
-                             f"got {self.blend!r}", "blend")
+            raise SceneError(f"must be one of {', '.join(BLENDS)}, got {self.blend!r}",
+                             "blend", where=w)
         if self.path is not None and (not isinstance(self.path, str) or not self.path):
-            raise SceneError(f"{w}: field 'path' must be a file name, got {self.path!r}", "path")
+            raise SceneError(f"must be a file name, got {self.path!r}", "path", where=w)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": self.kind, "source": self.source,
@@ -436,14 +448,12 @@ class GraspTransient(Transient):
     cutoff: float = 0.01
 
     def __post_init__(self) -> None:
-        _set_checked(self, "transient 'grasp'", grasp_force=_NONNEG)
-        if not 0 < self.cutoff <= 1:
-            raise SceneError(f"transient 'grasp': field 'cutoff' must be in (0, 1], got "
-                             f"{self.cutoff!r}", "cutoff")
+        w = "transient 'grasp'"
+        _set_checked(self, w, grasp_force=_NONNEG, cutoff=_FRACTION)
         try:
             PUBLISHED_GRASP.at(self.grasp_force)
         except ValueError as exc:
-            raise SceneError(f"transient 'grasp': {exc}", "grasp_force") from None
+            raise SceneError(str(exc), "grasp_force", where=w) from None
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         m, c, k = PUBLISHED_GRASP.at(self.grasp_force)
@@ -487,7 +497,7 @@ def _dataclass_parser(cls, exclude: tuple[str, ...] = ()
         try:
             return cls(**data)
         except SceneError as exc:
-            raise SceneError(f"{where}: {exc}", exc.field) from None
+            raise exc.within(where=where) from None
 
     return parse
 
@@ -528,18 +538,19 @@ class Scene:
     meta: Mapping[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
-        where = f"scene '{self.name}'"
         if not isinstance(self.name, str) or not self.name:
-            raise SceneError(f"scene: field 'name' must be a non-empty string, got {self.name!r}")
+            raise SceneError(f"must be a non-empty string, got {self.name!r}", "name",
+                             where="scene")
+        where = f"scene '{self.name}'"
         object.__setattr__(self, "surface_height",
                            _finite(where, "surface_height", self.surface_height))
         if self.material is None and self.spring is None:
-            raise SceneError(f"{where}: a scene needs either 'material' (real sample) "
-                             "or 'spring' (virtual sample)", "spring")
+            raise SceneError("a scene needs either 'material' (real sample) or 'spring' "
+                             "(virtual sample)", "spring", where=where)
         if self.material is not None and (self.spring is not None or self.transient is not None):
-            raise SceneError(f"{where}: a real sample ('material') cannot also have "
-                             "'spring' or 'transient'; real samples are touched, not rendered",
-                             "spring" if self.spring is not None else "transient")
+            raise SceneError("a real sample ('material') cannot also have 'spring' or "
+                             "'transient'; real samples are touched, not rendered",
+                             "spring" if self.spring is not None else "transient", where=where)
         if self.spring is not None:
             object.__setattr__(self, "spring",
                                _finite(where, "spring", self.spring, minimum=0.0))
@@ -579,7 +590,8 @@ class Scene:
             Naming the field, the offending value and what is allowed.
         """
         if not isinstance(data, Mapping):
-            raise SceneError(f"{where or 'scene'}: expected a table, got {type(data).__name__}")
+            raise SceneError(f"expected a table, got {type(data).__name__}",
+                             where=where or "scene")
         name = data.get("name", "?")
         where = where or f"scene '{name}'"
         _check_keys(where, data, cls._KEYS, {"name"})
@@ -597,9 +609,7 @@ class Scene:
         try:
             return cls(**kwargs)
         except SceneError as exc:
-            msg = str(exc)
-            raise SceneError(msg if msg.startswith(where) else f"{where}: {msg}",
-                             exc.field, exc.part) from None
+            raise exc.within(where=where) from None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-data form accepted by :meth:`from_dict`."""
@@ -623,41 +633,49 @@ def _in_part(part: tuple[str, ...], parse: Callable[[str, Any], Any], where: str
     try:
         return parse(where, data)
     except SceneError as exc:
-        raise SceneError(str(exc), exc.field, (*part, *exc.part)) from None
+        raise exc.within(part) from None
 
 
 def _parse_transient(where: str, data: Any) -> Transient | None:
     if not isinstance(data, Mapping):
-        raise SceneError(f"{where}: expected a table with 'kind', got {data!r}")
+        raise SceneError(f"expected a table with 'kind', got {data!r}", where=where)
     kind = data.get("kind")
+    kinds = "none, " + ", ".join(transient_kinds())
     if kind in (None, "none"):
         if kind is None:
-            raise SceneError(f"{where}: missing field 'kind'; allowed: none, "
-                             + ", ".join(transient_kinds()), "kind")
+            raise SceneError(f"missing (allowed kinds: {kinds})", "kind", where=where)
         _check_keys(where, data, {"kind"}, set())
         return None
     if kind not in _TRANSIENTS:
-        raise SceneError(f"{where}: transient kind {kind!r} is not available; allowed: none, "
-                         + ", ".join(transient_kinds()), "kind")
+        raise SceneError(f"transient kind {kind!r} is not available; allowed: {kinds}",
+                         "kind", where=where)
     rest = {k: v for k, v in data.items() if k != "kind"}
     return _TRANSIENTS[kind](where, rest)
 
 
 def _parse_material(where: str, data: Any) -> Material:
     if not isinstance(data, Mapping):
-        raise SceneError(f"{where}: expected a table, got {data!r}")
+        raise SceneError(f"expected a table, got {data!r}", where=where)
     _check_keys(where, data, {"stiffness", "damping", "ringing"}, {"stiffness"})
     ringing = None
     if "ringing" in data:
         r = data["ringing"]
         if not isinstance(r, Mapping):
-            raise SceneError(f"{where}.ringing: expected a table, got {r!r}")
+            raise SceneError(f"expected a table, got {r!r}", part=("ringing",),
+                             where=f"{where}.ringing")
         _in_part(("ringing",), lambda w, d: _check_keys(w, d, {"slope", "decay", "frequency"},
                                                         {"slope", "decay", "frequency"}),
                  f"{where}.ringing", r)
-        ringing = _in_part(("ringing",), lambda w, d: Ringing(**d), f"{where}.ringing", r)
+        ringing = _in_part(("ringing",), _ringing, f"{where}.ringing", r)
     try:
         return Material(stiffness=data["stiffness"], damping=data.get("damping", 0.0),
                         ringing=ringing)
     except SceneError as exc:
-        raise SceneError(f"{where}: {str(exc).removeprefix('material: ')}", exc.field) from None
+        raise exc.within(where=where) from None
+
+
+def _ringing(where: str, data: Mapping[str, Any]) -> Ringing:
+    try:
+        return Ringing(**data)
+    except SceneError as exc:
+        raise exc.within(where=where) from None

@@ -20,9 +20,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def pytest_configure(config):
-    """Build transient libraries into a fresh cache per run (subprocesses inherit it)."""
-    if "HAPTICLAB_CACHE" not in os.environ:
-        os.environ["HAPTICLAB_CACHE"] = tempfile.mkdtemp(prefix="hapticlab-cache-")
+    """Build transient libraries into a fresh library store per run (subprocesses inherit
+    it)."""
+    if "HAPTICLAB_LIBRARIES" not in os.environ:
+        os.environ["HAPTICLAB_LIBRARIES"] = tempfile.mkdtemp(prefix="hapticlab-libraries-")
 
 
 @pytest.fixture(scope="session")

@@ -14,9 +14,10 @@ identified model, inversion method and parameters, source sample and recordings)
 Loading checks the version and the hash (a corrupt file is refused) and, given a
 device, that the library was made on that very device (model, serial number, rate).
 
-The simulated device builds the library of a :class:`~device.scene.LibraryTransient`
-on first use, from the source sample's scene, and caches it by content hash in
-``$HAPTICLAB_CACHE`` (default ``~/.cache/hapticlab``).
+Building is an explicit step (``hapticlab library build``, or the application's
+preflight on a simulated device, which announces it); built libraries live in the
+library store (:func:`library_dir`), one folder per device, where
+:func:`find_library` finds them for the device in use.
 """
 
 from __future__ import annotations
@@ -26,21 +27,23 @@ import io
 import json
 import os
 import zipfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..base import DeviceInfo
 from ..errors import DeviceError
 from ..fileio import atomic_write
+from ..info import DeviceInfo
 from ..scene import LibraryTransient, Scene, TransientTable
 from .inversion import METHODS, discretize, invert
 from .sysid import TFModel, identify
 
 __all__ = ["TransientLibrary", "LibraryError", "build_library", "usable_band", "record_taps",
-           "segment_taps", "even_spread", "library_table", "cache_dir", "FORMAT_VERSION", "Tap"]
+           "segment_taps", "even_spread", "library_dir", "library_path", "find_library",
+           "build_into_store",
+           "FORMAT_VERSION", "Tap"]
 
 FORMAT_VERSION = 1
 PIPELINE_VERSION = "matching-1"
@@ -263,37 +266,56 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
                             np.stack([v.force for v in invs]), meta)
 
 
-# --------------------------------------------------------------------- device use
-def cache_dir() -> Path:
-    """Where built libraries are cached: ``$HAPTICLAB_CACHE`` or ``~/.cache/hapticlab``."""
-    return Path(os.environ.get("HAPTICLAB_CACHE") or Path.home() / ".cache" / "hapticlab")
+# --------------------------------------------------------------------- the library store
+def library_dir() -> Path:
+    """The library store: ``$HAPTICLAB_LIBRARIES``, or ``~/.local/share/hapticlab/libraries``.
+
+    Built libraries are kept here, one folder per device (model, serial number, servo
+    rate), so that a protocol names the real sample a library reproduces and the device in
+    use finds its own library without the protocol file changing.
+    """
+    env = os.environ.get("HAPTICLAB_LIBRARIES")
+    return Path(env) if env else Path.home() / ".local" / "share" / "hapticlab" / "libraries"
 
 
-def library_table(transient: LibraryTransient, sim_device) -> TransientTable:
-    """The table a simulated device plays for ``transient``: from its file, or built and cached."""
-    info = sim_device.info
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text).strip("_") or "device"
+
+
+def library_path(info: DeviceInfo, source: Scene) -> Path:
+    """Where the store keeps the library of real sample ``source`` built on device ``info``.
+
+    The file name carries a hash of the source sample's scene and of the pipeline version, so
+    a changed sample (or pipeline) never picks up a library made for the old one.
+    """
+    key = hashlib.sha256(json.dumps({"pipeline": PIPELINE_VERSION, "source": source.to_dict()},
+                                    sort_keys=True).encode()).hexdigest()[:12]
+    device = f"{_slug(info.model)}-{_slug(info.serial_number)}-{info.servo_rate_hz:g}Hz"
+    return library_dir() / device / f"{_slug(source.name)}-{key}.npz"
+
+
+def build_into_store(device, source: Scene, **options: Any) -> Path:
+    """Build the library of real sample ``source`` on ``device`` (:func:`build_library`,
+    ``options`` passed on) and keep it in the store; returns its path."""
+    lib = build_library(device, source, **options)
+    return lib.save(library_path(device.info, source))
+
+
+def find_library(info: DeviceInfo, transient: LibraryTransient) -> Path | None:
+    """The library file a device plays for ``transient``: the transient's own ``path`` when
+    it names one, else the store's library of its source sample on this device, or None.
+
+    Raises
+    ------
+    LibraryError
+        The transient names a file that does not exist.
+    """
     if transient.path is not None:
-        lib = TransientLibrary.load(transient.path, info)
-        return lib.table(transient.attenuation, transient.blend)
+        p = Path(transient.path)
+        if not p.is_file():
+            raise LibraryError(f"{p}: no such library file")
+        return p
     if transient.source_scene is None:
-        raise LibraryError(f"library transient for '{transient.source}' has neither a file "
-                           "('path') nor its source sample's scene (load it through a protocol)")
-    key = hashlib.sha256(json.dumps({
-        "pipeline": PIPELINE_VERSION, "device": sim_device.params.to_dict(),
-        "hand": asdict(sim_device.nominal_hand), "source": transient.source_scene.to_dict(),
-    }, sort_keys=True).encode()).hexdigest()[:16]
-    path = cache_dir() / f"library-{transient.source}-{key}.npz"
-    try:
-        lib = TransientLibrary.load(path, info)
-    except LibraryError:
-        lib = build_library(_twin(sim_device), transient.source_scene)
-        lib.save(path)
-    return lib.table(transient.attenuation, transient.blend)
-
-
-def _twin(sim_device):
-    """A fresh simulated device like ``sim_device`` as it was set up (its nominal hand; own
-    seed and clock) for building."""
-    from ..sim.backend import SimDevice
-
-    return SimDevice(device=sim_device.params, hand=sim_device.nominal_hand, seed=20_260_001)
+        return None
+    p = library_path(info, transient.source_scene)
+    return p if p.is_file() else None

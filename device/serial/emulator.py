@@ -20,6 +20,7 @@ import zlib
 
 import numpy as np
 
+from ..codes import Blend, SceneKind
 from ..scene import Material, Ringing, Scene, TableTransient, TransientTable
 from ..sim.backend import SimDevice
 from . import messages as M
@@ -27,8 +28,7 @@ from .framing import FrameDecoder
 
 __all__ = ["Emulator", "open_pty"]
 
-_BLENDS = ("scale", "nearest", "linear")
-_FAULT = {"watchdog": M.FaultCode.WATCHDOG, "estop": M.FaultCode.ESTOP}
+_FAULT = {name: code for code, name in M.FaultCode.NAMES.items()}
 
 
 def _log(text: str) -> None:
@@ -216,7 +216,7 @@ class Emulator:
         if self._busy():
             return S.BUSY
         if isinstance(msg, M.SceneBegin):
-            if msg.kind not in (0, 1, 2) or msg.blend > 2:
+            if msg.kind not in tuple(SceneKind) or msg.blend not in tuple(Blend):
                 return S.BAD_MESSAGE
             self._scenes[msg.scene_id] = {"begin": msg, "v": None,
                                           "table": np.zeros(msg.rows * msg.row_len, np.int16),
@@ -276,13 +276,13 @@ class Emulator:
         b: M.SceneBegin = sc["begin"]
         h = b.surface_um * 1e-6
         name = f"scene-{b.scene_id}"
-        if b.kind == 0:
+        if b.kind == SceneKind.REAL:
             ring = (Ringing(b.ring_slope, b.ring_decay, b.ring_freq) if b.ring_freq > 0 else None)
             return Scene(name, surface_height=h, material=Material(b.stiffness, b.damping, ring))
-        if b.kind == 1:
+        if b.kind == SceneKind.SPRING:
             return Scene(name, surface_height=h, spring=b.spring)
         forces = sc["table"].reshape(b.rows, b.row_len).astype(float) * 1e-3
-        table = TransientTable(sc["v"], forces, _BLENDS[b.blend], b.attenuation)
+        table = TransientTable(sc["v"], forces, Blend(b.blend), b.attenuation)
         return Scene(name, surface_height=h, spring=b.spring, transient=TableTransient(table))
 
     def _start(self, target, msg) -> None:

@@ -113,7 +113,8 @@ class FrameDecoder:
     def __init__(self) -> None:
         self._buf = bytearray()
         self.frames_ok = 0
-        self.errors: dict[str, int] = {"crc": 0, "cobs": 0, "length": 0, "version": 0}
+        self.errors: dict[str, int] = {"crc": 0, "cobs": 0, "length": 0, "version": 0,
+                                       "body": 0}  # body: a frame whose body misfits its type
 
     def feed(self, data: bytes) -> list[Frame]:
         out = []

@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from ..base import DeviceInfo, HapticDevice
-from ..errors import DeviceError, DeviceFaultError
+from ..base import DeviceInfo, HapticDevice, SimulatedHand
+from ..errors import DeviceError, DeviceSpecError
 from ..events import ContactEvent, FaultEvent, Flags, SaturationEvent, WindowResult
-from ..scene import LibraryTransient, Scene, Transient, TransientTable
+from ..scene import Scene, TransientTable
 from . import kernel as K
 from .params import DeviceParams, HandParams
 from .plant import N_INPUTS, Plant, build_plant, piece_propagators, zoh
@@ -35,7 +35,7 @@ class CompiledScene:
     """
 
     def __init__(self, scene: Scene, dev: DeviceParams, hand: HandParams,
-                 table_for: Callable[[Transient], TransientTable] | None = None):
+                 table: TransientTable | None = None):
         self.scene = scene
         self.plant: Plant = build_plant(dev, hand, scene.material, scene.surface_height)
         p = self.plant
@@ -56,26 +56,30 @@ class CompiledScene:
             self.render = 2
         self.spring = float(scene.spring or 0.0)
         if self.render == 2:
-            tr = scene.transient
-            self.transient_table = (table_for(tr) if table_for is not None
-                                    else tr.table(dev.servo_rate_hz, dev.effective_mass))
+            if table is None:  # a transient played on this device's own parameters
+                table = scene.transient.table(dev.servo_rate_hz, dev.effective_mass)
+            self.transient_table = table
         else:
             self.transient_table = TransientTable([1.0], np.zeros((1, 1)))
         tt = self.transient_table
         self.table = tt.forces
         self.table_v = tt.velocities
-        self.blend = _BLEND_CODES[tt.blend]
+        self.blend = int(tt.blend)
         self.attenuation = float(tt.attenuation)
-
-
-_BLEND_CODES = {"scale": K.BLEND_SCALE, "nearest": K.BLEND_NEAREST, "linear": K.BLEND_LINEAR}
+        p = self.plant
+        #: what the servo loop needs of this scene (:func:`device.sim.kernel.run_ticks`)
+        self.kernel_args = (self.tick_prop, self.pieces, int(p.n_sub), p.accel_row,
+                            float(p.surface_height), float(p.contact_stiffness),
+                            float(p.contact_damping), float(p.ring_gain), int(self.render),
+                            self.spring, self.table, self.table_v, self.blend,
+                            self.attenuation)
 
 
 def compile_scene(scene: Scene, dev: DeviceParams, hand: HandParams,
-                  table_for: Callable[[Transient], TransientTable] | None = None
-                  ) -> CompiledScene:
-    """Build the kernel inputs of ``scene`` (see :class:`CompiledScene`)."""
-    return CompiledScene(scene, dev, hand, table_for)
+                  table: TransientTable | None = None) -> CompiledScene:
+    """Build the kernel inputs of ``scene`` (see :class:`CompiledScene`); ``table`` is its
+    transient as the device plays it (built from the scene's own parameters when None)."""
+    return CompiledScene(scene, dev, hand, table)
 
 
 def velocity_weights(dev: DeviceParams) -> np.ndarray:
@@ -111,10 +115,11 @@ class SimDevice(HapticDevice):
     def __init__(self, device: DeviceParams | None = None, hand: HandParams | None = None,
                  tapper: Tapper | None = None, seed: int = 0, rate_hz: float | None = None,
                  live: bool = False, noise: bool = True, speed: float = 1.0):
+        super().__init__()
         dev = device or DeviceParams()
         if rate_hz is not None:
             if not 1_000 <= float(rate_hz) <= 20_000:
-                raise ValueError(f"sim servo rate must be 1,000–20,000 Hz, got {rate_hz!r}")
+                raise DeviceSpecError(f"sim servo rate must be 1,000–20,000 Hz, got {rate_hz!r}")
             dev = dev.with_rate(rate_hz)
         self.params = dev
         self.hand = hand or HandParams()
@@ -122,13 +127,14 @@ class SimDevice(HapticDevice):
         #: belong to this one, whoever holds the stylus later (:meth:`set_hand`)
         self.nominal_hand = self.hand
         self.tapper = tapper or Tapper()
+        self._base_tapper = self.tapper  # a simulated person's tapping scales this one
         self.seed = int(seed)
         # independent streams, so switching sensor noise off does not change the taps
         ss = np.random.SeedSequence(self.seed)
         self.rng_tapping, self.rng_noise = (np.random.default_rng(c) for c in ss.spawn(2))
         self.live = bool(live)
         if not (speed > 0 and math.isfinite(speed)):
-            raise ValueError(f"live speed must be finite and > 0, got {speed!r}")
+            raise DeviceSpecError(f"live speed must be finite and > 0, got {speed!r}")
         self.speed = float(speed)
         self._stop_requested = False
         self.noise = bool(noise)
@@ -144,6 +150,11 @@ class SimDevice(HapticDevice):
             watchdog_s=dev.watchdog_s, encoder_resolution=dev.encoder_resolution,
             accel_range=dev.accel_range)
         self._vel_w = velocity_weights(dev)
+        #: what the servo loop needs of the device (:func:`device.sim.kernel.run_ticks`)
+        self._kernel_device = (float(dev.encoder_resolution), self._vel_w,
+                               float(dev.contact_hysteresis), float(dev.force_constant),
+                               float(dev.current_limit), int(round(dev.ramp_s / dev.dt)),
+                               float(dev.servo_rate_hz))
         self._pull_gains = self._hand_gains()
         self._cache: dict[Scene, CompiledScene] = {}
         self._scene: CompiledScene | None = None
@@ -158,7 +169,6 @@ class SimDevice(HapticDevice):
         self._homed_clearance: float | None = None
         self._fault: FaultEvent | None = None
         self._estop_requested = False
-        self._closed = False
         self._output_force = 0.0
 
     @property
@@ -190,11 +200,38 @@ class SimDevice(HapticDevice):
             return
         self.hand = hand
         self._pull_gains = self._hand_gains()
-        current = self._scene.scene if self._scene is not None else None
+        current = self.scene
         self._cache.clear()
         self._free_air = None
         if current is not None:
             self.load_scene(current)
+
+    def set_simulated_hand(self, hand: SimulatedHand) -> bool:
+        """A simulated person takes the stylus: their grasp scales the nominal hand's
+        stiffness and damping, their tapping replaces the tapper's speeds, and their rhythm
+        scales its dwell and pause (see :class:`~device.base.SimulatedHand`)."""
+        if not isinstance(hand, SimulatedHand):
+            raise TypeError(f"expects a SimulatedHand, got {type(hand).__name__}")
+        nominal = self.nominal_hand
+        self.set_hand(replace(nominal, stiffness=nominal.stiffness * hand.grasp,
+                              damping=nominal.damping * hand.grasp))
+        base = self._base_tapper
+        self.tapper = replace(base, velocity_mean=hand.tap_speed, velocity_sd=hand.tap_speed_sd,
+                              dwell=tuple(x * hand.rhythm for x in base.dwell),
+                              pause=tuple(x * hand.rhythm for x in base.pause))
+        return True
+
+    @classmethod
+    def with_ratings(cls, info: DeviceInfo, **options: Any) -> SimDevice:
+        """A simulated device with another device's ratings: its servo rate, current limit,
+        force constant and effective mass (the moving mass beyond the default tip is put on
+        the motor side); everything else is this simulator's default."""
+        base = DeviceParams()
+        params = replace(base, servo_rate_hz=float(info.servo_rate_hz),
+                         current_limit=float(info.current_limit),
+                         force_constant=float(info.force_constant),
+                         motor_mass=max(1e-4, float(info.effective_mass) - base.tip_mass))
+        return cls(device=params, **options)
 
     @classmethod
     def from_spec(cls, arg: str | None = None, **options: Any) -> SimDevice:
@@ -203,7 +240,7 @@ class SimDevice(HapticDevice):
             try:
                 options.setdefault("rate_hz", float(arg))
             except ValueError:
-                raise DeviceError(f"sim spec 'sim:{arg}': expected a servo rate in Hz, "
+                raise DeviceSpecError(f"sim spec 'sim:{arg}': expected a servo rate in Hz, "
                                   "e.g. 'sim:10000'") from None
         return cls(**options)
 
@@ -236,47 +273,22 @@ class SimDevice(HapticDevice):
         """Output enabled (homed, no fault, not zeroed)."""
         return self._enabled
 
-    @property
-    def scene(self) -> Scene | None:
-        return self._scene.scene if self._scene else None
-
-    def _check_open(self) -> None:
-        if self._closed:
-            raise DeviceError("device is closed")
-
     # ---------------------------------------------------------------- control
-    def load_scene(self, scene: Scene) -> None:
-        self._check_open()
-        if not isinstance(scene, Scene):
-            raise TypeError(f"load_scene expects a device.Scene, got {type(scene).__name__}")
+    def _load_scene(self, scene: Scene, table: TransientTable | None) -> None:
         if scene not in self._cache:
-            self._cache[scene] = compile_scene(scene, self.params, self.hand, self._table_for)
+            self._cache[scene] = compile_scene(scene, self.params, self.hand, table)
         self._scene = self._cache[scene]
         self._enabled = False
         self._homed_clearance = None
         self._output_force = 0.0
 
-    def _table_for(self, transient: Transient) -> TransientTable:
-        if isinstance(transient, LibraryTransient):
-            from ..matching.library import library_table
-
-            return library_table(transient, self)
-        return transient.table(self.params.servo_rate_hz, self.params.effective_mass)
-
-    def home(self, clearance: float | None = None) -> None:
+    def _home(self, clearance: float | None) -> None:
         """Put the stylus at rest ``clearance`` [m] above the surface (default: the
         tapper's stroke top) and enable output with a ramp.
 
         Homing is modelled as completed position control: the state is set, not simulated.
         """
-        self._check_open()
-        if self._scene is None:
-            raise DeviceError("load a scene before homing")
-        if self._fault is not None:
-            raise DeviceFaultError(f"fault latched ({self._fault.code}): clear it first")
-        c = self.tapper.top if clearance is None else float(clearance)
-        if not (math.isfinite(c) and c > 0):
-            raise ValueError(f"home clearance must be finite and > 0 m, got {clearance!r}")
+        c = self.tapper.top if clearance is None else clearance
         p = self._scene.plant
         z = p.surface_height + c
         x = np.zeros(p.n_states)
@@ -326,43 +338,35 @@ class SimDevice(HapticDevice):
                                      f"no heartbeat for {self.params.watchdog_s:g} s: output "
                                      "zeroed")
 
-    def estop(self) -> None:
+    def _estop(self) -> None:
         self._estop_requested = True
         self._output_force = 0.0
         if self._fault is None:
             self._fault = FaultEvent(self.time, "estop", "emergency stop (latched)")
 
-    def clear_fault(self) -> None:
-        self._check_open()
+    def _clear_fault(self) -> None:
         self._fault = None
         self._estop_requested = False
         self._enabled = False  # output comes back only through home(), ramped
 
-    def zero(self) -> None:
+    def _zero(self) -> None:
         self._enabled = False
         self._output_force = 0.0
 
-    def close(self) -> None:
-        self.zero()
-        self._closed = True
+    def _close(self) -> None:
+        self._zero()
 
     # ----------------------------------------------------------------- window
-    def run_window(self, duration: float = 5.0, *, from_first_contact: bool = True,
-                   timeout: float = 30.0,
-                   on_progress: Callable[[float, WindowResult], None] | None = None,
-                   heartbeats: bool = True) -> WindowResult:
+    def _run_window(self, duration: float, from_first_contact: bool, timeout: float,
+                    on_progress: Callable[[float, WindowResult], None] | None,
+                    heartbeats: bool) -> WindowResult:
         """Simulate one tapping window (see :meth:`HapticDevice.run_window`).
 
         ``heartbeats=False`` makes the simulated host go silent for the window, so the
         watchdog trips ``watchdog_s`` after the last heartbeat.
         """
-        self._check_open()
-        if self._fault is not None:
-            raise DeviceFaultError(f"fault latched ({self._fault.code}): clear it first")
-        if self._scene is None or self._x is None or not self._enabled:
-            raise DeviceError("load a scene and home the device before running a window")
-        if not (duration > 0 and math.isfinite(duration)):
-            raise ValueError(f"window duration must be finite and > 0 s, got {duration!r}")
+        if self._x is None or not self._enabled:
+            raise DeviceError("home the device before running a window")
         dev, cs = self.params, self._scene
         total_s = (timeout + duration) if from_first_contact else duration
         plan = replace(self.tapper, top=self._homed_clearance).plan(
@@ -374,19 +378,13 @@ class SimDevice(HapticDevice):
         res.timed_out = from_first_contact and res.t_first_contact is None
         return res
 
-    def play_force(self, force, *, heartbeats: bool = True) -> WindowResult:
+    def _play_force(self, f: np.ndarray, heartbeats: bool) -> WindowResult:
         """Play an open-loop force command [N per servo tick] while the hand holds still.
 
         Each call starts with the stylus at rest in free air (no surface within reach) and
         output enabled; the command still goes through the ramp, watchdog and current
         clamp. Used for system identification. Afterwards, home again before a window.
         """
-        self._check_open()
-        if self._fault is not None:
-            raise DeviceFaultError(f"fault latched ({self._fault.code}): clear it first")
-        f = np.ascontiguousarray(force, dtype=float).reshape(-1)
-        if f.size == 0 or not np.all(np.isfinite(f)):
-            raise ValueError("force command must be a non-empty array of finite values [N]")
         if self._free_air is None:
             self._free_air = compile_scene(Scene("free-air", surface_height=-1e3, spring=0.0),
                                            self.params, self.hand)
@@ -410,7 +408,7 @@ class SimDevice(HapticDevice):
         ev_tick = np.zeros(4096, dtype=np.int64)
         ev_vel = np.zeros(4096)
         chunk = max(1, int(round((_LIVE_CHUNK_S if self.live else _CHUNK_S) / dt)))
-        ramp_ticks = int(round(dev.ramp_s / dt))
+        state = (self._x, self._ist, self._fst, self._rb)
         wall0 = time.perf_counter()
         late: list[float] = []
         n = 0
@@ -424,17 +422,9 @@ class SimDevice(HapticDevice):
             zero_from = int(math.ceil(wd - 1e-9)) if wd < 2**62 else 2**62
             if self._estop_requested:
                 zero_from = min(zero_from, n)
-            n_done = K.run_ticks(
-                n, n1, self._x, self._ist, self._fst, self._rb,
-                cs.tick_prop, cs.pieces, cs.plant.n_sub, cs.plant.accel_row,
-                cs.plant.surface_height, cs.plant.contact_stiffness, cs.plant.contact_damping,
-                cs.plant.ring_gain, buf.u_hand, f_ext,
-                cs.render, cs.spring, dev.encoder_resolution, self._vel_w,
-                dev.contact_hysteresis, cs.table, cs.table_v, cs.blend, cs.attenuation,
-                dev.force_constant, dev.current_limit, ramp_ticks, zero_from, stop_after,
-                dev.servo_rate_hz,
-                buf.pos, buf.fcmd, buf.fout, buf.cur, buf.acc, buf.flags, buf.z2, buf.v2, buf.a2,
-                ev_tick, ev_vel)
+            n_done = K.run_ticks(n, n1, state, cs.kernel_args, self._kernel_device, buf.u_hand,
+                                 f_ext, zero_from, stop_after, buf.out, buf.flags, ev_tick,
+                                 ev_vel)
             self._tick = tick0 + n_done
             n = n_done
             ft = int(self._ist[K.IST_FAULT_TICK])
@@ -542,25 +532,30 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 class _Buffers:
     """Growable per-tick arrays of a window, with the hand input computed alongside."""
 
-    NAMES = ("pos", "fcmd", "fout", "cur", "acc", "z2", "v2", "a2")
-
     def __init__(self, capacity: int, plan, gains: tuple[float, float, float], dt: float):
         self.plan, self.gains, self.dt = plan, gains, dt
         self.n = 0
-        for name in self.NAMES:
-            setattr(self, name, np.zeros(0))
+        self.out = np.zeros((K.N_OUT, 0))
         self.flags = np.zeros(0, dtype=np.int64)
         self.u_hand = np.zeros(0)
         self.ensure(capacity)
+
+    pos = property(lambda self: self.out[K.OUT_POS])
+    fcmd = property(lambda self: self.out[K.OUT_FCMD])
+    fout = property(lambda self: self.out[K.OUT_FOUT])
+    cur = property(lambda self: self.out[K.OUT_CUR])
+    acc = property(lambda self: self.out[K.OUT_ACC])
+    z2 = property(lambda self: self.out[K.OUT_Z2])
+    v2 = property(lambda self: self.out[K.OUT_V2])
+    a2 = property(lambda self: self.out[K.OUT_A2])
 
     def ensure(self, n: int) -> None:
         if n <= self.n:
             return
         new = max(n, 2 * self.n)
-        for name in self.NAMES:
-            a = np.zeros(new)
-            a[: self.n] = getattr(self, name)[: self.n]
-            setattr(self, name, a)
+        out = np.zeros((K.N_OUT, new))
+        out[:, : self.n] = self.out[:, : self.n]
+        self.out = out
         f = np.zeros(new, dtype=np.int64)
         f[: self.n] = self.flags[: self.n]
         self.flags = f

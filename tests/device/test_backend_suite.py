@@ -26,9 +26,12 @@ def test_backend_contract(opener, check):
 
 
 class _Lying(HapticDevice):
-    """Delegates to a real device but breaks one promise, to show the checks can fail."""
+    """A backend that delegates to a real device but breaks one promise, to show the checks
+    can fail. It implements only the backend interface (the ``_`` methods): the base class's
+    templates do the shared checks."""
 
     def __init__(self, inner, lie):
+        super().__init__()
         self.inner, self.lie = inner, lie
 
     info = property(lambda self: self.inner.info)
@@ -38,14 +41,16 @@ class _Lying(HapticDevice):
     def output_force(self):
         return 1.0 if self.lie == "output" else self.inner.output_force
 
-    def load_scene(self, scene):
+    def _load_scene(self, scene, table):
         self.inner.load_scene(scene)
 
-    def home(self, clearance=None):
+    def _home(self, clearance):
         self.inner.home(clearance)
 
-    def run_window(self, *a, **kw):
-        res = self.inner.run_window(*a, **kw)
+    def _run_window(self, duration, from_first_contact, timeout, on_progress, heartbeats):
+        res = self.inner.run_window(duration, from_first_contact=from_first_contact,
+                                    timeout=timeout, on_progress=on_progress,
+                                    heartbeats=heartbeats)
         if self.lie == "velocity":
             res.contacts = [type(c)(c.t, c.velocity * 1.1) for c in res.contacts]
         if self.lie == "unclamped":
@@ -54,23 +59,23 @@ class _Lying(HapticDevice):
             res.faults = []
         return res
 
-    def play_force(self, force, **kw):
-        return self.inner.play_force(force, **kw)
+    def _play_force(self, force, heartbeats):
+        return self.inner.play_force(force, heartbeats=heartbeats)
 
     def heartbeat(self):
         self.inner.heartbeat()
 
-    def estop(self):
+    def _estop(self):
         if self.lie != "no_estop":
             self.inner.estop()
 
-    def clear_fault(self):
+    def _clear_fault(self):
         self.inner.clear_fault()
 
-    def zero(self):
+    def _zero(self):
         self.inner.zero()
 
-    def close(self):
+    def _close(self):
         self.inner.close()
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from device import LibraryTransient, Material, Ringing, Scene, TransientTable
+from device import LibraryTransient, Material, Ringing, Scene, SceneError, TransientTable
 from device.matching.compare import scene_distances
 from device.matching.inversion import (
     DiscreteModel,
@@ -19,10 +19,12 @@ from device.matching.library import (
     LibraryError,
     Tap,
     TransientLibrary,
+    build_into_store,
     build_library,
-    cache_dir,
     even_spread,
-    library_table,
+    find_library,
+    library_dir,
+    library_path,
     record_taps,
     segment_taps,
 )
@@ -257,30 +259,34 @@ def test_even_spread_and_segmentation(realism):
     assert all(len(t.accel) == 1000 and t.velocity > 0 for t in taps)
 
 
-def test_sim_builds_the_library_on_first_use_and_caches_it(realism):
+def test_a_library_is_built_explicitly_into_the_store_and_found_there(realism):
     scene = realism.samples["matched_firm"].scene
+    source = realism.samples["wood_on_foam"].scene
     dev = SimDevice(seed=5)
-    dev.load_scene(scene)  # builds (or finds) the library
-    files = sorted(cache_dir().glob("library-wood_on_foam-*.npz"))
-    assert files
-    mtimes = [f.stat().st_mtime_ns for f in files]
+    if find_library(dev.info, scene.transient) is None:
+        # loading a matched scene never runs an experiment: without a library it is refused,
+        # naming the command that builds one
+        with pytest.raises(SceneError, match="library build --device SPEC --source "
+                                             "wood_on_foam"):
+            dev.load_scene(scene)
+        build_into_store(SimDevice(seed=20_260_001), source)
+    path = find_library(dev.info, scene.transient)
+    assert path == library_path(dev.info, source) and path.is_relative_to(library_dir())
+    mtime = path.stat().st_mtime_ns
+    dev.load_scene(scene)
     SimDevice(seed=6).load_scene(realism.samples["matched_soft"].scene)
-    assert [f.stat().st_mtime_ns for f in files] == mtimes  # reused, not rebuilt
-    mine = []
-    for f in files:  # the cache also holds libraries for other simulated configurations
-        try:
-            mine.append(TransientLibrary.load(f, dev.info))
-        except LibraryError:
-            pass
-    assert len(mine) == 1
-    lib = mine[0]
+    assert path.stat().st_mtime_ns == mtime  # found, not rebuilt
+    lib = TransientLibrary.load(path, dev.info)
     assert lib.meta["source"]["sample"] == "wood_on_foam"
     assert 8 <= len(lib.velocities) <= 12
     # peak force grows with the incoming speed (momentum), roughly linearly
     peaks = np.abs(lib.forces).max(axis=1)
     assert np.corrcoef(lib.velocities, peaks)[0, 1] > 0.8
-    with pytest.raises(LibraryError, match="neither a file"):
-        library_table(LibraryTransient("wood_on_foam"), dev)
+    # another simulated configuration (another servo rate) is another device: not found
+    assert find_library(SimDevice(rate_hz=1000).info, scene.transient) is None
+    # a library transient with neither a path nor its source scene (not loaded through a
+    # protocol) has nothing to look up
+    assert find_library(dev.info, LibraryTransient("wood_on_foam")) is None
 
 
 def test_build_library_refuses_virtual_sources():
@@ -349,7 +355,7 @@ def test_the_simulated_rubber_block_gives_the_measured_rubber_model():
     assert stacked.frequency > 25 or stacked.slope < -150
 
 
-def test_cache_dir_follows_the_environment(tmp_path, monkeypatch):
-    monkeypatch.setenv("HAPTICLAB_CACHE", str(tmp_path))
-    assert cache_dir() == tmp_path
-    assert os.environ["HAPTICLAB_CACHE"] == str(tmp_path)
+def test_library_dir_follows_the_environment(tmp_path, monkeypatch):
+    monkeypatch.setenv("HAPTICLAB_LIBRARIES", str(tmp_path))
+    assert library_dir() == tmp_path
+    assert os.environ["HAPTICLAB_LIBRARIES"] == str(tmp_path)

@@ -17,7 +17,9 @@ FIRM = Scene("firm", spring=680.0)
 
 HOST = r"""
 import sys
+from app.guards import install_signal_guards
 from device import Scene, open_device
+install_signal_guards()  # the application's guards: SIGTERM unwinds, closing the device
 with open_device("serial:" + sys.argv[1]) as dev:
     dev.load_scene(Scene("firm", spring=680.0))
     dev.home()
@@ -200,3 +202,42 @@ def test_an_emulator_that_fails_mid_window_goes_away_instead_of_hanging():
         emu.stop()
         server.join(timeout=5)
         os.close(slave)
+
+
+class _NoisyPort:
+    """A pyserial-like port that delivers only frames with a broken CRC."""
+
+    def __init__(self):
+        from device.serial import messages as M
+
+        good = M.encode(M.Pong(7), 1)
+        bad = bytearray(good)
+        bad[3] ^= 0x40  # one flipped bit inside the COBS body: the CRC no longer matches
+        self.data = bytes(bad) * 40
+        self.in_waiting = 0
+
+    def read(self, n=1):
+        time.sleep(0.001)
+        chunk, self.data = self.data[:n], self.data[n:]
+        self.in_waiting = len(self.data)
+        return chunk
+
+    def write(self, data):
+        return len(data)
+
+    def close(self):
+        pass
+
+
+def test_a_crc_storm_declares_the_link_unusable():
+    from device.serial.link import CRCStormError, Link
+
+    link = Link("noisy", transport=_NoisyPort())
+    try:
+        _wait_for(lambda: link.gone is not None, limit=5, what="the CRC storm")
+        assert isinstance(link.gone, CRCStormError) and "CRC storm" in str(link.gone)
+        with pytest.raises(CRCStormError):
+            link.check()
+        assert link.link_stats()["crc_errors"] >= 20
+    finally:
+        link.shutdown()
