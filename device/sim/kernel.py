@@ -24,7 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..codes import Blend
+from ..events import Flags
 from ._jit import lazy_njit
+from .plant import FA, FH, QD, V2, Z1, Z2, Q, Y
 
 __all__ = ["run_ticks", "propagate_linear", "IST", "FST"]
 
@@ -35,12 +38,14 @@ IST = 12
 # float state slots: the two table rows' coefficients of the transient playing
 FST_C1, FST_C2 = 0, 1
 FST = 2
-# how a contact speed picks table rows (TransientTable.blend)
-BLEND_SCALE, BLEND_NEAREST, BLEND_LINEAR = 0, 1, 2
+# how a contact speed picks table rows (TransientTable.blend), and the per-tick flags:
+# plain ints for the compiled loop, taken from the one definition of each code
+BLEND_SCALE, BLEND_NEAREST, BLEND_LINEAR = (int(b) for b in (Blend.SCALE, Blend.NEAREST,
+                                                             Blend.LINEAR))
+F_CONTACT, F_SAT, F_TRANSIENT, F_ZEROED, F_RAMP = (int(f) for f in (
+    Flags.CONTACT, Flags.SATURATED, Flags.TRANSIENT, Flags.ZEROED, Flags.RAMP))
 
-F_CONTACT, F_SAT, F_TRANSIENT, F_ZEROED, F_RAMP = 1, 2, 4, 8, 16
-
-Z1, V1, Z2, V2, FA, Y, YD, FH, Q, QD = range(10)
+# state indices: the plant's (device/sim/plant.py)
 
 
 @lazy_njit
@@ -146,21 +151,43 @@ def _pick_rows(speed, tbl_v, blend, atten, ist, fst):
     fst[FST_C2] = c2 * atten
 
 
+#: rows of the output array ``out`` of :func:`run_ticks`
+OUT_POS, OUT_FCMD, OUT_FOUT, OUT_CUR, OUT_ACC, OUT_Z2, OUT_V2, OUT_A2 = range(8)
+N_OUT = 8
+
+
 @lazy_njit
-def run_ticks(n0, n1, x, ist, fst, rb,
-              tick_prop, pieces, n_sub, accel_row,
-              h, ks, bs, ring_gain,
-              u_hand, f_ext,
-              render, K, enc_res, vel_w, hyst, table, tbl_v, blend, atten,
-              kt, i_max, ramp_ticks, zero_from, stop_after, rate,
-              o_pos, o_fcmd, o_fout, o_cur, o_acc, o_flags, o_z2, o_v2, o_a2,
-              ev_tick, ev_vel):
+def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after,
+              out, o_flags, ev_tick, ev_vel):
     """Advance ticks n0..n1-1 (indices into the input and output arrays).
 
-    ``u_hand`` holds the hand's pull at every tick and one beyond ``n1``.
+    Parameters
+    ----------
+    state : tuple
+        ``(x, ist, fst, rb)``: plant state, integer and float loop state, encoder ring
+        buffer (all updated in place).
+    scene : tuple
+        ``(tick_prop, pieces, n_sub, accel_row, h, ks, bs, ring_gain, render, K, table,
+        tbl_v, blend, atten)`` from :class:`~device.sim.backend.CompiledScene`.
+    device : tuple
+        ``(enc_res, vel_w, hyst, kt, i_max, ramp_ticks, rate)`` from the device parameters.
+    u_hand : ndarray
+        The hand's pull at every tick and one beyond ``n1`` [N].
+    f_ext : ndarray
+        Open-loop force per tick [N] (empty for none).
+    zero_from, stop_after : int
+        Tick from which output is zeroed (watchdog, e-stop); ticks of a window after its
+        first contact (−1: not measured from a contact).
+    out : ndarray (N_OUT, n)
+        Per-tick outputs (rows ``OUT_*``); ``o_flags`` the flags; ``ev_tick``, ``ev_vel``
+        the contact events.
 
     Returns the first tick not simulated (n1, or earlier when ``ist[IST_STOP]`` is reached).
     """
+    x, ist, fst, rb = state
+    (tick_prop, pieces, n_sub, accel_row, h, ks, bs, ring_gain, render, K, table, tbl_v,
+     blend, atten) = scene
+    enc_res, vel_w, hyst, kt, i_max, ramp_ticks, rate = device
     ns = x.shape[0]
     u = np.zeros(3)
     tmp = np.empty(ns)
@@ -240,21 +267,21 @@ def run_ticks(n0, n1, x, ist, fst, rb,
         u[1] = (u_hand[n + 1] - u_hand[n]) * rate  # ... and linear in between
         u[2] = 1.0
         # 4. record
-        o_pos[n] = enc
-        o_fcmd[n] = fc
-        o_fout[n] = x[FA]
-        o_cur[n] = cur
-        o_acc[n] = x[Y]
+        out[OUT_POS, n] = enc
+        out[OUT_FCMD, n] = fc
+        out[OUT_FOUT, n] = x[FA]
+        out[OUT_CUR, n] = cur
+        out[OUT_ACC, n] = x[Y]
         o_flags[n] = flags
-        o_z2[n] = x[Z2]
-        o_v2[n] = x[V2]
+        out[OUT_Z2, n] = x[Z2]
+        out[OUT_V2, n] = x[V2]
         mode = ist[IST_MODE]
         a2 = 0.0
         for j in range(ns):
             a2 += accel_row[mode, j] * x[j]
         for j in range(3):
             a2 += accel_row[mode, ns + j] * u[j]
-        o_a2[n] = a2
+        out[OUT_A2, n] = a2
         # 5. propagate
         if n_modes == 1:
             _apply(tick_prop[0], x, u, tmp)

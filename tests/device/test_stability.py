@@ -53,17 +53,13 @@ def _segment(scene: Scene, rate: float, duration: float, x0_fn, pull_fn) -> tupl
     ist[K.IST_SINCE_ENABLE] = 10**9
     w = velocity_weights(dev)
     rb = np.full(len(w), x[0])
-    outs = [np.zeros(n) for _ in range(8)]
+    out = np.zeros((K.N_OUT, n))
     flags = np.zeros(n, dtype=np.int64)
-    K.run_ticks(0, n, x, ist, np.zeros(K.FST), rb, cs.tick_prop, cs.pieces, cs.plant.n_sub,
-                cs.plant.accel_row, cs.plant.surface_height, cs.plant.contact_stiffness,
-                cs.plant.contact_damping, cs.plant.ring_gain, pull_fn(t), np.zeros(0),
-                cs.render, cs.spring, dev.encoder_resolution, w, dev.contact_hysteresis,
-                cs.table, cs.table_v, cs.blend, cs.attenuation, dev.force_constant,
-                dev.current_limit, 0, 2**62, -1, rate,
-                outs[0], outs[1], outs[2], outs[3], outs[4], flags, outs[5], outs[6], outs[7],
-                np.zeros(16, dtype=np.int64), np.zeros(16))
-    return t[:n], outs[5], outs[6]
+    device = (dev.encoder_resolution, w, dev.contact_hysteresis, dev.force_constant,
+              dev.current_limit, 0, rate)
+    K.run_ticks(0, n, (x, ist, np.zeros(K.FST), rb), cs.kernel_args, device, pull_fn(t),
+                np.zeros(0), 2**62, -1, out, flags, np.zeros(16, dtype=np.int64), np.zeros(16))
+    return t[:n], out[K.OUT_Z2], out[K.OUT_V2]
 
 
 @pytest.mark.parametrize("k", [220.0, 70_000.0, 1e7])
