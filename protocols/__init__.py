@@ -15,6 +15,7 @@ from .engine import (
     Paused,
     ResumeMismatch,
     SessionEngine,
+    SessionSetupError,
     Trial,
     seed_from_entropy,
 )
@@ -23,6 +24,7 @@ from .model import (
     Answer,
     Limits,
     Phase,
+    PhaseDesign,
     Protocol,
     RatingScale,
     Sample,
@@ -33,8 +35,8 @@ from .williams import williams_square
 
 __all__ = [
     "Answer", "Attempt", "BUILTIN", "DONE", "Done", "FINAL_STATUSES", "Limits", "LogMismatch",
-    "PAUSED", "Paused", "Phase", "Protocol", "ProtocolError", "RNG_ALGORITHM", "RatingScale",
-    "ResumeMismatch", "STATUSES", "Sample", "SaturationPolicy", "SessionEngine", "Trial",
-    "Window", "load_protocol", "parse_protocol", "protocol_text", "seed_from_entropy",
-    "williams_square",
+    "PAUSED", "Paused", "Phase", "PhaseDesign", "Protocol", "ProtocolError", "RNG_ALGORITHM",
+    "RatingScale", "ResumeMismatch", "STATUSES", "Sample", "SaturationPolicy", "SessionEngine",
+    "SessionSetupError", "Trial", "Window", "load_protocol", "parse_protocol", "protocol_text",
+    "seed_from_entropy", "williams_square",
 ]

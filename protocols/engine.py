@@ -37,11 +37,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from device.errors import HapticlabError
+
 from .model import Phase, Protocol
 from .williams import williams_square
 
 __all__ = ["SessionEngine", "Trial", "Attempt", "Done", "Paused", "DONE", "PAUSED",
-           "LogMismatch", "ResumeMismatch", "STATUSES", "FINAL_STATUSES"]
+           "LogMismatch", "ResumeMismatch", "SessionSetupError", "STATUSES", "FINAL_STATUSES"]
 
 STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "aborted_device", "skipped")
 FINAL_STATUSES = ("valid", "excluded_saturated", "skipped")
@@ -49,11 +51,15 @@ _CONTROL = ("paused", "resumed")
 RNG_ALGORITHM = "numpy PCG64 via SeedSequence(seed).spawn(2): [plan, redraw]"
 
 
-class LogMismatch(ValueError):
+class SessionSetupError(HapticlabError, ValueError):
+    """A session cannot be set up as asked (a seed, a counterbalance row)."""
+
+
+class LogMismatch(HapticlabError, ValueError):
     """The attempt log does not fit this protocol/seed (an entry names the wrong item)."""
 
 
-class ResumeMismatch(ValueError):
+class ResumeMismatch(HapticlabError, ValueError):
     """Resuming with a different protocol, seed or participant than the session recorded."""
 
 
@@ -164,16 +170,17 @@ class SessionEngine:
 
     def __init__(self, protocol: Protocol, seed: int, participant: str,
                  counterbalance_row: int | None = None):
-        if not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise SessionSetupError(f"seed must be a non-negative integer, got {seed!r}")
         self.protocol = protocol
         self.seed = int(seed)
         self.participant = participant
         self.counterbalance_row = counterbalance_row
         needs_row = any(p.block_order == "williams" for p in protocol.phases)
         if needs_row and counterbalance_row is None:
-            raise ValueError(f"protocol '{protocol.name}' counterbalances block order with a "
-                             "Williams square: give the participant's counterbalance row")
+            raise SessionSetupError(f"protocol '{protocol.name}' counterbalances block order "
+                                    "with a Williams square: give the participant's "
+                                    "counterbalance row (--row)")
         self._plan = self._build_plan()
 
     # ------------------------------------------------------------------ identity

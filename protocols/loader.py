@@ -19,13 +19,18 @@ from pathlib import Path
 from typing import Any
 
 from device import DeviceInfo, LibraryTransient, Scene, SceneError
-from device.scene import AccelSinusoid
+from device.errors import HapticlabError
+from device.scene import AccelSinusoid, unknown_key
 
 from ._toml_lines import key_lines, line_of
 from .model import (
+    NORMALIZATIONS,
+    SCORINGS,
+    SESSION_POLICIES,
     Answer,
     Limits,
     Phase,
+    PhaseDesign,
     Protocol,
     RatingScale,
     Sample,
@@ -40,7 +45,7 @@ _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _MISSING = object()
 
 
-class ProtocolError(ValueError):
+class ProtocolError(HapticlabError, ValueError):
     """A protocol file is invalid.
 
     Attributes
@@ -109,13 +114,11 @@ class _Ctx:
             raise self.error(path, f"expected a table, got {data!r}")
         for key in data:
             if key not in allowed:
-                hint = difflib.get_close_matches(key, sorted(allowed), n=1, cutoff=0.5)
-                extra = f"; did you mean '{hint[0]}'?" if hint else ""
-                raise self.error((*path, key), f"unknown key{extra} (allowed: "
-                                 f"{', '.join(sorted(allowed))})")
+                raise self.error((*path, key), unknown_key(key, allowed))
         for key in sorted(required):
             if key not in data:
-                raise self.error(path, f"missing required key '{key}'")
+                raise self.error((*path, key), f"missing (required: "
+                                 f"{', '.join(sorted(required))})")
         return data
 
     def number(self, path: tuple, value: Any, *, minimum: float | None = None,
@@ -153,7 +156,7 @@ class _Ctx:
 
 
 _TOP = {"protocol", "window", "rating", "answer", "saturation", "operator", "limits", "display",
-        "samples", "designs", "phases"}
+        "samples", "designs", "phases", "analysis"}
 
 
 def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | None = None
@@ -193,6 +196,9 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
     limits = _limits(cx, data.get("limits", {}))
     disp = cx.table(("display",), data.get("display", {}), {"cursor"})
     cursor = cx.boolean(("display", "cursor"), disp.get("cursor", False))
+    ana = cx.table(("analysis",), data.get("analysis", {}), {"sessions"})
+    sessions = cx.string(("analysis", "sessions"), ana.get("sessions", "first"),
+                         SESSION_POLICIES)
 
     samples: dict[str, Sample] = {}
     for i, raw in enumerate(_array(cx, ("samples",), data.get("samples", []))):
@@ -217,7 +223,7 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
         name=name, title=title, description=description.strip(), source=source,
         sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), samples=samples,
         phases=phases, window=window, rating=rating, answer=answer, saturation=saturation,
-        placeholders=placeholders, limits=limits, cursor=cursor)
+        placeholders=placeholders, limits=limits, cursor=cursor, sessions=sessions, text=text)
     if device is not None:
         _check_device(cx, proto, device)
     return proto
@@ -325,21 +331,31 @@ def _scene(cx: _Ctx, path: tuple, name: str, raw: Any) -> Scene:
         raise cx.error(path, f"expected a scene table, got {raw!r}")
     try:
         return Scene.from_dict({"name": name, **raw}, where="scene")
-    except SceneError as exc:
-        p = (*path, *exc.part, *((exc.field,) if exc.field else ()))
-        # the loader names the place itself: keep what the scene said after its own prefix
-        raise cx.error(p, re.sub(r"^scene( '[^']*')?[\w.]*: ", "", str(exc))) from None
+    except SceneError as exc:  # the loader names the place itself: file, line and key path
+        raise cx.error((*path, *exc.part, *((exc.field,) if exc.field else ())),
+                       exc.reason) from None
 
 
 def _sample(cx: _Ctx, i: int, raw: Any) -> Sample:
     path = ("samples", i)
-    s = cx.table(path, raw, {"id", "scene", "placement"}, {"id", "scene"})
+    s = cx.table(path, raw, {"id", "scene", "placement", "block", "factors"}, {"id", "scene"})
     sid = cx.ident((*path, "id"), s["id"])
     scene = _scene(cx, (*path, "scene"), sid, s["scene"])
     placement = s.get("placement", sid if scene.is_real else None)
     if placement is not None:
         placement = cx.string((*path, "placement"), placement)
-    return Sample(id=sid, scene=scene, placement=placement)
+    block = cx.ident((*path, "block"), s["block"]) if "block" in s else None
+    raw_f = s.get("factors", {})
+    if not isinstance(raw_f, Mapping):
+        raise cx.error((*path, "factors"), "must be a table of factor = \"level\", got "
+                       f"{raw_f!r}")
+    factors = {}
+    for k, v in raw_f.items():
+        if k == "sample" or not _ID.match(k):
+            raise cx.error((*path, "factors", k), "a factor name is letters, digits, '_', '-' "
+                           "or '.', and not 'sample' (the one-way factor)")
+        factors[k] = cx.ident((*path, "factors", k), v)
+    return Sample(id=sid, scene=scene, placement=placement, block=block, factors=factors)
 
 
 _FACTORS = ("frequency", "decay", "slope")
@@ -383,7 +399,7 @@ def _design(cx: _Ctx, i: int, raw: Any) -> list[tuple[tuple, Sample]]:
                 tr = AccelSinusoid(slope=vals["slope"], decay=vals["decay"],
                                    frequency=vals["frequency"])
             except SceneError as exc:
-                raise cx.error(mp, str(exc)) from None
+                raise cx.error((*mp, exc.field) if exc.field else mp, exc.reason) from None
             sid = f"{mid}-{code}"
             out.append(((*mp, "id"), Sample(
                 id=sid, scene=Scene(sid, spring=spring, transient=tr), block=mid,
@@ -396,7 +412,7 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
            rating: RatingScale | None) -> Phase:
     path = ("phases", i)
     p = cx.table(path, raw, {"name", "kind", "samples", "repetitions", "order", "blocks",
-                             "block_order"}, {"name", "samples"})
+                             "block_order", "analysis"}, {"name", "samples"})
     name = cx.ident((*path, "name"), p["name"])
     kind = cx.string((*path, "kind"), p.get("kind", "rated"), ("rated", "free", "identification"))
     sel = p["samples"]
@@ -418,10 +434,12 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
     order = cx.string((*path, "order"), p.get("order", "random"), ("random", "fixed"))
     blocks = p.get("blocks")
     if blocks is not None:
-        cx.string((*path, "blocks"), blocks, ("material",))
+        cx.string((*path, "blocks"), blocks, ("block",))
         missing = [s for s in ids if samples[s].block is None]
         if missing:
-            raise cx.error((*path, "blocks"), f"samples {missing} belong to no material")
+            raise cx.error((*path, "blocks"), f"samples {missing} belong to no block (a "
+                           "factorial design's materials are blocks; [[samples]] take "
+                           "block = \"name\")")
     block_order = cx.string((*path, "block_order"), p.get("block_order", "random"),
                             ("random", "fixed", "williams"))
     if kind == "identification":
@@ -432,8 +450,75 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
                            f"choices {sorted(answer.choices)}")
     elif kind == "rated" and rating is None:
         raise cx.error((*path, "kind"), "a rated phase needs a [rating] scale")
+    design = _phase_design(cx, (*path, "analysis"), p.get("analysis", {}), kind, ids, samples)
     return Phase(name=name, kind=kind, samples=ids, repetitions=reps, order=order,
-                 blocks=blocks, block_order=block_order)
+                 blocks=blocks, block_order=block_order, design=design)
+
+
+def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: str, ids: tuple[str, ...],
+                  samples: Mapping[str, Sample]) -> PhaseDesign:
+    """A phase's ``analysis`` table: what it measures and how it is analysed."""
+    a = cx.table(path, raw, {"role", "within", "by", "normalize", "scoring"})
+    if kind == "free":
+        if a:
+            raise cx.error(path, "a free phase is not rated or answered: nothing to analyse")
+        return PhaseDesign(role="none", dv="none", within=(), scoring=None)
+    role = cx.string((*path, "role"), a.get("role", "analysed"), ("analysed", "practice"))
+    if kind == "identification":
+        for key in ("within", "by", "normalize"):
+            if key in a:
+                raise cx.error((*path, key), "an identification phase is scored, not "
+                               "analysed by factors; use 'scoring'")
+        scoring = cx.string((*path, "scoring"), a.get("scoring", "all_correct"), SCORINGS)
+        return PhaseDesign(role=role, dv="answer", within=(), scoring=scoring)
+    if "scoring" in a:
+        raise cx.error((*path, "scoring"), "only an identification phase scores answers")
+    within = a.get("within", ["sample"])
+    if not isinstance(within, list) or not within or not all(isinstance(w, str) for w in within):
+        raise cx.error((*path, "within"), f"must be [\"sample\"] or a list of factor names, "
+                       f"got {within!r}")
+    if len(set(within)) != len(within):
+        raise cx.error((*path, "within"), f"factors repeat: {within}")
+    by = a.get("by")
+    if by is not None:
+        cx.string((*path, "by"), by, ("block",))
+        missing = [s for s in ids if samples[s].block is None]
+        if missing:
+            raise cx.error((*path, "by"), f"samples {missing} belong to no block")
+    normalize = cx.string((*path, "normalize"), a.get("normalize", "none"), NORMALIZATIONS)
+    if within != ["sample"]:
+        if "sample" in within:
+            raise cx.error((*path, "within"), "'sample' is the one-way design on its own; "
+                           "with other factors, list only the factors")
+        if len(within) > 3:
+            raise cx.error((*path, "within"), f"at most three within factors, got {within}")
+        for sid in ids:
+            lacking = [f for f in within if f not in samples[sid].factors]
+            if lacking:
+                raise cx.error((*path, "within"), f"sample {sid!r} has no level of "
+                               f"{', '.join(lacking)} (give it factors = {{ ... }})")
+        groups: dict = {}
+        for sid in ids:
+            groups.setdefault(samples[sid].block if by else None, []).append(sid)
+        for block, members in groups.items():
+            levels = [sorted({samples[s].factors[f] for s in members}) for f in within]
+            combos = {tuple(samples[s].factors[f] for f in within) for s in members}
+            where = f" in block {block!r}" if block else ""
+            if any(len(lv) < 2 for lv in levels):
+                one = [f for f, lv in zip(within, levels, strict=True) if len(lv) < 2]
+                raise cx.error((*path, "within"), f"factor(s) {', '.join(one)} have a single "
+                               f"level{where}: nothing to compare")
+            if len(combos) != math.prod(len(lv) for lv in levels) or \
+                    len(combos) != len(members):
+                raise cx.error((*path, "within"), f"the samples{where} do not cross the "
+                               f"factors {within} (each combination of levels exactly once): "
+                               f"{len(members)} samples, {len(combos)} distinct combinations "
+                               f"of {' × '.join(str(len(lv)) for lv in levels)}")
+    elif by is not None:
+        raise cx.error((*path, "by"), "'by' splits a factorial design; a one-way design over "
+                       "samples compares every sample of the phase")
+    return PhaseDesign(role=role, dv="rating", within=tuple(within), by=by,
+                       normalize=normalize)
 
 
 def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:

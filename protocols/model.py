@@ -8,7 +8,17 @@ from dataclasses import dataclass, field
 from device import Scene
 
 __all__ = ["Sample", "Window", "RatingScale", "Answer", "SaturationPolicy", "Limits", "Phase",
-           "Protocol"]
+           "PhaseDesign", "Protocol", "ROLES", "NORMALIZATIONS", "SCORINGS", "SESSION_POLICIES"]
+
+#: what a phase is for: analysed, practice (rated but not analysed), or none (not rated)
+ROLES = ("analysed", "practice", "none")
+#: how ratings are normalised before a factorial analysis
+NORMALIZATIONS = ("none", "zscore")
+#: how identification answers are scored: a repetition is right only when every surface is
+#: named right (the paper), or each surface counts on its own
+SCORINGS = ("all_correct", "per_surface")
+#: which sessions of a participant with several are analysed
+SESSION_POLICIES = ("first", "all")
 
 
 @dataclass(frozen=True)
@@ -25,9 +35,11 @@ class Sample:
         The physical item the operator puts under the stylus: the sample itself for a
         real sample; None for virtual samples (the engine assigns a placeholder block).
     block : str or None
-        Group the sample belongs to (the material of a factorial design).
+        Group the sample belongs to (the material of a factorial design); a phase with
+        ``blocks = "block"`` runs its items block by block.
     factors : mapping of str → str
-        Factor levels (``"low"``/``"high"``) of a factorial design.
+        The sample's level of each factor of a crossed design (``"low"``/``"high"`` in a
+        factorial design; any labels in ``[[samples]]``).
     params : mapping of str → float
         The parameter values behind the levels (e.g. ``frequency`` [Hz]).
     reference : str or None
@@ -98,6 +110,45 @@ class Limits:
 
 
 @dataclass(frozen=True)
+class PhaseDesign:
+    """How a phase is analysed: declared in the protocol, read by the analysis from the
+    protocol copy recorded with each session (never from the phase's or protocol's name).
+
+    Attributes
+    ----------
+    role : str
+        ``analysed``, ``practice`` (rated or answered, not analysed) or ``none`` (a free
+        phase: nothing to analyse).
+    dv : str
+        The dependent variable: ``rating``, ``answer`` or ``none``.
+    within : tuple of str
+        Within-subject factors: ``("sample",)`` for a one-way design over the phase's
+        samples, or factor names every sample of the phase carries a level of (crossed).
+    by : str or None
+        ``block``: one analysis per block (a factorial design's material).
+    normalize : str
+        ``none``, or ``zscore``: ratings z-scored within each participant first.
+    scoring : str or None
+        Identification answers: ``all_correct`` or ``per_surface``.
+    """
+
+    role: str = "analysed"
+    dv: str = "rating"
+    within: tuple[str, ...] = ("sample",)
+    by: str | None = None
+    normalize: str = "none"
+    scoring: str | None = None
+
+    @property
+    def analysed(self) -> bool:
+        return self.role == "analysed"
+
+    def to_dict(self) -> dict:
+        return {"role": self.role, "dv": self.dv, "within": list(self.within), "by": self.by,
+                "normalize": self.normalize, "scoring": self.scoring}
+
+
+@dataclass(frozen=True)
 class Phase:
     """A run of trials.
 
@@ -114,9 +165,11 @@ class Phase:
     order : str
         ``random`` or ``fixed`` within a block.
     blocks : str or None
-        Group items by this sample attribute (``material`` → ``Sample.block``).
+        ``block``: run the items block by block (each sample's ``block``).
     block_order : str
         ``random``, ``fixed`` or ``williams`` (balanced Latin square over participants).
+    design : PhaseDesign
+        What the phase measures and how it is analysed.
     """
 
     name: str
@@ -126,6 +179,7 @@ class Phase:
     order: str = "random"
     blocks: str | None = None
     block_order: str = "random"
+    design: PhaseDesign = field(default_factory=PhaseDesign)
 
 
 @dataclass(frozen=True)
@@ -146,6 +200,27 @@ class Protocol:
     placeholders: tuple[str, ...]
     limits: Limits
     cursor: bool = False
+    sessions: str = "first"
+    text: str = ""
 
     def sample(self, sample_id: str) -> Sample:
         return self.samples[sample_id]
+
+    def design(self) -> dict:
+        """The study design as plain data: what the session records beside the protocol copy
+        and what the analysis reads (scale, answers, sessions policy, each phase's design
+        and samples, each sample's block, factor levels and kind)."""
+        return {
+            "protocol": self.name, "title": self.title, "sha256": self.sha256,
+            "scale": None if self.rating is None else {"min": self.rating.min,
+                                                       "max": self.rating.max,
+                                                       "question": self.rating.question},
+            "answer_choices": None if self.answer is None else list(self.answer.choices),
+            "sessions": self.sessions,
+            "phases": [{"name": p.name, "kind": p.kind, "samples": list(p.samples),
+                        "repetitions": p.repetitions, "blocks": p.blocks,
+                        **p.design.to_dict()} for p in self.phases],
+            "samples": {sid: {"block": s.block, "factors": dict(s.factors),
+                              "real": s.is_real, "rated": s.rated, "reference": s.reference}
+                        for sid, s in self.samples.items()},
+        }
