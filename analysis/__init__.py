@@ -1,17 +1,21 @@
 """From raw session files to a study's statistics, figures and report.
 
-Reads the session folders of DESIGN.md; imports neither the device nor the protocol
-packages. The public API (stable names and parameters)::
+Reads the session folders of DESIGN.md (the format is :mod:`analysis.session_format`'s);
+imports neither the device nor the protocol packages. The public API (stable names and
+parameters), in the manner of pingouin — a long-format DataFrame and column names in, a
+tidy DataFrame out::
 
-    load_sessions(path)
-    preflight(data, dv, within, subject)
-    zscore_by_subject(data, dv, subject)
+    load_sessions(path)                      select_sessions(data, protocol=…, kind=…, …)
+    preflight(data, dv, within, subject)     zscore_by_subject(data, dv, subject)
     pairwise_ttests(data, dv, within, subject, padjust="holm")
     rm_anova(data, dv, within, subject)
     identification_scores(data, subject, correct, repetition=None, group=None)
+
+``analysis.datasets`` holds a small committed example (the docstrings' examples run on it).
 """
 
-from .load import LoadError, load_sessions, tap_velocities
+from . import datasets
+from .load import LoadError, load_sessions, select_sessions, tap_velocities
 from .stats import (
     StatsError,
     identification_scores,
@@ -22,5 +26,6 @@ from .stats import (
     zscore_by_subject,
 )
 
-__all__ = ["LoadError", "StatsError", "identification_scores", "load_sessions", "p_adjust",
-           "pairwise_ttests", "preflight", "rm_anova", "tap_velocities", "zscore_by_subject"]
+__all__ = ["LoadError", "StatsError", "datasets", "identification_scores", "load_sessions",
+           "p_adjust", "pairwise_ttests", "preflight", "rm_anova", "select_sessions",
+           "tap_velocities", "zscore_by_subject"]

@@ -1,106 +1,308 @@
-"""Reading session folders (DESIGN.md) into one long table. No I/O at import; reads only files."""
+"""Reading session folders into one long table, and choosing which sessions to analyse.
+
+No I/O at import; reads only files. The format is :mod:`analysis.session_format`'s.
+"""
 
 from __future__ import annotations
 
+import datetime as dt
 import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-__all__ = ["load_sessions", "LoadError", "tap_velocities"]
+from .session_format import (
+    COLUMNS,
+    FLOAT_COLUMNS,
+    INT_COLUMNS,
+    KINDS,
+    META,
+    TRIALS,
+    SessionMetaError,
+    TrialsFileError,
+    read_meta,
+    read_trials,
+    session_kind,
+)
+
+__all__ = ["load_sessions", "select_sessions", "LoadError", "tap_velocities", "SESSION_COLUMNS"]
+
+#: columns of ``load_sessions(...).attrs["session_table"]``, one row per session folder
+SESSION_COLUMNS = ("session_dir", "participant", "session", "protocol", "protocol_sha256",
+                   "kind", "responder", "status", "created_utc", "seed", "rows", "valid_rows",
+                   "design_key")
 
 
 class LoadError(ValueError):
-    """A session folder cannot be read (named by path and line)."""
+    """A session folder cannot be read (named by path and line), or no session was found."""
 
 
-def _read_tsv(path: Path) -> tuple[pd.DataFrame, str | None]:
-    text = path.read_text(encoding="utf-8", errors="replace")
-    torn = None
-    if text and not text.endswith("\n"):
-        cut = text.rfind("\n") + 1
-        torn, text = text[cut:], text[:cut]
-    lines = text.splitlines()
-    if not lines:
-        return pd.DataFrame(), torn
-    header = lines[0].split("\t")
-    rows = []
-    for no, line in enumerate(lines[1:], start=2):
-        f = line.split("\t")
-        if len(f) != len(header):
-            raise LoadError(f"{path}:{no}: corrupt line ({len(f)} fields, expected "
-                            f"{len(header)})")
-        rows.append(f)
-    return pd.DataFrame(rows, columns=header), torn
+def _design_key(design: dict | None) -> str:
+    import json
+
+    if not design:
+        return ""
+    body = {k: v for k, v in design.items() if k not in ("sha256", "title")}
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:12]
 
 
 def load_sessions(path: str | Path) -> pd.DataFrame:
     """All attempts of all sessions under ``path``, one row per attempt.
 
+    Parameters
+    ----------
+    path : str or Path
+        A folder holding ``sub-*/ses-*`` session folders at any depth.
+
     Returns
     -------
     DataFrame
-        The trials.tsv columns, typed (``trial_index``, ``attempt``, ``n_taps`` int;
-        ``rating``, ``response_time``, ``peak_current``, ``correct`` float, NaN when empty),
-        plus ``valid`` (status is valid), ``repetition`` (identification items), one column
-        per factor of a factorial design (e.g. ``frequency`` = low/high), and from
-        session.json: ``protocol``, ``protocol_sha256``, ``seed``, ``group``, ``scale``
-        ("min-max"), ``device_backend``, ``session_dir``.
-        ``result.attrs``: ``torn`` (torn last lines set aside, by file), ``files``
-        (SHA-256 of every file read), ``sessions`` (count).
+        The trials.tsv columns, typed (``trial_index``, ``attempt``, ``n_taps``,
+        ``session`` int; ``rating``, ``response_time``, ``peak_current``, ``correct`` float,
+        NaN when empty), plus ``valid`` (status is valid), ``repetition`` (from the item
+        key), one column per factor a sample carries (e.g. ``frequency`` = low/high), and
+        from session.json: ``protocol``, ``protocol_sha256``, ``design_key`` (sessions
+        with the same design share it), ``seed``, ``group``, ``scale`` ("min-max"),
+        ``kind`` (human, dry-run or simulated), ``responder``, ``device_backend``,
+        ``session_status``, ``session_dir``.
+
+        ``result.attrs``: ``session_table`` (DataFrame, one row per session folder, columns
+        :data:`SESSION_COLUMNS`), ``designs`` (design key → the design recorded with the
+        sessions), ``torn`` (torn last lines, by file), ``files`` (SHA-256 of every file
+        read), ``sessions`` (count).
+
+    Raises
+    ------
+    LoadError
+        No folder, no session, or a session file that cannot be read (named).
+
+    Examples
+    --------
+    >>> import analysis as A
+    >>> d = A.load_sessions(A.datasets.sessions_path())
+    >>> d.attrs["sessions"], sorted(d["participant"].unique())
+    (3, ['P01', 'P02', 'P03'])
+    >>> print(d.attrs["session_table"][["participant", "kind", "status"]].to_string(index=False))
+    participant      kind   status
+            P01 simulated complete
+            P02 simulated complete
+            P03 simulated complete
     """
     root = Path(path)
     if not root.exists():
         raise LoadError(f"{root}: no such folder")
-    metas = sorted(root.rglob("session.json"))
-    frames, torn, files = [], {}, {}
-    for mpath in metas:
+    if not root.is_dir():
+        raise LoadError(f"{root}: not a folder")
+    frames, torn, files, sessions, designs = [], {}, {}, [], {}
+    for mpath in sorted(root.rglob(META)):
         folder = mpath.parent
         try:
-            meta = json.loads(mpath.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise LoadError(f"{mpath}: not valid JSON ({exc})") from None
-        tpath = folder / "trials.tsv"
-        if not tpath.exists():
-            continue
-        files[str(tpath.relative_to(root))] = hashlib.sha256(tpath.read_bytes()).hexdigest()
-        files[str(mpath.relative_to(root))] = hashlib.sha256(mpath.read_bytes()).hexdigest()
-        df, t = _read_tsv(tpath)
+            meta = read_meta(mpath)
+        except SessionMetaError as exc:
+            raise LoadError(str(exc)) from None
+        tpath = folder / TRIALS
+        try:
+            rows, t = read_trials(tpath)
+        except TrialsFileError as exc:
+            raise LoadError(str(exc)) from None
         if t is not None:
-            torn[str(tpath)] = t
-        if df.empty:
+            torn[str(tpath)] = t.text
+        for f in (mpath, tpath):
+            if f.exists():
+                files[str(f.relative_to(root))] = hashlib.sha256(f.read_bytes()).hexdigest()
+        proto = meta["protocol"]
+        design = proto.get("design")
+        key = _design_key(design)
+        if key:
+            designs.setdefault(key, design)
+        kind = session_kind(meta)
+        status = meta.get("status", "")
+        sessions.append({
+            "session_dir": str(folder), "participant": str(meta["participant"]["id"]),
+            "session": int(meta["session"]), "protocol": proto["name"],
+            "protocol_sha256": proto["sha256"], "kind": kind,
+            "responder": meta.get("responder", ""), "status": status,
+            "created_utc": (meta.get("times") or {}).get("created_utc") or "",
+            "seed": meta.get("seed"), "rows": len(rows),
+            "valid_rows": sum(r["status"] == "valid" for r in rows), "design_key": key})
+        if not rows:
             continue
-        rating = meta.get("protocol", {}).get("rating") or {}
-        df["protocol"] = meta.get("protocol", {}).get("name", "")
-        df["protocol_sha256"] = meta.get("protocol", {}).get("sha256", "")
+        df = pd.DataFrame(rows)
+        rating = proto.get("rating") or (design or {}).get("scale") or {}
+        df["protocol"] = proto["name"]
+        df["protocol_sha256"] = proto["sha256"]
+        df["design_key"] = key
         df["seed"] = meta.get("seed")
-        df["group"] = meta.get("participant", {}).get("group", "") or ""
+        df["group"] = (meta["participant"].get("group") or "")
         df["scale"] = f"{rating['min']}-{rating['max']}" if rating else ""
-        df["device_backend"] = meta.get("device", {}).get("backend", "")
-        df["responder"] = meta.get("responder", "") if meta.get("ui") == "none" else "person"
+        df["device_backend"] = (meta.get("device") or {}).get("backend", "")
+        df["kind"] = kind
+        df["responder"] = meta.get("responder", "") if kind != "human" else "person"
+        df["session_status"] = status
         df["session_dir"] = str(folder)
         frames.append(df)
-    if not frames:
-        raise LoadError(f"{root}: no sessions (sub-*/ses-*/session.json with trials.tsv) found")
-    data = pd.concat(frames, ignore_index=True)
-    for c in ("trial_index", "attempt", "n_taps", "session"):
-        data[c] = pd.to_numeric(data[c], errors="coerce").fillna(0).astype(int)
-    for c in ("rating", "response_time", "peak_current", "correct"):
-        data[c] = pd.to_numeric(data[c].replace("", np.nan), errors="coerce")
+    if not sessions:
+        raise LoadError(f"{root}: no sessions (sub-*/ses-*/session.json) found")
+    table = pd.DataFrame(sessions, columns=list(SESSION_COLUMNS))
+    data = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
+        columns=[*COLUMNS, "protocol", "protocol_sha256", "design_key", "seed", "group", "scale",
+                 "device_backend", "kind", "responder", "session_status", "session_dir"])
+    for c in INT_COLUMNS:
+        if c in data:
+            data[c] = pd.to_numeric(data[c], errors="coerce").fillna(0).astype(int)
+    for c in FLOAT_COLUMNS:
+        if c in data:
+            data[c] = pd.to_numeric(data[c].replace("", np.nan), errors="coerce")
     data["valid"] = data["status"] == "valid"
-    rep = data["item"].str.extract(r"#(\d+)$")[0]
+    rep = data["item"].astype(str).str.extract(r"#(\d+)$")[0]
     data["repetition"] = pd.to_numeric(rep, errors="coerce").fillna(0).astype(int)
     if "factors" in data:
         parsed = data["factors"].fillna("").map(
             lambda s: dict(kv.split("=", 1) for kv in s.split(";") if "=" in kv))
         for name in sorted({k for d in parsed for k in d}):
             data[name] = parsed.map(lambda d, n=name: d.get(n, ""))
+    data.attrs["session_table"] = table
+    data.attrs["designs"] = designs
     data.attrs["torn"] = torn
     data.attrs["files"] = files
-    data.attrs["sessions"] = len(frames)
+    data.attrs["sessions"] = len(table)
     return data
+
+
+def _date(text: str | None, name: str) -> dt.datetime | None:
+    if text is None:
+        return None
+    try:
+        d = dt.datetime.fromisoformat(str(text))
+    except ValueError:
+        raise LoadError(f"--{name}: expected a date (YYYY-MM-DD) or an ISO time, got "
+                        f"{text!r}") from None
+    return d if d.tzinfo else d.replace(tzinfo=dt.UTC)
+
+
+def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
+                    kind: str | None = None, status: str = "complete",
+                    participants: list[str] | None = None, since: str | None = None,
+                    until: str | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Choose which sessions to analyse, and say why each is in or out.
+
+    Parameters
+    ----------
+    data : DataFrame
+        From :func:`load_sessions`.
+    protocol : str or list of str, optional
+        Protocol names to keep (default: all).
+    kind : {'human', 'dry-run', 'simulated', 'all'}, optional
+        Default: ``human`` when any human session exists, else ``simulated``, else
+        ``dry-run`` — people's data are never pooled with rehearsals unless asked.
+    status : {'complete', 'all'}
+        ``complete`` (default) leaves out interrupted and running sessions.
+    participants : list of str, optional
+        Participant ids to keep.
+    since, until : str, optional
+        Dates (``YYYY-MM-DD``, UTC) or ISO times bounding when a session was created
+        (``until`` a date includes that whole day).
+
+    Returns
+    -------
+    (DataFrame, DataFrame)
+        The rows of the included sessions, and the selection table: the session table's
+        columns plus ``included`` (bool) and ``reason`` (why it is out, or how it is in).
+        A participant with several sessions of one design is analysed as the design
+        declares (``sessions``: ``first`` keeps the earliest, ``all`` pools them as
+        repetitions); a session whose participant, protocol, seed and rows equal another's
+        (a backup copy) is left out as a duplicate.
+
+    Examples
+    --------
+    >>> import analysis as A
+    >>> d = A.load_sessions(A.datasets.sessions_path())
+    >>> rows, table = A.select_sessions(d, participants=["P01", "P02"])
+    >>> print(table[["participant", "included", "reason"]].to_string(index=False))
+    participant  included                                               reason
+            P01      True kind simulated (the default: no human sessions here)
+            P02      True kind simulated (the default: no human sessions here)
+            P03     False                             participant not selected
+    """
+    table = data.attrs["session_table"].copy()
+    if kind is None:
+        present = set(table["kind"])
+        kind = next((k for k in ("human", "simulated", "dry-run") if k in present), "human")
+        kind_note = f"kind {kind} (the default: " + ("people's sessions exist)"
+                                                       if kind == "human" else
+                                                       "no human sessions here)")
+    else:
+        if kind not in (*KINDS, "all"):
+            raise LoadError(f"--kind must be one of {', '.join(KINDS)} or all, got {kind!r}")
+        kind_note = f"kind {kind}"
+    if status not in ("complete", "all"):
+        raise LoadError(f"--status must be complete or all, got {status!r}")
+    protos = [protocol] if isinstance(protocol, str) else protocol
+    t0, t1 = _date(since, "since"), _date(until, "until")
+    if t1 is not None and len(str(until)) <= 10:
+        t1 = t1 + dt.timedelta(days=1)
+    reasons = []
+    for r in table.itertuples():
+        why = ""
+        created = _date(r.created_utc, "created") if r.created_utc else None
+        if protos is not None and r.protocol not in protos:
+            why = f"protocol {r.protocol} not selected"
+        elif kind != "all" and r.kind != kind:
+            why = f"{r.kind} session (selected: {kind})"
+        elif status == "complete" and r.status != "complete":
+            why = f"status {r.status or 'unknown'} (selected: complete sessions)"
+        elif participants is not None and r.participant not in participants:
+            why = "participant not selected"
+        elif t0 is not None and (created is None or created < t0):
+            why = f"created {r.created_utc or 'at an unknown time'}, before --since"
+        elif t1 is not None and (created is None or created >= t1):
+            why = f"created {r.created_utc or 'at an unknown time'}, after --until"
+        elif r.rows == 0:
+            why = "no recorded attempts"
+        reasons.append(why)
+    table["reason"] = reasons
+    table["included"] = table["reason"] == ""
+    # backup copies: the same participant, protocol, seed and rows in two folders
+    fingerprints: dict[tuple, str] = {}
+    # the copy nearest the top of the folder is kept (a backup usually sits deeper)
+    order = sorted(table.index[table["included"]],
+                   key=lambda i: (len(Path(table.loc[i, "session_dir"]).parts),
+                                  table.loc[i, "session_dir"]))
+    for i, r in table.loc[order].iterrows():
+        rows = data[data["session_dir"] == r.session_dir]
+        key = (r.participant, r.protocol_sha256, r.seed,
+               hashlib.sha256(rows[["item", "attempt", "status", "rating", "answer",
+                                    "tap_velocities"]].to_csv(index=False).encode()).hexdigest())
+        if key in fingerprints:
+            table.loc[i, ["included", "reason"]] = (False, f"duplicate of {fingerprints[key]} "
+                                                           "(same participant, seed and rows)")
+        else:
+            fingerprints[key] = r.session_dir
+    # several sessions of a participant under one design: as the design declares
+    designs = data.attrs.get("designs", {})
+    inc = table[table["included"]].sort_values(["created_utc", "session"])
+    for (_pid, key), g in inc.groupby(["participant", "design_key"], sort=False):
+        if len(g) < 2:
+            continue
+        policy = (designs.get(key) or {}).get("sessions", "first")
+        if policy == "first":
+            first = g.index[0]
+            for i in g.index[1:]:
+                table.loc[i, ["included", "reason"]] = (
+                    False, f"a later session of {g.loc[i, 'participant']} (the protocol analyses "
+                           f"each participant's first session: {table.loc[first, 'session_dir']})")
+        else:
+            for i in g.index:
+                table.loc[i, "reason"] = (f"one of {len(g)} sessions of this participant, "
+                                          "pooled as repetitions (the protocol analyses all)")
+    for i in table.index[table["included"] & (table["reason"] == "")]:
+        table.loc[i, "reason"] = kind_note
+    keep = set(table.loc[table["included"], "session_dir"])
+    out = data[data["session_dir"].isin(keep)].copy()
+    out.attrs = dict(data.attrs)
+    out.attrs["selection"] = table
+    return out, table
 
 
 def tap_velocities(data: pd.DataFrame) -> np.ndarray:

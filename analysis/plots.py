@@ -30,56 +30,75 @@ def _save(fig, out: Path, name: str) -> list[str]:
     return paths
 
 
-def realism_means(r: dict, out: Path) -> list[str]:
+def _name(a: dict) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in a["id"].replace("/", "-"))
+
+
+def rating_means(a: dict, out: Path) -> list[str]:
     plt = _plt()
+    r = a["result"]
     s = pd.DataFrame(r["samples"])
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = plt.subplots(figsize=(max(5, 0.7 * len(s) + 2), 4))
     x = np.arange(len(s))
     ax.errorbar(x, s["mean"], yerr=[s["mean"] - s["ci_low"], s["ci_high"] - s["mean"]],
                 fmt="o", capsize=4)
     ax.set_xticks(x, s["sample"], rotation=40, ha="right")
-    ax.set_ylabel("realism rating (mean ± 95 % CI)")
-    ax.set_title(f"Realism of the samples (n = {r['n_subjects']} participants)")
-    return _save(fig, out, "realism_means")
+    scale = a.get("scale")
+    if scale:
+        ax.set_ylim(scale["min"] - 0.3, scale["max"] + 0.3)
+    ax.set_ylabel("rating (mean ± 95 % CI)")
+    ax.set_title(f"{a['id']}: ratings of the samples (n = {r['n_subjects']} participants)")
+    return _save(fig, out, f"{_name(a)}_means")
 
 
-def realism_pmatrix(r: dict, out: Path) -> list[str]:
+def rating_pmatrix(a: dict, out: Path) -> list[str]:
     plt = _plt()
+    r = a["result"]
     order = [x["sample"] for x in r["samples"]]
     m = pd.DataFrame(np.nan, index=order, columns=order)
     for row in r["pairwise"].itertuples():
         m.loc[row.A, row.B] = m.loc[row.B, row.A] = row.p_holm
-    fig, ax = plt.subplots(figsize=(7, 6))
+    fig, ax = plt.subplots(figsize=(max(4, 0.5 * len(order) + 2), max(3.5, 0.45 * len(order)
+                                                                          + 1.5)))
     im = ax.imshow(m.to_numpy(dtype=float), vmin=0, vmax=1, cmap="viridis")
     ax.set_xticks(range(len(order)), order, rotation=60, ha="right")
     ax.set_yticks(range(len(order)), order)
     fig.colorbar(im, label="Holm-adjusted p (paired t-test)")
-    ax.set_title("Which samples differ")
-    return _save(fig, out, "realism_pvalues")
+    ax.set_title(f"{a['id']}: which samples differ")
+    return _save(fig, out, f"{_name(a)}_pvalues")
 
 
-def factorial_interactions(f: dict, out: Path) -> list[str]:
+def factorial_interactions(a: dict, out: Path) -> list[str]:
+    import itertools
+
     plt = _plt()
+    factors = list(a["phase_design"]["within"])
     files = []
-    for material, res in f.items():
+    for group, res in a["result"].items():
         sets = res["sets"]
-        fig, axes = plt.subplots(1, 3, figsize=(11, 3.4), sharey=True)
-        pairs = [("frequency", "decay"), ("frequency", "slope"), ("decay", "slope")]
-        for ax, (a, b) in zip(axes, pairs, strict=True):
-            for lvl, g in sets.groupby(b):
-                mm = g.groupby(a)["mean"].mean().reindex(["low", "high"])
-                ax.plot(["low", "high"], mm.to_numpy(), "o-", label=f"{b} {lvl}")
-            ax.set_xlabel(a)
+        pairs = list(itertools.combinations(factors, 2)) or [(factors[0], factors[0])]
+        fig, axes = plt.subplots(1, len(pairs), figsize=(3.7 * len(pairs), 3.4), sharey=True,
+                                 squeeze=False)
+        for ax, (f1, f2) in zip(axes[0], pairs, strict=True):
+            levels = list(dict.fromkeys(sets.sort_values(f1)[f1]))
+            if set(levels) == {"low", "high"}:
+                levels = ["low", "high"]
+            for lvl, g in sets.groupby(f2):
+                mm = g.groupby(f1)["mean"].mean().reindex(levels)
+                ax.plot(levels, mm.to_numpy(), "o-", label=f"{f2} {lvl}")
+            ax.set_xlabel(f1)
             ax.legend(fontsize=8)
-        axes[0].set_ylabel("mean rating (z)")
-        fig.suptitle(f"{material}: interactions (most significant: {res['most_significant']})")
-        files += _save(fig, out, f"factorial_{material}")
+        axes[0][0].set_ylabel("mean rating" + (" (z)" if a["phase_design"].get("normalize")
+                                               == "zscore" else ""))
+        fig.suptitle(f"{a['id']} — {group}: interactions (most significant: "
+                     f"{res['most_significant']})")
+        files += _save(fig, out, f"{_name(a)}_{group}")
     return files
 
 
-def confusion(i: dict, out: Path) -> list[str]:
+def confusion(a: dict, out: Path) -> list[str]:
     plt = _plt()
-    c = i["confusion"]
+    c = a["result"]["confusion"]
     fig, ax = plt.subplots(figsize=(4.5, 4))
     ax.imshow(c.to_numpy(), cmap="Blues")
     for (y, x), v in np.ndenumerate(c.to_numpy()):
@@ -88,14 +107,15 @@ def confusion(i: dict, out: Path) -> list[str]:
     ax.set_yticks(range(len(c.index)), c.index)
     ax.set_xlabel("answered")
     ax.set_ylabel("presented")
-    ax.set_title("Identification: confusion")
-    return _save(fig, out, "identification_confusion")
+    ax.set_title(f"{a['id']}: confusion")
+    return _save(fig, out, f"{_name(a)}_confusion")
 
 
-def accel_traces(data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str]:
+def accel_traces(a: dict, data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str]:
     """Acceleration after contact per sample, for the tap closest to a common speed."""
     plt = _plt()
-    d = data[(data["protocol"] == "realism") & data["valid"] & (data["trace_file"] != "")]
+    d = data[(data["design_key"] == a["design_key"]) & (data["phase"] == a["phase"])
+             & data["valid"] & (data["trace_file"].fillna("") != "")]
     picked = []
     for sample, g in d.groupby("sample"):
         best = None
@@ -114,17 +134,19 @@ def accel_traces(data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str
                         len(z["accel_counts"]))
                     i = int(round((z["contacts_t"][k] - t0) * rate))
                     sel = (idx >= i) & (idx < i + int(0.1 * rate))
-                    a = z["accel_counts"][sel] * float(z["accel_lsb"])
-                    best = (err, a, float(z["contacts_v"][k]), rate)
+                    acc = z["accel_counts"][sel] * float(z["accel_lsb"])
+                    best = (err, acc, float(z["contacts_v"][k]), rate)
         if best is not None:
             picked.append((str(sample), *best[1:]))
-    # one panel per sample on a shared scale: 11 overlaid traces hide each other
+    if not picked:
+        return []
+    # one panel per sample on a shared scale: overlaid traces hide each other
     cols = 4
     rows = max(1, -(-len(picked) // cols))
     fig, axes = plt.subplots(rows, cols, figsize=(10, 1.9 * rows + 0.8), sharex=True,
                              sharey=True, squeeze=False)
-    for ax, (sample, a, v, rate) in zip(axes.flat, picked, strict=False):
-        ax.plot(np.arange(len(a)) / rate * 1e3, a / v * speed, lw=0.7, color="C0")
+    for ax, (sample, acc, v, rate) in zip(axes.flat, picked, strict=False):
+        ax.plot(np.arange(len(acc)) / rate * 1e3, acc / v * speed, lw=0.7, color="C0")
         ax.set_title(f"{sample} ({v:.3f} m/s)", fontsize=8)
     for ax in axes.flat[len(picked):]:
         ax.set_visible(False)
@@ -132,16 +154,16 @@ def accel_traces(data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str
         ax.set_xlabel("ms after contact", fontsize=8)
     for ax in axes[:, 0]:
         ax.set_ylabel("m/s²", fontsize=8)
-    fig.suptitle(f"Contact acceleration per sample, scaled to {speed} m/s incoming speed",
-                 fontsize=10)
+    fig.suptitle(f"{a['id']}: contact acceleration per sample, scaled to {speed} m/s incoming "
+                 "speed", fontsize=10)
     fig.tight_layout()
-    return _save(fig, out, "accel_traces")
+    return _save(fig, out, f"{_name(a)}_accel_traces")
 
 
-def session_length(realism: dict, out: Path) -> list[str]:
+def session_length(a: dict, out: Path) -> list[str]:
     """Power of a 1-point contrast and CI half-width against participants, per repetitions."""
     plt = _plt()
-    t = realism["session_length"]["table"]
+    t = a["result"]["session_length"]["table"]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
     for r, g in t.groupby("reps"):
         a1.plot(g["subjects"], g["power"], marker="o", ms=3, label=f"{r} rep.")
@@ -152,22 +174,26 @@ def session_length(realism: dict, out: Path) -> list[str]:
     a2.set_xlabel("participants")
     a2.set_ylabel("95 % CI half-width of a mean [points]")
     a1.legend(fontsize=7)
-    fig.suptitle("Session length against power and precision (variances from these data)",
-                 fontsize=10)
+    fig.suptitle(f"{a['id']}: session length against power and precision (variances from "
+                 "these data)", fontsize=10)
     fig.tight_layout()
-    return _save(fig, out, "session_length")
+    return _save(fig, out, f"{_name(a)}_session_length")
 
 
-def save_all(data, results: dict, out: Path) -> list[str]:
+def save_all(data, analyses: list[dict], out: Path) -> list[str]:
+    """Every figure of every analysis (PNG and SVG); returns the file names."""
     files = []
-    if isinstance(results.get("realism"), dict):
-        files += realism_means(results["realism"], out)
-        files += session_length(results["realism"], out)
-        files += realism_pmatrix(results["realism"], out)
-        files += accel_traces(data, out)
-    if isinstance(results.get("factorial"), dict):
-        files += factorial_interactions(results["factorial"], out)
-    if isinstance(results.get("identification"), dict) and \
-            results["identification"].get("confusion") is not None:
-        files += confusion(results["identification"], out)
+    for a in analyses:
+        if isinstance(a["result"], str):
+            continue
+        if a["type"] == "oneway":
+            files += rating_means(a, out)
+            if isinstance(a["result"]["session_length"], dict):
+                files += session_length(a, out)
+            files += rating_pmatrix(a, out)
+            files += accel_traces(a, data, out)
+        elif a["type"] == "factorial":
+            files += factorial_interactions(a, out)
+        elif a["result"].get("confusion") is not None:
+            files += confusion(a, out)
     return files

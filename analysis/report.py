@@ -1,4 +1,11 @@
-"""``hapticlab analyze``: every study found in a data folder → report.json / .md / .html + figures.
+"""``hapticlab analyze``: the analyses the recorded designs call for → report.json / .md / .html.
+
+Which sessions are pooled is chosen (:func:`analysis.load.select_sessions`) and shown: the
+report opens with the table of sessions included and excluded, with the reason for each.
+Sessions are grouped by the design they recorded; each analysed phase of each design gets
+the analysis its design declares (:func:`analysis.study.analyse_phase`), and its methods
+paragraph is written from the data: the scale, the counts, the pairs and the corrections
+actually applied.
 
 Re-running on the same files gives identical numbers (the analyses have no randomness,
 and the JSON is written with sorted keys and rounded floats).
@@ -17,41 +24,23 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .load import load_sessions
+from .load import load_sessions, select_sessions
 from .stats import StatsError
-from .study import device_summary, factorial, identification, realism
+from .study import analyse_phase, analysed_phases, phase_rows
 
-__all__ = ["analyze", "METHODS"]
-
-METHODS = (
-    "Ratings were averaged per participant and sample before testing. Realism ratings "
-    "(1–7) of the testing phase were compared with a one-way repeated-measures ANOVA "
-    "(sample as the within-subject factor; sphericity by Mauchly's test, corrections by "
-    "Greenhouse–Geisser and Huynh–Feldt ε; effect sizes partial η² and generalized η², "
-    "Olejnik & Algina 2003) and with paired two-sided t-tests on every pair of samples "
-    "(55 pairs for 11 samples), p-values adjusted by Holm–Bonferroni and, separately, by "
-    "Benjamini–Hochberg; effect size d_z = mean difference / SD of the differences; 95 % "
-    "confidence intervals of mean differences from the t distribution. Samples whose "
-    "Holm-adjusted p ≥ .05 are grouped as not distinguishable (connected pairs). "
-    "Factorial ratings (1–10) were z-scored within each participant (mean 0, SD 1; a "
-    "participant with constant ratings gets z = 0) and analysed per material with a 2×2×2 "
-    "repeated-measures ANOVA (frequency, decay rate, amplitude slope); the most significant "
-    "parameter is the main effect with the smallest p; the best set is the set with the "
-    "highest mean z. Identification answers count as correct only when all three surfaces "
-    "were named right; chance is 1/6 (3! orders); percent correct is tested against chance "
-    "with a one-sided exact binomial test. Participants missing a cell are excluded from "
-    "repeated-measures tests (listwise); every exclusion is listed below.")
-
+__all__ = ["analyze", "build_report", "methods_text"]
 
 SIMULATED_NOTE = (
     "These data come from simulated participants, not people: the ratings and answers "
-    "are those of a rehearsal model (app/simulated.py) that judges features of the "
+    "are those of a rehearsal model (app/participant_model.py) that judges features of the "
     "simulated device's signals. Each simulated person taps with their own speed, grasp "
     "and rhythm, compares four felt features (stop time, jolt, onset pitch, ring-down) "
     "with the reference it felt, and places that distance on the range of what it has "
-    "felt so far; the parameters are listed in app/simulated.py and the README. The "
+    "felt so far; the parameters are listed in app/participant_model.py and the README. The "
     "report rehearses the study's analysis; its findings are not claims about human "
     "perception.")
+DRY_RUN_NOTE = ("These data come from a dry run: a scripted responder answered at random to "
+                "test the machinery. Nothing in this report is a finding.")
 
 
 def _clean(v, where: str = "report"):
@@ -75,75 +64,210 @@ def _clean(v, where: str = "report"):
     return v
 
 
-def _section(fn, *args):
+def _nan_to_none(rows: list[dict]) -> list[dict]:
+    return [{k: (None if isinstance(x, float) and math.isnan(x) else x) for k, x in r.items()}
+            for r in rows]
+
+
+def _scale_text(design: dict) -> str:
+    s = design.get("scale")
+    return f"{s['min']}–{s['max']}" if s else "—"
+
+
+def methods_text(a: dict, design: dict) -> str:
+    """The methods paragraph of one analysis, written from what was computed."""
+    phase, res = a["phase_design"], a["result"]
+    title = f"{design.get('title') or design['protocol']} ({design['protocol']}), phase " \
+            f"'{a['phase']}'"
+    if isinstance(res, str):
+        return f"{title}: {res}."
+    if a["type"] == "oneway":
+        k, n = res["n_levels"], res["n_subjects"]
+        anova = res["anova"].iloc[0]
+        n_anova = int(anova["DF_err"] / max(1, anova["DF"]) + 1)
+        if "W_mauchly" in res["anova"].columns and not pd.isna(anova.get("W_mauchly")):
+            sph = ("sphericity by Mauchly's test, with Greenhouse–Geisser and Huynh–Feldt "
+                   "corrections")
+        elif k == 2:
+            sph = "two levels, so sphericity holds by construction"
+        else:
+            sph = (f"Mauchly's test is undefined with {n_anova} participants for {k} samples "
+                   "(singular covariance), so the Greenhouse–Geisser-corrected p is reported")
+        pairs = k * (k - 1) // 2
+        const = len(res["constant_pairs"])
+        tested = f"all {pairs} pairs of samples" + (
+            f" ({const} pair(s) whose difference is the same for every participant are "
+            "listed, not tested)" if const else "")
+        excl = res["preflight"]
+        missing = excl[excl["check"] == "missing_cells"] if len(excl) else excl
+        ex_txt = ""
+        if len(missing):
+            ex_txt = (f" {int(missing['n_excluded'].sum())} participant(s) missing a sample "
+                      "were left out of the ANOVA (listwise) and of the t-tests of the pairs "
+                      "they miss.")
+        return (f"{title}: {n} participants rated {k} samples on a {_scale_text(design)} scale, "
+                f"{res['repetitions']} time(s) each (median); ratings were averaged per "
+                f"participant and sample. One-way repeated-measures ANOVA on {n_anova} "
+                f"participants with every sample (sample within subjects; {sph}); effect sizes "
+                "partial η² and generalized η² (Olejnik & Algina 2003). Paired two-sided "
+                f"t-tests on {tested}, p adjusted by Holm–Bonferroni and, separately, by "
+                "Benjamini–Hochberg; d_z = mean difference / SD of the differences; 95 % "
+                "confidence intervals from the t distribution. Samples whose Holm-adjusted "
+                f"p ≥ .05 are grouped as not distinguishable (connected pairs).{ex_txt}")
+    if a["type"] == "factorial":
+        factors = phase["within"]
+        groups = list(res)
+        first = res[groups[0]]
+        shape = " × ".join(str(len(first["sets"][f].unique())) for f in factors)
+        norm = (" Ratings were z-scored within each participant over the phase (mean 0, SD 1; "
+                "a participant with constant ratings gets z = 0)." if
+                phase.get("normalize") == "zscore" else "")
+        per = f" Per block ({', '.join(groups)}), a" if phase.get("by") else " A"
+        n = max(v["n_subjects"] for v in res.values())
+        return (f"{title}: {n} participants rated {len(first['sets'])} sets per "
+                f"{'block' if phase.get('by') else 'design'} ({shape} levels of "
+                f"{', '.join(factors)}) on a {_scale_text(design)} scale.{norm}{per} "
+                f"{shape} repeated-measures ANOVA ({', '.join(factors)} within subjects; "
+                "participants missing a cell left out, listwise); the most significant factor "
+                "is the main effect with the smallest p; the best set has the highest mean.")
+    k = res["surfaces"]
+    chance = 100 * res["chance"]
+    rule = (f"a repetition counts as correct only when all {k} surfaces are named right "
+            f"(chance 1/{k}! = {chance:.1f} %)" if res["scoring"] == "all_correct" else
+            f"each surface counts on its own (chance 1/{k} = {chance:.1f} %)")
+    return (f"{title}: {res['n_subjects']} participants named {k} surfaces per repetition; "
+            f"{rule}; percent correct is tested against chance with a one-sided exact "
+            "binomial test.")
+
+
+def _run(rows: pd.DataFrame, phase: dict):
     try:
-        return fn(*args)
+        return analyse_phase(rows, phase)
     except StatsError as exc:
-        return f"not computed: {exc}"
+        return {"type": "not computed", "result": f"not computed: {exc}", "device": None}
 
 
-def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json")) -> dict:
-    """Run every analysis the data allows and write the report; returns the JSON content."""
-    data = load_sessions(data_dir)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    protos = set(data["protocol"])
-    res: dict = {}
-    if "realism" in protos:
-        res["realism"] = _section(realism, data)
-    if "factorial" in protos:
-        res["factorial"] = _section(factorial, data)
-    if "identification" in protos:
-        res["identification"] = _section(identification, data)
-    res["device"] = device_summary(data)
-    figures = []
-    try:
-        from .plots import save_all
+def build_report(data: pd.DataFrame, selection: pd.DataFrame, filters: dict) -> tuple[dict, list]:
+    """Every analysis the selected sessions' designs call for; returns the report content (not
+    yet cleaned) and the analyses with their full results (for the figures)."""
+    designs = data.attrs.get("designs", {})
+    analyses = []
+    for key in sorted(set(data["design_key"]) - {""},
+                      key=lambda k: (designs[k]["protocol"], k)):
+        design = designs[key]
+        for phase in analysed_phases(design):
+            rows = phase_rows(data, key, phase["name"])
+            if rows.empty:
+                continue
+            a = _run(rows, phase)
+            a.update({"id": f"{design['protocol']}/{phase['name']}", "protocol":
+                      design["protocol"], "phase": phase["name"], "design_key": key,
+                      "phase_design": phase, "scale": design.get("scale")})
+            a["methods"] = methods_text(a, design)
+            analyses.append(a)
+    ids = [a["id"] for a in analyses]
+    for a in analyses:  # the same protocol name under two designs: tell them apart
+        if ids.count(a["id"]) > 1:
+            a["id"] += f" (design {a['design_key'][:6]})"
+    inc = selection[selection["included"]]
+    kinds = sorted(set(inc["kind"]))
+    intro = []
+    if "simulated" in kinds:
+        intro.append(SIMULATED_NOTE)
+    if "dry-run" in kinds:
+        intro.append(DRY_RUN_NOTE)
+    sel_text = (f"{len(inc)} of {len(selection)} sessions included "
+                f"({', '.join(f'{k}: {v}' for k, v in sorted(filters.items()) if v)}); "
+                "every session found is listed below with the reason it is in or out.")
+    methods = " ".join([*intro, sel_text, *(a["methods"] for a in analyses)])
+    report = {
+        "methods": methods, "kinds": kinds,
+        "selection": {"filters": filters, "included": int(len(inc)),
+                      "excluded": int(len(selection) - len(inc)),
+                      "sessions": selection[["session_dir", "participant", "session",
+                                             "protocol", "kind", "status", "rows", "included",
+                                             "reason"]].to_dict(orient="records")},
+        "analyses": [_report_entry(a) for a in analyses],
+    }
+    return report, analyses
 
-        figures = save_all(data, res, out)
-    except ImportError:
-        pass
-    prov = {"packages": {p: _ver(p) for p in ("numpy", "scipy", "pandas", "matplotlib")},
-            "python": platform.python_version(),
-            "input_files": data.attrs["files"], "seeds": sorted({int(s) for s in data["seed"]
-                                                                 if s is not None}),
-            "sessions": data.attrs["sessions"], "torn_lines_set_aside": data.attrs["torn"]}
-    responders = sorted(set(data["responder"])) if "responder" in data else []
-    prov["responders"] = responders
-    methods = METHODS
-    if any(r != "person" for r in responders):
-        methods = (f"{SIMULATED_NOTE} (responders: {', '.join(responders)}.) " + METHODS)
-    report = {"methods": methods, "provenance": prov, "figures": figures,
-              "device": res["device"]}
-    if "realism" in res:
-        r = res["realism"]
-        report["realism"] = r if isinstance(r, str) else {
+
+def _report_entry(a: dict) -> dict:
+    r = a["result"]
+    base = {"id": a["id"], "protocol": a["protocol"], "phase": a["phase"], "type": a["type"],
+            "design": a["phase_design"], "scale": a["scale"], "methods": a["methods"],
+            "device": a["device"]}
+    if isinstance(r, str):
+        return {**base, "result": r}
+    if a["type"] == "oneway":
+        base.update({
             "samples": r["samples"], "anova": r["anova"], "groups": r["groups"],
             "pairwise": r["pairwise"][["A", "B", "mean_diff", "ci_low", "ci_high", "t", "dof",
-                                       "p_unc", "p_holm", "p_fdr", "p_corr", "dz"]],
+                                       "p_unc", "p_holm", "p_fdr", "dz", "n"]],
             "anova_notes": r["anova"].attrs.get("notes", []),
-            "session_length": r["session_length"],
-            "n_subjects": r["n_subjects"], "exclusions": r["preflight"],
+            "session_length": r["session_length"], "n_subjects": r["n_subjects"],
+            "exclusions": r["preflight"],
             "constant_pairs": [list(p) for p in r["constant_pairs"]],
-            # a participant without a valid rating of a sample (every attempt saturated)
-            # has no mean there: null, and listed among the exclusions
-            "per_subject": [{k: (None if isinstance(x, float) and math.isnan(x) else x)
-                             for k, x in row.items()}
-                            for row in r["per_subject"].to_dict(orient="records")]}
-    if "factorial" in res:
-        f = res["factorial"]
-        report["factorial"] = f if isinstance(f, str) else {
-            m: {"anova": v["anova"], "most_significant": v["most_significant"],
-                "best_set": v["best_set"], "main_effects": v["main_effects"],
-                "sets": v["sets"], "exclusions": v["preflight"],
-                "n_subjects": v["n_subjects"]} for m, v in f.items()}
-    if "identification" in res:
-        i = res["identification"]
-        report["identification"] = i if isinstance(i, str) else {
-            "table": i["table"], "chance": i["chance"], "n_subjects": i["n_subjects"],
-            "confusion": None if i["confusion"] is None else
-            {k: {kk: int(vv) for kk, vv in row.items()} for k, row in
-             i["confusion"].to_dict(orient="index").items()}}
+            # a participant without a valid rating of a sample has no mean there: null
+            "per_subject": _nan_to_none(r["per_subject"].to_dict(orient="records"))})
+    elif a["type"] == "factorial":
+        base["groups"] = {g: {"anova": v["anova"], "most_significant": v["most_significant"],
+                              "most_significant_p": v["most_significant_p"],
+                              "best_set": v["best_set"], "main_effects": v["main_effects"],
+                              "sets": v["sets"], "exclusions": v["preflight"],
+                              "n_subjects": v["n_subjects"]} for g, v in r.items()}
+    else:
+        base.update({"table": r["table"], "chance": r["chance"], "scoring": r["scoring"],
+                     "n_subjects": r["n_subjects"],
+                     "confusion": None if r["confusion"] is None else
+                     {k: {kk: int(vv) for kk, vv in row.items()} for k, row in
+                      r["confusion"].to_dict(orient="index").items()}})
+    return base
+
+
+def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"),
+            protocol=None, kind=None, status: str = "complete", participants=None,
+            since=None, until=None) -> dict:
+    """Select sessions, run every analysis their designs call for, write the report.
+
+    Parameters
+    ----------
+    data_dir : path
+        Folder of session folders.
+    out : path
+        Where report.json / report.md / report.html and the figures go.
+    formats : tuple of {'html', 'md', 'json'}
+    protocol, kind, status, participants, since, until
+        Filters, as :func:`analysis.load.select_sessions`.
+
+    Returns
+    -------
+    dict
+        The report's content (what report.json holds).
+    """
+    data = load_sessions(data_dir)
+    filters = {"protocol": protocol, "kind": kind, "status": status,
+               "participants": participants, "since": since, "until": until}
+    selected, table = select_sessions(data, **filters)
+    filters = {**filters, "kind": kind or _default_kind(table)}
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    report, analyses = build_report(selected, table, filters)
+    figures = []
+    if analyses:
+        from .plots import save_all
+
+        figures = save_all(selected, analyses, out)
+    inc = table[table["included"]]
+    files = {k: v for k, v in data.attrs["files"].items()
+             if any(str(Path(data_dir) / k).startswith(str(Path(d)) + "/")
+                    for d in inc["session_dir"])}
+    report["figures"] = figures
+    report["provenance"] = {
+        "packages": {p: _ver(p) for p in ("numpy", "scipy", "pandas", "matplotlib")},
+        "python": platform.python_version(), "input_files": files,
+        "seeds": sorted({int(s) for s in inc["seed"] if s is not None}),
+        "sessions": int(len(inc)), "torn_lines_set_aside": data.attrs["torn"]}
     report = _clean(report)
     if "json" in formats:
         (out / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True))
@@ -153,6 +277,11 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
     if "html" in formats:
         (out / "report.html").write_text(_html(md, report))
     return report
+
+
+def _default_kind(table: pd.DataFrame) -> str:
+    inc = table[table["included"]]
+    return inc["kind"].iloc[0] if len(inc) else "human"
 
 
 def _ver(p: str) -> str:
@@ -172,78 +301,90 @@ def _table(rows: list[dict], cols: list[str] | None = None) -> str:
             return "—"
         if isinstance(v, float):
             return f"{v:.4g}"
-        return str(v)
+        return str(v).replace("|", "\\|")
 
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in cols) + " |" for r in rows]
     return "\n".join(lines) + "\n"
 
 
+def _oneway_md(a: dict) -> list[str]:
+    out = [f"{a['n_subjects']} participants.\n\n#### Samples (mean rating, 95 % CI; z: "
+           "per-participant z-scores)\n", _table(a["samples"]),
+           "\n#### One-way repeated-measures ANOVA\n", _table(a["anova"])]
+    out.extend(f"\n_{note}._\n" for note in a["anova_notes"])
+    out.append("\n#### Groups not distinguishable (Holm p ≥ .05)\n")
+    out.append("\n".join("- " + ", ".join(g) for g in a["groups"]) + "\n")
+    out.append("\n#### Paired t-tests (d_z: Cohen's d for paired data)\n")
+    out.append(_table(a["pairwise"]))
+    out.append("\n#### Exclusions\n")
+    out.append(_table(a["exclusions"]))
+    sl = a["session_length"]
+    out.append("\n#### Session length against power and precision\n")
+    if isinstance(sl, str):
+        out.append(sl + "\n")
+    else:
+        vc = sl["variance_components"]
+        out.append(f"Monte-Carlo, 10⁴ simulated studies per cell, with this study's SDs "
+                   f"(trial {vc['sd_trial']:.2f}, participant×sample "
+                   f"{vc['sd_interaction']:.2f}, participant {vc['sd_subject']:.2f}): power of "
+                   f"a {sl['effect']:g}-point paired difference (Bonferroni over all pairs) and "
+                   "the median 95 % CI half-width of a sample's mean.\n\n")
+        out.append(_table(sl["table"], ["subjects", "reps", "power", "ci_halfwidth"]))
+    return out
+
+
+def _factorial_md(a: dict) -> list[str]:
+    groups = a["groups"]
+    factors = a["design"]["within"]
+    rows = [{"group": g, **v["best_set"], "most significant": v["most_significant"]}
+            for g, v in groups.items()]
+    out = ["#### Best set per group\n", _table(rows)]
+    for g, v in groups.items():
+        out.append(f"\n#### {g}: preferred level of each factor\n")
+        out.append(_table(v["main_effects"]))
+        out.append(f"\n#### {g}: {' × '.join(factors)} ANOVA\n")
+        out.append(_table(v["anova"]))
+        out.append(f"\n#### {g}: exclusions\n")
+        out.append(_table(v["exclusions"]))
+    return out
+
+
+def _identification_md(a: dict) -> list[str]:
+    out = [f"Chance: {100 * a['chance']:.1f} % (scoring: {a['scoring']}).\n\n",
+           _table(a["table"])]
+    if a["confusion"]:
+        out.append("\n#### Confusion (rows presented, columns answered)\n")
+        out.append(_table([{"presented": k, **a["confusion"][k]} for k in a["confusion"]]))
+    return out
+
+
 def _markdown(rep: dict) -> str:
-    out = ["# hapticlab report\n", "## Methods\n", rep["methods"] + "\n"]
-    if "realism" in rep:
-        r = rep["realism"]
-        out.append("## Realism\n")
-        if isinstance(r, str):
-            out.append(r + "\n")
-        else:
-            out.append(f"{r['n_subjects']} participants.\n\n### Samples (mean rating, 95 % CI; "
-                       "z: per-participant z-scores)\n")
-            out.append(_table(r["samples"]))
-            out.append("\n### One-way repeated-measures ANOVA\n")
-            out.append(_table(r["anova"]))
-            out.extend(f"\n_{note}._\n" for note in r["anova_notes"])
-            out.append("\n### Groups not distinguishable (Holm p ≥ .05)\n")
-            out.append("\n".join("- " + ", ".join(g) for g in r["groups"]) + "\n")
-            out.append("\n### Paired t-tests (d_z: Cohen's d for paired data)\n")
-            out.append(_table(r["pairwise"]))
-            out.append("\n### Exclusions\n")
-            out.append(_table(r["exclusions"]))
-            sl = r["session_length"]
-            vc = sl["variance_components"]
-            out.append("\n### Session length against power and precision\n")
-            out.append(f"Monte-Carlo, 10⁴ simulated studies per cell, with this study's SDs "
-                       f"(trial {vc['sd_trial']:.2f}, participant×sample "
-                       f"{vc['sd_interaction']:.2f}, participant {vc['sd_subject']:.2f}): "
-                       f"power of a {sl['effect']:g}-point paired difference (Bonferroni over "
-                       "all pairs) and the median 95 % CI half-width of a sample's mean.\n\n")
-            out.append(_table(sl["table"], ["subjects", "reps", "power", "ci_halfwidth"]))
-    if "factorial" in rep:
-        out.append("## Factorial study\n")
-        f = rep["factorial"]
-        if isinstance(f, str):
-            out.append(f + "\n")
-        else:
-            rows = [{"material": m, **v["best_set"], "most significant": v["most_significant"]}
-                    for m, v in f.items()]
-            out.append("### Best set per material (cf. the paper's Table 2)\n")
-            out.append(_table(rows))
-            for m, v in f.items():
-                out.append(f"\n### {m}: preferred level of each parameter (mean z)\n")
-                out.append(_table(v["main_effects"]))
-                out.append(f"\n### {m}: 2×2×2 ANOVA on z-scores\n")
-                out.append(_table(v["anova"]))
-    if "identification" in rep:
-        out.append("## Identification (cf. the paper's Table 3)\n")
-        i = rep["identification"]
-        if isinstance(i, str):
-            out.append(i + "\n")
-        else:
-            out.append(f"Chance: 1/6 = {100 * i['chance']:.1f} %.\n\n")
-            out.append(_table(i["table"]))
-            if i["confusion"]:
-                out.append("\n### Confusion (rows presented, columns answered)\n")
-                names = list(i["confusion"])
-                out.append(_table([{"presented": k, **i["confusion"][k]} for k in names]))
-    d = rep["device"]
-    out.append("## Device\n")
-    out.append(f"Incoming speed over {d['n_taps']} valid taps: {d['velocity_mean']:.4f} ± "
-               f"{d['velocity_sd']:.4f} m/s (mean ± SD). Saturations per participant: mean "
-               f"{d['saturations_per_participant']['mean']:.2f}, range "
-               f"{d['saturations_per_participant']['min']}–"
-               f"{d['saturations_per_participant']['max']}.\n\n")
-    out.append(_table([{"sample": k, "saturations": v}
-                       for k, v in d["saturations_per_sample"].items()]))
+    out = ["# hapticlab report\n", "## Methods\n", rep["methods"] + "\n",
+           "## Sessions included and excluded\n",
+           _table(rep["selection"]["sessions"],
+                  ["participant", "session", "protocol", "kind", "status", "rows", "included",
+                   "reason", "session_dir"])]
+    if not rep["analyses"]:
+        out.append("\nNo analysed phase has data in the selected sessions.\n")
+    for a in rep["analyses"]:
+        out.append(f"## {a['id']}\n")
+        out.append(a["methods"] + "\n")
+        if "result" in a:
+            out.append(a["result"] + "\n")
+            continue
+        out.extend({"oneway": _oneway_md, "factorial": _factorial_md}.get(
+            a["type"], _identification_md)(a))
+        d = a["device"]
+        if d and d["n_taps"]:
+            sp = d["saturations_per_participant"]
+            out.append("\n#### Device\n")
+            out.append(f"Incoming speed over {d['n_taps']} valid taps: "
+                       f"{d['velocity_mean']:.4f} ± {d['velocity_sd'] or 0:.4f} m/s (mean ± SD). "
+                       f"Saturations per participant: mean {sp['mean']:.2f}, range "
+                       f"{sp['min']}–{sp['max']}.\n\n")
+            out.append(_table([{"sample": k, "saturations": v}
+                               for k, v in d["saturations_per_sample"].items()]))
     out.append("\n## Figures\n")
     out += [f"![{f}]({f})\n" for f in rep["figures"] if f.endswith(".png")]
     p = rep["provenance"]
@@ -263,7 +404,9 @@ def _html(md: str, rep: dict) -> str:
         if line.startswith("|"):
             if set(line.replace("|", "").strip()) <= {"-"}:
                 continue
-            rows.append([html.escape(c.strip()) for c in line.strip("|").split("|")])
+            cells = [c.replace("\\|", "|").strip()
+                     for c in line.strip("|").replace("\\|", "\x00").split("|")]
+            rows.append([html.escape(c.replace("\x00", "|")) for c in cells])
             in_table = True
             continue
         if in_table:
@@ -282,6 +425,11 @@ def _html(md: str, rep: dict) -> str:
             body.append(f"<li>{html.escape(line[2:])}</li>")
         elif line.strip():
             body.append(f"<p>{html.escape(line)}</p>")
+    if in_table and rows:
+        head, *rest = rows
+        body.append("<table><tr>" + "".join(f"<th>{c}</th>" for c in head) + "</tr>"
+                    + "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>"
+                              for r in rest) + "</table>")
     digest = hashlib.sha256(json.dumps(rep, sort_keys=True).encode()).hexdigest()[:16]
     style = ("body{font-family:sans-serif;max-width:1000px;margin:auto}table{border-collapse:"
              "collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}")

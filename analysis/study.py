@@ -1,4 +1,15 @@
-"""The analyses of the three studies, from the long table of :func:`analysis.load_sessions`."""
+"""A study's analyses, chosen by the design each session recorded — never by a name.
+
+Each analysed phase of a protocol declares its design (``protocols`` writes it into
+session.json beside the protocol copy): the dependent variable, the within factors
+(``sample`` for a one-way design over the phase's samples, or factor names the samples
+carry), whether to analyse one block at a time, the normalisation, and how answers are
+scored. :func:`analyse_phase` runs the matching analysis:
+
+* a one-way design over samples → :func:`rating_oneway`;
+* a crossed design over factors (optionally per block) → :func:`rating_factorial`;
+* answers → :func:`answer_scores`.
+"""
 
 from __future__ import annotations
 
@@ -19,7 +30,9 @@ from .stats import (
     zscore_by_subject,
 )
 
-__all__ = ["realism", "factorial", "identification", "device_summary", "mean_ci", "mean_cis"]
+__all__ = ["analyse_phase", "analyse_recorded", "phase_rows", "rating_oneway",
+           "rating_factorial", "answer_scores", "device_summary", "mean_ci", "mean_cis",
+           "analysed_phases"]
 
 SUBJECT = "participant"
 
@@ -45,13 +58,20 @@ def mean_cis(m: np.ndarray, alpha: float = 0.05) -> tuple[np.ndarray, np.ndarray
     return mean, mean - h, mean + h
 
 
-def _rated(data: pd.DataFrame, protocol: str, phase: str | None = None) -> pd.DataFrame:
-    d = data[(data["protocol"] == protocol) & data["valid"] & data["rating"].notna()]
-    if phase:
-        d = d[d["phase"] == phase]
+def analysed_phases(design: dict) -> list[dict]:
+    """The phases of a recorded design that are analysed (role ``analysed``)."""
+    return [p for p in design.get("phases", []) if p.get("role") == "analysed"]
+
+
+def phase_rows(data: pd.DataFrame, design_key: str, phase: str) -> pd.DataFrame:
+    """Rows of one phase of the sessions sharing a design."""
+    return data[(data["design_key"] == design_key) & (data["phase"] == phase)].copy()
+
+
+def _rated(d: pd.DataFrame, dv: str) -> pd.DataFrame:
+    d = d[d["valid"] & d[dv].notna()]
     if d.empty:
-        raise StatsError(f"no valid rated trials of protocol {protocol!r}"
-                         + (f" in phase {phase!r}" if phase else ""))
+        raise StatsError(f"no valid trials with a {dv}")
     return d.copy()
 
 
@@ -74,106 +94,202 @@ def _groups(levels: list[str], pw: pd.DataFrame, alpha: float) -> list[list[str]
     return sorted(comp.values(), key=lambda g: -len(g))
 
 
-def realism(data: pd.DataFrame, alpha: float = 0.05) -> dict:
-    """Realism study: per-sample means with CIs (raw and z), per-subject averages, all
-    pairwise paired t-tests (Holm and FDR), groups not distinguishable, one-way RM ANOVA."""
-    d = _rated(data, "realism", "testing")
-    d["rating_z"] = zscore_by_subject(d, "rating", SUBJECT)
-    subj = d.groupby([SUBJECT, "sample"], observed=True)[["rating", "rating_z"]].mean()
+def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample",
+                  subject: str = SUBJECT, alpha: float = 0.05) -> dict:
+    """One-way repeated-measures analysis of ratings over the levels of ``within``.
+
+    Per-level means with CIs (raw and z-scored per subject), per-subject averages, all
+    pairwise paired t-tests (Holm and Benjamini–Hochberg), groups not distinguishable,
+    a one-way RM ANOVA, and session length against power from these data's variances.
+
+    Returns
+    -------
+    dict
+        ``samples`` (list of dicts: level, n, mean, ci_low, ci_high, mean_z, …),
+        ``pairwise``, ``anova`` (DataFrames), ``groups``, ``per_subject``, ``preflight``,
+        ``constant_pairs``, ``n_subjects``, ``n_levels``, ``repetitions`` (median per
+        subject and level), ``session_length``.
+    """
+    d = _rated(data, dv)
+    d["rating_z"] = zscore_by_subject(d, dv, subject)
+    subj = d.groupby([subject, within], observed=True)[[dv, "rating_z"]].mean()
     samples = []
-    for s, g in subj.groupby(level="sample", observed=True):
-        m, lo, hi = mean_ci(g["rating"].to_numpy())
-        mz, loz, hiz = mean_ci(g["rating_z"].to_numpy())
+    for s, g in subj.groupby(level=within, observed=True):
+        m, lo, hi = mean_ci(g[dv].to_numpy(), alpha)
+        mz, loz, hiz = mean_ci(g["rating_z"].to_numpy(), alpha)
         samples.append({"sample": s, "n": int(len(g)), "mean": m, "ci_low": lo, "ci_high": hi,
                         "mean_z": mz, "ci_low_z": loz, "ci_high_z": hiz})
     samples.sort(key=lambda r: -r["mean"])
     order = [r["sample"] for r in samples]
-    d["sample"] = pd.Categorical(d["sample"], categories=order, ordered=True)
-    d = d.sort_values("sample")
-    pre = preflight(d, "rating", "sample", SUBJECT, scale="scale")
-    holm = pairwise_ttests(d, "rating", "sample", SUBJECT, "holm", alpha)
-    fdr = pairwise_ttests(d, "rating", "sample", SUBJECT, "fdr_bh", alpha)
+    d[within] = pd.Categorical(d[within], categories=order, ordered=True)
+    d = d.sort_values(within)
+    pre = preflight(d, dv, within, subject, scale="scale" if "scale" in d else None)
+    holm = pairwise_ttests(d, dv, within, subject, "holm", alpha)
+    fdr = pairwise_ttests(d, dv, within, subject, "fdr_bh", alpha)
     pw = holm.rename(columns={"p_corr": "p_holm"}).drop(columns="p_adjust")
     pw["p_fdr"] = fdr["p_corr"].to_numpy()
     pw["p_corr"] = pw["p_holm"]
-    anova = rm_anova(d, "rating", "sample", SUBJECT)
-    per_subject = (d.groupby([SUBJECT, "sample"], observed=True)["rating"].mean()
-                   .unstack("sample").reset_index())
-    # session length against precision and power, from this study's own variance
-    vc = variance_components(d, "rating", "sample", SUBJECT)
-    length = power_table(range(5, 31, 5), range(1, 6), effect=1.0, alpha=alpha,
-                         comparisons=len(order) * (len(order) - 1) // 2, seed=0, **vc)
-    return {"samples": samples, "pairwise": pw, "anova": anova,
-            "session_length": {"variance_components": vc, "effect": 1.0, "table": length},
+    anova = rm_anova(d, dv, within, subject)
+    per_subject = (d.groupby([subject, within], observed=True)[dv].mean()
+                   .unstack(within).reset_index())
+    reps = int(d.groupby([subject, within], observed=True).size().median())
+    k = len(order)
+    length = None
+    try:
+        vc = variance_components(d, dv, within, subject)
+        length = {"variance_components": vc, "effect": 1.0,
+                  "table": power_table(range(5, 31, 5), range(1, 6), effect=1.0, alpha=alpha,
+                                       comparisons=k * (k - 1) // 2, seed=0, **vc)}
+    except ValueError as exc:
+        length = f"not computed: {exc}"
+    return {"samples": samples, "pairwise": pw, "anova": anova, "session_length": length,
             "groups": _groups(order, holm, alpha), "per_subject": per_subject,
             "preflight": pre, "constant_pairs": holm.attrs.get("constant_pairs", []),
-            "n_subjects": int(d[SUBJECT].nunique())}
+            "n_subjects": int(d[subject].nunique()), "n_levels": k, "repetitions": reps}
 
 
-FACTORS = ("frequency", "decay", "slope")
+def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = None,
+                     normalize: str = "zscore", dv: str = "rating",
+                     subject: str = SUBJECT) -> dict:
+    """Crossed within-subject design: an RM ANOVA over ``factors`` (per ``by`` group when
+    given), on ratings z-scored within each subject when ``normalize == "zscore"``.
 
-
-def factorial(data: pd.DataFrame) -> dict:
-    """Factorial study: per material, a 2×2×2 within-subject ANOVA on ratings z-scored per
-    subject, the most significant parameter, each parameter's preferred level (main
-    effects), and the best set."""
-    d = _rated(data, "factorial")
-    d["rating_z"] = zscore_by_subject(d, "rating", SUBJECT)
+    Returns
+    -------
+    dict
+        group (a block, or ``all``) → ``anova``, ``most_significant`` (the main effect with
+        the smallest p), ``most_significant_p``, ``main_effects`` (DataFrame: factor, each
+        level's mean, the preferred level, p_unc), ``best_set``, ``sets`` (DataFrame: each
+        set's mean and count), ``preflight``, ``n_subjects``.
+    """
+    d = _rated(data, dv)
+    y = dv
+    if normalize == "zscore":
+        d["rating_z"] = zscore_by_subject(d, dv, subject)
+        y = "rating_z"
+    by_col = {"block": "block"}.get(by or "", None)
     out = {}
-    for material, g in d.groupby("block", observed=True):
-        anova = rm_anova(g, "rating_z", list(FACTORS), SUBJECT)
-        mains = anova[anova["Source"].isin(FACTORS)]
+    groups = d.groupby(by_col, observed=True) if by_col else [("all", d)]
+    for name, g in groups:
+        anova = rm_anova(g, y, list(factors), subject)
+        mains = anova[anova["Source"].isin(factors)]
         most = mains.sort_values(["p_unc", "F"], ascending=[True, False]).iloc[0]
-        means = (g.groupby(["sample", *FACTORS], observed=True)["rating_z"]
+        means = (g.groupby(["sample", *factors], observed=True)[y]
                  .agg(["mean", "count"]).reset_index().sort_values("mean", ascending=False))
         best = means.iloc[0]
-        # each factor's levels: a participant's mean z over the four sets at that level,
-        # averaged over participants (its 2-level F test is the paired t test of these)
         p_of = mains.set_index("Source")["p_unc"]
         effects = []
-        for f in FACTORS:
-            lv = g.groupby([SUBJECT, f], observed=True)["rating_z"].mean().unstack(f)
-            lo, hi = float(lv["low"].mean()), float(lv["high"].mean())
-            effects.append({"factor": f, "mean_z_low": lo, "mean_z_high": hi,
-                            "difference": hi - lo, "p_unc": float(p_of[f]),
-                            "preferred": "high" if hi > lo else "low"})
-        out[str(material)] = {
+        for f in factors:
+            lv = g.groupby([subject, f], observed=True)[y].mean().unstack(f)
+            level_means = {str(c): float(lv[c].mean()) for c in lv.columns}
+            effects.append({"factor": f, "level_means": level_means,
+                            "preferred": max(level_means, key=level_means.get),
+                            "p_unc": float(p_of[f])})
+        if all(set(e["level_means"]) == {"low", "high"} for e in effects):
+            for e in effects:  # the two-level design of the papers reads low/high
+                lo, hi = e["level_means"]["low"], e["level_means"]["high"]
+                e.update(mean_z_low=lo, mean_z_high=hi, difference=hi - lo)
+        out[str(name)] = {
             "anova": anova, "most_significant": str(most["Source"]),
             "main_effects": pd.DataFrame(effects),
             "most_significant_p": float(most["p_unc"]),
-            "best_set": {"sample": str(best["sample"]), "mean_z": float(best["mean"]),
-                         **{f: str(best[f]) for f in FACTORS}},
-            "sets": means, "preflight": preflight(g, "rating_z", list(FACTORS), SUBJECT),
-            "n_subjects": int(g[SUBJECT].nunique())}
+            "best_set": {"sample": str(best["sample"]), "mean": float(best["mean"]),
+                         **{f: str(best[f]) for f in factors}},
+            "sets": means, "preflight": preflight(g, y, list(factors), subject),
+            "n_subjects": int(g[subject].nunique())}
     return out
 
 
-def identification(data: pd.DataFrame) -> dict:
-    """Identification test: the paper's Table 3 (all, last repetition, by group), chance level
-    and a confusion matrix."""
-    d = data[(data["protocol"] == "identification") & data["valid"]].copy()
+def answer_scores(data: pd.DataFrame, scoring: str = "all_correct",
+                  subject: str = SUBJECT) -> dict:
+    """Identification answers: percent correct overall, per repetition and group, chance
+    level, and a confusion matrix.
+
+    ``scoring = "all_correct"``: a repetition is correct only when every surface is named
+    right (chance 1/k! for k surfaces); ``per_surface``: each surface counts on its own
+    (chance 1/k).
+    """
+    d = data[data["valid"]].copy()
     if d.empty:
         raise StatsError("no valid identification answers")
     d["truth"] = d["sample"].str.replace("+", ",", regex=False)
-    res = identification_scores(d, SUBJECT, "correct", repetition="repetition", group="group",
-                                answer="answer", truth="truth")
-    return {"table": res["summary"], "confusion": res.get("confusion"), "chance": 1 / 6,
-            "n_subjects": int(d[SUBJECT].nunique())}
+    k = int(d["truth"].str.count(",").max()) + 1
+    if scoring == "per_surface":
+        rows = []
+        for r in d.itertuples():
+            for t, a in zip(r.truth.split(","), str(r.answer).split(","), strict=False):
+                rows.append({subject: getattr(r, subject), "correct": int(t == a),
+                             "repetition": r.repetition, "group": r.group,
+                             "answer": a, "truth": t})
+        scored = pd.DataFrame(rows)
+        chance = 1 / k
+    else:
+        scored = d
+        chance = 1 / math.factorial(k)
+    res = identification_scores(scored, subject, "correct", repetition="repetition",
+                                group="group", chance=chance, answer="answer", truth="truth")
+    return {"table": res["summary"], "confusion": res.get("confusion"), "chance": chance,
+            "surfaces": k, "scoring": scoring, "n_subjects": int(d[subject].nunique())}
 
 
-def device_summary(data: pd.DataFrame) -> dict:
-    """Incoming speeds over valid taps; saturations per participant and per sample."""
+def device_summary(data: pd.DataFrame, subject: str = SUBJECT) -> dict:
+    """Incoming speeds over the valid taps of ``data``; saturations per participant (mean and
+    range) and per sample."""
     valid = data[data["valid"]]
     v = tap_velocities(valid)
     sat = data[data["status"].isin(["saturated", "excluded_saturated"])]
-    per_p = sat.groupby(SUBJECT).size().reindex(data[SUBJECT].unique(), fill_value=0)
-    return {"velocity_mean": float(v.mean()) if v.size else 0.0,
-            "velocity_sd": float(v.std(ddof=1)) if v.size > 1 else 0.0,
+    per_p = sat.groupby(subject).size().reindex(data[subject].unique(), fill_value=0)
+    return {"velocity_mean": float(v.mean()) if v.size else None,
+            "velocity_sd": float(v.std(ddof=1)) if v.size > 1 else None,
             "n_taps": int(v.size),
             "saturations_per_participant": {
-                "mean": float(per_p.mean()) if len(per_p) else 0.0,
-                "min": int(per_p.min()) if len(per_p) else 0,
-                "max": int(per_p.max()) if len(per_p) else 0,
+                "mean": float(per_p.mean()) if len(per_p) else None,
+                "min": int(per_p.min()) if len(per_p) else None,
+                "max": int(per_p.max()) if len(per_p) else None,
                 "by_participant": {str(k): int(x) for k, x in per_p.items()}},
             "saturations_per_sample": {str(k): int(x) for k, x in
                                        sat.groupby("sample").size().items()}}
+
+
+def analyse_phase(rows: pd.DataFrame, phase: dict, alpha: float = 0.05) -> dict:
+    """The analysis a recorded phase design calls for, on that phase's rows.
+
+    Returns
+    -------
+    dict
+        ``type`` (``oneway``, ``factorial`` or ``identification``) and ``result`` (the
+        analysis' dict), plus ``device`` (:func:`device_summary` of the phase).
+    """
+    if phase.get("dv") == "answer":
+        kind, result = "identification", answer_scores(rows, phase.get("scoring") or
+                                                       "all_correct")
+    elif list(phase.get("within") or []) == ["sample"]:
+        kind, result = "oneway", rating_oneway(rows, alpha=alpha)
+    else:
+        kind, result = "factorial", rating_factorial(rows, list(phase["within"]),
+                                                     phase.get("by"),
+                                                     phase.get("normalize") or "none")
+    return {"type": kind, "result": result, "device": device_summary(rows)}
+
+
+def analyse_recorded(data: pd.DataFrame, protocol: str, phase: str, alpha: float = 0.05) -> dict:
+    """The analysis that ``protocol``'s recorded design declares for ``phase``, on the rows
+    of ``data`` (from :func:`analysis.load_sessions`, selected or not).
+
+    Raises
+    ------
+    StatsError
+        When no session of that protocol recorded a design analysing that phase, or the
+        sessions recorded more than one design under that name.
+    """
+    designs = data.attrs.get("designs", {})
+    keys = sorted(set(data.loc[data["protocol"] == protocol, "design_key"]) - {""})
+    if not keys:
+        raise StatsError(f"no session of protocol {protocol!r} with a recorded design")
+    if len(keys) > 1:
+        raise StatsError(f"protocol {protocol!r} was recorded with {len(keys)} designs "
+                         f"({', '.join(keys)}); analyse them apart (select by design_key)")
+    match = [p for p in analysed_phases(designs[keys[0]]) if p["name"] == phase]
+    if not match:
+        raise StatsError(f"protocol {protocol!r} does not analyse a phase {phase!r}")
+    return analyse_phase(phase_rows(data, keys[0], phase), match[0], alpha)

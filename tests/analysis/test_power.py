@@ -61,7 +61,7 @@ def test_power_cli():
     assert bad.returncode == 2 and "--subjects" in bad.stderr
     unrated = subprocess.run([sys.executable, "-m", "app", "power", "identification"],
                              capture_output=True, text=True)
-    assert unrated.returncode == 2 and "no rated phase" in unrated.stderr
+    assert unrated.returncode == 2 and "no analysed rating phase" in unrated.stderr
 
 
 def test_variance_components_recover_known_sds():

@@ -15,7 +15,7 @@ CLI = [sys.executable, "-m", "app"]
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
     data = tmp_path_factory.mktemp("study")
-    common = ["--device", "sim", "--ui", "none", "--no-audio", "--quiet"]
+    common = ["--dry-run", "--no-audio", "--quiet"]
     for i in range(3):
         for proto, pid, extra in (("realism", f"R{i}", ["--traces", "contacts"]),
                                   ("factorial", f"F{i}", ["--traces", "none"]),
@@ -40,34 +40,55 @@ def test_load_sessions(study):
     assert set(fac["frequency"]) == {"low", "high"} and set(fac["block"]) == {
         "rubber", "wood", "aluminum"}
     assert d.attrs["files"] and not d.attrs["torn"]
+    t = d.attrs["session_table"]
+    assert set(t["kind"]) == {"dry-run"} and set(t["status"]) == {"complete"}
+    assert len(d.attrs["designs"]) == 3  # one design per protocol
+
+
+def _analysis(rep, id_):
+    return next(a for a in rep["analyses"] if a["id"] == id_)
 
 
 def test_report_structure_and_numbers(study, tmp_path):
     rep = analyze(study, tmp_path / "r")
     _no_nan(rep)
-    r = rep["realism"]
+    assert [a["id"] for a in rep["analyses"]] == [
+        "factorial/rating", "identification/identification", "realism/testing"]
+    r = _analysis(rep, "realism/testing")
+    assert r["type"] == "oneway" and r["design"]["within"] == ["sample"]
     assert {s["sample"] for s in r["samples"]} >= {"wood", "foam", "matched_firm"}
-    assert len(r["samples"]) == 11 and len(r["pairwise"]) == 55
+    assert len(r["samples"]) == 11
+    assert len(r["pairwise"]) + len(r["constant_pairs"]) == 55
     assert set(r["samples"][0]) >= {"sample", "mean", "ci_low", "ci_high", "mean_z"}
-    assert set(r["pairwise"][0]) >= {"A", "B", "t", "dof", "p_unc", "p_corr", "dz"}
+    assert set(r["pairwise"][0]) >= {"A", "B", "t", "dof", "p_unc", "p_holm", "dz", "n"}
     assert r["anova"][0]["Source"] == "sample" and "eps_gg" in r["anova"][0]
     # 3 participants, 11 samples: Mauchly's test is undefined and said to be, not p = 0
     assert "p_spher" not in r["anova"][0] and "Mauchly" in r["anova_notes"][0]
+    f = _analysis(rep, "factorial/rating")
+    assert f["type"] == "factorial" and f["design"]["by"] == "block"
     for m in ("rubber", "wood", "aluminum"):
-        f = rep["factorial"][m]
-        assert f["most_significant"] in ("frequency", "decay", "slope")
-        assert set(f["best_set"]) >= {"frequency", "decay", "slope", "sample"}
-        assert len(f["anova"]) == 7 and all("DF_err" in row for row in f["anova"])
-        assert [e["factor"] for e in f["main_effects"]] == ["frequency", "decay", "slope"]
-    t = {row["scope"]: row for row in rep["identification"]["table"]}
+        g = f["groups"][m]
+        assert g["most_significant"] in ("frequency", "decay", "slope")
+        assert set(g["best_set"]) >= {"frequency", "decay", "slope", "sample"}
+        assert len(g["anova"]) == 7 and all("DF_err" in row for row in g["anova"])
+        assert [e["factor"] for e in g["main_effects"]] == ["frequency", "decay", "slope"]
+    i = _analysis(rep, "identification/identification")
+    t = {row["scope"]: row for row in i["table"]}
     assert t["all"]["n"] == 9 and "last repetition" in t and "group expert" in t
-    assert rep["device"]["n_taps"] > 0 and 0.05 < rep["device"]["velocity_mean"] < 0.2
+    dev = r["device"]
+    assert dev["n_taps"] > 0 and 0.05 < dev["velocity_mean"] < 0.2
     assert rep["provenance"]["seeds"] == [1, 2, 3]
+    # the methods are written from the data: the scale and the counts of this study
+    assert "rated 11 samples on a 1–7 scale" in r["methods"] and "all 55 pairs" in r["methods"]
+    assert "on a 1–10 scale" in f["methods"] and "2 × 2 × 2" in f["methods"]
+    assert "chance 1/3! = 16.7 %" in i["methods"]
+    assert rep["methods"].startswith("These data come from a dry run")
     out = tmp_path / "r"
-    for f in ("report.json", "report.md", "report.html", "realism_means.png",
-              "realism_means.svg", "realism_pvalues.png", "factorial_wood.png",
-              "identification_confusion.png", "accel_traces.png"):
-        assert (out / f).stat().st_size > 500, f
+    for name in ("report.json", "report.md", "report.html", "realism-testing_means.png",
+                 "realism-testing_means.svg", "realism-testing_pvalues.png",
+                 "factorial-rating_wood.png", "identification-identification_confusion.png",
+                 "realism-testing_accel_traces.png"):
+        assert (out / name).stat().st_size > 500, name
     assert "Greenhouse–Geisser" in (out / "report.md").read_text()
     assert "<table>" in (out / "report.html").read_text()
 
@@ -87,7 +108,7 @@ def test_cli_analyze_and_its_errors(study, tmp_path):
     assert (tmp_path / "o" / "report.json").exists()
     bad = subprocess.run([*CLI, "analyze", str(tmp_path / "none"), "--out", str(tmp_path / "x")],
                          capture_output=True, text=True)
-    assert bad.returncode == 2 and "no such folder" in bad.stderr
+    assert bad.returncode == 2 and "no such folder" in bad.stderr and "Traceback" not in bad.stderr
     fmt = subprocess.run([*CLI, "analyze", str(study), "--out", str(tmp_path / "y"), "--format",
                           "pdf"], capture_output=True, text=True)
     assert fmt.returncode == 2 and "--format" in fmt.stderr

@@ -226,7 +226,7 @@ def test_factorial_main_effects_match_a_hand_computation():
     ANOVA's p equals the paired t-test on those per-participant means (scipy ttest_rel)."""
     import itertools
 
-    from analysis.study import factorial
+    from analysis.study import rating_factorial
 
     rng = np.random.default_rng(3)
     rows = []
@@ -237,7 +237,8 @@ def test_factorial_main_effects_match_a_hand_computation():
                          "phase": "rating", "block": "wood", "sample": f"wood-{f}{d}{a}",
                          "frequency": f, "decay": d, "slope": a, "rating": float(r)})
     data = pd.DataFrame(rows)
-    eff = factorial(data)["wood"]["main_effects"].set_index("factor")
+    eff = rating_factorial(data, ["frequency", "decay", "slope"], by="block")["wood"][
+        "main_effects"].set_index("factor")
     # by hand with numpy
     z = data.groupby("participant")["rating"].transform(lambda x: (x - x.mean()) / x.std(ddof=0))
     for factor in ("frequency", "decay", "slope"):

@@ -1,0 +1,196 @@
+"""The session-file format: the one place that defines it, used by the recorder and the loader.
+
+A session folder (``<data>/sub-<participant>/ses-<n>/``) holds:
+
+``session.json``
+    Metadata, written atomically: format version, app version, the protocol (name, file,
+    SHA-256 and the **design** derived from it), the session kind and responder, seed,
+    participant, device, times, status. :data:`META_REQUIRED` lists the keys a reader needs.
+``protocol.toml``
+    The resolved protocol file the session ran, byte for byte (its SHA-256 is in
+    session.json); resume uses this copy.
+``trials.tsv``
+    One row per attempt: tab-separated UTF-8, the header (:data:`COLUMNS`) first, each row
+    written, flushed and fsynced before the next trial starts. A process killed mid-write
+    leaves at most one torn last line, which :func:`read_trials` reports apart from the
+    rows; a corrupt earlier line is a named error.
+``traces/``
+    Per attempt, the device's raw streams (compressed NumPy, written atomically).
+
+Column types are in :data:`INT_COLUMNS` and :data:`FLOAT_COLUMNS` (empty means missing);
+everything else is text.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+__all__ = ["FORMAT_VERSION", "COLUMNS", "INT_COLUMNS", "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
+           "TrialsFileError", "SessionMetaError", "TornLine", "header_line", "format_row",
+           "read_trials", "read_meta", "session_kind", "TRIALS", "META", "PROTOCOL_COPY",
+           "TRACES"]
+
+FORMAT_VERSION = 2
+TRIALS, META, PROTOCOL_COPY, TRACES = "trials.tsv", "session.json", "protocol.toml", "traces"
+
+COLUMNS = ("participant", "session", "phase", "trial_index", "item", "attempt", "sample",
+           "block", "factors", "placement", "status", "n_taps", "tap_velocities", "peak_current",
+           "rating", "response_time", "answer", "correct", "reason", "t_start", "t_end",
+           "trace_file")
+INT_COLUMNS = ("session", "trial_index", "attempt", "n_taps")
+FLOAT_COLUMNS = ("peak_current", "rating", "response_time", "correct")
+
+#: who answered: a person (``human``), a scripted responder testing the machinery
+#: (``dry-run``), or the simulated participant model (``simulated``)
+KINDS = ("human", "dry-run", "simulated")
+
+#: dotted keys of session.json that every reader relies on
+META_REQUIRED = ("protocol.name", "protocol.sha256", "seed", "participant.id", "session",
+                 "status")
+
+
+class TrialsFileError(ValueError):
+    """trials.tsv cannot be read: a missing or wrong header, or a corrupt line before the last
+    (named by file and line number)."""
+
+
+class SessionMetaError(ValueError):
+    """session.json is missing, not JSON, or lacks a key every reader needs (named)."""
+
+
+@dataclass(frozen=True)
+class TornLine:
+    """An incomplete last line: its line number and raw text."""
+
+    line: int
+    text: str
+
+
+def header_line() -> str:
+    """The header of trials.tsv, with its newline."""
+    return "\t".join(COLUMNS) + "\n"
+
+
+def _cell(column: str, v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    s = str(v)
+    if any(c in s for c in "\t\n\r"):
+        raise ValueError(f"trials.tsv column {column!r}: a tab or line break cannot be "
+                         f"recorded: {s!r}")
+    return s
+
+
+def format_row(row: dict) -> str:
+    """One trials.tsv line (with its newline) for ``row`` (column → value; missing: empty).
+
+    Raises
+    ------
+    ValueError
+        For an unknown column, or a value holding a tab or line break.
+    """
+    unknown = set(row) - set(COLUMNS)
+    if unknown:
+        raise ValueError(f"unknown trials.tsv columns: {sorted(unknown)}")
+    return "\t".join(_cell(c, row.get(c)) for c in COLUMNS) + "\n"
+
+
+def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
+    """Rows of trials.tsv (dicts of text), and a torn last line if the writer was killed
+    mid-line.
+
+    Raises
+    ------
+    TrialsFileError
+        For a missing or wrong header, or a malformed line that is not the last.
+    """
+    path = Path(path)
+    if not path.exists():
+        return [], None
+    raw = path.read_bytes().decode("utf-8", errors="replace")
+    if not raw:
+        return [], None
+    complete = raw.endswith("\n")
+    lines = raw.split("\n")
+    if complete:
+        lines = lines[:-1]
+    header = lines[0].split("\t")
+    if tuple(header) != COLUMNS:
+        if len(lines) == 1 and not complete:
+            return [], TornLine(1, lines[0])
+        raise TrialsFileError(f"{path}:1: header is not the trials.tsv header "
+                              f"({len(header)} columns, expected {len(COLUMNS)})")
+    rows: list[dict] = []
+    torn = None
+    for no, line in enumerate(lines[1:], start=2):
+        fields = line.split("\t")
+        last = no == len(lines)
+        ok = len(fields) == len(COLUMNS) and (complete or not last)
+        if ok:
+            row = dict(zip(COLUMNS, fields, strict=True))
+            try:
+                int(row["trial_index"])
+                int(row["attempt"])
+            except ValueError:
+                ok = False
+        if not ok:
+            if last:
+                torn = TornLine(no, line)
+                break
+            raise TrialsFileError(f"{path}:{no}: corrupt line ({len(fields)} fields, expected "
+                                  f"{len(COLUMNS)}): {line[:80]!r}")
+        rows.append(row)
+    return rows, torn
+
+
+def _get(meta: dict, dotted: str) -> Any:
+    cur: Any = meta
+    for part in dotted.split("."):
+        if not isinstance(cur, dict) or part not in cur:
+            raise KeyError(dotted)
+        cur = cur[part]
+    return cur
+
+
+def read_meta(path: str | Path) -> dict:
+    """session.json as a dict, checked for :data:`META_REQUIRED`.
+
+    Raises
+    ------
+    SessionMetaError
+        Naming the file and what is wrong (missing, not JSON, a missing key).
+    """
+    path = Path(path)
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SessionMetaError(f"{path}: no session.json — not a session folder") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise SessionMetaError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise SessionMetaError(f"{path}: expected a JSON object, got {type(meta).__name__}")
+    missing = []
+    for key in META_REQUIRED:
+        try:
+            _get(meta, key)
+        except KeyError:
+            missing.append(key)
+    if missing:
+        raise SessionMetaError(f"{path}: missing key(s) {', '.join(missing)}")
+    return meta
+
+
+def session_kind(meta: dict) -> str:
+    """The session's kind (:data:`KINDS`): recorded since format 2; inferred for older
+    sessions from how they ran (a PsychoPy screen: a person)."""
+    kind = meta.get("kind")
+    if kind in KINDS:
+        return kind
+    if meta.get("ui") == "psychopy":
+        return "human"
+    return "simulated" if meta.get("responder") == "simulated" else "dry-run"
