@@ -8,33 +8,31 @@ saturate is reported, with a warning above ``warn`` of trials.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 __all__ = ["saturation_check"]
 
 
 def saturation_check(protocol, info, windows: int = 12, seed: int = 0, warn: float = 0.2,
-                     velocity_mean: float = 0.11, velocity_sd: float = 0.033) -> list[dict]:
+                     velocity_mean: float = 0.11, velocity_sd: float = 0.033,
+                     say=print) -> list[dict]:
     """Per virtual sample: taps, saturating taps and trials (5-s windows) with a saturation."""
+    from device import SimulatedHand
     from device.sim.backend import SimDevice
-    from device.sim.params import DeviceParams
-    from device.sim.tapper import Tapper
 
-    params = replace(DeviceParams(), servo_rate_hz=float(info.servo_rate_hz),
-                     current_limit=float(info.current_limit),
-                     force_constant=float(info.force_constant),
-                     motor_mass=max(1e-4, float(info.effective_mass) - DeviceParams().tip_mass))
+    from .libraries import LIBRARY_SEED, prepare_libraries, with_libraries
+
+    hand = SimulatedHand(tap_speed=velocity_mean, tap_speed_sd=velocity_sd)
+    twin = SimDevice.with_ratings(info, seed=seed)
+    # matched samples play a library built on the simulated twin (announced when built)
+    libs = prepare_libraries(protocol, twin, "sim", say=say,
+                             opener=lambda: SimDevice.with_ratings(info, seed=LIBRARY_SEED))
+    protocol = with_libraries(protocol, libs)
     rows = []
     for sid, sample in protocol.samples.items():
         if sample.is_real or sample.scene.transient is None or not sample.rated:
             continue
-        dev = SimDevice(device=params, seed=seed,
-                        tapper=Tapper(velocity_mean=velocity_mean, velocity_sd=velocity_sd))
-        try:
-            dev.load_scene(sample.scene)
-        except Exception as exc:  # e.g. a library only the real device can provide
-            rows.append({"sample": sid, "error": str(exc)})
-            continue
+        dev = SimDevice.with_ratings(info, seed=seed)
+        dev.set_simulated_hand(hand)
+        dev.load_scene(sample.scene)
         taps = sat_taps = sat_trials = 0
         for _ in range(windows):
             dev.home()

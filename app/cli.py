@@ -1,7 +1,7 @@
-"""The ``hapticlab`` command line.
+"""The ``hapticlab`` command line: a thin layer over :mod:`app.api` and the packages.
 
-User errors (bad specs, files, values) print one clear line to stderr and exit 2,
-never a traceback. Heavy modules are imported inside the command that needs them.
+Every :class:`~device.errors.HapticlabError` prints one line to stderr and exits 2, never a
+traceback. Heavy modules are imported inside the command that needs them.
 """
 
 from __future__ import annotations
@@ -12,21 +12,18 @@ import math
 import sys
 from collections.abc import Callable, Sequence
 
-__all__ = ["main"]
+from device.errors import HapticlabError
 
+from .errors import UsageError
 
-class UserError(Exception):
-    """An error in what the user asked for; printed without a traceback."""
+__all__ = ["main", "build_parser"]
 
 
 def _device_selftest(args: argparse.Namespace) -> int:
-    from device import DeviceError, open_device
+    from device import open_device
     from device.suite import run_selftest
 
-    try:
-        open_device(args.spec).close()
-    except (DeviceError, ValueError) as exc:
-        raise UserError(str(exc)) from None
+    open_device(args.spec).close()  # a bad spec or an absent device: one line, exit 2
     report = run_selftest(args.spec, lambda: open_device(args.spec))
     if args.json:
         print(json.dumps(report, indent=2))
@@ -47,20 +44,14 @@ def _device_selftest(args: argparse.Namespace) -> int:
 
 
 def _load_protocol(path: str, device_spec: str | None = None):
-    from device import DeviceError, open_device
-    from protocols import ProtocolError, load_protocol
+    from device import open_device
+    from protocols import load_protocol
 
     info = None
     if device_spec:
-        try:
-            with open_device(device_spec) as dev:
-                info = dev.info
-        except (DeviceError, ValueError) as exc:
-            raise UserError(str(exc)) from None
-    try:
-        return load_protocol(path, device=info)
-    except ProtocolError as exc:
-        raise UserError(str(exc)) from None
+        with open_device(device_spec) as dev:
+            info = dev.info
+    return load_protocol(path, device=info)
 
 
 def _protocol_validate(args: argparse.Namespace) -> int:
@@ -77,10 +68,7 @@ def _protocol_show(args: argparse.Namespace) -> int:
     from protocols import SessionEngine
 
     p = _load_protocol(args.file)
-    try:
-        engine = SessionEngine(p, args.seed, args.participant, args.row)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
+    engine = SessionEngine(p, args.seed, args.participant, args.row)
     phases: list[dict] = []
     for item in engine.plan():
         if not phases or phases[-1]["name"] != item.phase:
@@ -91,13 +79,17 @@ def _protocol_show(args: argparse.Namespace) -> int:
             trial["block"] = item.block
         phases[-1]["trials"].append(trial)
     plan = {"protocol": p.name, "source": p.source, "sha256": p.sha256, "seed": args.seed,
-            "participant": args.participant, "phases": phases}
+            "participant": args.participant, "phases": phases, "design": p.design()}
     if args.json:
         print(json.dumps(plan, indent=2))
         return 0
     print(f"{p.title} ({p.source}, sha256 {p.sha256[:12]}…), seed {args.seed}")
-    for ph in phases:
-        print(f"\n{ph['name']} ({len(ph['trials'])} trials)")
+    for ph, design in zip(phases, p.design()["phases"], strict=False):
+        what = design["role"] if design["role"] != "analysed" else (
+            f"analysed: {design['dv']}" + (f" over {' × '.join(design['within'])}"
+                                           if design["within"] else "")
+            + (f" per {design['by']}" if design["by"] else ""))
+        print(f"\n{ph['name']} ({len(ph['trials'])} trials; {what})")
         for i, t in enumerate(ph["trials"], 1):
             s = t["sample"] if isinstance(t["sample"], str) else " / ".join(t["sample"])
             print(f"  {i:3d}  {s}")
@@ -105,38 +97,31 @@ def _protocol_show(args: argparse.Namespace) -> int:
 
 
 def _open_spec(spec: str):
-    from device import DeviceError, open_device
+    from device import open_device
 
-    try:
-        return open_device(spec)
-    except (DeviceError, ValueError) as exc:
-        raise UserError(str(exc)) from None
+    return open_device(spec)
 
 
 def _matching(args: argparse.Namespace) -> int:
     from app import matching_cli as mc
-    from device import DeviceError
 
-    try:
-        if args.action == "identify":
-            return mc.device_identify(args, _open_spec)
-        if args.action == "identify-grasp":
-            return mc.device_identify_grasp(args)
-        if args.action == "library-build":
-            return mc.library_build(args, _open_spec, lambda p: _load_protocol(p))
-        return mc.library_show(args, _open_spec)
-    except (DeviceError, ValueError) as exc:
-        raise UserError(str(exc)) from None
+    if args.action == "sysid":
+        return mc.device_sysid(args, _open_spec)
+    if args.action == "fit-grasp":
+        return mc.device_fit_grasp(args)
+    if args.action == "library-build":
+        return mc.library_build(args, _open_spec, _load_protocol)
+    return mc.library_show(args, _open_spec)
 
 
 def _device_emulate(args: argparse.Namespace) -> int:
     from device.serial.emulator import main as emulate
 
     if not 1_000 <= args.rate <= 20_000:
-        raise UserError(f"--rate must be 1,000–20,000 Hz, got {args.rate:g}")
+        raise UsageError(f"--rate must be 1,000–20,000 Hz, got {args.rate:g}")
     if not 0 < args.speed <= 20:
-        raise UserError(f"--speed must be in (0, 20] (device seconds per wall second), "
-                        f"got {args.speed:g}")
+        raise UsageError(f"--speed must be in (0, 20] (device seconds per wall second), "
+                         f"got {args.speed:g}")
     return emulate(args.rate, args.seed, args.speed)
 
 
@@ -146,7 +131,8 @@ def _device_check(args: argparse.Namespace) -> int:
     protocol = _load_protocol(args.protocol)
     with _open_spec(args.device) as dev:
         info = dev.info
-    rows = saturation_check(protocol, info, windows=args.windows, warn=args.warn)
+    rows = saturation_check(protocol, info, windows=args.windows, warn=args.warn,
+                            say=lambda m: print(m, file=sys.stderr))
     if args.json:
         print(json.dumps({"device": args.device, "rows": rows}, indent=2))
         return 0
@@ -169,8 +155,8 @@ def _bench(args: argparse.Namespace) -> int:
     try:
         module = importlib.import_module(f"benchmarks.{args.what}")
     except ModuleNotFoundError:
-        raise UserError(f"no benchmark named {args.what!r}; "
-                        "available: sim, matching, link, crash, analysis, demo") from None
+        raise UsageError(f"no benchmark named {args.what!r}; "
+                         "available: sim, matching, link, crash, analysis, demo") from None
     return module.main(args)
 
 
@@ -181,58 +167,89 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from app.ids import ParticipantIdError
-    from app.simulate_cli import simulate
-    from device import DeviceError
-    from protocols import ProtocolError
+    from app.api import simulate_study
 
-    try:
-        return simulate(args)
-    except (ParticipantIdError, ProtocolError, DeviceError, ValueError) as exc:
-        raise UserError(str(exc)) from None
+    if args.participants < 1:
+        raise UsageError(f"--participants must be at least 1, got {args.participants}")
+    if not (math.isfinite(args.speed) and 0 < args.speed <= 20):
+        raise UsageError(f"--speed must be in (0, 20] (device seconds per wall second), got "
+                         f"{args.speed:g}")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {args.seed}")
+
+    study = simulate_study(args.protocol, args.participants, seed=args.seed, data=args.data,
+                           device=args.device, speed=args.speed, traces=args.traces,
+                           prefix=args.prefix, group=args.group)
+    if not study.complete:
+        last = study.sessions[-1]
+        print(last.message, file=sys.stderr)
+        return last.exit_code
+    print(f"{len(study.sessions)} simulated sessions in {args.data}/ "
+          f"({study.seconds:.0f} s)", file=sys.stderr)
+    return 0
 
 
 def _run(args: argparse.Namespace) -> int:
-    from app.ids import ParticipantIdError
-    from app.session_cli import run
-    from device import DeviceError
-    from protocols import ProtocolError
+    from app.api import run_session
 
-    try:
-        return run(args)
-    except (ParticipantIdError, ProtocolError, DeviceError, ValueError) as exc:
-        raise UserError(str(exc)) from None
+    responder = "scripted" if args.dry_run else args.responder
+    if args.dry_run and args.responder not in ("person", "scripted"):
+        raise UsageError("--dry-run is --responder scripted; give one of them")
+    device = args.device
+    if device is None:
+        if responder == "person":
+            raise UsageError("a session with a person needs --device: serial:PORT for the "
+                             "lab's device (for a rehearsal without a person: --dry-run, or "
+                             "--responder simulated)")
+        device = "sim"
+    if responder == "person" and (device == "sim" or device.startswith("sim:")):
+        print("hapticlab: warning: a person on the SIMULATED device — nothing they feel comes "
+              "from hardware; the session is recorded as human on backend 'sim'",
+              file=sys.stderr)
+    r = run_session(args.protocol, args.participant, device=device, data=args.data,
+                    responder=responder, seed=args.seed, row=args.row, group=args.group,
+                    traces=args.traces, audio=not args.no_audio, fullscreen=args.fullscreen,
+                    quiet=args.quiet)
+    if r.status == "complete":
+        print(r.message)
+    return r.exit_code
 
 
 def _resume(args: argparse.Namespace) -> int:
-    from app.recorder import TrialsFileError
-    from app.session_cli import resume
-    from device import DeviceError
-    from protocols import ProtocolError, ResumeMismatch
+    from app.api import resume_session
 
-    try:
-        return resume(args)
-    except (ProtocolError, DeviceError, ValueError, ResumeMismatch, TrialsFileError,
-            FileNotFoundError) as exc:
-        raise UserError(str(exc)) from None
+    r = resume_session(args.session_dir, device=args.device,
+                       audio=False if args.no_audio else None, clear_fault=args.clear_fault,
+                       fullscreen=args.fullscreen, quiet=args.quiet)
+    if r.status == "complete":
+        print(r.message)
+    return r.exit_code
+
+
+def _list(text: str | None) -> list[str] | None:
+    return None if text is None else [x.strip() for x in text.split(",") if x.strip()]
 
 
 def _analyze(args: argparse.Namespace) -> int:
-    from analysis import LoadError, StatsError
-    from analysis.report import analyze
+    from app.api import analyze
 
     formats = tuple(f.strip() for f in args.format.split(","))
     bad = set(formats) - {"html", "md", "json"}
     if bad:
-        raise UserError(f"--format takes html, md, json; got {sorted(bad)}")
-    try:
-        rep = analyze(args.data_dir, args.out, formats)
-    except (LoadError, StatsError) as exc:
-        raise UserError(str(exc)) from None
-    studies = [k for k in ("realism", "factorial", "identification") if k in rep]
-    print(f"report for {', '.join(studies) or 'no study'} ({rep['provenance']['sessions']} "
+        raise UsageError(f"--format takes html, md, json; got {sorted(bad)}")
+    rep = analyze(args.data_dir, args.out, formats=formats, protocol=_list(args.protocol),
+                  kind=args.kind, status=args.status, participants=_list(args.participants),
+                  since=args.since, until=args.until)
+    sel = rep["selection"]
+    ids = [a["id"] for a in rep["analyses"]]
+    print(f"{len(ids)} analyses ({', '.join(ids) or 'none'}) of {sel['included']} sessions "
+          f"({sel['excluded']} excluded, reasons in the report; {sel['filters']['kind']} "
           f"sessions) written to {args.out}/ ({', '.join('report.' + f for f in formats)}, "
           f"{len(rep['figures'])} figure files)")
+    if not ids:
+        print("hapticlab: nothing was analysed: no analysed phase has data in the selected "
+              "sessions (see the selection table in the report)", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -251,39 +268,44 @@ def _power(args: argparse.Namespace) -> int:
         subjects = _range(args.subjects)[:: args.step]
         reps = _range(args.reps)
     except ValueError:
-        raise UserError("--subjects and --reps take 'A..B' or 'a,b,c'") from None
+        raise UsageError("--subjects and --reps take 'A..B' or 'a,b,c'") from None
     if not subjects or min(subjects) < 2 or not reps or min(reps) < 1:
-        raise UserError("need at least 2 subjects and 1 repetition")
+        raise UsageError("need at least 2 subjects and 1 repetition")
     protocol = _load_protocol(args.protocol)
-    rated = [p.name for p in protocol.phases if p.kind == "rated"]
-    if not rated:
-        raise UserError(f"power: protocol {protocol.name!r} has no rated phase; power and "
-                        "precision are computed for rating studies")
-    comparisons = math.comb(len([s for s in protocol.samples.values() if s.rated]), 2)
+    oneway = [p for p in protocol.phases if p.design.analysed and p.design.dv == "rating"]
+    if not oneway:
+        raise UsageError(f"power: protocol {protocol.name!r} has no analysed rating phase; "
+                         "power and precision are computed for rating studies")
+    phase = oneway[-1]
+    comparisons = math.comb(len(phase.samples), 2)
     sd = {"sd_trial": args.sd_trial, "sd_interaction": args.sd_interaction,
           "sd_subject": args.sd_subject}
     if args.pilot:
-        from analysis import load_sessions
+        from analysis import LoadError, load_sessions
 
-        # the phase the study is analysed on: the last rated one (realism: testing; a
-        # demonstration phase is a first look, rated before the scale settles)
-        phase = rated[-1]
-        d = load_sessions(args.pilot)
+        try:
+            d = load_sessions(args.pilot)
+        except LoadError as exc:
+            raise UsageError(str(exc)) from None
+        # the phase the protocol's design analyses (a practice phase is a first look)
         d = d[d["valid"] & d["rating"].notna() & (d["protocol"] == protocol.name)
-              & (d["phase"] == phase)]
+              & (d["phase"] == phase.name)]
         if d.empty:
-            raise UserError(f"--pilot {args.pilot}: no valid ratings of {protocol.name!r} "
-                            f"in phase {phase!r}")
-        sd = variance_components(d)
+            raise UsageError(f"--pilot {args.pilot}: no valid ratings of {protocol.name!r} "
+                             f"in phase {phase.name!r}")
+        try:
+            sd = variance_components(d)
+        except ValueError as exc:
+            raise UsageError(f"--pilot {args.pilot}: {exc}") from None
     t = power_table(subjects, reps, args.effect, alpha=args.alpha, comparisons=comparisons,
                     experiments=args.experiments, **sd)
     if args.json:
-        print(json.dumps({"protocol": protocol.name, "effect": args.effect,
-                          "comparisons": comparisons, **sd,
+        print(json.dumps({"protocol": protocol.name, "phase": phase.name,
+                          "effect": args.effect, "comparisons": comparisons, **sd,
                           "rows": t.to_dict(orient="records")}, indent=2))
         return 0
-    print(f"{protocol.name}: power of a {args.effect:g}-point paired difference at alpha "
-          f"{args.alpha:g}/{comparisons} (Bonferroni) and the 95 % CI half-width of a "
+    print(f"{protocol.name}/{phase.name}: power of a {args.effect:g}-point paired difference at "
+          f"alpha {args.alpha:g}/{comparisons} (Bonferroni) and the 95 % CI half-width of a "
           f"sample's mean, {args.experiments} simulated experiments per cell "
           f"(sd trial {sd['sd_trial']:.2f}, subject×sample {sd['sd_interaction']:.2f}, "
           f"subject {sd['sd_subject']:.2f})")
@@ -298,14 +320,62 @@ def _power(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_session_parsers(sub) -> None:
+    r = sub.add_parser("run", help="run a session: a person at the screen, or a dry run")
+    r.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    r.add_argument("--participant", required=True, help="participant id, e.g. P01")
+    r.add_argument("--device", default=None, help="serial:PORT (the lab's device), sim or "
+                   "sim:RATE; required when a person answers")
+    r.add_argument("--responder", choices=("person", "scripted", "simulated"),
+                   default="person", help="who answers: a person at the PsychoPy screen "
+                   "(default), random answers (a dry run), or the simulated participant")
+    r.add_argument("--dry-run", action="store_true",
+                   help="test the machinery: --responder scripted on --device sim")
+    r.add_argument("--seed", type=int, default=None, help="session seed (drawn and recorded "
+                   "when not given)")
+    r.add_argument("--data", default="data", help="data folder (default ./data)")
+    r.add_argument("--no-audio", action="store_true", help="run without sound")
+    r.add_argument("--row", type=int, default=None,
+                   help="counterbalance row (Williams-ordered protocols)")
+    r.add_argument("--traces", choices=("full", "contacts", "none"), default="full",
+                   help="raw device streams kept per attempt")
+    r.add_argument("--fullscreen", action="store_true")
+    r.add_argument("--group", default="", help="participant group label, e.g. expert or novice")
+    r.add_argument("--quiet", action="store_true")
+    r.set_defaults(func=_run)
+    rs = sub.add_parser("resume", help="continue an interrupted session exactly where it stopped")
+    rs.add_argument("session_dir")
+    rs.add_argument("--device", default=None, help="override the recorded device spec")
+    rs.add_argument("--no-audio", action="store_true")
+    rs.add_argument("--clear-fault", action="store_true",
+                    help="clear a latched e-stop/watchdog fault first (when it is safe)")
+    rs.add_argument("--fullscreen", action="store_true")
+    rs.add_argument("--quiet", action="store_true")
+    rs.set_defaults(func=_resume)
+    s = sub.add_parser("simulate", help="run a whole study with simulated participants")
+    s.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    s.add_argument("--participants", type=int, default=9)
+    s.add_argument("--seed", type=int, default=0, help="study seed (session seeds derive from it)")
+    s.add_argument("--data", default="sim-data", help="data folder (default ./sim-data: never "
+                   "beside people's data)")
+    s.add_argument("--device", default="sim",
+                   help="sim, sim:RATE, serial:PORT or serial:emulator (paced by --speed)")
+    s.add_argument("--speed", type=float, default=1.0,
+                   help="serial:emulator only: device seconds per wall second (default 1)")
+    s.add_argument("--traces", choices=("full", "contacts", "none"), default="contacts")
+    s.add_argument("--prefix", default="sim", help="participant ids are PREFIX01, PREFIX02, …")
+    s.add_argument("--group", default="", help="group label of these participants")
+    s.set_defaults(func=_simulate)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="hapticlab",
         description="Psychophysics of haptic contact realism: devices, protocols, analysis.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    dev = sub.add_parser("device",
-                         help="device tools (selftest, emulate, identify, identify-grasp)")
+    dev = sub.add_parser("device", help="device tools (selftest, check, emulate, sysid, "
+                         "fit-grasp)")
     dsub = dev.add_subparsers(dest="device_command", required=True, metavar="ACTION")
     st = dsub.add_parser("selftest", help="run the backend-independent checks against a device")
     st.add_argument("spec", help="device spec, e.g. sim or serial:/dev/ttyACM0")
@@ -346,13 +416,15 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("data_dir")
     an.add_argument("--out", required=True)
     an.add_argument("--format", default="html,md,json", help="comma-separated: html, md, json")
+    an.add_argument("--protocol", help="protocol names to analyse, comma-separated")
+    an.add_argument("--kind", choices=("human", "dry-run", "simulated", "all"),
+                    help="session kind (default: human when any human session exists)")
+    an.add_argument("--status", choices=("complete", "all"), default="complete")
+    an.add_argument("--participants", help="participant ids, comma-separated")
+    an.add_argument("--since", help="sessions created on or after (YYYY-MM-DD, UTC)")
+    an.add_argument("--until", help="sessions created on or before (YYYY-MM-DD, UTC)")
     an.set_defaults(func=_analyze)
-    from app.session_cli import add_parsers as add_session
-
-    add_session(sub, _run, _resume)
-    from app.simulate_cli import add_parser as add_simulate
-
-    add_simulate(sub, _simulate)
+    _add_session_parsers(sub)
     pr = sub.add_parser("protocol", help="protocol files (validate, show)")
     psub = pr.add_subparsers(dest="protocol_command", required=True, metavar="ACTION")
     pv = psub.add_parser("validate", help="check a protocol file; exit 0 when valid")
@@ -386,17 +458,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from .guards import Terminated, install_signal_guards
+
     parser = build_parser()
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
+    install_signal_guards()
     try:
         return func(args)
-    except UserError as exc:
+    except HapticlabError as exc:
         print(f"hapticlab: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("hapticlab: interrupted", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        print(f"hapticlab: stopped ({exc})", file=sys.stderr)
+        return 128 + exc.signum
     except BrokenPipeError:  # output piped into `head` and the like
         sys.stderr.close()
         return 0

@@ -49,6 +49,14 @@ class PlainConsole:
         """An operator action queued from the keyboard (pause, estop, abort, skip, requeue)."""
         return self.actions.popleft() if self.actions else None
 
+    def wait_ready(self) -> str:
+        """Nobody at the keys: go at once (or take an action queued by a program)."""
+        a = self.next_action()
+        return "go" if a in (None, "ready") else a
+
+    def wait_resume(self) -> str:
+        return "go"
+
     def close(self) -> None:
         return None
 

@@ -7,7 +7,6 @@ writes the report. Data go to ``OUT/data/``, the report to ``OUT/report/``.
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import sys
 import time
@@ -31,27 +30,23 @@ class StudyStopped(RuntimeError):
 
 def simulate_study(data: str | Path, seed: int) -> dict[str, float]:
     """Simulate every session of :data:`STUDY` into ``data``; returns seconds per stage."""
-    from app.simulate_cli import simulate
+    from app.api import simulate_study as simulate
 
     times = {}
     for i, (protocol, n, prefix, group) in enumerate(STUDY):
         print(f"simulating {protocol}: {n} participants{f' ({group})' if group else ''}",
               file=sys.stderr, flush=True)
-        t0 = time.perf_counter()
-        rc = simulate(argparse.Namespace(protocol=protocol, participants=n, seed=seed * 10 + i,
-                                         data=str(data), device="sim", speed=1.0,
-                                         traces="contacts",
-                                         prefix=prefix, group=group))
-        if rc != 0:
-            raise StudyStopped(rc)
-        times[f"simulate {protocol} ({n}{', ' + group if group else ''})"] = \
-            time.perf_counter() - t0
+        study = simulate(protocol, n, seed=seed * 10 + i, data=data, prefix=prefix,
+                         group=group, traces="contacts")
+        if not study.complete:
+            raise StudyStopped(study.sessions[-1].exit_code)
+        times[f"simulate {protocol} ({n}{', ' + group if group else ''})"] = study.seconds
     return times
 
 
 def run_demo(seed: int = 1, out: str | Path = "out/demo") -> int:
     """Simulate, analyse and report; returns 0 when the report is written."""
-    from analysis.report import analyze
+    from app.api import analyze
 
     out = Path(out)
     data, report = out / "data", out / "report"

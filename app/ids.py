@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 
+from device.errors import HapticlabError
+
 __all__ = ["validate_participant", "ParticipantIdError"]
 
 _OK = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,31}$")
@@ -11,7 +13,7 @@ _RESERVED = {"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)),
              *(f"LPT{i}" for i in range(1, 10))}
 
 
-class ParticipantIdError(ValueError):
+class ParticipantIdError(HapticlabError, ValueError):
     """A participant id that cannot safely name a folder."""
 
 

@@ -8,7 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["device_identify", "device_identify_grasp", "library_build", "library_show"]
+from .errors import UsageError
+
+__all__ = ["device_sysid", "device_fit_grasp", "library_build", "library_show"]
 
 
 def _agg():
@@ -20,7 +22,7 @@ def _agg():
     return plt
 
 
-def device_identify(args: argparse.Namespace, open_spec) -> int:
+def device_sysid(args: argparse.Namespace, open_spec) -> int:
     from device.matching.library import usable_band
     from device.matching.sysid import identify
 
@@ -69,12 +71,12 @@ def device_identify(args: argparse.Namespace, open_spec) -> int:
     return 0
 
 
-def device_identify_grasp(args: argparse.Namespace) -> int:
+def device_fit_grasp(args: argparse.Namespace) -> int:
     from device.matching.grasp import PUBLISHED, GraspRig, identify_grasp
 
     if not args.simulated:
-        raise SystemExit("hapticlab: error: only --simulated grasp impacts are available; a "
-                         "real grasping interface needs its own recording driver")
+        raise UsageError("only --simulated grasp impacts are available; a real grasping "
+                         "interface needs its own recording driver")
     result = identify_grasp(GraspRig().impacts(args.impacts, args.seed), estimate=args.estimate)
     result["published"] = {"m": dict(zip(("intercept", "slope"), PUBLISHED.m, strict=True)),
                            "c": dict(zip(("intercept", "slope"), PUBLISHED.c, strict=True)),
@@ -94,17 +96,21 @@ def device_identify_grasp(args: argparse.Namespace) -> int:
 
 
 def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
-    from device.matching.library import build_library
+    from device.matching.library import build_library, library_path
 
     protocol = load_protocol(args.protocol)
     if args.source not in protocol.samples or not protocol.samples[args.source].is_real:
         real = [k for k, s in protocol.samples.items() if s.is_real]
-        raise ValueError(f"--source must be a real sample of {protocol.source}: "
+        raise UsageError(f"--source must be a real sample of {protocol.source}: "
                          f"{', '.join(real)}; got {args.source!r}")
+    if args.entries < 2 or args.windows < 1:
+        raise UsageError("--entries must be >= 2 and --windows >= 1")
+    source = protocol.samples[args.source].scene
     with open_spec(args.device) as dev:
-        lib = build_library(dev, protocol.samples[args.source].scene, entries=args.entries,
-                            method=args.method, windows=args.windows)
-    path = lib.save(args.out)
+        lib = build_library(dev, source, entries=args.entries, method=args.method,
+                            windows=args.windows)
+        out = args.out or library_path(dev.info, source)
+    path = lib.save(out)
     errs = lib.meta["inversion"]["in_window_error"]
     print(f"wrote {path}: {len(lib.velocities)} transients for {args.source} on {args.device} "
           f"({lib.velocities.min():.3f}–{lib.velocities.max():.3f} m/s), {args.method} "
@@ -158,7 +164,8 @@ def add_parsers(device_sub, sub, func) -> None:
 
     ``func(args)`` runs them (it dispatches on ``args.action``).
     """
-    di = device_sub.add_parser("identify", help="identify force → acceleration on a device")
+    di = device_sub.add_parser("sysid", help="system identification: force → acceleration "
+                               "on a device, with the hand holding the stylus")
     di.add_argument("--device", default="sim")
     di.add_argument("--order", type=int, default=7)
     di.add_argument("--relative-degree", type=int, default=4)
@@ -168,26 +175,29 @@ def add_parsers(device_sub, sub, func) -> None:
     di.add_argument("--repeats", type=int, default=4)
     di.add_argument("--png", type=Path)
     di.add_argument("--json", action="store_true")
-    di.set_defaults(action="identify", func=func)
+    di.set_defaults(action="sysid", func=func)
 
-    dg = device_sub.add_parser("identify-grasp", help="grasp-force model from impacts (SPEC §3)")
+    dg = device_sub.add_parser("fit-grasp", help="fit the grasp-force model to impacts (SPEC §3)")
     dg.add_argument("--simulated", action="store_true", help="use the simulated grasping rig")
     dg.add_argument("--impacts", type=int, default=100)
     dg.add_argument("--seed", type=int, default=1)
     dg.add_argument("--estimate", choices=("ls", "manual", "rls"), default="ls")
     dg.add_argument("--json", action="store_true")
-    dg.set_defaults(action="identify-grasp", func=func)
+    dg.set_defaults(action="fit-grasp", func=func)
 
     lib = sub.add_parser("library", help="acceleration-matched transient libraries")
     lsub = lib.add_subparsers(dest="library_command", required=True, metavar="ACTION")
-    lb = lsub.add_parser("build", help="record, identify, invert: build a library on a device")
+    lb = lsub.add_parser("build", help="record, identify, invert: build a library on a device "
+                         "(into the library store, where sessions on that device find it)")
     lb.add_argument("--device", default="sim")
     lb.add_argument("--protocol", default="realism", help="protocol holding the source sample")
     lb.add_argument("--source", default="wood_on_foam", help="real sample to reproduce")
     lb.add_argument("--entries", type=int, default=12)
     lb.add_argument("--windows", type=int, default=8, help="5-s tap windows to record")
     lb.add_argument("--method", choices=("regularized", "stable"), default="regularized")
-    lb.add_argument("--out", type=Path, required=True)
+    lb.add_argument("--out", type=Path, default=None,
+                    help="write here instead of the library store (a protocol's sample then "
+                    "names it in 'path')")
     lb.set_defaults(action="library-build", func=func)
     ls = lsub.add_parser("show", help="describe a library file and plot it")
     ls.add_argument("file", type=Path)

@@ -1,47 +1,81 @@
-"""Who answers in a headless session: pluggable participants.
+"""Who answers in a session: a person at the screen, a scripted responder, a simulated person.
 
-A participant rates windows, names surfaces, and may adjust how the simulated device's
-hand taps (``before_window``). Every choice comes from the generator it is handed, which
-the runner derives from (session seed, trial index, attempt): a resumed session repeats
-the uninterrupted one exactly.
+:class:`Participant` is what the runner asks of all of them, with a default for every
+question that a kind of participant has no use for, so the runner calls every hook
+unconditionally. Every choice a non-human participant makes comes from the generator it is
+handed, which the runner derives from (session seed, trial index, attempt): a resumed
+session repeats the uninterrupted one exactly.
 """
 
 from __future__ import annotations
 
-from typing import Protocol as _Protocol
-
 import numpy as np
 
-__all__ = ["Participant", "ScriptedResponder", "make_participant"]
+__all__ = ["Participant", "ScriptedResponder", "RESPONDERS"]
+
+#: who answers: a person (``person``, at the PsychoPy screen), random answers to test the
+#: machinery (``scripted``), or the simulated participant model (``simulated``)
+RESPONDERS = ("person", "scripted", "simulated")
 
 
-class Participant(_Protocol):
-    """What the runner asks of a (simulated or scripted) participant."""
+class Participant:
+    """What the runner asks of whoever answers (defaults: nothing to show, one window)."""
+
+    name = "participant"
+
+    def instructions(self, phase: str) -> None:
+        """A phase begins (a screen shows its instructions)."""
+
+    def ready(self, trial) -> None:
+        """The operator placed the item; the trial starts."""
+
+    def waiting(self, trial) -> None:
+        """Between trials: the operator is changing the sample."""
 
     def before_window(self, trial, sample_id: str, device, rng: np.random.Generator) -> None:
-        ...
+        """Just before a tapping window on ``sample_id``."""
+
+    def progress(self, t: float, partial, duration: float) -> None:
+        """During a window: ``t`` [s] elapsed of ``duration``, what the device reported."""
+
+    def after_window(self, trial, sample_id: str, result) -> None:
+        """After a window: what the device reported (a simulated person feels it)."""
+
+    def keep_tapping(self) -> bool:
+        """Familiarization: another window? (default: one window)."""
+        return False
+
+    def choose_surface(self, trial, visited: set[int]) -> int | None:
+        """Identification: which surface to tap next (index), or None to answer. Default:
+        each surface once, in order."""
+        rest = [i for i in range(len(trial.samples)) if i not in visited]
+        return rest[0] if rest else None
 
     def rate(self, trial, scale, result, rng: np.random.Generator) -> tuple[int, float]:
         """(rating on the scale, response time [s])."""
-        ...
+        raise NotImplementedError(f"{type(self).__name__} does not rate")
 
     def identify(self, trial, choices, results, rng: np.random.Generator
                  ) -> tuple[list[str], float]:
         """(a name for each surface in order, response time [s])."""
-        ...
+        raise NotImplementedError(f"{type(self).__name__} does not identify")
+
+    def pause(self) -> None:
+        """The operator paused the session."""
 
     def debrief(self) -> str:
-        ...
+        """Free-text criteria at the end."""
+        return ""
+
+    def close(self) -> None:
+        """Release what the participant holds (a window)."""
 
 
-class ScriptedResponder:
+class ScriptedResponder(Participant):
     """Answers at random from the generator it is given: for dry runs of the machinery,
     not a model of anyone (see the simulated participant for that)."""
 
     name = "scripted"
-
-    def before_window(self, trial, sample_id, device, rng) -> None:
-        return None
 
     def rate(self, trial, scale, result, rng) -> tuple[int, float]:
         return int(rng.integers(scale.min, scale.max + 1)), float(rng.uniform(0.8, 2.5))
@@ -51,18 +85,3 @@ class ScriptedResponder:
 
     def debrief(self) -> str:
         return "scripted responder: no criteria"
-
-    def keep_tapping(self) -> bool:
-        return False  # one familiarization window
-
-
-def make_participant(name: str, protocol=None, seed: int = 0, group: str = "") -> Participant:
-    """``scripted`` (random answers) or ``simulated`` (see :mod:`app.simulated`; ``group``
-    ``expert`` or ``novice`` sets how finely it perceives)."""
-    if name == "scripted":
-        return ScriptedResponder()
-    if name == "simulated":
-        from app.simulated import SimulatedParticipant
-
-        return SimulatedParticipant(protocol, seed, group)
-    raise ValueError(f"unknown responder {name!r}; available: scripted, simulated")

@@ -24,18 +24,20 @@ from typing import Any
 
 import numpy as np
 
+from analysis.session_format import FORMAT_VERSION, PROTOCOL_COPY
 from device import DeviceError, HapticDevice
 from protocols import DONE, PAUSED, RNG_ALGORITHM, Attempt, Protocol, SessionEngine, Trial
 
 from .console import PlainConsole
-from .recorder import SessionFiles, read_trials
+from .participants import Participant
+from .recorder import SessionFiles
 
 __all__ = ["SessionRunner", "SessionInterrupted", "session_meta", "utc_now"]
 
 APP_VERSION = "0.1.0"
 
 
-class SessionInterrupted(RuntimeError):
+class SessionInterrupted(Exception):
     """The session stopped before the end (device gone, operator abort); it can be resumed."""
 
 
@@ -66,16 +68,21 @@ def _versions() -> dict[str, str]:
 
 def session_meta(protocol: Protocol, protocol_ref: str, participant: str, session: int, seed: int,
                  counterbalance_row: int | None, device: HapticDevice, device_spec: str,
-                 ui: str, responder: str, audio: bool, group: str = "") -> dict:
+                 ui: str, responder: str, audio: bool, group: str = "", kind: str = "dry-run",
+                 libraries: dict | None = None) -> dict:
     """The metadata DESIGN.md asks for, at session start."""
     return {
+        "format_version": FORMAT_VERSION,
         "app": {"name": "hapticlab", "version": APP_VERSION, "git_sha": _git_sha()},
         "protocol": {"name": protocol.name, "ref": protocol_ref, "source": protocol.source,
-                     "sha256": protocol.sha256,
+                     "sha256": protocol.sha256, "copy": PROTOCOL_COPY,
                      "rating": None if protocol.rating is None else
                      {"min": protocol.rating.min, "max": protocol.rating.max},
                      "answer_choices": None if protocol.answer is None
-                     else list(protocol.answer.choices)},
+                     else list(protocol.answer.choices),
+                     "design": protocol.design()},
+        "kind": kind,
+        "libraries": libraries or {},
         "seed": seed,
         "rng": RNG_ALGORITHM + "; per attempt: SeedSequence([seed, trial_index, attempt])",
         "participant": {"id": participant, "counterbalance_row": counterbalance_row,
@@ -103,15 +110,15 @@ class SessionRunner:
     protocol, engine : the protocol and its session engine
     device : HapticDevice
     files : SessionFiles
-    participant_ui : object with ``rate``/``identify``/``before_window`` (see app.participants)
-        and, for a screen, ``show``/``ready`` hooks.
+    participant_ui : Participant
+        Who answers (a person's screen, a scripted or simulated participant).
     """
 
     protocol: Protocol
     engine: SessionEngine
     device: HapticDevice
     files: SessionFiles
-    participant_ui: Any
+    participant_ui: Participant
     participant: str
     session: int
     seed: int
@@ -122,7 +129,7 @@ class SessionRunner:
     timing: list[dict] = field(default_factory=list)
 
     def load_log(self) -> None:
-        rows, torn = read_trials(self.files.trials)
+        rows, torn = self.files.read_rows()
         if torn is not None:
             raise RuntimeError("set the torn line aside before loading the log")
         self.log = [Attempt(r["item"], r["status"], r["reason"]) for r in rows]
@@ -144,12 +151,11 @@ class SessionRunner:
                 time.sleep(0.05)
                 continue
             done = len(self.engine.outcomes(self.log))
+            self.participant_ui.waiting(trial)
             self.console.place(trial, self._total(), done)
-            action = self.console.wait_ready() if hasattr(self.console, "wait_ready") \
-                else self.console.next_action()
+            action = self.console.wait_ready()
             while action == "pause":
-                if hasattr(self.participant_ui, "pause"):
-                    self.participant_ui.pause()
+                self.participant_ui.pause()
                 self.console.say("paused — press p to resume")
                 action = self.console.wait_resume()
             if action in ("skip", "requeue"):
@@ -164,13 +170,12 @@ class SessionRunner:
     def _attempt(self, trial: Trial) -> None:
         rng = self._rng(trial)
         t_start = utc_now()
-        if hasattr(self.participant_ui, "ready"):
-            self.participant_ui.ready(trial)
+        self.participant_ui.ready(trial)
         if self.audio is not None:
             self.audio.tap_cue()
         results = []
         try:
-            if trial.kind == "identification" and hasattr(self.participant_ui, "choose_surface"):
+            if trial.kind == "identification":
                 # the participant switches between the surfaces before naming them
                 visited: set[int] = set()
                 by_surface: dict[int, Any] = {}
@@ -181,13 +186,13 @@ class SessionRunner:
             elif trial.kind == "free":
                 # familiarization: windows on the sample until the participant is done
                 results.append(self._window(trial, trial.samples[0], rng))
-                while getattr(self.participant_ui, "keep_tapping", lambda: False)():
+                while self.participant_ui.keep_tapping():
                     results.append(self._window(trial, trial.samples[0], rng))
             else:
                 for sid in trial.samples:
                     results.append(self._window(trial, sid, rng))
         except DeviceError as exc:
-            partial = getattr(exc, "partial", None)
+            partial = exc.partial
             self._record(trial, "aborted_device", reason=str(exc)[:200], t_start=t_start,
                          result=partial)
             raise SessionInterrupted(f"device error during trial {trial.trial_index}: {exc}"
@@ -232,9 +237,7 @@ class SessionRunner:
         sample = self.protocol.samples[sample_id]
         dev = self.device
         dev.load_scene(sample.scene)
-        if hasattr(dev, "reseed"):
-            dev.reseed([self.seed, trial.trial_index, trial.attempt,
-                        trial.samples.index(sample_id)])
+        dev.reseed([self.seed, trial.trial_index, trial.attempt, trial.samples.index(sample_id)])
         self.participant_ui.before_window(trial, sample_id, dev, rng)
         dev.home()
         w = self.protocol.window
@@ -246,14 +249,12 @@ class SessionRunner:
             for c in partial.contacts[shown:]:  # live incoming speeds for the operator
                 self.console.contact(c.velocity)
             shown = len(partial.contacts)
-            if hasattr(self.participant_ui, "progress"):
-                self.participant_ui.progress(t, partial, w.duration)
+            self.participant_ui.progress(t, partial, w.duration)
 
         res = dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
         if res.timing:
             self.timing.append(res.timing)
-        if hasattr(self.participant_ui, "after_window"):  # what a simulated person felt
-            self.participant_ui.after_window(trial, sample_id, res)
+        self.participant_ui.after_window(trial, sample_id, res)  # what a simulated person felt
         return res
 
     # ------------------------------------------------------------------ recording

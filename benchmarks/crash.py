@@ -47,7 +47,7 @@ def kill_and_resume(kills: int, seed: int = 1, protocol: str = "realism", rng_se
     ``kills`` kills have landed.
     """
     work = Path(workdir or tempfile.mkdtemp(prefix="hapticlab-crash-"))
-    common = ["--participant", "P01", "--device", "sim", "--ui", "none", "--seed", str(seed),
+    common = ["--participant", "P01", "--dry-run", "--seed", str(seed),
               "--no-audio", "--quiet", "--traces", traces]
     ref_dir = work / "reference"
     subprocess.run(_cmd(["run", protocol, "--data", str(ref_dir), *common]), check=True,

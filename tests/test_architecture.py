@@ -51,6 +51,159 @@ def test_the_checker_sees_imports(tmp_path):
     assert imported_roots(bad) == {"os", "app", "psychopy"}
 
 
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def imported_modules(path: Path) -> set[str]:
+    """Every module of ours ``path`` imports, relative imports resolved, lazy (function-level)
+    imports included: a cycle through a lazy import is still a cycle of the design."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    here = _module_name(path)
+    package = here if path.name == "__init__.py" else here.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            # "from pkg import sub" may name a submodule
+            names = [mod] + [f"{mod}.{a.name}" for a in node.names]
+        else:
+            continue
+        out.update(n for n in names if n.split(".")[0] in OURS)
+    return out
+
+
+def _our_modules() -> dict[str, Path]:
+    mods = {}
+    for pkg in OURS:
+        for f in (ROOT / pkg).rglob("*.py"):
+            mods[_module_name(f)] = f
+    return mods
+
+
+def _graph() -> dict[str, set[str]]:
+    mods = _our_modules()
+    graph = {}
+    for name, f in mods.items():
+        deps = set()
+        for m in imported_modules(f):
+            while m and m not in mods:  # "from device.scene import Scene" → device.scene
+                m = m.rpartition(".")[0]
+            if m and m != name:
+                deps.add(m)
+        graph[name] = deps
+    return graph
+
+
+def test_simulated_device_does_not_import_matching():
+    """Loading a scene on the simulated device never runs an experiment: device.sim renders
+    tables and never reaches into acceleration matching (building a library is explicit)."""
+    graph = _graph()
+    for mod, deps in graph.items():
+        if mod.startswith("device.sim"):
+            bad = sorted(d for d in deps if d.startswith("device.matching"))
+            assert not bad, f"{mod} imports {bad}"
+
+
+def test_backends_do_not_build_tables():
+    """One function outside the backends turns a transient into a table (device.render)."""
+    for mod, deps in _graph().items():
+        if mod.startswith(("device.sim", "device.serial")):
+            assert "device.render" not in deps, mod
+            assert not any(d.startswith("device.matching") for d in deps), mod
+
+
+def test_no_import_cycles():
+    graph = _graph()
+    index, low, stack, on, cycles = {}, {}, [], set(), []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    assert not cycles, f"import cycles: {cycles}"
+
+
+def _private_device_uses(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    bad = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 \
+                and node.module.split(".")[0] == "device":
+            if any(p.startswith("_") for p in node.module.split(".")):
+                bad.append(f"line {node.lineno}: from {node.module}")
+            bad += [f"line {node.lineno}: import {a.name} from {node.module}"
+                    for a in node.names if a.name.startswith("_")]
+        elif isinstance(node, ast.Import):
+            bad += [f"line {node.lineno}: import {a.name}" for a in node.names
+                    if a.name.split(".")[0] == "device"
+                    and any(p.startswith("_") for p in a.name.split("."))]
+        elif isinstance(node, ast.Attribute) and node.attr.startswith("_") \
+                and not node.attr.startswith("__") \
+                and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+            bad.append(f"line {node.lineno}: .{node.attr}")
+    return bad
+
+
+#: the simulator's and the serial driver's insides: app/ talks to a backend's class, never
+#: to its parameters, plant, kernel, tapper, framing or messages
+BACKEND_INSIDES = ("device.sim.params", "device.sim.plant", "device.sim.kernel",
+                   "device.sim.tapper", "device.serial.framing", "device.serial.messages",
+                   "device.serial.link")
+
+
+def test_app_uses_only_public_device_api():
+    """app/ reaches devices through public names only: no private modules or names of
+    device, no private attributes of objects it does not own, and no backend insides (a
+    simulated participant's hand goes through ``set_simulated_hand``, a device's ratings
+    through ``DeviceInfo``)."""
+    for f in sorted((ROOT / "app").rglob("*.py")):
+        bad = _private_device_uses(f)
+        assert not bad, f"{f.relative_to(ROOT)}: {bad}"
+        insides = sorted(m for m in imported_modules(f) if m.startswith(BACKEND_INSIDES))
+        assert not insides, f"{f.relative_to(ROOT)} imports {insides}"
+
+
+def test_the_private_use_checker_sees_them(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("from device.sim._jit import lazy_njit\nfrom device.scene import _finite\n"
+                 "def g(dev):\n    return dev._scene, self._ok\n")
+    assert len(_private_device_uses(f)) == 3
+
+
 IMPORT_PROBE = r"""
 import json, sys
 opened = []
@@ -74,3 +227,49 @@ def test_core_imports_without_psychopy_or_writes(tmp_path):
     assert report["psychopy"] == []
     assert report["written"] == []
     assert list(tmp_path.iterdir()) == []
+
+
+def _exported_errors() -> dict[str, str]:
+    """Exception classes named in an ``__all__`` of our packages: name → module."""
+    import importlib
+
+    out = {}
+    for name in _our_modules():
+        if name.startswith("benchmarks") or name.endswith("__main__"):
+            continue
+        mod = importlib.import_module(name)
+        for attr in getattr(mod, "__all__", ()):
+            obj = getattr(mod, attr, None)
+            if isinstance(obj, type) and issubclass(obj, BaseException) \
+                    and obj.__module__.split(".")[0] in OURS:
+                out[attr] = obj.__module__
+    return out
+
+
+def test_every_exported_error_is_raised_somewhere():
+    """An error a package exports is one its code raises (directly, through a subclass, or
+    handed to the code that raises it), never a name kept for show."""
+    import importlib
+
+    raised: set[str] = set()
+    for path in _our_modules().values():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                target = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+                if isinstance(target, ast.Name):
+                    raised.add(target.id)
+                elif isinstance(target, ast.Attribute):
+                    raised.add(target.attr)
+            elif isinstance(node, ast.Call):  # an error class passed on to be raised
+                raised.update(a.id for a in node.args if isinstance(a, ast.Name)
+                              and a.id.endswith(("Error", "Interrupted")))
+    errors = _exported_errors()
+    classes = {n: getattr(importlib.import_module(m), n) for n, m in errors.items()}
+    unused = []
+    for n, cls in classes.items():
+        subs = [s for s, c in classes.items() if c is not cls and issubclass(c, cls)]
+        if n not in raised and not any(s in raised for s in subs):
+            unused.append(f"{errors[n]}.{n}")
+    assert not unused, f"exported but never raised: {unused}"
+    assert {"CRCStormError", "HapticlabError", "SceneError"} <= set(errors)

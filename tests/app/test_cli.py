@@ -51,8 +51,8 @@ def test_bench_sim_json_shape():
     assert wall[1_000] > 1.0 > wall[10_000]
 
 
-def test_identify_grasp_json():
-    out = run("device", "identify-grasp", "--simulated", "--impacts", "100", "--seed", "3",
+def test_fit_grasp_json():
+    out = run("device", "fit-grasp", "--simulated", "--impacts", "100", "--seed", "3",
               "--json")
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
@@ -64,9 +64,9 @@ def test_identify_grasp_json():
     assert r["fit_percent"]["median"] > 80
 
 
-def test_identify_json_and_plot(artifacts):
-    png = artifacts / "identify_sim.png"
-    out = run("device", "identify", "--device", "sim", "--json", "--png", str(png))
+def test_sysid_json_and_plot(artifacts):
+    png = artifacts / "sysid_sim.png"
+    out = run("device", "sysid", "--device", "sim", "--json", "--png", str(png))
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
     assert r["model"]["order"] == 7 and r["model"]["relative_degree"] == 4

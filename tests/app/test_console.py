@@ -68,15 +68,13 @@ def test_device_check_reports_saturation_by_sample():
 
 
 def test_familiarization_runs_until_the_participant_is_done(tmp_path):
+    from app.participants import Participant
     from app.recorder import SessionFiles, new_session_dir, read_trials
     from app.runner import SessionRunner
     from protocols import SessionEngine, load_protocol
 
-    class ThreeWindows:
+    class ThreeWindows(Participant):
         n = 0
-
-        def before_window(self, *a):
-            pass
 
         def keep_tapping(self):
             self.n += 1

@@ -11,7 +11,7 @@ from app.recorder import COLUMNS, SessionFiles, TrialsFileError, read_trials
 from benchmarks.crash import kill_and_resume
 
 CLI = [sys.executable, "-m", "app"]
-HEADLESS = ["--device", "sim", "--ui", "none", "--responder", "scripted", "--no-audio",
+HEADLESS = ["--dry-run", "--no-audio",
             "--quiet"]
 
 MINI = """
@@ -86,7 +86,7 @@ def test_placements_never_reveal_and_always_swap(realism_session):
         if r["sample"] in ("wood", "wood_on_foam", "foam"):
             assert r["placement"] == r["sample"]
         else:
-            assert r["placement"] in ("block A", "block B")
+            assert r["placement"] in ("placeholder A", "placeholder B")
 
 
 def test_an_existing_session_is_never_overwritten(tmp_path):
@@ -157,19 +157,33 @@ def test_a_corrupt_earlier_line_is_a_named_error(realism_session, tmp_path):
     assert out.returncode == 2 and "trials.tsv:6: corrupt line" in out.stderr
 
 
-def test_resume_is_refused_when_the_protocol_changed(tmp_path):
+def test_resume_uses_the_sessions_protocol_copy_and_refuses_an_edited_one(tmp_path):
     proto = tmp_path / "mini.toml"
     proto.write_text(MINI)
     out = run("run", str(proto), "--participant", "P04", "--seed", "2", "--data",
               str(tmp_path / "d"), *HEADLESS)
     assert out.returncode == 0
     folder = tmp_path / "d" / "sub-P04" / "ses-1"
+    assert (folder / "protocol.toml").read_text() == MINI  # the protocol travels with it
+    rows = (folder / "trials.tsv").read_text().splitlines(keepends=True)
+    (folder / "trials.tsv").write_text("".join(rows[:3]))  # as if stopped after 2 attempts
     meta = json.loads((folder / "session.json").read_text())
     meta["status"] = "interrupted"
     (folder / "session.json").write_text(json.dumps(meta))
-    proto.write_text(MINI.replace("repetitions = 2", "repetitions = 3"))
+    # the lab edits (or deletes) its file: the session keeps running its own copy, from
+    # any working directory
+    proto.write_text(MINI.replace("repetitions = 2", "repetitions = 3") + "# a comment\n")
+    out = run("resume", str(folder), cwd=tmp_path / "d")
+    assert out.returncode == 0, out.stderr
+    strip = lambda text: [ln.split("\t")[:15] for ln in text.splitlines()]  # noqa: E731
+    assert strip((folder / "trials.tsv").read_text()) == strip("".join(rows))  # as uninterrupted
+    # the copy itself edited: refused, naming the file
+    meta["status"] = "interrupted"
+    (folder / "session.json").write_text(json.dumps(meta))
+    (folder / "protocol.toml").write_text(MINI.replace("repetitions = 2", "repetitions = 3"))
     out = run("resume", str(folder))
     assert out.returncode == 2 and "changed since the session started" in out.stderr
+    assert "protocol.toml" in out.stderr
 
 
 @pytest.mark.slow
@@ -185,7 +199,8 @@ def test_headless_session_over_the_emulator(emulator, tmp_path):
     proto = tmp_path / "mini.toml"
     proto.write_text(MINI)
     out = run("run", str(proto), "--participant", "P05", "--seed", "4", "--data", str(tmp_path),
-              "--device", f"serial:{emulator.port}", "--ui", "none", "--no-audio", "--quiet")
+              "--device", f"serial:{emulator.port}", "--responder", "scripted", "--no-audio",
+              "--quiet")
     assert out.returncode == 0, out.stderr
     folder = tmp_path / "sub-P05" / "ses-1"
     rows, _ = read_trials(folder / "trials.tsv")
@@ -201,7 +216,7 @@ def test_emulator_dies_mid_session_then_resume_on_a_new_one(tmp_path, emulator_f
     emu = emulator_factory(8)
     proc = subprocess.Popen([*CLI, "run", str(proto), "--participant", "P06", "--seed", "5",
                              "--data", str(tmp_path), "--device", f"serial:{emu.port}",
-                             "--ui", "none", "--no-audio"], stdout=subprocess.PIPE,
+                             "--responder", "scripted", "--no-audio"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     folder = tmp_path / "sub-P06" / "ses-1"
     import time
@@ -229,8 +244,23 @@ def test_emulator_dies_mid_session_then_resume_on_a_new_one(tmp_path, emulator_f
 
 
 def test_real_device_sessions_refuse_to_run_without_audio(emulator, tmp_path):
-    out = run("run", "realism", "--participant", "P07", "--device", f"serial:{emulator.port}",
-              "--ui", "none", "--data", str(tmp_path))
-    if "no audio" not in out.stderr:
+    proto = tmp_path / "mini.toml"
+    proto.write_text(MINI)
+    out = run("run", str(proto), "--participant", "P07", "--device", f"serial:{emulator.port}",
+              "--responder", "scripted", "--data", str(tmp_path / "d"))
+    if out.returncode == 0:
         pytest.skip("this machine has working audio output")
-    assert out.returncode == 2 and "--no-audio" in out.stderr
+    assert out.returncode == 2 and "no audio" in out.stderr and "--no-audio" in out.stderr
+    assert not (tmp_path / "d").exists() or not any((tmp_path / "d").rglob("trials.tsv"))
+
+
+def test_a_real_device_without_its_library_is_refused_with_the_command(emulator, tmp_path):
+    """Realism over the serial link: the matched samples need a library built on this very
+    device; the run stops before recording anything and names the command that builds it."""
+    out = run("run", "realism", "--participant", "P08", "--device", f"serial:{emulator.port}",
+              "--responder", "scripted", "--no-audio", "--data", str(tmp_path))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert "matched_firm, matched_soft need(s) a library reproducing 'wood_on_foam'" in out.stderr
+    assert (f"hapticlab library build --device serial:{emulator.port} --protocol realism "
+            "--source wood_on_foam") in out.stderr
+    assert not any(tmp_path.iterdir())

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from analysis import load_sessions
-from analysis.study import device_summary, identification, realism
-from app.simulated import SimulatedParticipant, felt_features
+from analysis.study import analyse_recorded
+from app.participant_model import SimulatedParticipant, felt_features
 from device import open_device
 from protocols import load_protocol
 
@@ -45,7 +45,7 @@ def test_each_person_holds_and_taps_the_stylus_their_own_way():
     p = load_protocol("realism")
     people = [SimulatedParticipant(p, seed=s) for s in (1, 2)]
     held = []
-    with open_device("sim", seed=0) as dev:
+    with open_device("sim", seed=0) as dev:  # the simulated device: its hand is public state
         dev.load_scene(p.samples["wood"].scene)
         for person in people:
             person.before_window(None, "wood", dev, None)
@@ -79,7 +79,7 @@ def test_a_changed_rendering_changes_the_rating():
 
 def test_experts_identify_more_reliably_than_novices():
     """Same surfaces felt, same remembered blocks: only the perceptual noise differs by group
-    (app.simulated.FEATURE_NOISE), so experts name the materials right more often (the
+    (app.participant_model.FEATURE_NOISE), so experts name the materials right more often (the
     paper's Table 3: 88.9 % against 79.2 %)."""
     from types import SimpleNamespace
 
@@ -121,6 +121,10 @@ def study(study_dir):
     return load_sessions(study_dir)
 
 
+def realism(study):
+    return analyse_recorded(study, "realism", "testing")["result"]
+
+
 def test_face_validity_realism(study):
     r = realism(study)
     means = {s["sample"]: s["mean"] for s in r["samples"]}
@@ -144,7 +148,7 @@ def test_face_validity_realism(study):
 
 
 def test_face_validity_taps_and_saturations(study):
-    dev = device_summary(study)
+    dev = analyse_recorded(study, "realism", "testing")["device"]
     assert 0.09 < dev["velocity_mean"] < 0.13 and 0.02 < dev["velocity_sd"] < 0.05
     sat = dev["saturations_per_sample"]
     heavy = sum(v for k, v in sat.items() if k.startswith(("sinusoid", "matched")))
@@ -152,7 +156,7 @@ def test_face_validity_taps_and_saturations(study):
 
 
 def test_face_validity_identification(study):
-    i = identification(study)
+    i = analyse_recorded(study, "identification", "identification")["result"]
     t = {row["scope"]: row for row in i["table"].to_dict(orient="records")}
     assert t["all"]["percent"] > 60 and t["all"]["p_binom"] < 1e-6
 
@@ -164,9 +168,7 @@ def test_face_validity_factorial(study):
     two seeds of three, as in the paper; for aluminum, the higher slope (toward the measured
     model's far larger amplitude) is preferred (p ≤ .004). What does not emerge (aluminum's
     300 Hz, rubber's direction) is explained in the README: mostly the simulated device."""
-    from analysis.study import factorial
-
-    res = factorial(study)
+    res = analyse_recorded(study, "factorial", "rating")["result"]
     for mat, factors in (("wood", ("frequency", "slope")), ("aluminum", ("slope",))):
         effects = res[mat]["main_effects"].set_index("factor")
         for factor in factors:
@@ -273,5 +275,6 @@ def test_demo_writes_the_whole_study_and_its_report(tmp_path):
     assert (tmp_path / "demo" / "report" / "report.html").stat().st_size > 10_000
     assert rep["methods"].startswith("These data come from simulated participants")
     assert rep["provenance"]["sessions"] == 9 + 9 + 14
-    assert {"realism", "factorial", "identification"} <= set(rep)
+    assert [a["id"] for a in rep["analyses"]] == [
+        "factorial/rating", "identification/identification", "realism/testing"]
     assert "report.html" in out.stdout and "simulating realism" in out.stderr

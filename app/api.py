@@ -1,0 +1,447 @@
+"""The programmatic API: run, resume and simulate sessions, analyse a data folder.
+
+The command line is a thin layer over these functions. Every error they raise on purpose is
+a :class:`~device.errors.HapticlabError` (bad input, unusable files, a device that fails);
+a session that stops part way is not an error but a :class:`SessionResult` whose status
+says so (everything recorded is on disk and :func:`resume_session` continues it).
+
+Examples
+--------
+>>> from app.api import run_session, simulate_study, analyze        # doctest: +SKIP
+>>> r = run_session("realism", "P01", device="sim", responder="simulated", data="sim-data",
+...                 audio=False)                                     # doctest: +SKIP
+>>> r.status, r.folder                                               # doctest: +SKIP
+('complete', PosixPath('sim-data/sub-P01/ses-1'))
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import AnalysisError, SessionFileError, UsageError
+from .guards import Terminated, close_at_exit
+
+__all__ = ["SessionResult", "StudyResult", "run_session", "resume_session", "simulate_study",
+           "analyze", "session_seed", "KIND_OF", "DEFAULT_SIM_DATA"]
+
+#: the session kind each responder gives
+KIND_OF = {"person": "human", "scripted": "dry-run", "simulated": "simulated"}
+#: where simulated studies go unless told otherwise (never beside people's data)
+DEFAULT_SIM_DATA = "sim-data"
+
+
+@dataclass(frozen=True)
+class SessionResult:
+    """How a session ended.
+
+    Attributes
+    ----------
+    folder : Path
+        The session folder.
+    status : str
+        ``complete``, ``interrupted`` (the device failed or the operator aborted; resume it)
+        or ``stopped`` (a signal or Ctrl-C; resume it).
+    attempts : int
+        Rows recorded in trials.tsv.
+    message : str
+        What happened, for people (how to resume).
+    """
+
+    folder: Path
+    status: str
+    attempts: int
+    message: str = ""
+
+    @property
+    def exit_code(self) -> int:
+        """0 complete, 3 interrupted, 130 stopped (the CLI's exit status)."""
+        return {"complete": 0, "interrupted": 3}.get(self.status, 130)
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """A simulated study: its sessions (in order) and how long each stage took [s]."""
+
+    sessions: list[SessionResult] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def complete(self) -> bool:
+        return all(s.status == "complete" for s in self.sessions)
+
+
+def _err(*args) -> None:
+    print(*args, file=sys.stderr, flush=True)
+
+
+def _participant(responder: str, protocol, seed: int, group: str, fullscreen: bool):
+    if responder == "person":
+        from app.screen import PsychoPyScreen
+
+        return PsychoPyScreen(protocol, fullscreen=fullscreen)
+    if responder == "simulated":
+        from app.participant_model import SimulatedParticipant
+
+        return SimulatedParticipant(protocol, seed, group)
+    from app.participants import ScriptedResponder
+
+    return ScriptedResponder()
+
+
+def _audio(enabled: bool, device_backend: str, say: Callable[[str], None]):
+    if not enabled:
+        return None
+    from app.audio import Audio, AudioUnavailable
+
+    try:
+        return Audio()
+    except AudioUnavailable as exc:
+        if device_backend != "sim":
+            raise UsageError(f"no audio device ({exc}): a real session needs masking noise "
+                             "and the tap cue; fix the audio or pass --no-audio") from None
+        say(f"warning: no audio ({exc}); dry run continues without sound")
+        return None
+
+
+def _open(spec: str, seed: int):
+    from device import open_device
+
+    if spec == "sim" or spec.startswith("sim:"):
+        return open_device(spec, seed=seed)
+    return open_device(spec)
+
+
+def _drive(runner, files, meta, console) -> SessionResult:
+    from app.runner import SessionInterrupted, utc_now
+
+    def stopped(why: str, status: str, msg: str) -> SessionResult:
+        meta["status"] = "interrupted"
+        meta.setdefault("interruptions", []).append(why)
+        files.write_meta(meta)
+        console.say(msg)
+        return SessionResult(files.folder, status, len(runner.log), msg)
+
+    try:
+        runner.run()
+    except SessionInterrupted as exc:
+        return stopped(str(exc), "interrupted", f"session interrupted: {exc}\nresume with: "
+                       f"hapticlab resume {files.folder}")
+    except (KeyboardInterrupt, Terminated) as exc:
+        return stopped(f"stopped ({type(exc).__name__})", "stopped",
+                       "stopped; everything recorded is saved. resume with: hapticlab resume "
+                       f"{files.folder}")
+    meta["times"]["finished_utc"] = utc_now()
+    meta["status"] = "complete"
+    meta["link"] = runner.device.link_stats()
+    if runner.timing:  # live pacing (the simulator in live mode): achieved servo rate
+        rates = [t["achieved_rate_hz"] for t in runner.timing]
+        meta["timing"] = {"achieved_rate_hz_median": float(np.median(rates)),
+                          "lateness_p99_s_max": max(t["lateness_p99_s"] for t in runner.timing)}
+    meta["participant"]["debrief"] = runner.participant_ui.debrief()
+    files.write_meta(meta)
+    return SessionResult(files.folder, "complete", len(runner.log),
+                         f"session complete: {files.folder} ({len(runner.log)} attempts)")
+
+
+def _responder(responder: str) -> str:
+    if responder not in KIND_OF:
+        raise UsageError(f"responder must be one of {', '.join(KIND_OF)}, got {responder!r}")
+    return responder
+
+
+def run_session(protocol: str | Path, participant: str, *, device: str,
+                data: str | Path = "data", responder: str = "person", seed: int | None = None,
+                row: int | None = None, group: str = "", traces: str = "full",
+                audio: bool = True, fullscreen: bool = False, quiet: bool = False,
+                operator_keys: bool | None = None,
+                say: Callable[[str], None] | None = None) -> SessionResult:
+    """Run one session to the end (or until it is stopped) and record it.
+
+    Parameters
+    ----------
+    protocol : str or Path
+        A built-in protocol name (``realism``, ``factorial``, ``identification``) or a file.
+    participant : str
+        Participant id (letters, digits, ``_``, ``-``; at most 32).
+    device : str
+        Device spec: ``sim``, ``sim:RATE``, ``serial:PORT``.
+    data : path
+        Data folder; the session goes to ``data/sub-<participant>/ses-<n>/``.
+    responder : {'person', 'scripted', 'simulated'}
+        Who answers: a person at the PsychoPy screen (a ``human`` session), random answers
+        (a ``dry-run``), or the simulated participant model (``simulated``).
+    seed : int, optional
+        Session seed (drawn and recorded when None).
+    row : int, optional
+        Counterbalance row for Williams-ordered block orders.
+    group : str
+        Participant group label (e.g. ``expert``).
+    traces : {'full', 'contacts', 'none'}
+        Raw device streams kept per attempt.
+    audio : bool
+        Masking noise, tap cue and saturation tone.
+    fullscreen : bool
+        The participant's window fills the screen.
+    quiet : bool
+        No console lines.
+    operator_keys : bool, optional
+        Read operator keys from the terminal (default: when a person answers).
+    say : callable, optional
+        Where messages for the operator go (default: stderr).
+
+    Returns
+    -------
+    SessionResult
+    """
+    from app.console import make_console
+    from app.ids import validate_participant
+    from app.libraries import prepare_libraries, with_libraries
+    from app.recorder import SessionFiles, new_session_dir
+    from app.runner import SessionRunner, session_meta
+    from protocols import SessionEngine, parse_protocol, protocol_text, seed_from_entropy
+
+    responder = _responder(responder)
+    if traces not in ("full", "contacts", "none"):
+        raise UsageError(f"traces must be full, contacts or none, got {traces!r}")
+    participant = validate_participant(participant)
+    source, text = protocol_text(protocol)
+    proto = parse_protocol(text, source)
+    seed = seed_from_entropy() if seed is None else seed
+    if not isinstance(seed, int) or seed < 0:
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
+    engine = SessionEngine(proto, seed, participant, row)
+    console = make_console(quiet=quiet)
+    say = say or console.say
+    with _open(device, seed) as dev:
+        close_at_exit(dev)
+        libraries = prepare_libraries(proto, dev, device, say, ref=str(protocol))
+        proto = with_libraries(proto, libraries)
+        ui = _participant(responder, proto, seed, group, fullscreen)
+        sound = None
+        try:
+            sound = _audio(audio, dev.info.backend, say)
+            if operator_keys if operator_keys is not None else responder == "person":
+                console = make_console("keys", quiet, dev)
+            folder, n = new_session_dir(Path(data), participant)
+            files = SessionFiles(folder)
+            files.start(text)
+            meta = session_meta(proto, str(protocol), participant, n, seed, row, dev, device,
+                                "psychopy" if responder == "person" else "none", responder,
+                                sound is not None, group, KIND_OF[responder], libraries)
+            meta["traces_mode"] = traces
+            files.write_meta(meta)
+            console.say(f"session {folder} (seed {seed})")
+            runner = SessionRunner(proto, engine, dev, files, ui, participant, n, seed, console,
+                                   sound, traces)
+            return _drive(runner, files, meta, console)
+        finally:
+            for part in (ui, sound, console):
+                if part is not None:
+                    part.close()
+
+
+def resume_session(folder: str | Path, *, device: str | None = None, audio: bool | None = None,
+                   clear_fault: bool = False, fullscreen: bool = False, quiet: bool = False,
+                   operator_keys: bool | None = None) -> SessionResult:
+    """Continue an interrupted session exactly where it stopped.
+
+    The session keeps its kind and responder; the protocol is the copy in the session
+    folder (so resuming works from any working directory, and editing the original file
+    changes nothing), with the library files recorded at the start.
+
+    Parameters
+    ----------
+    folder : path
+        The session folder (``.../sub-P01/ses-1``).
+    device : str, optional
+        Another device spec than the recorded one (e.g. the same device on another port).
+    audio : bool, optional
+        Default: as recorded.
+    clear_fault : bool
+        Clear a latched e-stop or watchdog fault first (the operator's decision).
+    fullscreen, quiet, operator_keys
+        As :func:`run_session`.
+    """
+    from app.console import make_console
+    from app.libraries import with_libraries
+    from app.recorder import SessionFiles
+    from app.runner import SessionRunner, utc_now
+    from protocols import LogMismatch, ResumeMismatch, SessionEngine, parse_protocol
+
+    files = SessionFiles(Path(folder))
+    meta = files.read_meta()
+    console = make_console(quiet=quiet)
+    if meta.get("status") == "complete":
+        return SessionResult(files.folder, "complete", len(files.read_rows()[0]),
+                             f"{files.folder}: the session is already complete")
+    ref = meta["protocol"].get("ref", "")
+    if files.protocol.exists():
+        text, source = files.protocol.read_text(encoding="utf-8"), str(files.protocol)
+    else:  # written before sessions kept their protocol copy
+        from protocols import protocol_text
+
+        source, text = protocol_text(ref)
+    proto = parse_protocol(text, source)
+    if proto.sha256 != meta["protocol"]["sha256"]:
+        raise ResumeMismatch(f"cannot resume: {source} changed since the session started "
+                             f"(sha256 {meta['protocol']['sha256'][:12]}… then, "
+                             f"{proto.sha256[:12]}… now)")
+    proto = with_libraries(proto, meta.get("libraries", {}))
+    p = meta["participant"]
+    engine = SessionEngine(proto, meta["seed"], p["id"], p.get("counterbalance_row"))
+    engine.check_resume({"protocol_sha256": meta["protocol"]["sha256"], "seed": meta["seed"],
+                         "participant": p["id"],
+                         "counterbalance_row": p.get("counterbalance_row")})
+    torn = files.set_aside_torn()
+    if torn is not None:
+        console.say(f"set aside a torn last line of trials.tsv (line {torn.line}, kept in "
+                    "trials.torn.tsv): the attempt it belonged to will run again")
+    responder = meta.get("responder", "scripted")
+    if responder not in KIND_OF:
+        responder = "person" if meta.get("ui") == "psychopy" else "scripted"
+    spec = device or meta["device"]["spec"]
+    with _open(spec, meta["seed"]) as dev:
+        close_at_exit(dev)
+        if clear_fault and dev.fault is not None:
+            console.say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
+            dev.clear_fault()
+        ui = _participant(responder, proto, meta["seed"], p.get("group", ""), fullscreen)
+        sound = None
+        try:
+            sound = _audio(meta.get("audio", False) if audio is None else audio,
+                           dev.info.backend, console.say)
+            if operator_keys if operator_keys is not None else responder == "person":
+                console = make_console("keys", quiet, dev)
+            runner = SessionRunner(proto, engine, dev, files, ui, p["id"], meta["session"],
+                                   meta["seed"], console, sound, meta.get("traces_mode", "full"))
+            runner.load_log()
+            try:
+                engine.next_trial(runner.log)
+            except LogMismatch as exc:
+                raise SessionFileError(f"{files.trials}: {exc}") from None
+            meta["resumes"].append({"at_utc": utc_now(), "attempts_logged": len(runner.log),
+                                    "torn_line": None if torn is None else torn.line,
+                                    "device": spec})
+            meta["status"] = "running"
+            files.write_meta(meta)
+            console.say(f"resuming {files.folder} after {len(runner.log)} attempts")
+            return _drive(runner, files, meta, console)
+        finally:
+            for part in (ui, sound, console):
+                if part is not None:
+                    part.close()
+
+
+def session_seed(study_seed: int, k: int) -> int:
+    """Session seed of participant ``k`` (1-based) of a simulated study."""
+    return int(np.random.SeedSequence([study_seed, k]).generate_state(1, np.uint32)[0])
+
+
+@contextmanager
+def _device_spec(spec: str, speed: float = 1.0) -> Iterator[str]:
+    """``serial:emulator`` starts a device emulator on a pty for the run, paced at ``speed``
+    × real time."""
+    if spec != "serial:emulator":
+        yield spec
+        return
+    proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", "--speed",
+                             repr(float(speed))],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        port = proc.stdout.readline().strip()
+        if not port:
+            raise UsageError("the device emulator did not start")
+        yield f"serial:{port}"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
+                   data: str | Path = DEFAULT_SIM_DATA, device: str = "sim", speed: float = 1.0,
+                   traces: str = "contacts", prefix: str = "sim", group: str = "",
+                   progress: Callable[[str], None] | None = _err) -> StudyResult:
+    """Simulated participants' sessions, headless, through the same path as a real session.
+
+    Participant k (1-based) of a study with seed S gets the id ``PREFIXkk`` and the session
+    seed ``SeedSequence([S, k])``, so a study is reproduced from S alone.
+
+    Parameters
+    ----------
+    protocol : str or Path
+    participants : int
+    seed : int
+        Study seed.
+    data : path
+        Default ``sim-data``: simulated sessions never land beside people's.
+    device : str
+        ``sim``, ``sim:RATE``, ``serial:PORT`` or ``serial:emulator`` (paced by ``speed``).
+    speed : float
+        ``serial:emulator`` only: device seconds per wall second (≤ 20).
+    traces, prefix, group
+        As :func:`run_session` (ids are PREFIX01, PREFIX02, …).
+    progress : callable, optional
+        Called with a line after each participant.
+
+    Returns
+    -------
+    StudyResult
+        The sessions in order; it stops at the first session that does not complete.
+    """
+    if not isinstance(participants, int) or participants < 1:
+        raise UsageError(f"participants must be at least 1, got {participants!r}")
+    if not isinstance(seed, int) or seed < 0:
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
+    if not (isinstance(speed, (int, float)) and math.isfinite(speed) and 0 < speed <= 20):
+        raise UsageError(f"speed must be in (0, 20] (device seconds per wall second), got "
+                         f"{speed!r}")
+    t0 = time.perf_counter()
+    out: list[SessionResult] = []
+    with _device_spec(device, speed) as spec:
+        for k in range(1, participants + 1):
+            r = run_session(protocol, f"{prefix}{k:02d}", device=spec, data=data,
+                            responder="simulated", seed=session_seed(seed, k), group=group,
+                            traces=traces, audio=False, quiet=True, operator_keys=False)
+            out.append(r)
+            if r.status != "complete":
+                break
+            if progress is not None:
+                progress(f"  {protocol}: participant {k}/{participants} done "
+                         f"({time.perf_counter() - t0:.0f} s)")
+    return StudyResult(out, time.perf_counter() - t0)
+
+
+def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json"),
+            protocol: str | list[str] | None = None, kind: str | None = None,
+            status: str = "complete", participants: list[str] | None = None,
+            since: str | None = None, until: str | None = None) -> dict:
+    """Select sessions, run the analyses their designs call for, write the report.
+
+    Parameters are those of :func:`analysis.report.analyze`; its errors come back as
+    :class:`~app.errors.AnalysisError`.
+
+    Returns
+    -------
+    dict
+        The report's content (report.json).
+    """
+    from analysis import LoadError, StatsError
+    from analysis.report import analyze as _analyze
+
+    bad = set(formats) - {"html", "md", "json"}
+    if bad:
+        raise UsageError(f"formats are html, md, json; got {sorted(bad)}")
+    try:
+        return _analyze(data, out, tuple(formats), protocol=protocol, kind=kind, status=status,
+                        participants=participants, since=since, until=until)
+    except (LoadError, StatsError) as exc:
+        raise AnalysisError(str(exc)) from None
