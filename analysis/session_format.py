@@ -30,11 +30,12 @@ from typing import Any
 
 __all__ = ["FORMAT_VERSION", "COLUMNS", "INT_COLUMNS", "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
            "TrialsFileError", "SessionMetaError", "TornLine", "header_line", "format_row",
-           "read_trials", "read_meta", "session_kind", "TRIALS", "META", "PROTOCOL_COPY",
-           "TRACES"]
+           "read_trials", "read_meta", "session_kind", "canonical_bytes", "is_canonical",
+           "TRIALS", "META", "PROTOCOL_COPY", "TRACES", "LOCK"]
 
 FORMAT_VERSION = 2
 TRIALS, META, PROTOCOL_COPY, TRACES = "trials.tsv", "session.json", "protocol.toml", "traces"
+LOCK = "session.lock"  #: held (flock) by the one process writing the session
 
 COLUMNS = ("participant", "session", "phase", "trial_index", "item", "attempt", "sample",
            "block", "factors", "placement", "status", "n_taps", "tap_velocities", "peak_current",
@@ -100,19 +101,46 @@ def format_row(row: dict) -> str:
     return "\t".join(_cell(c, row.get(c)) for c in COLUMNS) + "\n"
 
 
+def _text(raw: bytes) -> str:
+    """trials.tsv's text with any line ending (LF, CRLF, a spreadsheet's lone CR) as LF and
+    without a UTF-8 byte-order mark."""
+    text = raw.decode("utf-8", errors="replace")
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    return text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+def canonical_bytes(rows: list[dict]) -> bytes:
+    """trials.tsv as this format writes it: the header and ``rows``, LF endings, no BOM."""
+    return (header_line() + "".join(format_row(r) for r in rows)).encode("utf-8")
+
+
+def is_canonical(path: str | Path) -> bool:
+    """True when the file is byte for byte what :func:`canonical_bytes` writes (or absent)."""
+    path = Path(path)
+    if not path.exists():
+        return True
+    raw = path.read_bytes()
+    return not raw.startswith(b"\xef\xbb\xbf") and b"\r" not in raw
+
+
 def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
     """Rows of trials.tsv (dicts of text), and a torn last line if the writer was killed
     mid-line.
 
+    Any line ending (LF, CRLF, CR) and a UTF-8 byte-order mark are accepted (a file opened and
+    saved by a spreadsheet); :func:`canonical_bytes` is what a writer puts back. A header
+    alone, or an empty file, means no rows.
+
     Raises
     ------
     TrialsFileError
-        For a missing or wrong header, or a malformed line that is not the last.
+        For a wrong header, or a malformed line that is not the last.
     """
     path = Path(path)
     if not path.exists():
         return [], None
-    raw = path.read_bytes().decode("utf-8", errors="replace")
+    raw = _text(path.read_bytes())
     if not raw:
         return [], None
     complete = raw.endswith("\n")
@@ -121,10 +149,14 @@ def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
         lines = lines[:-1]
     header = lines[0].split("\t")
     if tuple(header) != COLUMNS:
-        if len(lines) == 1 and not complete:
-            return [], TornLine(1, lines[0])
-        raise TrialsFileError(f"{path}:1: header is not the trials.tsv header "
-                              f"({len(header)} columns, expected {len(COLUMNS)})")
+        if len(lines) == 1 and not complete and header_line().startswith(lines[0]):
+            return [], TornLine(1, lines[0])  # killed while writing the header
+        unknown = [c for c in header if c not in COLUMNS]
+        missing = [c for c in COLUMNS if c not in header]
+        what = "; ".join(x for x in (f"missing {', '.join(missing)}" if missing else "",
+                                     f"unknown {', '.join(unknown)}" if unknown else "") if x)
+        raise TrialsFileError(f"{path}:1: not the trials.tsv header "
+                              f"({what or 'columns in another order'})")
     rows: list[dict] = []
     torn = None
     for no, line in enumerate(lines[1:], start=2):

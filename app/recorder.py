@@ -13,6 +13,8 @@
 
 from __future__ import annotations
 
+import datetime as dt
+import fcntl
 import io
 import json
 import os
@@ -22,6 +24,7 @@ import numpy as np
 
 from analysis.session_format import (
     COLUMNS,
+    LOCK,
     META,
     PROTOCOL_COPY,
     TRACES,
@@ -29,14 +32,16 @@ from analysis.session_format import (
     SessionMetaError,
     TornLine,
     TrialsFileError,
+    canonical_bytes,
     format_row,
     header_line,
+    is_canonical,
     read_meta,
     read_trials,
 )
 from device.fileio import atomic_write
 
-from .errors import SessionFileError
+from .errors import SessionFileError, SessionInUseError, io_error
 
 __all__ = ["COLUMNS", "SessionFiles", "new_session_dir", "atomic_write", "TornLine",
            "read_trials", "TrialsFileError"]
@@ -45,16 +50,19 @@ __all__ = ["COLUMNS", "SessionFiles", "new_session_dir", "atomic_write", "TornLi
 def new_session_dir(data: Path, participant: str) -> tuple[Path, int]:
     """Create ``data/sub-<participant>/ses-<n>/`` with the next free n (never reusing one)."""
     sub = Path(data) / f"sub-{participant}"
-    sub.mkdir(parents=True, exist_ok=True)
-    n = 1
-    while True:
-        d = sub / f"ses-{n}"
-        try:
-            d.mkdir()  # atomic: the claim; two runners cannot get the same session
-            (d / TRACES).mkdir()
-            return d, n
-        except FileExistsError:
-            n += 1
+    try:
+        sub.mkdir(parents=True, exist_ok=True)
+        n = 1
+        while True:
+            d = sub / f"ses-{n}"
+            try:
+                d.mkdir()  # atomic: the claim; two runners cannot get the same session
+                (d / TRACES).mkdir()
+                return d, n
+            except FileExistsError:
+                n += 1
+    except OSError as exc:
+        raise io_error(exc, "cannot create the session folder") from None
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -75,18 +83,80 @@ class SessionFiles:
         self.protocol = self.folder / PROTOCOL_COPY
         self.traces = self.folder / TRACES
 
+    # ------------------------------------------------------------------ one writer
+    def lock(self) -> None:
+        """Become the one process writing this session (an exclusive ``flock`` on
+        ``session.lock``, released by the kernel when the process ends, even by kill -9).
+
+        Raises
+        ------
+        SessionInUseError
+            Naming the process that holds it and since when.
+        """
+        try:
+            fd = os.open(self.folder / LOCK, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as exc:
+            raise io_error(exc, "cannot take the session's lock") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 200).decode("utf-8", "replace").split("\t")
+            os.close(fd)
+            pid = holder[0].strip() or "?"
+            since = holder[1].strip() if len(holder) > 1 else "an unknown time"
+            raise SessionInUseError(f"{self.folder}: session in use by PID {pid} since "
+                                    f"{since}; wait for it to end (or stop that process)") \
+                from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\t{dt.datetime.now(dt.UTC).isoformat(timespec='seconds')}"
+                     "\n".encode())
+        self._lock_fd = fd
+
+    def release(self) -> None:
+        fd = getattr(self, "_lock_fd", None)
+        if fd is not None:
+            os.close(fd)  # closing the descriptor releases the flock
+            self._lock_fd = None
+
+    # ------------------------------------------------------------------ writing
     def start(self, protocol_text: str) -> None:
         """A new session: the protocol copy and the trials header, durable with the folder
         before anything else is recorded."""
-        atomic_write(self.protocol, protocol_text.encode("utf-8"))
-        with open(self.trials, "x", encoding="utf-8", newline="") as f:
-            f.write(header_line())
-            f.flush()
-            os.fsync(f.fileno())
-        _fsync_dir(self.folder)
+        try:
+            atomic_write(self.protocol, protocol_text.encode("utf-8"))
+            with open(self.trials, "x", encoding="utf-8", newline="") as f:
+                f.write(header_line())
+                f.flush()
+                os.fsync(f.fileno())
+            _fsync_dir(self.folder)
+        except OSError as exc:
+            raise io_error(exc, "cannot start the session's files") from None
+
+    def repair(self) -> list[str]:
+        """Make trials.tsv canonical before a resume appends to it: a missing or empty file
+        gets its header (a crash or a full disk before the first row); CRLF or CR endings
+        and a byte-order mark (a spreadsheet saved it) are rewritten as this format writes
+        them. Returns what was done, for the operator."""
+        done = []
+        try:
+            if not self.trials.exists() or self.trials.stat().st_size == 0:
+                atomic_write(self.trials, header_line().encode("utf-8"))
+                done.append("wrote the missing header of trials.tsv")
+            elif not is_canonical(self.trials):
+                rows, torn = self.read_rows()
+                if torn is None:
+                    atomic_write(self.trials, canonical_bytes(rows))
+                    done.append("rewrote trials.tsv with LF line endings and no byte-order "
+                                "mark")
+        except OSError as exc:
+            raise io_error(exc, "cannot repair trials.tsv") from None
+        return done
 
     def write_meta(self, meta: dict) -> None:
-        atomic_write(self.meta, json.dumps(meta, indent=2, sort_keys=True).encode("utf-8"))
+        try:
+            atomic_write(self.meta, json.dumps(meta, indent=2, sort_keys=True).encode("utf-8"))
+        except OSError as exc:
+            raise io_error(exc, "cannot write session.json") from None
 
     def read_meta(self) -> dict:
         try:
@@ -103,22 +173,28 @@ class SessionFiles:
     def append_row(self, row: dict) -> None:
         """Append one attempt and make it durable before returning."""
         line = format_row(row)
-        new = not self.trials.exists() or self.trials.stat().st_size == 0
-        with open(self.trials, "a", encoding="utf-8", newline="") as f:
+        try:
+            new = not self.trials.exists() or self.trials.stat().st_size == 0
+            with open(self.trials, "a", encoding="utf-8", newline="") as f:
+                if new:
+                    f.write(header_line())
+                f.write(line)
+                f.flush()
+                os.fsync(f.fileno())
             if new:
-                f.write(header_line())
-            f.write(line)
-            f.flush()
-            os.fsync(f.fileno())
-        if new:
-            _fsync_dir(self.folder)
+                _fsync_dir(self.folder)
+        except OSError as exc:
+            raise io_error(exc, "cannot record the attempt in trials.tsv") from None
 
     def save_trace(self, name: str, traces: dict, contacts: list) -> str:
         buf = io.BytesIO()
         np.savez_compressed(buf, contacts_t=np.array([c.t for c in contacts]),
                             contacts_v=np.array([c.velocity for c in contacts]),
                             **{k: np.asarray(v) for k, v in traces.items()})
-        atomic_write(self.traces / name, buf.getvalue())
+        try:
+            atomic_write(self.traces / name, buf.getvalue())
+        except OSError as exc:
+            raise io_error(exc, "cannot save the attempt's traces") from None
         return f"{TRACES}/{name}"
 
     def set_aside_torn(self) -> TornLine | None:
@@ -126,12 +202,12 @@ class SessionFiles:
         rows, torn = self.read_rows()
         if torn is None:
             return None
-        raw = self.trials.read_bytes()
-        keep = raw[: raw.rstrip(b"\n").rfind(b"\n") + 1] if not raw.endswith(b"\n") \
-            else raw[: raw[:-1].rfind(b"\n") + 1]
-        with open(self.folder / "trials.torn.tsv", "a", encoding="utf-8") as f:
-            f.write(torn.text + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        atomic_write(self.trials, keep if keep else header_line().encode("utf-8"))
+        try:
+            with open(self.folder / "trials.torn.tsv", "a", encoding="utf-8") as f:
+                f.write(torn.text + "\n")
+                f.flush()
+                os.fsync(f.fileno())
+            atomic_write(self.trials, canonical_bytes(rows))  # what is complete, canonical
+        except OSError as exc:
+            raise io_error(exc, "cannot set the torn line of trials.tsv aside") from None
         return torn
