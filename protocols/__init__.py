@@ -22,6 +22,7 @@ from .engine import (
 from .loader import BUILTIN, ProtocolError, load_protocol, parse_protocol, protocol_text
 from .model import (
     Answer,
+    Attempts,
     Limits,
     Phase,
     PhaseDesign,
@@ -34,7 +35,8 @@ from .model import (
 from .williams import williams_square
 
 __all__ = [
-    "Answer", "Attempt", "BUILTIN", "DONE", "Done", "FINAL_STATUSES", "Limits", "LogMismatch",
+    "Answer", "Attempt", "Attempts", "BUILTIN", "DONE", "Done", "FINAL_STATUSES", "Limits",
+    "LogMismatch",
     "PAUSED", "Paused", "Phase", "PhaseDesign", "Protocol", "ProtocolError", "RNG_ALGORITHM",
     "RatingScale", "ResumeMismatch", "STATUSES", "Sample", "SaturationPolicy", "SessionEngine",
     "SessionSetupError", "Trial", "Window", "load_protocol", "parse_protocol", "protocol_text",

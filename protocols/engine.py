@@ -20,11 +20,22 @@ Statuses of an attempt
     the saturated attempt that reached the protocol's cap: the item leaves the queue.
 ``requeued``
     the operator sent the item back (with a reason): random position, like a redraw,
-    not counted against the saturation cap.
+    not counted against any cap.
+``timed_out``
+    nobody tapped before the window's timeout: the item goes back at a random position,
+    counted against the protocol's ``[attempts] max_timeouts``.
+``excluded_timeout``
+    the timed-out attempt that reached that cap: the item leaves the queue.
 ``aborted_device``
-    the device failed mid-trial: the item stays first in the queue and is retried.
+    the device failed mid-trial: the item stays first in the queue and is retried,
+    counted against ``[attempts] max_device_failures``.
+``excluded_device``
+    the device failure that reached that cap: the item leaves the queue.
 ``skipped``
     the operator skipped the item: it leaves the queue.
+
+Every count is capped, so a session always ends: a device that saturates, times out or
+fails on every attempt still reaches the end of the plan.
 
 Operator pauses are log entries with status ``paused`` / ``resumed``; while paused,
 :meth:`SessionEngine.next_trial` returns :data:`PAUSED`.
@@ -43,10 +54,19 @@ from .model import Phase, Protocol
 from .williams import williams_square
 
 __all__ = ["SessionEngine", "Trial", "Attempt", "Done", "Paused", "DONE", "PAUSED",
-           "LogMismatch", "ResumeMismatch", "SessionSetupError", "STATUSES", "FINAL_STATUSES"]
+           "LogMismatch", "ResumeMismatch", "SessionSetupError", "STATUSES", "FINAL_STATUSES",
+           "SATURATION_SAFETY_CAP"]
 
-STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "aborted_device", "skipped")
-FINAL_STATUSES = ("valid", "excluded_saturated", "skipped")
+STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "timed_out",
+            "excluded_timeout", "aborted_device", "excluded_device", "skipped")
+FINAL_STATUSES = ("valid", "excluded_saturated", "excluded_timeout", "excluded_device", "skipped")
+#: a counted failure → (the status at its cap, the protocol's cap)
+_CAPPED = {"saturated": "excluded_saturated", "timed_out": "excluded_timeout",
+           "aborted_device": "excluded_device"}
+#: saturations of one item after which it is excluded even with ``max_attempts = "none"``
+#: (the paper redrew without a cap; no participant saturates one sample this often, and a
+#: device that saturates on every attempt must still let the session end)
+SATURATION_SAFETY_CAP = 20
 _CONTROL = ("paused", "resumed")
 RNG_ALGORITHM = "numpy PCG64 via SeedSequence(seed).spawn(2): [plan, redraw]"
 
@@ -146,7 +166,7 @@ DONE, PAUSED = Done(), Paused()
 class _State:
     queue: list[Item]
     attempts: dict[str, int] = field(default_factory=dict)
-    saturations: dict[str, int] = field(default_factory=dict)
+    failures: dict[tuple[str, str], int] = field(default_factory=dict)  # (kind, item) → n
     n_attempts: int = 0
     paused: bool = False
     last_placement: str | None = None
@@ -250,7 +270,7 @@ class SessionEngine:
         _, redraw_ss = np.random.SeedSequence(self.seed).spawn(2)
         rng = np.random.default_rng(redraw_ss)
         st = _State(queue=list(self._plan))
-        cap = self.protocol.saturation.max_attempts
+        final_of = {v: k for k, v in _CAPPED.items()}
         for n, entry in enumerate(log):
             if not isinstance(entry, Attempt):
                 raise LogMismatch(f"log entry {n + 1}: expected an Attempt, got {entry!r}")
@@ -272,22 +292,32 @@ class SessionEngine:
             st.attempts[head.key] = st.attempts.get(head.key, 0) + 1
             st.last_placement = self._placement(head, st.last_placement)
             status = entry.status
-            if status == "saturated":
-                st.saturations[head.key] = st.saturations.get(head.key, 0) + 1
-                if st.saturations[head.key] >= cap:
-                    raise LogMismatch(f"log entry {n + 1}: attempt {st.saturations[head.key]} of "
-                                      f"{head.key!r} saturated at the cap of {cap}; it must be "
-                                      "logged 'excluded_saturated'")
-            if status == "excluded_saturated":
-                st.saturations[head.key] = st.saturations.get(head.key, 0) + 1
+            kind = status if status in _CAPPED else final_of.get(status)
+            if kind is not None:
+                key = (kind, head.key)
+                st.failures[key] = st.failures.get(key, 0) + 1
+                if status == kind and st.failures[key] >= self.cap(kind):
+                    raise LogMismatch(f"log entry {n + 1}: attempt {st.failures[key]} of "
+                                      f"{head.key!r} is {status} at the cap of "
+                                      f"{self.cap(kind)}; it must be logged '{_CAPPED[kind]}'")
             if status in FINAL_STATUSES:
                 st.queue.pop(0)
                 st.finished[head.key] = status
-            elif status in ("saturated", "requeued"):
+            elif status in ("saturated", "requeued", "timed_out"):
                 st.queue.pop(0)
                 self._reinsert(st.queue, head, rng)
             # aborted_device: the item stays first and is retried
         return st
+
+    def cap(self, kind: str) -> int:
+        """How many counted failures of ``kind`` (saturated, timed_out, aborted_device) end
+        an item."""
+        if kind == "saturated":
+            cap = self.protocol.saturation.max_attempts
+            return SATURATION_SAFETY_CAP if cap is None else cap
+        if kind == "timed_out":
+            return self.protocol.attempts.max_timeouts
+        return self.protocol.attempts.max_device_failures
 
     @staticmethod
     def _reinsert(queue: list[Item], item: Item, rng: np.random.Generator) -> None:
@@ -325,16 +355,20 @@ class SessionEngine:
                      placement=self._placement(head, st.last_placement),
                      repetition=head.repetition)
 
+    def failure_status(self, kind: str, trial: Trial, log: Sequence[Attempt]) -> str:
+        """Status to log for a failed attempt of ``kind`` (``saturated``, ``timed_out``,
+        ``aborted_device``): the kind itself or, when it reaches its cap, the exclusion."""
+        n = self._replay(log).failures.get((kind, trial.item), 0) + 1
+        return _CAPPED[kind] if n >= self.cap(kind) else kind
+
     def saturated_status(self, trial: Trial, log: Sequence[Attempt]) -> str:
         """Status to log for a saturated attempt: ``saturated`` or, at the cap, the exclusion."""
         if self.protocol.saturation.action == "keep":
             return "valid"
-        st = self._replay(log)
-        n = st.saturations.get(trial.item, 0) + 1
-        return "excluded_saturated" if n >= self.protocol.saturation.max_attempts else "saturated"
+        return self.failure_status("saturated", trial, log)
 
     def outcomes(self, log: Sequence[Attempt]) -> dict[str, str]:
-        """Final status of every finished item (``valid``, ``excluded_saturated``, ``skipped``)."""
+        """Final status of every finished item (``valid``, ``skipped`` or an exclusion)."""
         return dict(self._replay(log).finished)
 
     def remaining(self, log: Sequence[Attempt]) -> list[Item]:

@@ -18,6 +18,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from device import DeviceInfo, LibraryTransient, Scene, SceneError
 from device.errors import HapticlabError
 from device.scene import AccelSinusoid, unknown_key
@@ -28,6 +30,7 @@ from .model import (
     SCORINGS,
     SESSION_POLICIES,
     Answer,
+    Attempts,
     Limits,
     Phase,
     PhaseDesign,
@@ -156,7 +159,7 @@ class _Ctx:
 
 
 _TOP = {"protocol", "window", "rating", "answer", "saturation", "operator", "limits", "display",
-        "samples", "designs", "phases", "analysis"}
+        "samples", "designs", "phases", "analysis", "attempts"}
 
 
 def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | None = None
@@ -171,6 +174,9 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
         m = re.search(r"line (\d+)", str(exc))
         raise ProtocolError(source, int(m.group(1)) if m else None, "",
                             f"not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ProtocolError(source, None, "", "arrays or tables nested too deeply to read; a "
+                            "protocol is a few levels deep") from None
     cx = _Ctx(source, text)
     cx.table((), data, _TOP, {"protocol", "phases"})
     head = cx.table(("protocol",), data["protocol"], {"name", "title", "description"}, {"name"})
@@ -186,6 +192,7 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
     if rating is None and answer is None:
         raise cx.error((), "a protocol needs a [rating] scale or an [answer] table")
     saturation = _saturation(cx, data.get("saturation", {}))
+    attempts = _attempts(cx, data.get("attempts", {}))
     op = cx.table(("operator",), data.get("operator", {}), {"placeholders"})
     placeholders = tuple(op.get("placeholders", ()))
     for i, p in enumerate(placeholders):
@@ -223,7 +230,8 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
         name=name, title=title, description=description.strip(), source=source,
         sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), samples=samples,
         phases=phases, window=window, rating=rating, answer=answer, saturation=saturation,
-        placeholders=placeholders, limits=limits, cursor=cursor, sessions=sessions, text=text)
+        placeholders=placeholders, limits=limits, cursor=cursor, sessions=sessions, text=text,
+        attempts=attempts)
     if device is not None:
         _check_device(cx, proto, device)
     return proto
@@ -307,13 +315,25 @@ def _answer(cx: _Ctx, raw: Any) -> Answer:
 def _saturation(cx: _Ctx, raw: Any) -> SaturationPolicy:
     s = cx.table(("saturation",), raw, {"action", "tone", "max_attempts"})
     cap = s.get("max_attempts", 3)
-    if isinstance(cap, int) and not isinstance(cap, bool) and cap < 1:
-        raise cx.error(("saturation", "max_attempts"), f"a redraw cap of {cap} would never run "
-                       "the item; must be >= 1")
+    if cap == "none":
+        n = None  # the paper's redraw without a cap (the engine keeps a safety stop)
+    else:
+        if isinstance(cap, int) and not isinstance(cap, bool) and cap < 1:
+            raise cx.error(("saturation", "max_attempts"), f"a redraw cap of {cap} would never "
+                           "run the item; must be >= 1, or \"none\" for no cap")
+        if isinstance(cap, str):
+            raise cx.error(("saturation", "max_attempts"), f"must be an integer >= 1 or "
+                           f"\"none\", got {cap!r}")
+        n = int(cx.number(("saturation", "max_attempts"), cap, minimum=1, integer=True))
     return SaturationPolicy(
         action=cx.string(("saturation", "action"), s.get("action", "redraw"), ("redraw", "keep")),
-        tone=cx.boolean(("saturation", "tone"), s.get("tone", True)),
-        max_attempts=int(cx.number(("saturation", "max_attempts"), cap, minimum=1, integer=True)))
+        tone=cx.boolean(("saturation", "tone"), s.get("tone", True)), max_attempts=n)
+
+
+def _attempts(cx: _Ctx, raw: Any) -> Attempts:
+    a = cx.table(("attempts",), raw, {"max_timeouts", "max_device_failures"})
+    return Attempts(**{k: int(cx.number(("attempts", k), a.get(k, 3), minimum=1, integer=True))
+                       for k in ("max_timeouts", "max_device_failures")})
 
 
 def _limits(cx: _Ctx, raw: Any) -> Limits:
@@ -535,11 +555,15 @@ def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:
         tr = s.scene.transient
         if tr is None or isinstance(tr, LibraryTransient):
             continue  # a library's forces exist only once it is built on the device
+        path = ("samples", i, "scene", "transient")
+        try:
+            tr.check_for(device.servo_rate_hz)
+        except SceneError as exc:
+            raise cx.error((*path, exc.field) if exc.field else path,
+                           f"sample '{s.id}': {exc.reason}") from None
         table = tr.unit_table(device.servo_rate_hz, device.effective_mass)
-        peak = float(max(abs(table.max()), abs(table.min()))) * v
-        if peak > f_max:
-            raise cx.error(("samples", i, "scene", "transient"),
-                           f"sample '{s.id}': transient peak {peak:.2f} N at {v:g} m/s exceeds "
-                           f"the {f_max:.2f} N the device can deliver ({limit:g} A × "
+        peak = float(np.max(np.abs(table))) * v
+        if not peak <= f_max:  # a NaN peak fails this too
+            raise cx.error(path, f"sample '{s.id}': transient peak {peak:.2f} N at {v:g} m/s "
+                           f"exceeds the {f_max:.2f} N the device can deliver ({limit:g} A × "
                            f"{device.force_constant:g} N/A)")
-

@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 
 from device import Scene
 
-__all__ = ["Sample", "Window", "RatingScale", "Answer", "SaturationPolicy", "Limits", "Phase",
+__all__ = ["Sample", "Window", "RatingScale", "Answer", "SaturationPolicy", "Attempts", "Limits",
+           "Phase",
            "PhaseDesign", "Protocol", "ROLES", "NORMALIZATIONS", "SCORINGS", "SESSION_POLICIES"]
 
 #: what a phase is for: analysed, practice (rated but not analysed), or none (not rated)
@@ -94,11 +95,22 @@ class Answer:
 
 @dataclass(frozen=True)
 class SaturationPolicy:
-    """What a saturated attempt does: ``redraw`` the item (up to ``max_attempts``) or ``keep``."""
+    """What a saturated attempt does: ``redraw`` the item (up to ``max_attempts``
+    saturations, or without a cap when None — the paper's redraw, with the engine's safety
+    stop) or ``keep`` it."""
 
     action: str = "redraw"
     tone: bool = True
-    max_attempts: int = 3
+    max_attempts: int | None = 3
+
+
+@dataclass(frozen=True)
+class Attempts:
+    """How often an item may time out (nobody tapped) or fail on the device before it is
+    excluded, so a session always ends."""
+
+    max_timeouts: int = 3
+    max_device_failures: int = 3
 
 
 @dataclass(frozen=True)
@@ -200,6 +212,7 @@ class Protocol:
     placeholders: tuple[str, ...]
     limits: Limits
     cursor: bool = False
+    attempts: Attempts = field(default_factory=Attempts)
     sessions: str = "first"
     text: str = ""
 

@@ -13,6 +13,7 @@ from protocols import (
     PAUSED,
     Attempt,
     LogMismatch,
+    ProtocolError,
     ResumeMismatch,
     SessionEngine,
     load_protocol,
@@ -213,7 +214,9 @@ def test_williams_rows_counterbalance_factorial_blocks():
     assert len(set(orders)) == 6  # all 3! orders, each once
 
 
-STATUS = st.sampled_from(["valid", "saturated", "requeued", "aborted_device", "skipped"])
+STATUS = st.sampled_from(["valid", "saturated", "requeued", "timed_out", "aborted_device",
+                          "skipped"])
+CAPPED = ("saturated", "timed_out", "aborted_device")
 
 
 class SessionMachine(RuleBasedStateMachine):
@@ -230,8 +233,8 @@ class SessionMachine(RuleBasedStateMachine):
     @rule(status=STATUS)
     def attempt(self, status):
         t = self.engine.next_trial(self.log)
-        if status == "saturated":
-            status = self.engine.saturated_status(t, self.log)
+        if status in CAPPED:
+            status = self.engine.failure_status(status, t, self.log)
         if status == "requeued" and self.steps > 200:
             status = "valid"  # operators do not re-queue forever
         self.log.append(Attempt(t.item, status))
@@ -271,11 +274,51 @@ def test_any_log_prefix_resumes_to_the_uninterrupted_order(seed, statuses):
         t = e.next_trial(log)
         if t is DONE:
             break
-        if s == "saturated":
-            s = e.saturated_status(t, log)
+        if s in CAPPED:
+            s = e.failure_status(s, t, log)
         log.append(Attempt(t.item, s))
     full = e.remaining(log)
     for k in range(len(log) + 1):
         # replaying the first k entries and then the rest gives the same final state
         assert SessionEngine(IDENT, seed, "P01").remaining(log[:k]) == e.remaining(log[:k])
     assert SessionEngine(IDENT, seed, "P01").remaining(log) == full
+
+
+@pytest.mark.parametrize("kind, final", [("saturated", "excluded_saturated"),
+                                         ("timed_out", "excluded_timeout"),
+                                         ("aborted_device", "excluded_device")])
+def test_a_session_ends_even_when_every_attempt_fails(kind, final):
+    """Every loop is bounded: a surface nobody can reach (always timed out), a device that
+    fails on every window, or one that always saturates still reaches the end."""
+    e = SessionEngine(IDENT, 3, "P01")
+    log = []
+    for _ in range(1000):
+        t = e.next_trial(log)
+        if t is DONE:
+            break
+        log.append(Attempt(t.item, e.failure_status(kind, t, log)))
+    assert t is DONE
+    outcomes = e.outcomes(log)
+    assert set(outcomes.values()) == {final} and len(outcomes) == len(e.plan())
+    assert len(log) == 3 * len(e.plan())  # the default cap of each [attempts]/[saturation]
+
+
+def test_no_saturation_cap_is_the_papers_redraw_with_a_safety_stop():
+    from protocols.engine import SATURATION_SAFETY_CAP
+
+    text = protocol_text("identification")[1].replace("max_attempts = 3",
+                                                      'max_attempts = "none"')
+    e = SessionEngine(parse_protocol(text, "i.toml"), 3, "P01")
+    assert e.protocol.saturation.max_attempts is None
+    log = []
+    target = e.next_trial(log).item
+    statuses = []
+    while (t := e.next_trial(log)) is not DONE:
+        if t.item != target:
+            log.append(Attempt(t.item, "valid"))
+            continue
+        statuses.append(e.saturated_status(t, log))
+        log.append(Attempt(t.item, statuses[-1]))
+    assert statuses == ["saturated"] * (SATURATION_SAFETY_CAP - 1) + ["excluded_saturated"]
+    with pytest.raises(ProtocolError, match=r"max_attempts: must be an integer >= 1 or \"none\""):
+        parse_protocol(text.replace('"none"', '"never"'), "i.toml")
