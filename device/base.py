@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import DeviceError, DeviceFaultError, UnknownBackendError
+from .errors import DeviceError, DeviceFaultError, DeviceSpecError, UnknownBackendError
 from .events import FaultEvent, WindowResult
 from .info import DeviceInfo
 from .scene import Scene, Transient, TransientTable
@@ -80,6 +80,7 @@ class HapticDevice(ABC):
         self._loaded: Scene | None = None
         self._homed = False
         self._tables: dict[Transient, TransientTable] = {}
+        self._current_limit: float | None = None
 
     # ---------------------------------------------------------------- identity
     @property
@@ -209,6 +210,37 @@ class HapticDevice(ABC):
             self._closed = True
             self._homed = False
 
+    @property
+    def current_limit(self) -> float:
+        """The amplifier current limit in force [A]: the rating, or lower when a session set
+        it (:meth:`set_current_limit`)."""
+        return self.info.current_limit if self._current_limit is None else self._current_limit
+
+    def set_current_limit(self, amps: float) -> float:
+        """Clamp the amplifier current at ``amps`` [A] from now on (a protocol's
+        ``[limits] max_current``); never above the device's rating. Returns the limit now
+        in force.
+
+        Raises
+        ------
+        DeviceSpecError
+            ``amps`` is not a finite number > 0.
+        DeviceError
+            Above the rating, or the device cannot lower its limit: a session must not start.
+        """
+        self._check_open()
+        a = float(amps) if isinstance(amps, (int, float)) and not isinstance(amps, bool) \
+            else float("nan")
+        if not (math.isfinite(a) and a > 0):
+            raise DeviceSpecError(f"current limit must be a finite number > 0 A, got {amps!r}")
+        rating = self.info.current_limit
+        if a > rating * (1 + 1e-12):
+            raise DeviceError(f"a current limit of {a:g} A is above this device's rating of "
+                              f"{rating:g} A")
+        self._set_current_limit(a)
+        self._current_limit = a
+        return a
+
     # ------------------------------------------------- optional, with defaults
     def reseed(self, entropy) -> None:
         """Restart the device's own randomness from ``entropy`` (a simulated device's
@@ -261,6 +293,12 @@ class HapticDevice(ABC):
     @abstractmethod
     def _close(self) -> None:
         """Zero output and release the device."""
+
+    def _set_current_limit(self, amps: float) -> None:
+        """Clamp the current at ``amps`` [A] (checked ≤ rating). A backend that cannot says
+        so: a session with a lower protocol limit then refuses to start."""
+        raise DeviceError(f"{type(self).__name__} cannot lower its current limit; a protocol "
+                          "with [limits] max_current below the rating cannot run on it")
 
     @abstractmethod
     def heartbeat(self) -> None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .errors import SceneError
-from .scene import LibraryTransient, Transient, TransientTable
+from .scene import MAX_TRANSIENT_S, LibraryTransient, Transient, TransientTable
 
 if TYPE_CHECKING:
     from .info import DeviceInfo
@@ -53,5 +53,10 @@ def transient_table(transient: Transient, info: DeviceInfo) -> TransientTable:
         except LibraryError as exc:
             raise SceneError(str(exc), "path",
                              where=f"transient 'library' of '{transient.source}'") from None
+        length = lib.forces.shape[1] / info.servo_rate_hz
+        if not length <= MAX_TRANSIENT_S:
+            raise SceneError(f"{path}: its transients last {length:.3g} s; at most "
+                             f"{MAX_TRANSIENT_S:g} s", "path",
+                             where=f"transient 'library' of '{transient.source}'")
         return lib.table(transient.attenuation, transient.blend)
     return transient.table(info.servo_rate_hz, info.effective_mass)

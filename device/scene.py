@@ -145,6 +145,11 @@ class Material:
 
 
 BLENDS = tuple(b.label for b in Blend)
+#: longest contact transient a device is asked to play [s] (the papers' last ≤ 0.1 s)
+MAX_TRANSIENT_S = 1.0
+#: farthest a surface may be from the device's origin [m]: a desktop stylus reaches a few
+#: centimetres, and a surface beyond reach would make every window time out
+MAX_REACH_M = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,14 +230,59 @@ class Transient:
     """
 
     kind: ClassVar[str] = ""
+    #: (field, [Hz]) of the transient's frequency, if it has one (checked against Nyquist)
+    _frequency_field: ClassVar[str | None] = None
+    #: the field that sets how long the table lasts
+    _length_field: ClassVar[str | None] = None
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         """Force per unit incoming speed [N/(m/s)] at each servo tick after contact."""
         raise NotImplementedError(f"transient kind {self.kind!r} has no unit table")
 
     def table(self, rate_hz: float, effective_mass: float) -> TransientTable:
-        """What the device plays (see :class:`TransientTable`)."""
+        """What the device plays (see :class:`TransientTable`), after :meth:`check_for`."""
+        self.check_for(rate_hz)
         return TransientTable([1.0], self.unit_table(rate_hz, effective_mass), "scale")
+
+    def length_s(self) -> float | None:
+        """How long the table lasts [s] (None: not a parametric transient)."""
+        return None
+
+    def frequency_hz(self) -> float | None:
+        """The vibration frequency [Hz] the table must carry (None: none)."""
+        return None
+
+    def check_for(self, rate_hz: float) -> None:
+        """Refuse a transient a device at ``rate_hz`` [Hz] cannot play as written.
+
+        A frequency at or above half the servo rate would alias (at exactly the rate it
+        samples to zeros); a table shorter than one tick is nothing, and a time constant
+        shorter than one tick is a single sample; a table longer than
+        :data:`MAX_TRANSIENT_S` is not a contact transient (and would fill the device's
+        memory).
+
+        Raises
+        ------
+        SceneError
+            Naming the field, its value and the range allowed at this rate.
+        """
+        where = f"transient '{self.kind}'"
+        nyq = rate_hz / 2
+        f = self.frequency_hz()
+        if f is not None and not f < nyq:
+            raise SceneError(f"{f:g} Hz is at or above the Nyquist frequency of a "
+                             f"{rate_hz:g}-Hz servo; must be < {nyq:g} Hz",
+                             self._frequency_field, where=where)
+        d = self.length_s()
+        if d is None:
+            return
+        tick = 1.0 / rate_hz
+        if not d <= MAX_TRANSIENT_S:
+            raise SceneError(f"the table would last {d:.3g} s; a contact transient lasts at "
+                             f"most {MAX_TRANSIENT_S:g} s", self._length_field, where=where)
+        if not d >= tick:
+            raise SceneError(f"the table would last {d:.3g} s, less than one servo tick "
+                             f"({tick:g} s at {rate_hz:g} Hz)", self._length_field, where=where)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": self.kind}
@@ -272,11 +322,15 @@ class Pulse(Transient):
     """
 
     kind: ClassVar[str] = "pulse"
+    _length_field: ClassVar[str] = "duration"
     gain: float
     duration: float
 
     def __post_init__(self) -> None:
         _set_checked(self, "transient 'pulse'", gain=_NONNEG, duration=_POS)
+
+    def length_s(self) -> float:
+        return self.duration
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         import numpy as np
@@ -305,6 +359,8 @@ class ForceSinusoid(Transient):
     """
 
     kind: ClassVar[str] = "sinusoid"
+    _frequency_field: ClassVar[str] = "frequency"
+    _length_field: ClassVar[str] = "decay_time"
     gain: float
     decay_time: float
     frequency: float
@@ -313,6 +369,19 @@ class ForceSinusoid(Transient):
     def __post_init__(self) -> None:
         _set_checked(self, "transient 'sinusoid'", gain=_NONNEG, decay_time=_POS,
                      frequency=_POS, cutoff=_FRACTION)
+
+    def length_s(self) -> float:
+        return self.decay_time * math.log(1.0 / self.cutoff)
+
+    def frequency_hz(self) -> float:
+        return self.frequency
+
+    def check_for(self, rate_hz: float) -> None:
+        super().check_for(rate_hz)
+        if not self.decay_time >= 1.0 / rate_hz:
+            raise SceneError(f"{self.decay_time:g} s is shorter than one servo tick "
+                             f"({1 / rate_hz:g} s at {rate_hz:g} Hz): the table would be one "
+                             "sample", "decay_time", where="transient 'sinusoid'")
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         import numpy as np
@@ -342,6 +411,8 @@ class AccelSinusoid(Transient):
     """
 
     kind: ClassVar[str] = "q_sinusoid"
+    _frequency_field: ClassVar[str] = "frequency"
+    _length_field: ClassVar[str] = "decay"
     slope: float
     decay: float
     frequency: float
@@ -350,6 +421,19 @@ class AccelSinusoid(Transient):
     def __post_init__(self) -> None:
         _set_checked(self, "transient 'q_sinusoid'", slope=_ANY, decay=_POS, frequency=_POS,
                      cutoff=_FRACTION)
+
+    def length_s(self) -> float:
+        return math.log(1.0 / self.cutoff) / self.decay
+
+    def frequency_hz(self) -> float:
+        return self.frequency
+
+    def check_for(self, rate_hz: float) -> None:
+        super().check_for(rate_hz)
+        if not self.decay <= rate_hz:
+            raise SceneError(f"{self.decay:g} 1/s decays within one servo tick at {rate_hz:g} "
+                             f"Hz (the table would be one sample); must be <= {rate_hz:g} 1/s",
+                             "decay", where="transient 'q_sinusoid'")
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         import numpy as np
@@ -444,6 +528,8 @@ class GraspTransient(Transient):
     """
 
     kind: ClassVar[str] = "grasp"
+    _frequency_field: ClassVar[str] = "grasp_force"
+    _length_field: ClassVar[str] = "cutoff"
     grasp_force: float
     cutoff: float = 0.01
 
@@ -454,6 +540,20 @@ class GraspTransient(Transient):
             PUBLISHED_GRASP.at(self.grasp_force)
         except ValueError as exc:
             raise SceneError(str(exc), "grasp_force", where=w) from None
+
+    def _modal(self) -> tuple[float, float]:
+        """(σ [1/s], ω_d [rad/s]) of the grasped handle at this grasp force."""
+        m, c, k = PUBLISHED_GRASP.at(self.grasp_force)
+        wn = math.sqrt(k / m)
+        zeta = c / (2 * math.sqrt(k * m))
+        return zeta * wn, wn * math.sqrt(max(1e-12, (1 - zeta) * (1 + zeta)))
+
+    def length_s(self) -> float:
+        sigma, _ = self._modal()
+        return math.log(1 / self.cutoff) / sigma
+
+    def frequency_hz(self) -> float:
+        return self._modal()[1] / (2 * math.pi)
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         m, c, k = PUBLISHED_GRASP.at(self.grasp_force)
@@ -520,7 +620,8 @@ class Scene:
     name : str
         Identifier, used in records and messages.
     surface_height : float [m]
-        Height of the (real or virtual) surface in device coordinates.
+        Height of the (real or virtual) surface in device coordinates, within
+        ±:data:`MAX_REACH_M`.
     spring : float or None [N/m]
         Penetration-spring stiffness of a virtual sample (0 allowed: transient only);
         None for a real sample.
@@ -543,7 +644,8 @@ class Scene:
                              where="scene")
         where = f"scene '{self.name}'"
         object.__setattr__(self, "surface_height",
-                           _finite(where, "surface_height", self.surface_height))
+                           _finite(where, "surface_height", self.surface_height,
+                                   minimum=-MAX_REACH_M, maximum=MAX_REACH_M))
         if self.material is None and self.spring is None:
             raise SceneError("a scene needs either 'material' (real sample) or 'spring' "
                              "(virtual sample)", "spring", where=where)

@@ -178,6 +178,9 @@ class SerialDevice(HapticDevice):
             crc = zlib.crc32(q.tobytes()) & 0xFFFFFFFF
         self._command(M.SceneCommit(sid, crc))
 
+    def _set_current_limit(self, amps: float) -> None:
+        self._command(M.SetLimit(int(round(amps * 1000))))
+
     def _home(self, clearance: float | None) -> None:
         c = 0.02 if clearance is None else clearance
         self._command(M.Home(int(round(c * 1e6))))

@@ -180,6 +180,7 @@ class Emulator:
         sim = self.sim
         if isinstance(msg, M.Hello):
             i = sim.info
+            sim.set_current_limit(i.current_limit)  # a new host session: the rating again
             self.send(M.HelloAck(
                 1, int(i.servo_rate_hz), int(round(i.current_limit * 1000)),
                 int(round(i.force_constant * 1000)), int(round(i.effective_mass * 1e6)),
@@ -247,6 +248,12 @@ class Emulator:
             return S.OK
         if sim.fault is not None and isinstance(msg, (M.Home, M.StartWindow, M.PlayStart)):
             return S.FAULT_LATCHED
+        if isinstance(msg, M.SetLimit):
+            if not 0 < msg.current_ma <= int(round(sim.info.current_limit * 1000)):
+                return S.BAD_MESSAGE
+            sim.set_current_limit(msg.current_ma / 1000)
+            _log(f"host: current limit {msg.current_ma} mA")
+            return S.OK
         if isinstance(msg, M.Home):
             if sim.scene is None:
                 return S.BAD_STATE

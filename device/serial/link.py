@@ -282,6 +282,15 @@ class Link:
                              self.timeout):
                 acks = self.remove(lambda e: isinstance(e, M.HelloAck))
                 self.clear_events()
+                # what came before the session opened (a stream joined in the middle of a
+                # frame) is not the link's fault: count from here
+                with self.cv:
+                    for k in self._decoder.errors:
+                        self._decoder.errors[k] = 0
+                    self._crc_times.clear()
+                    for k in ("crc_errors", "other_errors", "lost", "duplicates",
+                              "out_of_order"):
+                        self.stats[k] = 0
                 return acks[-1]
         raise ProtocolMismatchError(f"{self.port}: no HELLO answer in protocol version 1 "
                                     f"(frames ok {self._decoder.frames_ok}, corrupt "

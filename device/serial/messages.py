@@ -241,6 +241,16 @@ class PlayStart(Message):
 
 
 @dataclass(frozen=True)
+class SetLimit(Message):
+    """Clamp the amplifier current at current_ma [mA, u16, 1 … rating] from now on; a HELLO
+    restores the rating."""
+
+    TYPE = 0x25
+    FMT = "H"
+    current_ma: int = 0
+
+
+@dataclass(frozen=True)
 class EStop(Message):
     TYPE = 0x30
     FMT = ""
@@ -409,7 +419,8 @@ class TraceBlock(Message):
 
 MESSAGES: dict[int, type[Message]] = {
     m.TYPE: m for m in (Hello, Heartbeat, Ping, SceneBegin, SceneVelocities, SceneChunk,
-                        SceneCommit, Home, StartWindow, StopWindow, PlayChunk, PlayStart, EStop,
+                        SceneCommit, Home, StartWindow, StopWindow, PlayChunk, PlayStart, SetLimit,
+                        EStop,
                         ClearFault, Zero, TraceRequest, Ack, HelloAck, Pong, Contact, Saturation,
                         Fault, StatusReport, WindowDone, TraceBlock)}
 

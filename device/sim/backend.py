@@ -15,7 +15,7 @@ import numpy as np
 from ..base import DeviceInfo, HapticDevice, SimulatedHand
 from ..errors import DeviceError, DeviceSpecError
 from ..events import ContactEvent, FaultEvent, Flags, SaturationEvent, WindowResult
-from ..scene import Scene, TransientTable
+from ..scene import MAX_REACH_M, Scene, TransientTable
 from . import kernel as K
 from .params import DeviceParams, HandParams
 from .plant import N_INPUTS, Plant, build_plant, piece_propagators, zoh
@@ -150,11 +150,7 @@ class SimDevice(HapticDevice):
             watchdog_s=dev.watchdog_s, encoder_resolution=dev.encoder_resolution,
             accel_range=dev.accel_range)
         self._vel_w = velocity_weights(dev)
-        #: what the servo loop needs of the device (:func:`device.sim.kernel.run_ticks`)
-        self._kernel_device = (float(dev.encoder_resolution), self._vel_w,
-                               float(dev.contact_hysteresis), float(dev.force_constant),
-                               float(dev.current_limit), int(round(dev.ramp_s / dev.dt)),
-                               float(dev.servo_rate_hz))
+        self._kernel_device = self._device_args()
         self._pull_gains = self._hand_gains()
         self._cache: dict[Scene, CompiledScene] = {}
         self._scene: CompiledScene | None = None
@@ -170,6 +166,17 @@ class SimDevice(HapticDevice):
         self._fault: FaultEvent | None = None
         self._estop_requested = False
         self._output_force = 0.0
+
+    def _device_args(self) -> tuple:
+        """What the servo loop needs of the device (:func:`device.sim.kernel.run_ticks`)."""
+        dev = self.params
+        return (float(dev.encoder_resolution), self._vel_w, float(dev.contact_hysteresis),
+                float(dev.force_constant), float(self.current_limit),
+                int(round(dev.ramp_s / dev.dt)), float(dev.servo_rate_hz))
+
+    def _set_current_limit(self, amps: float) -> None:
+        self._current_limit = amps
+        self._kernel_device = self._device_args()
 
     @property
     def _watchdog_device_s(self) -> float:
@@ -386,8 +393,8 @@ class SimDevice(HapticDevice):
         clamp. Used for system identification. Afterwards, home again before a window.
         """
         if self._free_air is None:
-            self._free_air = compile_scene(Scene("free-air", surface_height=-1e3, spring=0.0),
-                                           self.params, self.hand)
+            far = Scene("free-air", surface_height=-MAX_REACH_M, spring=0.0)  # out of reach
+            self._free_air = compile_scene(far, self.params, self.hand)
         self._x = np.zeros(self._free_air.plant.n_states)
         self._reset_loop_state(0.0)
         self._enabled = False  # a window needs home() afterwards
@@ -429,13 +436,7 @@ class SimDevice(HapticDevice):
             n = n_done
             ft = int(self._ist[K.IST_FAULT_TICK])
             if ft >= 0:  # latch now, so callers see it mid-window, timed at the zeroing tick
-                t_f = (tick0 + ft) * dt
-                if self._fault is None:
-                    self._fault = FaultEvent(t_f, "watchdog", f"no heartbeat for "
-                                             f"{dev.watchdog_s:g} s: output zeroed")
-                elif self._fault.code == "estop" and self._fault.t != t_f:
-                    self._fault = FaultEvent(t_f, "estop", "emergency stop (latched): output "
-                                             "zeroed")
+                self._latch((tick0 + ft) * dt)
             if self.live:
                 target = wall0 + n * dt / self.speed
                 late.append(time.perf_counter() - target)
@@ -460,6 +461,20 @@ class SimDevice(HapticDevice):
             self._output_force = 0.0
         return res
 
+    def _latch(self, t_f: float) -> None:
+        """The servo loop zeroed output at device time ``t_f`` [s]: latch the fault it
+        means (a non-finite command, the operator's e-stop, or the watchdog)."""
+        if self._ist[K.IST_FAULT_CODE] == K.FAULT_NAN:
+            if self._fault is None or self._fault.code != "nan_command":
+                self._fault = FaultEvent(t_f, "nan_command", "a force command that is not a "
+                                         "finite number reached the clamp: output zeroed")
+        elif self._estop_requested:
+            if self._fault is None or self._fault.t != t_f:
+                self._fault = FaultEvent(t_f, "estop", "emergency stop (latched): output zeroed")
+        elif self._fault is None:
+            self._fault = FaultEvent(t_f, "watchdog", f"no heartbeat for "
+                                     f"{self.params.watchdog_s:g} s: output zeroed")
+
     def _result(self, buf: _Buffers, n: int, tick0: int, ev_tick, ev_vel,
                 final: bool = False) -> WindowResult:
         dev = self.params
@@ -483,12 +498,7 @@ class SimDevice(HapticDevice):
                                            (b - a) * dt) for a, b in _runs(sat)]
         ft = int(self._ist[K.IST_FAULT_TICK])
         if ft >= 0:  # the kernel zeroed output at tick ft
-            t_f = (tick0 + ft) * dt
-            if self._estop_requested:
-                self._fault = FaultEvent(t_f, "estop", "emergency stop (latched): output zeroed")
-            elif self._fault is None:
-                self._fault = FaultEvent(t_f, "watchdog",
-                                         f"no heartbeat for {dev.watchdog_s:g} s: output zeroed")
+            self._latch((tick0 + ft) * dt)
             res.faults = [self._fault]
         acc = buf.acc[:n].copy()
         if self.noise and dev.accel_noise_rms > 0:

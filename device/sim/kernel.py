@@ -9,7 +9,8 @@ One call advances the simulation over a range of servo ticks. Per tick, in order
 3. rendering (virtual scenes only): spring K·(penetration of the encoder reading),
    plus, in transient scenes, the transient table scaled by the estimated speed;
    output ramp after enable; zero on a latched fault or when the watchdog deadline
-   has passed; current clamp with saturation flag;
+   has passed; a command that is not finite (NaN, inf) zeroes output and latches a
+   ``nan_command`` fault; current clamp with saturation flag;
 4. record the tick's outputs;
 5. propagate the continuous plant over the tick with the command held (exact ZOH).
    Real samples switch between free and contact modes; a switch inside a tick is
@@ -33,8 +34,10 @@ __all__ = ["run_ticks", "propagate_linear", "IST", "FST"]
 
 # integer state slots
 IST_MODE, IST_ARMED, IST_PLAY, IST_SINCE_ENABLE, IST_FIRST, IST_NEV, IST_RB, IST_FAULT, \
-    IST_STOP, IST_FAULT_TICK, IST_ROW1, IST_ROW2 = range(12)
-IST = 12
+    IST_STOP, IST_FAULT_TICK, IST_ROW1, IST_ROW2, IST_FAULT_CODE = range(13)
+IST = 13
+# why the loop latched output off (IST_FAULT_CODE)
+FAULT_DEADLINE, FAULT_NAN = 1, 2  # the watchdog/e-stop deadline; a non-finite command
 # float state slots: the two table rows' coefficients of the transient playing
 FST_C1, FST_C2 = 0, 1
 FST = 2
@@ -252,7 +255,12 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
         if ist[IST_FAULT] == 0 and n >= zero_from:
             ist[IST_FAULT] = 1
             ist[IST_FAULT_TICK] = n
+            ist[IST_FAULT_CODE] = FAULT_DEADLINE
         cur = fc / kt
+        if ist[IST_FAULT] == 0 and not (abs(cur) < np.inf):  # NaN or ±inf never reaches the
+            ist[IST_FAULT] = 1                                 # amplifier: zero and latch
+            ist[IST_FAULT_TICK] = n
+            ist[IST_FAULT_CODE] = FAULT_NAN
         if ist[IST_FAULT] != 0:
             cur = 0.0
             flags |= F_ZEROED
