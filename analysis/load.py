@@ -47,13 +47,49 @@ def _design_key(design: dict | None) -> str:
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:12]
 
 
-def load_sessions(path: str | Path) -> pd.DataFrame:
+def _invalid(row: dict, phase: dict | None, design: dict | None) -> str:
+    """Why a recorded valid attempt cannot be analysed ('' when it can)."""
+    if row["status"] != "valid" or phase is None:
+        return ""
+    if phase.get("dv") == "rating":
+        scale = (design or {}).get("scale") or {}
+        text = row["rating"].strip()
+        try:
+            r = float(text)
+        except ValueError:
+            return f"rating {text!r} is not a number" if text else "a valid trial without a rating"
+        if not np.isfinite(r):
+            return f"rating {text} is not a finite number"
+        if scale and not (scale["min"] <= r <= scale["max"]):
+            return f"rating {text} is outside the scale {scale['min']}–{scale['max']}"
+        if r != int(r):
+            return f"rating {text} is not a point of the scale"
+    elif phase.get("dv") == "answer":
+        names = [a for a in row["answer"].split(",") if a]
+        choices = (design or {}).get("answer_choices") or []
+        k = len(row["sample"].split("+"))
+        if len(names) != k:
+            return f"answer {row['answer']!r} names {len(names)} surfaces, the trial had {k}"
+        bad = [a for a in names if choices and a not in choices]
+        if bad:
+            return f"answer names {', '.join(bad)}, not among {', '.join(choices)}"
+        if row["correct"] not in ("0", "1"):
+            return f"correct is {row['correct']!r}, not 0 or 1"
+    return ""
+
+
+def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
     """All attempts of all sessions under ``path``, one row per attempt.
 
     Parameters
     ----------
     path : str or Path
         A folder holding ``sub-*/ses-*`` session folders at any depth.
+    drop_invalid : bool
+        A valid attempt that cannot be analysed (a rating off the recorded scale, not a
+        number or not finite; an answer that names the wrong surfaces) is an error naming its
+        file and line (default); True marks such rows not valid instead, with their reason
+        in ``invalid_reason`` and in ``attrs["invalid_rows"]``.
 
     Returns
     -------
@@ -70,7 +106,8 @@ def load_sessions(path: str | Path) -> pd.DataFrame:
         ``result.attrs``: ``session_table`` (DataFrame, one row per session folder, columns
         :data:`SESSION_COLUMNS`), ``designs`` (design key → the design recorded with the
         sessions), ``torn`` (torn last lines, by file), ``files`` (SHA-256 of every file
-        read), ``sessions`` (count).
+        read), ``sessions`` (count), ``invalid_rows`` (list of dicts: ``file``, ``line``,
+        ``participant``, ``phase``, ``sample``, ``reason``).
 
     Raises
     ------
@@ -94,7 +131,7 @@ def load_sessions(path: str | Path) -> pd.DataFrame:
         raise LoadError(f"{root}: no such folder")
     if not root.is_dir():
         raise LoadError(f"{root}: not a folder")
-    frames, torn, files, sessions, designs = [], {}, {}, [], {}
+    frames, torn, files, sessions, designs, invalid = [], {}, {}, [], {}, []
     for mpath in sorted(root.rglob(META)):
         folder = mpath.parent
         try:
@@ -128,7 +165,14 @@ def load_sessions(path: str | Path) -> pd.DataFrame:
             "valid_rows": sum(r["status"] == "valid" for r in rows), "design_key": key})
         if not rows:
             continue
+        phases = {p["name"]: p for p in (design or {}).get("phases", [])}
+        reasons = [_invalid(r, phases.get(r["phase"]), design) for r in rows]
+        for line, (r, why) in enumerate(zip(rows, reasons, strict=True), start=2):
+            if why:
+                invalid.append({"file": str(tpath), "line": line, "participant": r["participant"],
+                                "phase": r["phase"], "sample": r["sample"], "reason": why})
         df = pd.DataFrame(rows)
+        df["invalid_reason"] = reasons
         rating = proto.get("rating") or (design or {}).get("scale") or {}
         df["protocol"] = proto["name"]
         df["protocol_sha256"] = proto["sha256"]
@@ -144,17 +188,25 @@ def load_sessions(path: str | Path) -> pd.DataFrame:
         frames.append(df)
     if not sessions:
         raise LoadError(f"{root}: no sessions (sub-*/ses-*/session.json) found")
+    if invalid and not drop_invalid:
+        first = invalid[0]
+        more = f" (and {len(invalid) - 1} more row(s))" if len(invalid) > 1 else ""
+        raise LoadError(f"{first['file']}:{first['line']}: {first['reason']}{more}; correct "
+                        "the file, or analyse with --drop-invalid to leave such rows out "
+                        "(each is then listed in the report)")
     table = pd.DataFrame(sessions, columns=list(SESSION_COLUMNS))
     data = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
         columns=[*COLUMNS, "protocol", "protocol_sha256", "design_key", "seed", "group", "scale",
-                 "device_backend", "kind", "responder", "session_status", "session_dir"])
+                 "device_backend", "kind", "responder", "session_status", "session_dir",
+                 "invalid_reason"])
     for c in INT_COLUMNS:
         if c in data:
             data[c] = pd.to_numeric(data[c], errors="coerce").fillna(0).astype(int)
     for c in FLOAT_COLUMNS:
         if c in data:
             data[c] = pd.to_numeric(data[c].replace("", np.nan), errors="coerce")
-    data["valid"] = data["status"] == "valid"
+    data["valid"] = (data["status"] == "valid") & (data["invalid_reason"].fillna("") == "") \
+        if "invalid_reason" in data else data["status"] == "valid"
     rep = data["item"].astype(str).str.extract(r"#(\d+)$")[0]
     data["repetition"] = pd.to_numeric(rep, errors="coerce").fillna(0).astype(int)
     if "factors" in data:
@@ -167,6 +219,7 @@ def load_sessions(path: str | Path) -> pd.DataFrame:
     data.attrs["torn"] = torn
     data.attrs["files"] = files
     data.attrs["sessions"] = len(table)
+    data.attrs["invalid_rows"] = invalid
     return data
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -111,31 +112,40 @@ def confusion(a: dict, out: Path) -> list[str]:
     return _save(fig, out, f"{_name(a)}_confusion")
 
 
+def _tap_near(path: Path, speed: float):
+    """(|v − speed|, acceleration [m/s²] 100 ms from contact, v [m/s], rate [Hz]) of the tap
+    in a trace file whose incoming speed is nearest ``speed``; None without contacts."""
+    with np.load(path) as z:
+        if not len(z["contacts_v"]):
+            return None
+        k = int(np.argmin(np.abs(z["contacts_v"] - speed)))
+        rate, t0 = float(z["rate_hz"]), float(z["t0"])
+        idx = z["sample_index"] if "sample_index" in z else np.arange(len(z["accel_counts"]))
+        i = int(round((z["contacts_t"][k] - t0) * rate))
+        sel = (idx >= i) & (idx < i + int(0.1 * rate))
+        acc = z["accel_counts"][sel] * float(z["accel_lsb"])
+        return abs(z["contacts_v"][k] - speed), acc, float(z["contacts_v"][k]), rate
+
+
 def accel_traces(a: dict, data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str]:
     """Acceleration after contact per sample, for the tap closest to a common speed."""
     plt = _plt()
     d = data[(data["design_key"] == a["design_key"]) & (data["phase"] == a["phase"])
              & data["valid"] & (data["trace_file"].fillna("") != "")]
-    picked = []
+    picked, skipped = [], []
     for sample, g in d.groupby("sample"):
         best = None
         for row in g.itertuples():
             path = Path(row.session_dir) / row.trace_file
             if not path.exists() or "*" in row.trace_file:
                 continue
-            with np.load(path) as z:
-                if not len(z["contacts_v"]):
-                    continue
-                k = int(np.argmin(np.abs(z["contacts_v"] - speed)))
-                err = abs(z["contacts_v"][k] - speed)
-                if best is None or err < best[0]:
-                    rate, t0 = float(z["rate_hz"]), float(z["t0"])
-                    idx = z["sample_index"] if "sample_index" in z else np.arange(
-                        len(z["accel_counts"]))
-                    i = int(round((z["contacts_t"][k] - t0) * rate))
-                    sel = (idx >= i) & (idx < i + int(0.1 * rate))
-                    acc = z["accel_counts"][sel] * float(z["accel_lsb"])
-                    best = (err, acc, float(z["contacts_v"][k]), rate)
+            try:
+                tap = _tap_near(path, speed)
+            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+                skipped.append(str(path))  # a truncated or foreign file: not this figure's
+                continue
+            if tap is not None and (best is None or tap[0] < best[0]):
+                best = tap
         if best is not None:
             picked.append((str(sample), *best[1:]))
     if not picked:
@@ -154,8 +164,9 @@ def accel_traces(a: dict, data: pd.DataFrame, out: Path, speed: float = 0.11) ->
         ax.set_xlabel("ms after contact", fontsize=8)
     for ax in axes[:, 0]:
         ax.set_ylabel("m/s²", fontsize=8)
+    note = f" ({len(skipped)} unreadable trace files skipped)" if skipped else ""
     fig.suptitle(f"{a['id']}: contact acceleration per sample, scaled to {speed} m/s incoming "
-                 "speed", fontsize=10)
+                 f"speed{note}", fontsize=10)
     fig.tight_layout()
     return _save(fig, out, f"{_name(a)}_accel_traces")
 

@@ -227,7 +227,7 @@ def _report_entry(a: dict) -> dict:
 
 def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"),
             protocol=None, kind=None, status: str = "complete", participants=None,
-            since=None, until=None) -> dict:
+            since=None, until=None, drop_invalid: bool = False) -> dict:
     """Select sessions, run every analysis their designs call for, write the report.
 
     Parameters
@@ -239,13 +239,16 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
     formats : tuple of {'html', 'md', 'json'}
     protocol, kind, status, participants, since, until
         Filters, as :func:`analysis.load.select_sessions`.
+    drop_invalid : bool
+        Leave out (and list) recorded rows that cannot be analysed, instead of stopping
+        with an error naming the first (:func:`analysis.load.load_sessions`).
 
     Returns
     -------
     dict
         The report's content (what report.json holds).
     """
-    data = load_sessions(data_dir)
+    data = load_sessions(data_dir, drop_invalid=drop_invalid)
     filters = {"protocol": protocol, "kind": kind, "status": status,
                "participants": participants, "since": since, "until": until}
     selected, table = select_sessions(data, **filters)
@@ -263,6 +266,10 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
              if any(str(Path(data_dir) / k).startswith(str(Path(d)) + "/")
                     for d in inc["session_dir"])}
     report["figures"] = figures
+    keep = set(inc["session_dir"])
+    report["selection"]["rows_left_out"] = [
+        r for r in data.attrs.get("invalid_rows", [])
+        if str(Path(r["file"]).parent) in keep]
     report["provenance"] = {
         "packages": {p: _ver(p) for p in ("numpy", "scipy", "pandas", "matplotlib")},
         "python": platform.python_version(), "input_files": files,
@@ -301,10 +308,14 @@ def _table(rows: list[dict], cols: list[str] | None = None) -> str:
             return "—"
         if isinstance(v, float):
             return f"{v:.4g}"
-        return str(v).replace("|", "\\|")
+        return str(v)
+
+    def fmt_cell(v):  # escaped for Markdown: no cell can add columns or raw HTML
+        return (html.escape(fmt(v), quote=False).replace("|", "\\|")
+                .replace("\n", " ").replace("\r", " "))
 
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in cols) + " |" for r in rows]
+    lines += ["| " + " | ".join(fmt_cell(r.get(c, "")) for c in cols) + " |" for r in rows]
     return "\n".join(lines) + "\n"
 
 
@@ -359,19 +370,28 @@ def _identification_md(a: dict) -> list[str]:
     return out
 
 
+def _md_text(text: str) -> str:
+    """User-given text (titles, names) in Markdown prose: no raw HTML gets through."""
+    return html.escape(str(text), quote=False)
+
+
 def _markdown(rep: dict) -> str:
-    out = ["# hapticlab report\n", "## Methods\n", rep["methods"] + "\n",
+    out = ["# hapticlab report\n", "## Methods\n", _md_text(rep["methods"]) + "\n",
            "## Sessions included and excluded\n",
            _table(rep["selection"]["sessions"],
                   ["participant", "session", "protocol", "kind", "status", "rows", "included",
                    "reason", "session_dir"])]
+    left_out = rep["selection"].get("rows_left_out") or []
+    if left_out:
+        out.append("\n### Recorded rows left out (--drop-invalid)\n")
+        out.append(_table(left_out, ["participant", "phase", "sample", "reason", "file", "line"]))
     if not rep["analyses"]:
         out.append("\nNo analysed phase has data in the selected sessions.\n")
     for a in rep["analyses"]:
-        out.append(f"## {a['id']}\n")
-        out.append(a["methods"] + "\n")
+        out.append(f"## {_md_text(a['id'])}\n")
+        out.append(_md_text(a["methods"]) + "\n")
         if "result" in a:
-            out.append(a["result"] + "\n")
+            out.append(_md_text(a["result"]) + "\n")
             continue
         out.extend({"oneway": _oneway_md, "factorial": _factorial_md}.get(
             a["type"], _identification_md)(a))
@@ -404,9 +424,8 @@ def _html(md: str, rep: dict) -> str:
         if line.startswith("|"):
             if set(line.replace("|", "").strip()) <= {"-"}:
                 continue
-            cells = [c.replace("\\|", "|").strip()
-                     for c in line.strip("|").replace("\\|", "\x00").split("|")]
-            rows.append([html.escape(c.replace("\x00", "|")) for c in cells])
+            cells = [c.strip() for c in line.strip("|").replace("\\|", "\x00").split("|")]
+            rows.append([html.escape(html.unescape(c.replace("\x00", "|"))) for c in cells])
             in_table = True
             continue
         if in_table:
@@ -415,6 +434,7 @@ def _html(md: str, rep: dict) -> str:
                         + "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>"
                                   for r in rest) + "</table>")
             rows, in_table = [], False
+        line = html.unescape(line)  # the Markdown escaped it; escape once, for HTML, below
         if line.startswith("#"):
             n = len(line) - len(line.lstrip("#"))
             body.append(f"<h{n}>{html.escape(line[n:].strip())}</h{n}>")

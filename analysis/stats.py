@@ -431,8 +431,11 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
         sph = _sphericity(arr)
         df1, df2 = rows[0]["DF"], errors[(1,)][1]
         sph["p_gg"] = float(special.fdtrc(df1 * sph["eps_gg"], df2 * sph["eps_gg"], rows[0]["F"]))
-        if n_subj - 1 < shape[1] - 1:
-            del sph["W_mauchly"], sph["p_spher"]
+        if "eps_hf" not in sph:
+            notes.append(f"Huynh–Feldt ε not computed: its estimate is undefined with "
+                         f"{n_subj} subjects for {shape[1]} levels; use the Greenhouse–Geisser "
+                         "ε")
+        if "W_mauchly" not in sph:
             notes.append(f"Mauchly's test not computed: {n_subj} subjects give a singular "
                          f"covariance of the {shape[1] - 1} contrasts (it needs at least "
                          f"{shape[1]}); use the Greenhouse–Geisser p")
@@ -455,6 +458,14 @@ def _sphericity(arr: np.ndarray) -> dict[str, float]:
     Y = arr @ C
     S = np.cov(Y, rowvar=False, ddof=1)
     tr = np.trace(S)
+    eps_gg = float(tr ** 2 / (p * np.trace(S @ S))) if tr > 0 else 1.0
+    out = {"eps_gg": min(1.0, eps_gg)}
+    den = p * (n - 1 - p * eps_gg)
+    if den > 1e-9 * p * (n - 1):  # with very few subjects the Huynh–Feldt ε is undefined
+        eps_hf = (n * p * eps_gg - 2) / den
+        out["eps_hf"] = float(min(1.0, max(eps_gg, eps_hf)))
+    if n - 1 < p:  # the contrasts' covariance is singular: Mauchly's test is undefined
+        return out
     det = max(float(np.linalg.det(S)), 0.0)
     W = det / (tr / p) ** p if tr > 0 else 1.0
     # Bartlett's χ² with Anderson's second-order term (accurate at small n):
@@ -471,11 +482,8 @@ def _sphericity(arr: np.ndarray) -> dict[str, float]:
         p_spher = float(min(1.0, max(0.0, base + w2 * (special.chdtrc(dfc + 4, chi2) - base))))
     else:
         p_spher = 0.0
-    eps_gg = float(tr ** 2 / (p * np.trace(S @ S))) if tr > 0 else 1.0
-    eps_hf = (n * p * eps_gg - 2) / (p * (n - 1 - p * eps_gg))
-    eps_hf = float(min(1.0, max(eps_gg, eps_hf))) if math.isfinite(eps_hf) else 1.0
-    return {"W_mauchly": float(W), "p_spher": p_spher, "eps_gg": min(1.0, eps_gg),
-            "eps_hf": eps_hf}
+    out.update(W_mauchly=float(W), p_spher=p_spher)
+    return out
 
 
 # --------------------------------------------------------------------- identification
