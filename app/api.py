@@ -17,6 +17,7 @@ Examples
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import sys
 import time
@@ -32,6 +33,8 @@ from .guards import Terminated, close_at_exit
 
 __all__ = ["SessionResult", "StudyResult", "run_session", "resume_session", "simulate_study",
            "analyze", "session_seed", "KIND_OF", "DEFAULT_SIM_DATA"]
+
+_GROUP = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
 
 #: the session kind each responder gives
 KIND_OF = {"person": "human", "scripted": "dry-run", "simulated": "simulated"}
@@ -120,13 +123,30 @@ def _open(spec: str, seed: int):
     return open_device(spec)
 
 
+def _apply_limit(protocol, dev, recorded: float | None = None) -> dict:
+    """Clamp the device's current at the protocol's ``[limits] max_current`` (the lower of
+    it and the device's rating), for the whole session; what session.json records."""
+    rating = dev.info.current_limit
+    wanted = recorded if recorded is not None else protocol.limits.max_current
+    if wanted is not None and wanted > rating * (1 + 1e-12):
+        raise UsageError(f"the protocol's [limits] max_current of {wanted:g} A is above this "
+                         f"device's rating of {rating:g} A")
+    applied = dev.set_current_limit(min(wanted, rating) if wanted is not None else rating)
+    return {"current_limit_a": applied, "device_rating_a": rating,
+            "protocol_max_current_a": protocol.limits.max_current}
+
+
 def _drive(runner, files, meta, console) -> SessionResult:
+    from app.errors import DataFolderError
     from app.runner import SessionInterrupted, utc_now
 
     def stopped(why: str, status: str, msg: str) -> SessionResult:
         meta["status"] = "interrupted"
         meta.setdefault("interruptions", []).append(why)
-        files.write_meta(meta)
+        try:
+            files.write_meta(meta)
+        except DataFolderError as exc:  # the disk that stopped the session
+            msg += f"\n(session.json still says 'running': {exc})"
         console.say(msg)
         return SessionResult(files.folder, status, len(runner.log), msg)
 
@@ -205,6 +225,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     from app.console import make_console
     from app.ids import validate_participant
     from app.libraries import prepare_libraries, with_libraries
+    from app.preflight import data_folder_ready, expected_session_bytes
     from app.recorder import SessionFiles, new_session_dir
     from app.runner import SessionRunner, session_meta
     from protocols import SessionEngine, parse_protocol, protocol_text, seed_from_entropy
@@ -213,16 +234,22 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     if traces not in ("full", "contacts", "none"):
         raise UsageError(f"traces must be full, contacts or none, got {traces!r}")
     participant = validate_participant(participant)
+    if group and not _GROUP.match(group):
+        raise UsageError(f"group {group!r}: use letters, digits, '_', '-' or '.' (at most 32)")
     source, text = protocol_text(protocol)
     proto = parse_protocol(text, source)
     seed = seed_from_entropy() if seed is None else seed
     if not isinstance(seed, int) or seed < 0:
         raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
     engine = SessionEngine(proto, seed, participant, row)
+    # the data folder before any device or window opens: nothing starts that cannot be kept
+    data_folder_ready(data, expected_session_bytes(proto, traces))
     console = make_console(quiet=quiet)
     say = say or console.say
     with _open(device, seed) as dev:
         close_at_exit(dev)
+        parse_protocol(text, source, dev.info)  # what this device cannot play stops here
+        limits = _apply_limit(proto, dev)
         libraries = prepare_libraries(proto, dev, device, say, ref=str(protocol))
         proto = with_libraries(proto, libraries)
         ui = _participant(responder, proto, seed, group, fullscreen)
@@ -233,11 +260,13 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 console = make_console("keys", quiet, dev)
             folder, n = new_session_dir(Path(data), participant)
             files = SessionFiles(folder)
+            files.lock()
             files.start(text)
             meta = session_meta(proto, str(protocol), participant, n, seed, row, dev, device,
                                 "psychopy" if responder == "person" else "none", responder,
                                 sound is not None, group, KIND_OF[responder], libraries)
             meta["traces_mode"] = traces
+            meta["limits"] = limits
             files.write_meta(meta)
             console.say(f"session {folder} (seed {seed})")
             runner = SessionRunner(proto, engine, dev, files, ui, participant, n, seed, console,
@@ -247,6 +276,19 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
             for part in (ui, sound, console):
                 if part is not None:
                     part.close()
+            if "files" in locals():
+                files.release()
+
+
+def _check_rows(files, meta: dict, rows: list[dict]) -> None:
+    """Every recorded row belongs to this session (participant and session number)."""
+    pid, ses = str(meta["participant"]["id"]), str(meta["session"])
+    for i, r in enumerate(rows, start=2):
+        for col, want in (("participant", pid), ("session", ses)):
+            if r[col] != want:
+                raise SessionFileError(f"{files.trials}:{i}: {col} is {r[col]!r} but "
+                                       f"session.json says {want!r}: the files do not belong "
+                                       "together (edited, or copied from another session)")
 
 
 def resume_session(folder: str | Path, *, device: str | None = None, audio: bool | None = None,
@@ -272,17 +314,32 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
         As :func:`run_session`.
     """
     from app.console import make_console
-    from app.libraries import with_libraries
     from app.recorder import SessionFiles
+
+    files = SessionFiles(Path(folder))
+    files.read_meta()  # a session folder (a named error otherwise), before anything is written
+    files.lock()  # one writer: a second resume of this session stops here
+    try:
+        meta = files.read_meta()  # as the last writer left it
+        console = make_console(quiet=quiet)
+        if meta.get("status") == "complete":
+            return SessionResult(files.folder, "complete", len(files.read_rows()[0]),
+                                 f"{files.folder}: the session is already complete")
+        return _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
+                       operator_keys)
+    finally:
+        files.release()
+
+
+def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
+            operator_keys) -> SessionResult:
+    from app.console import make_console
+    from app.ids import validate_participant
+    from app.libraries import check_recorded, with_libraries
+    from app.preflight import data_folder_ready
     from app.runner import SessionRunner, utc_now
     from protocols import LogMismatch, ResumeMismatch, SessionEngine, parse_protocol
 
-    files = SessionFiles(Path(folder))
-    meta = files.read_meta()
-    console = make_console(quiet=quiet)
-    if meta.get("status") == "complete":
-        return SessionResult(files.folder, "complete", len(files.read_rows()[0]),
-                             f"{files.folder}: the session is already complete")
     ref = meta["protocol"].get("ref", "")
     if files.protocol.exists():
         text, source = files.protocol.read_text(encoding="utf-8"), str(files.protocol)
@@ -297,14 +354,20 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
                              f"{proto.sha256[:12]}… now)")
     proto = with_libraries(proto, meta.get("libraries", {}))
     p = meta["participant"]
+    validate_participant(p["id"])
     engine = SessionEngine(proto, meta["seed"], p["id"], p.get("counterbalance_row"))
     engine.check_resume({"protocol_sha256": meta["protocol"]["sha256"], "seed": meta["seed"],
                          "participant": p["id"],
                          "counterbalance_row": p.get("counterbalance_row")})
+    data_folder_ready(files.folder)
     torn = files.set_aside_torn()
     if torn is not None:
         console.say(f"set aside a torn last line of trials.tsv (line {torn.line}, kept in "
                     "trials.torn.tsv): the attempt it belonged to will run again")
+    for done in files.repair():
+        console.say(done)
+    rows, _ = files.read_rows()
+    _check_rows(files, meta, rows)
     responder = meta.get("responder", "scripted")
     if responder not in KIND_OF:
         responder = "person" if meta.get("ui") == "psychopy" else "scripted"
@@ -314,6 +377,8 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
         if clear_fault and dev.fault is not None:
             console.say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
             dev.clear_fault()
+        limits = _apply_limit(proto, dev, (meta.get("limits") or {}).get("current_limit_a"))
+        check_recorded(meta.get("libraries", {}), dev)
         ui = _participant(responder, proto, meta["seed"], p.get("group", ""), fullscreen)
         sound = None
         try:
@@ -328,9 +393,13 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
                 engine.next_trial(runner.log)
             except LogMismatch as exc:
                 raise SessionFileError(f"{files.trials}: {exc}") from None
+            if ui.stateful:  # its answers depend on what it felt: bring it where it was
+                console.say(f"replaying {len(rows)} recorded attempts for the simulated "
+                            "participant's memory")
+                runner.replay(rows)
             meta["resumes"].append({"at_utc": utc_now(), "attempts_logged": len(runner.log),
                                     "torn_line": None if torn is None else torn.line,
-                                    "device": spec})
+                                    "device": spec, "limits": limits})
             meta["status"] = "running"
             files.write_meta(meta)
             console.say(f"resuming {files.folder} after {len(runner.log)} attempts")
@@ -423,7 +492,8 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
 def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json"),
             protocol: str | list[str] | None = None, kind: str | None = None,
             status: str = "complete", participants: list[str] | None = None,
-            since: str | None = None, until: str | None = None) -> dict:
+            since: str | None = None, until: str | None = None,
+            drop_invalid: bool = False) -> dict:
     """Select sessions, run the analyses their designs call for, write the report.
 
     Parameters are those of :func:`analysis.report.analyze`; its errors come back as
@@ -442,6 +512,11 @@ def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json")
         raise UsageError(f"formats are html, md, json; got {sorted(bad)}")
     try:
         return _analyze(data, out, tuple(formats), protocol=protocol, kind=kind, status=status,
-                        participants=participants, since=since, until=until)
+                        participants=participants, since=since, until=until,
+                        drop_invalid=drop_invalid)
     except (LoadError, StatsError) as exc:
         raise AnalysisError(str(exc)) from None
+    except OSError as exc:
+        from app.errors import io_error
+
+        raise io_error(exc, "cannot write the report") from None

@@ -58,9 +58,22 @@ def _protocol_validate(args: argparse.Namespace) -> int:
     p = _load_protocol(args.file, args.device)
     n_items = sum(len(ph.samples) * ph.repetitions if ph.kind != "identification"
                   else ph.repetitions for ph in p.phases)
+    libs = ""
+    if args.device:  # the libraries its matched samples need, built on this device
+        from app.libraries import prepare_libraries
+        from device import open_device
+
+        with open_device(args.device) as dev:
+            sim = dev.info.backend == "sim"
+            found = prepare_libraries(p, dev, args.device, build=False, ref=args.file) \
+                if not sim else {}
+        if sim and any(s.scene.kind == "library" for s in p.samples.values()):
+            libs = "; matched samples: a missing library is built on first use (simulated)"
+        elif found:
+            libs = f"; libraries found for {', '.join(sorted(found))}"
     print(f"{p.source}: valid protocol '{p.name}' — {len(p.samples)} samples, "
           f"{len(p.phases)} phases, {n_items} trials without redraws"
-          + (f"; checked against device '{args.device}'" if args.device else ""))
+          + (f"; checked against device '{args.device}'{libs}" if args.device else ""))
     return 0
 
 
@@ -239,7 +252,7 @@ def _analyze(args: argparse.Namespace) -> int:
         raise UsageError(f"--format takes html, md, json; got {sorted(bad)}")
     rep = analyze(args.data_dir, args.out, formats=formats, protocol=_list(args.protocol),
                   kind=args.kind, status=args.status, participants=_list(args.participants),
-                  since=args.since, until=args.until)
+                  since=args.since, until=args.until, drop_invalid=args.drop_invalid)
     sel = rep["selection"]
     ids = [a["id"] for a in rep["analyses"]]
     print(f"{len(ids)} analyses ({', '.join(ids) or 'none'}) of {sel['included']} sessions "
@@ -423,6 +436,9 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("--participants", help="participant ids, comma-separated")
     an.add_argument("--since", help="sessions created on or after (YYYY-MM-DD, UTC)")
     an.add_argument("--until", help="sessions created on or before (YYYY-MM-DD, UTC)")
+    an.add_argument("--drop-invalid", action="store_true",
+                    help="leave out recorded rows that cannot be analysed (a rating off the "
+                    "scale, …), listing each, instead of stopping at the first")
     an.set_defaults(func=_analyze)
     _add_session_parsers(sub)
     pr = sub.add_parser("protocol", help="protocol files (validate, show)")
@@ -447,6 +463,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--fuzz", type=int, default=100_000,
                    help="link: mutated frames to push through the decoder")
     b.add_argument("--kills", type=int, default=1000, help="crash: kill -9 count")
+    b.add_argument("--points", default=None, help="crash: kill after every write point "
+                   "('all') or the listed ones ('3,17')")
     b.set_defaults(func=_bench)
 
     d = sub.add_parser("demo", help="what `make demo` runs: a whole simulated study and its "

@@ -20,7 +20,8 @@ from device.matching.library import LibraryError, TransientLibrary, build_into_s
 
 from .errors import MissingLibraryError
 
-__all__ = ["prepare_libraries", "with_libraries", "LIBRARY_SEED", "BUILD_SECONDS"]
+__all__ = ["prepare_libraries", "with_libraries", "check_recorded", "LIBRARY_SEED",
+           "BUILD_SECONDS"]
 
 #: seed of the fresh simulated device a simulated library is built on (reproducible builds)
 LIBRARY_SEED = 20_260_001
@@ -117,3 +118,23 @@ def with_libraries(protocol, libraries: dict[str, dict]):
         tr = dataclasses.replace(s.scene.transient, path=lib["path"])
         samples[sid] = dataclasses.replace(s, scene=dataclasses.replace(s.scene, transient=tr))
     return dataclasses.replace(protocol, samples=samples)
+
+
+def check_recorded(libraries: dict[str, dict], device) -> None:
+    """The library files a session recorded are still there, unchanged, and made on this
+    device (a resume refuses to start otherwise).
+
+    Raises
+    ------
+    MissingLibraryError
+        Naming the sample, the file and what is wrong.
+    """
+    for sid, lib in libraries.items():
+        try:
+            got = TransientLibrary.load(lib["path"], device.info)
+        except LibraryError as exc:
+            raise MissingLibraryError(f"sample {sid}: the library this session started with "
+                                      f"cannot be used: {exc}") from None
+        if got.sha256 != lib.get("sha256", got.sha256):
+            raise MissingLibraryError(f"sample {sid}: {lib['path']} changed since the session "
+                                      "started (its SHA-256 differs); restore it to resume")

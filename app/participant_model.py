@@ -186,6 +186,7 @@ class SimulatedParticipant(Participant):
     """
 
     name = "simulated"
+    stateful = True  # remembers references and the range of what it felt
 
     def __init__(self, protocol, seed: int, group: str = ""):
         self.protocol = protocol

@@ -22,6 +22,9 @@ class Participant:
     """What the runner asks of whoever answers (defaults: nothing to show, one window)."""
 
     name = "participant"
+    #: True when answers depend on what was felt before: a resumed session then replays the
+    #: recorded attempts first (:meth:`app.runner.SessionRunner.replay`)
+    stateful = False
 
     def instructions(self, phase: str) -> None:
         """A phase begins (a screen shows its instructions)."""

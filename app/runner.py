@@ -29,6 +29,7 @@ from device import DeviceError, HapticDevice
 from protocols import DONE, PAUSED, RNG_ALGORITHM, Attempt, Protocol, SessionEngine, Trial
 
 from .console import PlainConsole
+from .errors import DataFolderError, SessionFileError
 from .participants import Participant
 from .recorder import SessionFiles
 
@@ -127,6 +128,7 @@ class SessionRunner:
     traces: str = "full"
     log: list[Attempt] = field(default_factory=list)
     timing: list[dict] = field(default_factory=list)
+    _expected: list[dict] | None = None  # while replaying: the recorded rows still to meet
 
     def load_log(self) -> None:
         rows, torn = self.files.read_rows()
@@ -142,7 +144,49 @@ class SessionRunner:
         return len(self.engine.plan())
 
     def run(self) -> str:
-        """Run to the end; returns "complete". Raises SessionInterrupted to stop early."""
+        """Run to the end; returns "complete". Raises SessionInterrupted to stop early —
+        also when the data folder fails (full, read-only): what was recorded is kept."""
+        try:
+            return self._run()
+        except DataFolderError as exc:
+            raise SessionInterrupted(f"{exc}. Everything recorded before is kept; fix this, "
+                                     "then resume") from exc
+
+    # columns a replayed attempt must reproduce
+    _REPLAYED = ("item", "attempt", "status", "n_taps", "tap_velocities", "rating", "answer")
+
+    def replay(self, rows: list[dict]) -> None:
+        """Run the recorded attempts again without recording them, so a participant whose
+        answers depend on what it felt before (the simulated participant) is where it was
+        when the session stopped. Each replayed attempt must reproduce its row; operator
+        actions and pauses are taken from the rows.
+
+        Raises
+        ------
+        SessionFileError
+            A replayed attempt differs from its row (naming the line and the columns).
+        """
+        self.log = []
+        self._expected = [dict(r, _line=i + 2) for i, r in enumerate(rows)]
+        console, self.console = self.console, PlainConsole(quiet=True)  # nothing to tell
+        try:
+            while self._expected:
+                row = self._expected[0]
+                if row["status"] in ("paused", "resumed") or row["reason"].startswith(
+                        "operator") or row["status"] in ("aborted_device", "excluded_device"):
+                    self._expected.pop(0)
+                    self.log.append(Attempt(row["item"], row["status"], row["reason"]))
+                    continue
+                trial = self.engine.next_trial(self.log)
+                if trial is DONE or trial is PAUSED:
+                    raise SessionFileError(f"{self.files.trials}:{row['_line']}: the replayed "
+                                           "session ended before its rows did")
+                self._attempt(trial)
+        finally:
+            self._expected = None
+            self.console = console
+
+    def _run(self) -> str:
         while True:
             trial = self.engine.next_trial(self.log)
             if trial is DONE:
@@ -192,22 +236,29 @@ class SessionRunner:
                 for sid in trial.samples:
                     results.append(self._window(trial, sid, rng))
         except DeviceError as exc:
-            partial = exc.partial
-            self._record(trial, "aborted_device", reason=str(exc)[:200], t_start=t_start,
-                         result=partial)
-            raise SessionInterrupted(f"device error during trial {trial.trial_index}: {exc}"
-                                     ) from exc
+            status = self.engine.failure_status("aborted_device", trial, self.log)
+            self._record(trial, status, reason=str(exc)[:200], t_start=t_start,
+                         result=exc.partial)
+            excluded = (f"; item {trial.item} failed {self.engine.cap('aborted_device')} times "
+                        "and is left out" if status == "excluded_device" else "")
+            raise SessionInterrupted(f"device error during trial {trial.trial_index}: "
+                                     f"{exc}{excluded}") from exc
         res = results[0]
         velocities = np.concatenate([r.velocities for r in results]) if results else []
         if any(r.faults for r in results):  # an e-stop or the watchdog during the window
             f = next(r.faults[0] for r in results if r.faults)
-            self._record(trial, "aborted_device", reason=f"{f.code}: {f.message}",
+            status = self.engine.failure_status("aborted_device", trial, self.log)
+            self._record(trial, status, reason=f"{f.code}: {f.message}",
                          t_start=t_start, result=res, results=results)
             raise SessionInterrupted(f"{f.code} during trial {trial.trial_index}: output is off "
                                      "and latched; resume with --clear-fault once it is safe")
         if any(r.timed_out for r in results):
-            self._record(trial, "requeued", reason="no contact before the timeout",
+            status = self.engine.failure_status("timed_out", trial, self.log)
+            self._record(trial, status, reason="no contact before the timeout",
                          t_start=t_start, result=res)
+            self.console.say(f"  no contact within {self.protocol.window.timeout:g} s: "
+                             + ("left out (timed out too often)" if status == "excluded_timeout"
+                                else "the item goes back into the pool"))
             return
         if any(r.saturated for r in results) and self.protocol.saturation.action == "redraw" \
                 and trial.kind != "free":
@@ -221,8 +272,10 @@ class SessionRunner:
         if trial.kind == "rated":
             rating, rt = self.participant_ui.rate(trial, self.protocol.rating, res, rng)
             if not self.protocol.rating.min <= rating <= self.protocol.rating.max:
-                raise ValueError(f"rating {rating} outside the scale "
-                                 f"{self.protocol.rating.min}–{self.protocol.rating.max}")
+                raise SessionInterrupted(f"the responder gave rating {rating!r}, outside the "
+                                         f"scale {self.protocol.rating.min}–"
+                                         f"{self.protocol.rating.max}; nothing was recorded "
+                                         "for this trial")
             row.update(rating=int(rating), response_time=round(float(rt), 3))
         elif trial.kind == "identification":
             answers, rt = self.participant_ui.identify(trial, self.protocol.answer.choices,
@@ -263,6 +316,10 @@ class SessionRunner:
         results = results or ([result] if result is not None else [])
         vel = [v for r in results for v in r.velocities]
         trace_file = None
+        if self._expected is not None:  # replaying: compare, do not record
+            self._meet(trial, status, vel, extra)
+            self.log.append(Attempt(trial.item, status, reason))
+            return
         if results and self.traces != "none" and any(len(r.traces) for r in results):
             for k, r in enumerate(results):
                 if not r.traces:
@@ -288,6 +345,21 @@ class SessionRunner:
         }
         self.files.append_row(row)  # durable before anything else happens
         self.log.append(Attempt(trial.item, status, reason))
+
+    def _meet(self, trial: Trial, status: str, vel: list[float], extra: dict) -> None:
+        """A replayed attempt against its recorded row."""
+        row = self._expected.pop(0)
+        got = {"item": trial.item, "attempt": str(trial.attempt), "status": status,
+               "n_taps": str(len(vel)), "tap_velocities": ";".join(f"{v:.5f}" for v in vel),
+               "rating": str(extra.get("rating", "")), "answer": str(extra.get("answer", ""))}
+        diff = [c for c in self._REPLAYED if got[c] != row[c]]
+        if diff:
+            raise SessionFileError(
+                f"{self.files.trials}:{row['_line']}: the replayed attempt differs from the "
+                f"recorded one in {', '.join(diff)} (recorded "
+                f"{', '.join(f'{c}={row[c]!r}' for c in diff)}; replayed "
+                f"{', '.join(f'{c}={got[c]!r}' for c in diff)}): the session cannot be "
+                "resumed exactly")
 
 
 def _trace_payload(res, mode: str, info) -> dict:

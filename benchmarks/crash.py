@@ -1,4 +1,6 @@
-"""``hapticlab bench crash --kills N``: kill -9 a headless session at random moments, resume it.
+"""``hapticlab bench crash``: kill -9 a headless session and resume it; nothing may be lost.
+
+``--kills N`` (random moments):
 
 1. An uninterrupted reference session (seed S) is run.
 2. The same session (seed S, another folder) is started and killed with SIGKILL after a
@@ -7,6 +9,15 @@
 3. Checked: every row present after a kill is still there at the end (0 completed trials
    lost; a torn last line is set aside and its attempt run again), and the final attempt
    sequence equals the reference's, column for column.
+
+``--points all`` (every write point, in the manner of SQLite's crash tests): the reference
+session is run under :mod:`benchmarks._killpoint`, which counts every write point in the data
+folder (open, write, fsync, rename, mkdir); then, for each point, a fresh session is killed
+right after it (and, at each write, half way through it: a torn write), and resumed to the
+end. Reported: ``points``, ``runs``, ``lost_rows`` (runs where a row seen after the kill was
+gone at the end), ``headerless`` (a trials.tsv without its header at any time),
+``divergent`` (a final sequence that differs from the reference) and ``failed`` (a resume
+that could not complete).
 """
 
 from __future__ import annotations
@@ -100,8 +111,118 @@ def _incomplete(folder: Path) -> bool:
         return True
 
 
+def _launch(args: list[str], env: dict) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "benchmarks._killpoint", *args], env=env,
+                          capture_output=True, text=True, timeout=600)
+
+
+def _sessions(data: Path) -> list[Path]:
+    return sorted((p.parent for p in data.rglob("session.json")),
+                  key=lambda p: int(p.name.split("-")[1]))
+
+
+def _headerless(data: Path) -> bool:
+    from analysis.session_format import header_line
+
+    head = header_line().encode()
+    for ses in _sessions(data):
+        t = ses / "trials.tsv"
+        if t.exists() and not t.read_bytes().startswith(head[: t.stat().st_size]):
+            return True
+        if not t.exists() or t.stat().st_size == 0:
+            return True
+    return False
+
+
+def _one_point(k: int, torn: bool, protocol: str, run_args: list[str], work: Path,
+               reference: list[tuple]) -> dict:
+    data = work / f"point-{k}{'-torn' if torn else ''}"
+    env = {**os.environ, "HAPTICLAB_KILL_ROOT": str(data), "HAPTICLAB_KILL_AT": str(k),
+           "HAPTICLAB_KILL_TORN": "1" if torn else "0"}
+    killed = _launch(["run", protocol, "--data", str(data), *run_args], env)
+    out = {"point": k, "torn": torn, "killed": killed.returncode == -9, "lost": False,
+           "headerless": False, "divergent": False, "failed": "", "resumes": 0}
+    seen = _rows(_sessions(data)[-1]) if _sessions(data) else []
+    out["headerless"] |= bool(_sessions(data)) and _headerless(data)
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("HAPTICLAB_KILL")}
+    for _ in range(4):
+        sessions = _sessions(data)
+        if sessions and not _incomplete(sessions[-1]):
+            break
+        if sessions:  # resume what the kill left
+            r = subprocess.run(_cmd(["resume", str(sessions[-1]), "--quiet"]), env=clean,
+                               capture_output=True, text=True, timeout=600)
+            out["resumes"] += 1
+        else:  # killed before the session was written: the operator runs it again
+            r = subprocess.run(_cmd(["run", protocol, "--data", str(data), *run_args]),
+                               env=clean, capture_output=True, text=True, timeout=600)
+        if r.returncode not in (0,):
+            out["failed"] = (r.stderr.strip().splitlines() or ["?"])[-1][:200]
+            break
+    sessions = _sessions(data)
+    final = _rows(sessions[-1]) if sessions else []
+    out["headerless"] |= _headerless(data)
+    out["lost"] = final[: len(seen)] != seen
+    out["divergent"] = final != reference
+    return out
+
+
+def kill_at_points(protocol: str = "realism", seed: int = 1, points: str = "all",
+                   workdir: Path | None = None, traces: str = "contacts", workers: int = 2,
+                   torn: bool = True) -> dict:
+    """Kill a session after each of its write points (``points``: ``all`` or a comma list
+    of point numbers), resume it, and check what :mod:`this module <benchmarks.crash>`'s
+    docstring lists."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    work = Path(workdir or tempfile.mkdtemp(prefix="hapticlab-points-"))
+    work.mkdir(parents=True, exist_ok=True)
+    run_args = ["--participant", "P01", "--dry-run", "--seed", str(seed), "--no-audio",
+                "--quiet", "--traces", traces]
+    ref = work / "reference"
+    log = work / "points.log"
+    env = {**os.environ, "HAPTICLAB_KILL_ROOT": str(ref), "HAPTICLAB_KILL_LOG": str(log)}
+    r = _launch(["run", protocol, "--data", str(ref), *run_args], env)
+    if r.returncode != 0:
+        raise RuntimeError(f"the reference session failed: {r.stderr}")
+    kinds = [line.split("\t")[0] for line in log.read_text().splitlines()]
+    reference = _rows(_sessions(ref)[-1])
+    chosen = range(1, len(kinds) + 1) if points == "all" else [int(x) for x in
+                                                                points.split(",")]
+    jobs = [(k, False) for k in chosen] + [(k, True) for k in chosen
+                                           if torn and kinds[k - 1] == "write"]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        results = list(pool.map(lambda j: _one_point(j[0], j[1], protocol, run_args, work,
+                                                     reference), jobs))
+    bad = [x for x in results if x["lost"] or x["headerless"] or x["divergent"] or x["failed"]
+           or not x["killed"]]
+    return {"points": len(kinds), "runs": len(results),
+            "by_kind": {k: kinds.count(k) for k in sorted(set(kinds))},
+            "lost_rows": sum(x["lost"] for x in results),
+            "headerless": sum(x["headerless"] for x in results),
+            "divergent": sum(x["divergent"] for x in results),
+            "failed": sum(bool(x["failed"]) for x in results),
+            "not_killed": sum(not x["killed"] for x in results),
+            "reference_rows": len(reference), "problems": bad[:20]}
+
+
 def main(args) -> int:
     t0 = time.perf_counter()
+    if getattr(args, "points", None):
+        r = kill_at_points(points=args.points)
+        r["wall_s"] = time.perf_counter() - t0
+        if args.json:
+            emit(r, True)
+        else:
+            print_table(f"crash: kill -9 after every write point, then resume "
+                        f"({r['wall_s']:.0f} s)",
+                        ["points", "runs", "rows lost", "headerless", "divergent",
+                         "resumes failed"],
+                        [(r["points"], r["runs"], r["lost_rows"], r["headerless"],
+                          r["divergent"], r["failed"])])
+        ok = not (r["lost_rows"] or r["headerless"] or r["divergent"] or r["failed"]
+                  or r["not_killed"])
+        return 0 if ok else 1
     kills = getattr(args, "kills", 1000)
     r = kill_and_resume(kills)
     r["wall_s"] = time.perf_counter() - t0

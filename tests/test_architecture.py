@@ -264,6 +264,12 @@ def test_every_exported_error_is_raised_somewhere():
             elif isinstance(node, ast.Call):  # an error class passed on to be raised
                 raised.update(a.id for a in node.args if isinstance(a, ast.Name)
                               and a.id.endswith(("Error", "Interrupted")))
+            elif isinstance(node, (ast.Dict, ast.Tuple)):  # a table of errors to raise
+                elts = node.values if isinstance(node, ast.Dict) else node.elts
+                raised.update(e.id for e in elts if isinstance(e, ast.Name)
+                              and e.id.endswith("Error"))
+                raised.update(x.id for e in elts if isinstance(e, ast.Tuple) for x in e.elts
+                              if isinstance(x, ast.Name) and x.id.endswith("Error"))
     errors = _exported_errors()
     classes = {n: getattr(importlib.import_module(m), n) for n, m in errors.items()}
     unused = []
