@@ -1,14 +1,19 @@
 """The participant's screen (PsychoPy) — the only module of hapticlab that imports PsychoPy.
 
-Screens: phase instructions; "tap" (the 5-s window from first contact, with a thin
-progress line as the only feedback); the rating (digit keys; on a 1–10 scale 0 means 10,
-and the screen says so); the identification answer (surfaces chosen with keys 1–3, then
-each named); debrief free text; pause. The realism protocol shows text only — nothing
-may hint at the sample; the factorial and identification protocols draw the virtual
-surface and the stylus as a cursor above it.
+Screens: phase instructions; "please wait" between trials (from the end of a rating until
+the operator's ``r``; it offers R for the real block again when the phase has reference
+blocks); "tap" (the window from first contact, with a thin progress line); the rating (one
+number key, digits and ENTER, or a slider, as the protocol's scale says); surfaces chosen
+with number keys and named with the number shown beside each name (identification); the
+real block to tap; "paused" (the operator's pause or an e-stop); debrief free text; thanks.
 
-Keys that mean nothing on a screen are ignored; the key buffer is cleared before each
-screen, so a double press counts once. ``keys`` can be injected (tests, scripted demos).
+Every text comes from the protocol (``[texts]``, defaults in English: see
+:mod:`protocols.texts`); every size and position is a fraction of the window, so the layout
+is the same at 1024×768 and 1920×1080. The realism protocol shows text only; protocols with
+``[display] cursor`` draw the surface and the stylus as a cursor from the device's reported
+height. Keys that mean nothing on a screen are ignored; the key buffer is cleared before
+each screen, so a double press counts once. ``keys`` can be injected (tests, scripted
+demos): a callable returning newly pressed keys, each a name or a (name, modifiers) pair.
 """
 
 from __future__ import annotations
@@ -16,25 +21,31 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable
 
-__all__ = ["PsychoPyScreen"]
+from protocols.model import choice_keys
 
-_INSTRUCTIONS = {
-    "familiarization": "Tap freely on the sample in front of you.\n\n"
-                       "Take your time. Press SPACE when you are done.",
-    "demonstration": "You will now tap on a series of samples, one at a time.\n\n"
-                     "After each one, rate it. Press SPACE to begin.",
-    "testing": "Now the same, with more samples.\n\nPress SPACE to begin.",
-    "rating": "Tap each surface and rate how realistic it feels compared with the real "
-              "block.\n\nPress SPACE to begin.",
-    "identification": "One scene, three surfaces. Press 1, 2 or 3 to choose a surface and tap "
-                      "it.\nWhen you know them, press N to name each one.\n\n"
-                      "Press SPACE to begin.",
-}
-_MM_TO_PX = 8.0  # cursor scale: stylus height above the surface
+from .participants import Participant
+
+__all__ = ["PsychoPyScreen", "info_dialog"]
+
+_PUNCT = {"comma": ",", "period": ".", "slash": "/", "semicolon": ";", "apostrophe": "'",
+          "minus": "-", "equal": "=", "bracketleft": "(", "bracketright": ")",
+          "backslash": "\\", "grave": "`"}
+_SHIFTED = {"1": "!", "slash": "?", "apostrophe": '"', "semicolon": ":", "9": "(", "0": ")",
+            "minus": "_", "equal": "+", "comma": "<", "period": ">", "2": "@", "3": "#"}
+_NUM = {f"num_{d}": str(d) for d in range(10)}
 
 
-class PsychoPyScreen:
-    """Participant screen; also answers the runner's participant questions.
+def _fmt(text: str, **kw) -> str:
+    """A protocol text with its placeholders filled (unknown ones left as written)."""
+    class Keep(dict):
+        def __missing__(self, key):
+            return "{" + key + "}"
+
+    return text.format_map(Keep(**kw))
+
+
+class PsychoPyScreen(Participant):
+    """A person at the PsychoPy window; also answers the runner's participant questions.
 
     Parameters
     ----------
@@ -43,63 +54,79 @@ class PsychoPyScreen:
     size : (int, int)
         Window size in pixels when not full screen.
     keys : callable, optional
-        Returns newly pressed key names (default: PsychoPy's keyboard).
+        Returns newly pressed keys (default: PsychoPy's keyboard, with modifiers).
     """
 
-    def __init__(self, protocol, fullscreen: bool = False, size: tuple[int, int] = (1024, 768),
-                 keys: Callable[[], list[str]] | None = None, clock: Callable[[], float] = None):
-        from psychopy import visual
+    name = "person"
 
+    def __init__(self, protocol, fullscreen: bool = False, size: tuple[int, int] = (1024, 768),
+                 keys: Callable[[], list] | None = None, clock: Callable[[], float] = None):
+        from psychopy import logging, visual
+
+        # PsychoPy's own messages ("monitor specification not found", …) would scroll
+        # through the operator's live view; only its errors reach the terminal
+        logging.console.setLevel(logging.ERROR)
         self.protocol = protocol
+        self.texts = dict(protocol.texts) if protocol.texts else _default_texts()
         self.win = visual.Window(size, fullscr=fullscreen, units="pix", color=(-0.6, -0.6, -0.6),
                                  allowGUI=not fullscreen, waitBlanking=False)
-        self._text = visual.TextStim(self.win, text="", height=30, wrapWidth=size[0] * 0.8,
+        w, h = self.win.size
+        self.W, self.H = float(w), float(h)
+        self._text = visual.TextStim(self.win, text="", height=0.042 * h, wrapWidth=0.8 * w,
                                      color="white")
-        self._small = visual.TextStim(self.win, text="", height=20, pos=(0, -size[1] * 0.38),
-                                      color=(0.5, 0.5, 0.5), wrapWidth=size[0] * 0.9)
-        self._bar = visual.Rect(self.win, width=0, height=4, pos=(0, -size[1] * 0.45),
-                                fillColor=(0.2, 0.2, 0.2), lineColor=None)
-        self._surface = visual.Rect(self.win, width=size[0] * 0.6, height=16,
-                                    pos=(0, -size[1] * 0.2), fillColor=(0.55, 0.45, 0.35),
+        self._small = visual.TextStim(self.win, text="", height=0.028 * h, pos=(0, -0.38 * h),
+                                      color=(0.5, 0.5, 0.5), wrapWidth=0.9 * w)
+        self._bar = visual.Rect(self.win, width=0, height=max(2.0, 0.005 * h),
+                                pos=(0, -0.45 * h), fillColor=(0.2, 0.2, 0.2), lineColor=None)
+        self._surface = visual.Rect(self.win, width=0.6 * w, height=0.02 * h,
+                                    pos=(0, -0.2 * h), fillColor=(0.55, 0.45, 0.35),
                                     lineColor=None)
-        self._cursor = visual.Circle(self.win, radius=10, fillColor=(0.9, 0.9, 0.2),
+        self._cursor = visual.Circle(self.win, radius=0.013 * h, fillColor=(0.9, 0.9, 0.2),
                                      lineColor=None)
+        self._slider = None
         self._keys = keys or self._psychopy_keys
         self._clock = clock or time.perf_counter
         self.cursor = bool(protocol.cursor)
         self._height: float | None = None
         self._shown_phase: str | None = None
+        self._waiting: tuple | None = None  # what the "please wait" screen shows, while shown
         self.drawn_text: list[str] = []  # what the last frame said (tests read it)
         self._done = False
         self.debrief_text = ""
 
     # ------------------------------------------------------------------ drawing
     @staticmethod
-    def _psychopy_keys() -> list[str]:
+    def _psychopy_keys() -> list:
         from psychopy import event
 
-        return event.getKeys()
+        return event.getKeys(modifiers=True)
+
+    def _names(self) -> list[str]:
+        return [k[0] if isinstance(k, tuple) else k for k in self._keys()]
 
     def _flush(self) -> None:
         self._keys()  # drop everything pressed so far: a double press counts once
 
     def _frame(self, text: str, small: str = "", cursor: bool = False, progress: float = 0.0,
-               flip: bool = True) -> None:
+               flip: bool = True, slider: bool = False) -> None:
         self.drawn_text = [t for t in (text, small) if t]
         if cursor and self.cursor:
             self._surface.draw()
             if self._height is not None:
-                y = self._surface.pos[1] + 8 + 10 + max(0.0, self._height * 1000) * _MM_TO_PX
-                self._cursor.pos = (0, y)
+                top = self._surface.pos[1] + self._surface.height / 2 + self._cursor.radius
+                # 1 mm of stylus height is 1 % of the window's height
+                self._cursor.pos = (0, top + max(0.0, self._height * 1000) * 0.01 * self.H)
                 self._cursor.draw()
         self._text.text = text
-        self._text.pos = (0, 120 if cursor and self.cursor else 0)
+        self._text.pos = (0, 0.16 * self.H if (cursor and self.cursor) or slider else 0)
         self._text.draw()
+        if slider and self._slider is not None:
+            self._slider.draw()
         if small:
             self._small.text = small
             self._small.draw()
         if progress > 0:
-            self._bar.width = self.win.size[0] * 0.6 * min(1.0, progress)
+            self._bar.width = self.W * 0.6 * min(1.0, progress)
             self._bar.draw()
         if flip:
             self.win.flip()
@@ -117,95 +144,239 @@ class PsychoPyScreen:
         t0 = self._clock()
         while True:
             draw()
-            for k in self._keys():
+            for k in self._names():
                 if k in valid:
                     return k, self._clock() - t0
             time.sleep(0.005)
 
+    def t(self, key: str, **kw) -> str:
+        return _fmt(self.texts[key], **kw)
+
     # ------------------------------------------------------------------ screens
     def instructions(self, phase: str) -> None:
-        text = _INSTRUCTIONS.get(phase, f"{phase}\n\nPress SPACE to begin.")
+        ph = next((p for p in self.protocol.phases if p.name == phase), None)
+        kind = ph.kind if ph is not None else "rated"
+        from protocols.texts import INSTRUCTIONS_BY_KIND
+
+        text = self.texts.get("instructions", {}).get(phase) or INSTRUCTIONS_BY_KIND[kind]
+        n = len(ph.samples) if ph is not None else 3
+        text = _fmt(text, n=n, keys=", ".join(str(i + 1) for i in range(n)))
         self._wait(["space"], lambda: self._frame(text))
         self._shown_phase = phase
 
+    def waiting(self, trial) -> None:
+        """From the end of a trial until the operator starts the next: please wait (and R for
+        the real block again, when the phase has reference blocks)."""
+        if trial.kind == "reference":  # the real block is on its way (due, or asked for)
+            self._waiting = (self.t("wait"), self.t("reference_requested"), False)
+        else:
+            ph = next((p for p in self.protocol.phases if p.name == trial.phase), None)
+            offer = ph is not None and ph.references != "none" and trial.kind != "free"
+            self._waiting = (self.t("wait"), self.t("wait_detail") + (
+                "\n" + self.t("reference_offer") if offer else ""), offer)
+        self._flush()
+        self._frame(*self._waiting[:2])
+
+    def poll(self) -> str | None:
+        """Between trials: keep the window alive; ``"reference"`` when R was pressed."""
+        if self._waiting is None:
+            return None
+        keys = self._names()
+        self._frame(*self._waiting[:2])
+        if self._waiting[2] and "r" in keys:
+            self._waiting = (self.t("wait"), self.t("reference_requested"), False)
+            self._frame(*self._waiting[:2])
+            return "reference"
+        return None
+
     def ready(self, trial) -> None:
+        self._waiting = None
         if trial.phase != self._shown_phase:
             self.instructions(trial.phase)
-        self._frame("Please wait", "the experimenter is preparing the next sample")
+
+    def reference(self, trial, sample) -> None:
+        """The real block to tap (shown while the operator places it and during the taps)."""
+        self._waiting = None
+        self._height = None
+        self._frame(self.t("reference"), self.t("reference_detail",
+                                                 block=sample.placement or sample.id),
+                    cursor=True)
 
     def before_window(self, trial, sample_id, device, rng) -> None:
         self._height = None
-        self._frame("Tap", cursor=True)
+        done = self.t("done_hint") if trial.kind == "free" else ""
+        self._frame(self.t("tap"), done, cursor=True)
 
     def keep_tapping(self) -> bool:
-        """Familiarization: another window, unless SPACE was pressed during the last one."""
+        """Familiarization: another window, unless ENTER was pressed during the last one."""
         done, self._done = self._done, False
         return not done
 
     def progress(self, t: float, partial, duration: float) -> None:
         """During a window: the thin bar fills over the window; the cursor follows the stylus."""
-        if self._shown_phase == "familiarization" and "space" in self._keys():
+        keys = self._names()
+        free = self._shown_phase is not None and any(
+            p.name == self._shown_phase and p.kind == "free" for p in self.protocol.phases)
+        if free and "return" in keys:
             self._done = True
-        self._height = getattr(partial, "live_height", None)
+        self._height = partial.live_height
         started = partial.t_first_contact is not None or bool(partial.contacts)
-        self._frame("Tap", cursor=True, progress=(t / duration) if started else 0.0)
+        self._frame(self.t("tap"), self.t("done_hint") if free else "", cursor=True,
+                    progress=(t / duration) if started else 0.0)
 
+    # ------------------------------------------------------------------ answers
     def rate(self, trial, scale, result, rng) -> tuple[int, float]:
-        values = list(scale.values)
-        keymap = {str(v): v for v in values if v < 10}
-        if 10 in values:
-            keymap["0"] = 10
-        hint = "  ".join(str(v) for v in values)
+        mode = scale.entry_mode
         anchors = "   ".join(f"{k} = {v}" for k, v in sorted(scale.anchors.items()))
-        typing = "  (press 0 for 10)" if 10 in values else ""
+        if mode == "keys":
+            return self._rate_keys(scale, anchors)
+        if mode == "slider":
+            return self._rate_slider(scale, anchors)
+        return self._rate_typed(scale, anchors)
+
+    def _rate_keys(self, scale, anchors: str) -> tuple[int, float]:
+        keymap = scale.key_map()
+        hint = "  ".join(str(v) for v in scale.values)
         key, rt = self._wait(keymap, lambda: self._frame(
-            f"{scale.question}\n\n{hint}", anchors + typing))
-        self._frame(f"{scale.question}\n\n{hint}", f"your rating: {keymap[key]}")
+            f"{scale.question}\n\n{hint}", f"{anchors}\n{self.t('rating_keys')}"))
+        self._frame(f"{scale.question}\n\n{hint}", self.t("rating_confirmed", value=keymap[key]))
         return keymap[key], rt
 
+    def _rate_typed(self, scale, anchors: str) -> tuple[int, float]:
+        """Digits typed, ENTER confirms; BACKSPACE deletes; a number off the scale is said so."""
+        typed, note = "", ""
+        self._flush()
+        t0 = self._clock()
+        while True:
+            shown = typed or "_"
+            hint = note or self.t("rating_typed", min=scale.min, max=scale.max)
+            self._frame(f"{scale.question}\n\n{shown}", f"{anchors}\n{hint}")
+            for k in self._names():
+                k = _NUM.get(k, k)
+                if k.isdigit() and len(k) == 1 and len(typed) < 6:
+                    typed, note = typed + k, ""
+                elif k == "minus" and not typed and scale.min < 0:
+                    typed = "-"
+                elif k == "backspace":
+                    typed = typed[:-1]
+                elif k in ("return", "num_enter") and typed not in ("", "-"):
+                    value = int(typed)
+                    if scale.min <= value <= scale.max:
+                        rt = self._clock() - t0
+                        self._frame(f"{scale.question}\n\n{value}",
+                                    self.t("rating_confirmed", value=value))
+                        return value, rt
+                    note = self.t("rating_invalid", value=value, min=scale.min, max=scale.max)
+                    typed = ""
+            time.sleep(0.005)
+
+    def _rate_slider(self, scale, anchors: str) -> tuple[int, float]:
+        """A PsychoPy Slider over the scale's points: arrow keys or the mouse, ENTER."""
+        from psychopy import visual
+
+        values = list(scale.values)
+        labels = [scale.anchors.get(v, str(v)) if v in (values[0], values[-1]) else str(v)
+                  for v in values]
+        self._slider = visual.Slider(self.win, ticks=values, labels=labels, granularity=1,
+                                     size=(0.7 * self.W, 0.03 * self.H), pos=(0, -0.05 * self.H),
+                                     labelHeight=0.025 * self.H, style="rating")
+        value: int | None = None
+        self._flush()
+        t0 = self._clock()
+        try:
+            while True:
+                self._frame(scale.question, self.t("rating_slider"), slider=True)
+                got = self._slider.getRating()
+                if got is not None:
+                    value = int(round(got))
+                for k in self._names():
+                    if k in ("left", "right"):
+                        start = value if value is not None else (values[0] + values[-1]) // 2
+                        value = min(values[-1], max(values[0], start + (1 if k == "right"
+                                                                        else -1)))
+                        self._slider.markerPos = value
+                    elif k in ("return", "num_enter") and value is not None:
+                        rt = self._clock() - t0
+                        self._frame(scale.question, self.t("rating_confirmed", value=value),
+                                    slider=True)
+                        return value, rt
+                time.sleep(0.005)
+        finally:
+            self._slider = None
+
     def choose_surface(self, trial, visited: set[int]) -> int | None:
-        """Identification: 1–3 chooses a surface to tap; N (once all were tapped) ends."""
+        """Identification: number keys choose a surface to tap; N (once all were tapped)."""
         n = len(trial.samples)
-        valid = [str(i + 1) for i in range(n)] + (["n"] if len(visited) == n else [])
-        tapped = ", ".join(str(i + 1) for i in sorted(visited)) or "none yet"
+        keys = ", ".join(str(i + 1) for i in range(n))
+        valid = [str(i + 1) for i in range(n)] + [f"num_{i + 1}" for i in range(n)] + (
+            ["n"] if len(visited) == n else [])
+        tapped = ", ".join(str(i + 1) for i in sorted(visited)) or "—"
         key, _ = self._wait(valid, lambda: self._frame(
-            "Choose a surface: 1, 2 or 3", f"tapped: {tapped}"
-            + ("   — press N to name them" if len(visited) == n else ""), cursor=True))
-        return None if key == "n" else int(key) - 1
+            self.t("choose", keys=keys), self.t("tapped", list=tapped)
+            + (f"   — {self.t('name_hint')}" if len(visited) == n else ""), cursor=True))
+        return None if key == "n" else int(key.removeprefix("num_")) - 1
 
     def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:
-        keys = {c[0]: c for c in choices}
-        names = "   ".join(f"{c[0].upper()} = {c}" for c in choices)
+        """Each surface named with the number key shown beside each name."""
+        keymap = choice_keys(choices)
+        names = "   ".join(f"{i + 1} = {c}" for i, c in enumerate(choices))
         answers, total = [], 0.0
         for i in range(len(trial.samples)):
-            key, rt = self._wait(keys, lambda i=i: self._frame(f"Surface {i + 1} is …", names))
-            answers.append(keys[key])
+            key, rt = self._wait(keymap, lambda i=i: self._frame(
+                self.t("name", i=i + 1), self.t("names", names=names)))
+            answers.append(keymap[key])
             total += rt
         return answers, total
 
-    def pause(self) -> None:
-        self._frame("Paused", "the experimenter will continue shortly")
+    def pause(self, fault: bool = False) -> None:
+        self._waiting = None
+        self._frame(self.t("paused"), self.t("paused_detail"))
 
     def debrief(self) -> str:
-        """Free text: what made a sample feel real? Enter ends, Backspace deletes."""
+        """Free text: what made a sample feel real? ENTER ends, BACKSPACE deletes; SHIFT gives
+        capitals and the shifted signs."""
         if self.debrief_text:
             return self.debrief_text
         text = ""
         self._flush()
         while True:
-            self._frame("What made a sample feel real or not?\n\n" + (text or "…"),
-                        "type, then press ENTER")
-            for k in self._keys():
-                if k == "return":
+            self._frame(f"{self.t('debrief')}\n\n{text or '…'}", self.t("debrief_hint"))
+            for item in self._keys():
+                k, mods = (item if isinstance(item, tuple) else (item, {}))
+                shift = bool(mods.get("shift") or mods.get("capslock")) if mods else False
+                if k in ("return", "num_enter"):
                     self.debrief_text = text
                     return text
                 if k == "backspace":
                     text = text[:-1]
                 elif k == "space":
                     text += " "
+                elif shift and k in _SHIFTED:
+                    text += _SHIFTED[k]
+                elif k in _PUNCT:
+                    text += _PUNCT[k]
                 elif len(k) == 1:
-                    text += k
+                    text += k.upper() if shift else k
             time.sleep(0.005)
+
+    def finished(self, summary: str = "") -> None:
+        self._frame(self.t("thanks"))
 
     def close(self) -> None:
         self.win.close()
+
+
+def _default_texts() -> dict:
+    from protocols.texts import resolve_texts
+
+    return resolve_texts({}, {})
+
+
+def info_dialog(fields: dict, title: str = "Participant") -> dict | None:
+    """A PsychoPy dialog asking the fields a protocol declares (``[participant] fields``):
+    a text field per default, a choice per list. Returns the answers, or None if cancelled."""
+    from psychopy import gui
+
+    info = {k: (list(v) if isinstance(v, list) else v) for k, v in fields.items()}
+    dlg = gui.DlgFromDict(info, title=title, sortKeys=False)
+    return dict(info) if dlg.OK else None

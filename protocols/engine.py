@@ -37,8 +37,13 @@ Statuses of an attempt
 Every count is capped, so a session always ends: a device that saturates, times out or
 fails on every attempt still reaches the end of the plan.
 
+``estop``
+    the operator's e-stop (or the device's watchdog) stopped the attempt: the item stays
+    first and is retried once the fault is cleared, not counted against any cap.
+
 Operator pauses are log entries with status ``paused`` / ``resumed``; while paused,
-:meth:`SessionEngine.next_trial` returns :data:`PAUSED`.
+:meth:`SessionEngine.next_trial` returns :data:`PAUSED`. A ``reference`` entry (a real block
+tapped for comparison) does not change the order.
 """
 
 from __future__ import annotations
@@ -58,7 +63,7 @@ __all__ = ["SessionEngine", "Trial", "Attempt", "Done", "Paused", "DONE", "PAUSE
            "SATURATION_SAFETY_CAP"]
 
 STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "timed_out",
-            "excluded_timeout", "aborted_device", "excluded_device", "skipped")
+            "excluded_timeout", "aborted_device", "excluded_device", "skipped", "estop")
 FINAL_STATUSES = ("valid", "excluded_saturated", "excluded_timeout", "excluded_device", "skipped")
 #: a counted failure → (the status at its cap, the protocol's cap)
 _CAPPED = {"saturated": "excluded_saturated", "timed_out": "excluded_timeout",
@@ -67,7 +72,7 @@ _CAPPED = {"saturated": "excluded_saturated", "timed_out": "excluded_timeout",
 #: (the paper redrew without a cap; no participant saturates one sample this often, and a
 #: device that saturates on every attempt must still let the session end)
 SATURATION_SAFETY_CAP = 20
-_CONTROL = ("paused", "resumed")
+_CONTROL = ("paused", "resumed", "reference")
 RNG_ALGORITHM = "numpy PCG64 via SeedSequence(seed).spawn(2): [plan, redraw]"
 
 
@@ -196,11 +201,18 @@ class SessionEngine:
         self.seed = int(seed)
         self.participant = participant
         self.counterbalance_row = counterbalance_row
-        needs_row = any(p.block_order == "williams" for p in protocol.phases)
-        if needs_row and counterbalance_row is None:
+        williams = [p for p in protocol.phases if p.block_order == "williams"]
+        if williams and counterbalance_row is None:
             raise SessionSetupError(f"protocol '{protocol.name}' counterbalances block order "
                                     "with a Williams square: give the participant's "
                                     "counterbalance row (--row)")
+        for p in williams:
+            n = len(self.williams_rows(p))
+            if not isinstance(counterbalance_row, int) or not 0 <= counterbalance_row < n:
+                raise SessionSetupError(f"counterbalance row {counterbalance_row!r} is not a "
+                                        f"row of phase {p.name!r}'s Williams square: rows "
+                                        f"0–{n - 1} ({n} orders; a row beyond them would "
+                                        "repeat one silently)")
         self._plan = self._build_plan()
 
     # ------------------------------------------------------------------ identity
@@ -249,8 +261,8 @@ class SessionEngine:
         if phase.block_order == "random":
             names = [names[i] for i in rng.permutation(len(names))]
         elif phase.block_order == "williams":
-            rows = williams_square(len(names))
-            names = [names[i] for i in rows[self.counterbalance_row % len(rows)]]
+            rows = self.williams_rows(phase)
+            names = [names[i] for i in rows[self.counterbalance_row]]
         out = []
         for block in names:
             members = [s for s in phase.samples if block is None or samples[s].block == block]
@@ -260,6 +272,12 @@ class SessionEngine:
                 block_items = [block_items[i] for i in rng.permutation(len(block_items))]
             out.extend(block_items)
         return out
+
+    def williams_rows(self, phase: Phase) -> list[list[int]]:
+        """The Williams square of ``phase``'s blocks (its rows are the counterbalance rows)."""
+        blocks = {self.protocol.samples[s].block for s in phase.samples} if phase.blocks \
+            else {None}
+        return williams_square(len(blocks))
 
     def plan(self) -> list[Item]:
         """The uninterrupted order of items (no saturations, no operator actions)."""
@@ -279,6 +297,8 @@ class SessionEngine:
                 continue
             if entry.status == "resumed":
                 st.paused = False
+                continue
+            if entry.status == "reference":
                 continue
             if not st.queue:
                 raise LogMismatch(f"log entry {n + 1} ({entry.item}, {entry.status}) comes after "
@@ -306,7 +326,7 @@ class SessionEngine:
             elif status in ("saturated", "requeued", "timed_out"):
                 st.queue.pop(0)
                 self._reinsert(st.queue, head, rng)
-            # aborted_device: the item stays first and is retried
+            # aborted_device, estop: the item stays first and is retried
         return st
 
     def cap(self, kind: str) -> int:

@@ -26,7 +26,9 @@ from device.scene import AccelSinusoid, unknown_key
 
 from ._toml_lines import key_lines, line_of
 from .model import (
+    ENTRIES,
     NORMALIZATIONS,
+    REFERENCES,
     SCORINGS,
     SESSION_POLICIES,
     Answer,
@@ -159,7 +161,7 @@ class _Ctx:
 
 
 _TOP = {"protocol", "window", "rating", "answer", "saturation", "operator", "limits", "display",
-        "samples", "designs", "phases", "analysis", "attempts"}
+        "samples", "designs", "phases", "analysis", "attempts", "texts", "participant"}
 
 
 def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | None = None
@@ -203,6 +205,8 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
     limits = _limits(cx, data.get("limits", {}))
     disp = cx.table(("display",), data.get("display", {}), {"cursor"})
     cursor = cx.boolean(("display", "cursor"), disp.get("cursor", False))
+    texts = _texts(cx, data.get("texts", {}))
+    fields_ = _participant_fields(cx, data.get("participant", {}))
     ana = cx.table(("analysis",), data.get("analysis", {}), {"sessions"})
     sessions = cx.string(("analysis", "sessions"), ana.get("sessions", "first"),
                          SESSION_POLICIES)
@@ -211,6 +215,7 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
     for i, raw in enumerate(_array(cx, ("samples",), data.get("samples", []))):
         _add(cx, samples, _sample(cx, i, raw), ("samples", i, "id"))
     _link_libraries(cx, samples)
+    _check_references(cx, samples)
     for i, raw in enumerate(_array(cx, ("designs",), data.get("designs", []))):
         for path, s in _design(cx, i, raw):
             _add(cx, samples, s, path)
@@ -225,13 +230,17 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
     for i, n in enumerate(names):
         if names.index(n) != i:
             raise cx.error(("phases", i, "name"), f"duplicate phase name {n!r}")
+    for k in texts["instructions"]:
+        if k not in names:
+            raise cx.error(("texts", "instructions", k), f"no phase named {k!r}; phases: "
+                           f"{', '.join(names)}")
 
     proto = Protocol(
         name=name, title=title, description=description.strip(), source=source,
         sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), samples=samples,
         phases=phases, window=window, rating=rating, answer=answer, saturation=saturation,
         placeholders=placeholders, limits=limits, cursor=cursor, sessions=sessions, text=text,
-        attempts=attempts)
+        attempts=attempts, texts=texts, participant_fields=fields_)
     if device is not None:
         _check_device(cx, proto, device)
     return proto
@@ -276,14 +285,15 @@ def _window(cx: _Ctx, raw: Any) -> Window:
 
 
 def _rating(cx: _Ctx, raw: Any) -> RatingScale:
-    r = cx.table(("rating",), raw, {"min", "max", "question", "anchors"},
+    r = cx.table(("rating",), raw, {"min", "max", "question", "anchors", "entry"},
                  {"min", "max", "question"})
     lo = int(cx.number(("rating", "min"), r["min"], integer=True))
     hi = int(cx.number(("rating", "max"), r["max"], integer=True))
     if lo >= hi:
         raise cx.error(("rating", "max"), f"scale max must be greater than min ({lo}), got {hi}")
-    if hi - lo > 99:
-        raise cx.error(("rating", "max"), f"a scale of {hi - lo + 1} points cannot be typed")
+    if hi - lo > 1000 or max(abs(lo), abs(hi)) > 99_999:
+        raise cx.error(("rating", "max"), f"a scale of {hi - lo + 1} points ({lo}–{hi}) is "
+                       "not a rating scale; at most 1001 points of up to 5 digits")
     anchors: dict[int, str] = {}
     raw_anchors = r.get("anchors", {})
     if not isinstance(raw_anchors, Mapping):
@@ -297,7 +307,12 @@ def _rating(cx: _Ctx, raw: Any) -> RatingScale:
         if not lo <= k <= hi:
             raise cx.error(("rating", "anchors", key), f"anchor {k} is outside the scale {lo}–{hi}")
         anchors[k] = cx.string(("rating", "anchors", key), text)
-    return RatingScale(lo, hi, cx.string(("rating", "question"), r["question"]), anchors)
+    entry = cx.string(("rating", "entry"), r.get("entry", "auto"), ENTRIES)
+    if entry == "keys" and not (0 <= lo and hi <= 9):
+        raise cx.error(("rating", "entry"), f"one number key cannot enter {lo}–{hi}; use "
+                       "\"typed\" (digits and ENTER) or \"slider\"")
+    return RatingScale(lo, hi, cx.string(("rating", "question"), r["question"]), anchors,
+                       entry)
 
 
 def _answer(cx: _Ctx, raw: Any) -> Answer:
@@ -307,8 +322,11 @@ def _answer(cx: _Ctx, raw: Any) -> Answer:
     if not isinstance(choices, list) or len(choices) < 2:
         raise cx.error(("answer", "choices"), f"needs at least two names, got {choices!r}")
     names = tuple(cx.ident(("answer", "choices", i), c) for i, c in enumerate(choices))
-    if len(set(names)) != len(names):
+    if len({n.lower() for n in names}) != len(names):
         raise cx.error(("answer", "choices"), f"names must be distinct, got {list(names)}")
+    if len(names) > 9:
+        raise cx.error(("answer", "choices"), f"{len(names)} names cannot each have a number "
+                       "key (1–9); at most 9")
     return Answer(kind, names)
 
 
@@ -358,7 +376,8 @@ def _scene(cx: _Ctx, path: tuple, name: str, raw: Any) -> Scene:
 
 def _sample(cx: _Ctx, i: int, raw: Any) -> Sample:
     path = ("samples", i)
-    s = cx.table(path, raw, {"id", "scene", "placement", "block", "factors"}, {"id", "scene"})
+    s = cx.table(path, raw, {"id", "scene", "placement", "block", "factors", "reference",
+                             "rated"}, {"id", "scene"})
     sid = cx.ident((*path, "id"), s["id"])
     scene = _scene(cx, (*path, "scene"), sid, s["scene"])
     placement = s.get("placement", sid if scene.is_real else None)
@@ -375,7 +394,10 @@ def _sample(cx: _Ctx, i: int, raw: Any) -> Sample:
             raise cx.error((*path, "factors", k), "a factor name is letters, digits, '_', '-' "
                            "or '.', and not 'sample' (the one-way factor)")
         factors[k] = cx.ident((*path, "factors", k), v)
-    return Sample(id=sid, scene=scene, placement=placement, block=block, factors=factors)
+    reference = cx.ident((*path, "reference"), s["reference"]) if "reference" in s else None
+    rated = cx.boolean((*path, "rated"), s.get("rated", True))
+    return Sample(id=sid, scene=scene, placement=placement, block=block, factors=factors,
+                  reference=reference, rated=rated)
 
 
 _FACTORS = ("frequency", "decay", "slope")
@@ -432,7 +454,7 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
            rating: RatingScale | None) -> Phase:
     path = ("phases", i)
     p = cx.table(path, raw, {"name", "kind", "samples", "repetitions", "order", "blocks",
-                             "block_order", "analysis"}, {"name", "samples"})
+                             "block_order", "analysis", "references"}, {"name", "samples"})
     name = cx.ident((*path, "name"), p["name"])
     kind = cx.string((*path, "kind"), p.get("kind", "rated"), ("rated", "free", "identification"))
     sel = p["samples"]
@@ -471,8 +493,58 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
     elif kind == "rated" and rating is None:
         raise cx.error((*path, "kind"), "a rated phase needs a [rating] scale")
     design = _phase_design(cx, (*path, "analysis"), p.get("analysis", {}), kind, ids, samples)
+    has_refs = any(samples[s].reference for s in ids)
+    default = ("start" if kind == "identification" else "block") if has_refs else "none"
+    references = cx.string((*path, "references"), p.get("references", default), REFERENCES)
+    if references != "none" and not has_refs:
+        raise cx.error((*path, "references"), "none of the phase's samples has a 'reference' "
+                       "(the real block to compare with)")
     return Phase(name=name, kind=kind, samples=ids, repetitions=reps, order=order,
-                 blocks=blocks, block_order=block_order, design=design)
+                 blocks=blocks, block_order=block_order, design=design, references=references)
+
+
+def _check_references(cx: _Ctx, samples: dict[str, Sample]) -> None:
+    for i, (sid, s) in enumerate(samples.items()):
+        if s.reference is None:
+            continue
+        ref = samples.get(s.reference)
+        if ref is None or not ref.is_real:
+            raise cx.error(("samples", i, "reference"), f"sample {sid!r}: the reference must "
+                           f"be a real sample of this protocol, got {s.reference!r}")
+
+
+def _texts(cx: _Ctx, raw: Any) -> dict:
+    from .texts import DEFAULT_TEXTS, resolve_texts
+
+    t = cx.table(("texts",), raw, {*DEFAULT_TEXTS, "instructions"})
+    over = {k: cx.string(("texts", k), v) for k, v in t.items() if k != "instructions"}
+    ins = cx.table(("texts", "instructions"), t.get("instructions", {}),
+                   set(t.get("instructions", {})) if isinstance(t.get("instructions"), Mapping)
+                   else set())
+    return resolve_texts(over, {k: cx.string(("texts", "instructions", k), v)
+                                for k, v in ins.items()})
+
+
+def _participant_fields(cx: _Ctx, raw: Any) -> dict:
+    p = cx.table(("participant",), raw, {"fields"})
+    fields_ = p.get("fields", {})
+    if not isinstance(fields_, Mapping):
+        raise cx.error(("participant", "fields"), "must be a table: name = \"default\" or "
+                       "name = [\"choice\", …]")
+    out = {}
+    for k, v in fields_.items():
+        if not _ID.match(k):
+            raise cx.error(("participant", "fields", k), "a field name is letters, digits, "
+                           "'_', '-' or '.'")
+        if isinstance(v, list):
+            if not v or not all(isinstance(c, str) and c for c in v):
+                raise cx.error(("participant", "fields", k), "choices must be non-empty "
+                               f"strings, got {v!r}")
+        elif not isinstance(v, str):
+            raise cx.error(("participant", "fields", k), f"must be a default text or a list of "
+                           f"choices, got {v!r}")
+        out[k] = v
+    return out
 
 
 def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: str, ids: tuple[str, ...],

@@ -8,8 +8,12 @@ from dataclasses import dataclass, field
 from device import Scene
 
 __all__ = ["Sample", "Window", "RatingScale", "Answer", "SaturationPolicy", "Attempts", "Limits",
-           "Phase",
-           "PhaseDesign", "Protocol", "ROLES", "NORMALIZATIONS", "SCORINGS", "SESSION_POLICIES"]
+           "Phase", "PhaseDesign", "Protocol", "ROLES", "ENTRIES", "NORMALIZATIONS", "SCORINGS",
+           "SESSION_POLICIES", "REFERENCES"]
+
+#: when a phase's real reference blocks are tapped: never, at the start of each block, or
+#: all of them once at the start of the phase (and, whenever it has them, on request)
+REFERENCES = ("none", "block", "start")
 
 #: what a phase is for: analysed, practice (rated but not analysed), or none (not rated)
 ROLES = ("analysed", "practice", "none")
@@ -44,9 +48,10 @@ class Sample:
     params : mapping of str → float
         The parameter values behind the levels (e.g. ``frequency`` [Hz]).
     reference : str or None
-        Id of the real sample to compare against (not itself rated).
+        Id of the real sample to compare against (not itself rated): the operator places it
+        at the start of each block (or of the phase) and whenever the participant asks.
     rated : bool
-        False for reference samples that are only tapped on request.
+        False for reference samples (real blocks tapped for comparison, not rated).
     """
 
     id: str
@@ -71,6 +76,12 @@ class Window:
     timeout: float = 30.0
 
 
+#: how a participant enters a rating: one number key, digits typed and confirmed with ENTER,
+#: or a slider (arrow keys or the mouse, ENTER); ``auto`` is one key when every value is a
+#: single digit, typed otherwise
+ENTRIES = ("auto", "keys", "typed", "slider")
+
+
 @dataclass(frozen=True)
 class RatingScale:
     """Integer rating scale shown after each rated window."""
@@ -79,10 +90,34 @@ class RatingScale:
     max: int
     question: str
     anchors: Mapping[int, str] = field(default_factory=dict)
+    entry: str = "auto"
 
     @property
     def values(self) -> range:
         return range(self.min, self.max + 1)
+
+    @property
+    def entry_mode(self) -> str:
+        """``keys``, ``typed`` or ``slider`` (``auto`` resolved)."""
+        if self.entry != "auto":
+            return self.entry
+        return "keys" if 0 <= self.min and self.max <= 9 else "typed"
+
+    def key_map(self) -> dict[str, int]:
+        """For one-key entry: the keys (PsychoPy's names, top row and keypad) that give each
+        point. Only single digits have a key; a point without one cannot be answered."""
+        return {f"{pre}{v}": v for v in self.values if 0 <= v <= 9 for pre in ("", "num_")}
+
+
+#: how many choices number keys can name (1–9)
+MAX_CHOICES = 9
+
+
+def choice_keys(choices) -> dict[str, str]:
+    """The number keys (top row and keypad) that name each choice, 1 for the first; choices
+    beyond :data:`MAX_CHOICES` have none."""
+    return {f"{pre}{i + 1}": c for i, c in enumerate(tuple(choices)[:MAX_CHOICES])
+            for pre in ("", "num_")}
 
 
 @dataclass(frozen=True)
@@ -91,6 +126,10 @@ class Answer:
 
     kind: str
     choices: tuple[str, ...]
+
+    def key_map(self) -> dict[str, str]:
+        """The number keys that name each choice (:func:`choice_keys`)."""
+        return choice_keys(self.choices)
 
 
 @dataclass(frozen=True)
@@ -192,6 +231,7 @@ class Phase:
     blocks: str | None = None
     block_order: str = "random"
     design: PhaseDesign = field(default_factory=PhaseDesign)
+    references: str = "none"  #: when the real reference blocks are tapped: none | block | start
 
 
 @dataclass(frozen=True)
@@ -213,6 +253,8 @@ class Protocol:
     limits: Limits
     cursor: bool = False
     attempts: Attempts = field(default_factory=Attempts)
+    texts: Mapping[str, object] = field(default_factory=dict)
+    participant_fields: Mapping[str, object] = field(default_factory=dict)
     sessions: str = "first"
     text: str = ""
 

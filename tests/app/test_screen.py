@@ -1,7 +1,8 @@
 """The participant screen in a real PsychoPy window under Xvfb, with screenshots.
 
 Screenshots land in tests/artifacts/screens/ (and are copied to docs/screens/ for the
-README). Key presses are injected; everything else — window, text, drawing — is real.
+README). Key presses are injected here; tests/app/test_test_day.py drives whole sessions
+with real X key events (xdotool). Everything else — window, text, drawing — is real.
 """
 
 from types import SimpleNamespace
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from device import ContactEvent, WindowResult
-from protocols import load_protocol
+from protocols import load_protocol, parse_protocol, protocol_text
 
 psychopy = pytest.importorskip("psychopy", reason="the `ui` extra is installed by make test")
 
@@ -42,47 +43,88 @@ def shots(artifacts):
     return d
 
 
-def make(protocol, keys):
+def make(protocol, keys, size=(800, 600)):
     from app.screen import PsychoPyScreen
 
-    return PsychoPyScreen(load_protocol(protocol), size=(800, 600), keys=keys)
+    p = protocol if not isinstance(protocol, str) else load_protocol(protocol)
+    return PsychoPyScreen(p, size=size, keys=keys)
 
 
-TRIAL = SimpleNamespace(phase="testing", samples=("wood",), trial_index=3, attempt=1)
+def edited(name, old, new):
+    source, text = protocol_text(name)
+    assert old in text
+    return parse_protocol(text.replace(old, new), source)
+
+
+TRIAL = SimpleNamespace(phase="testing", samples=("wood",), trial_index=3, attempt=1,
+                        kind="rated")
+FREE = SimpleNamespace(phase="familiarization", samples=("wood",), trial_index=1, attempt=1,
+                       kind="free")
 ID_TRIAL = SimpleNamespace(phase="identification", samples=("wood", "rubber", "aluminum"),
-                           trial_index=1, attempt=1)
+                           trial_index=1, attempt=1, kind="identification")
 
 
-def test_realism_screens_are_text_only(xdisplay, shots):
-    scr = make("realism", Keys([], ["x", "space"], []))  # the last: polled during the window
+def test_realism_screens_are_text_only_and_say_the_keys_they_use(xdisplay, shots):
+    scr = make("realism", Keys([], ["return", "space"], ["return"]))
     try:
         scr.instructions("familiarization")
-        assert "Press SPACE when you are done" in scr.drawn_text[0]
-        scr.screenshot(shots / "realism-instructions.png", text=scr.drawn_text[0])
-        scr.before_window(TRIAL, "wood", None, None)
-        assert scr.drawn_text == ["Tap"]
+        text = scr.drawn_text[0]
+        # the keys named are the keys used: SPACE begins, ENTER ends familiarization
+        assert "Press SPACE to begin" in text and "When you are done, press ENTER" in text
+        scr.screenshot(shots / "realism-instructions.png", text=text)
+        scr.before_window(FREE, "wood", None, None)
+        assert scr.drawn_text == ["Tap", "press ENTER when you are done"]
         partial = WindowResult(10_000, 1.0, [ContactEvent(1.0, 0.1)])
         partial.live_height = 0.01
         scr.progress(2.5, partial, 5.0)
+        assert not scr.keep_tapping()  # ENTER during the window: done
         scr.screenshot(shots / "realism-tap.png", text="Tap", cursor=True, progress=0.5)
         std, img = image_stats(shots / "realism-tap.png")
         assert std > 1.0  # not blank
-        # text only: where the factorial screen draws its surface and cursor, nothing
-        assert not scr.cursor
+        assert not scr.cursor  # text only: where the factorial screen draws, nothing
         assert np.ptp(img[380:460, :]) < 5
     finally:
         scr.close()
 
 
-def test_rating_ignores_other_keys_and_counts_a_double_press_once(xdisplay, shots):
+def test_between_trials_please_wait_until_the_operator_starts(xdisplay, shots):
+    scr = make("factorial", Keys([], ["x"], ["r"], [], []))
+    trial = SimpleNamespace(phase="rating", samples=("wood-HHH",), trial_index=4, attempt=1,
+                            kind="rated")
+    try:
+        scr.waiting(trial)
+        assert scr.drawn_text[0] == "Please wait"
+        assert "Press R to tap the real block again" in scr.drawn_text[1]
+        assert scr.poll() is None  # another key: nothing
+        scr.screenshot(shots / "between-trials.png", text=scr.drawn_text[0],
+                       small=scr.drawn_text[1])
+        assert scr.poll() == "reference"  # R: the participant asks for the real block
+        assert "is placing the real block" in scr.drawn_text[1]
+        assert scr.poll() is None  # asked once
+        scr.waiting(SimpleNamespace(**{**vars(trial), "kind": "reference"}))  # being placed
+        assert "is placing the real block" in scr.drawn_text[1]
+        assert "Press R" not in scr.drawn_text[1]
+        ref = load_protocol("factorial").samples["wood-real"]
+        scr.reference(trial, ref)
+        assert scr.drawn_text[0] == "Tap the real block" and "real wood block" in \
+            scr.drawn_text[1]
+        scr.screenshot(shots / "reference-block.png", text=scr.drawn_text[0],
+                       small=scr.drawn_text[1], cursor=True)
+        assert image_stats(shots / "reference-block.png")[0] > 1.0
+    finally:
+        scr.close()
+
+
+def test_single_key_rating_ignores_other_keys_and_counts_a_double_press_once(xdisplay, shots):
     keys = Keys(["a", "5", "5"],  # flushed: pressed before the screen appeared
                 ["x", "9", "space"], ["6", "6"])
     scr = make("realism", keys)
     try:
         scale = scr.protocol.rating
+        assert scale.entry_mode == "keys"
         rating, rt = scr.rate(TRIAL, scale, None, None)
         assert rating == 6 and rt >= 0  # 'x', '9' (off the 1–7 scale) and 'space' ignored
-        assert "your rating: 6" in scr.drawn_text[1]
+        assert scr.drawn_text[1] == "Your rating: 6"
         scr.screenshot(shots / "realism-rating.png",
                        text=f"{scale.question}\n\n1  2  3  4  5  6  7",
                        small="1 = not at all like the real wood   7 = exactly like the real wood")
@@ -91,14 +133,41 @@ def test_rating_ignores_other_keys_and_counts_a_double_press_once(xdisplay, shot
         scr.close()
 
 
-def test_factorial_rating_types_ten_as_zero(xdisplay, shots):
-    scr = make("factorial", Keys([], ["0"]))
+def test_ratings_above_nine_are_typed_and_confirmed(xdisplay, shots):
+    """On 1–10 a 0 used to record 10; on 1–100 typing '100' recorded 1. Ratings are now
+    typed and confirmed with ENTER; off the scale is said so and asked again."""
+    scr = make("factorial", Keys([], ["0"], ["return"], ["1", "0"], ["return"]))
     try:
+        assert scr.protocol.rating.entry_mode == "typed"
         rating, _ = scr.rate(TRIAL, scr.protocol.rating, None, None)
         assert rating == 10
-        text = scr.drawn_text
-        scr.screenshot(shots / "factorial-rating.png", text=text[0],
-                       small="1 = least realistic   10 = most realistic  (press 0 for 10)")
+        scr.screenshot(shots / "factorial-rating.png", text=f"{scr.protocol.rating.question}"
+                       "\n\n10", small="1 = least realistic   10 = most realistic\nType a "
+                       "number from 1 to 10, then press ENTER.")
+    finally:
+        scr.close()
+    p = edited("realism", "min = 1\nmax = 7", "min = 0\nmax = 100")
+    scr = make(p, Keys([], ["1", "0", "1", "return"], ["backspace", "backspace", "backspace",
+                                                        "1", "0", "0"], ["return"]))
+    try:
+        rating, _ = scr.rate(TRIAL, p.rating, None, None)
+        assert rating == 100  # 101 was refused ("not on the scale"), then 100
+    finally:
+        scr.close()
+    p = edited("realism", "min = 1\nmax = 7", "min = 0\nmax = 10")
+    scr = make(p, Keys([], ["0", "return"]))
+    try:
+        assert scr.rate(TRIAL, p.rating, None, None)[0] == 0  # 0 is 0 on a 0–10 scale
+    finally:
+        scr.close()
+
+
+def test_a_slider_rating(xdisplay, shots):
+    p = edited("realism", 'question = "How well', 'entry = "slider"\nquestion = "How well')
+    scr = make(p, Keys([], ["return"], ["right", "right"], ["left"], ["return"]))
+    try:
+        rating, _ = scr.rate(TRIAL, p.rating, None, None)
+        assert rating == 4 + 2 - 1  # from the middle (4 on 1–7): right, right, left
     finally:
         scr.close()
 
@@ -112,15 +181,16 @@ def test_factorial_tap_screen_draws_surface_and_cursor(xdisplay, shots):
         scr.progress(0.0, partial, 5.0)
         scr.screenshot(shots / "factorial-tap.png", text="Tap", cursor=True)
         std, img = image_stats(shots / "factorial-tap.png")
-        # the surface band (and the cursor above it) are drawn
         assert np.ptp(img[380:460, :]) > 50 and (img[350:, :] > 100).sum() > 2000
     finally:
         scr.close()
 
 
-def test_identification_switches_surfaces_then_names_each(xdisplay, shots):
-    # each screen first clears the key buffer (the [] batches), then reads keys
-    keys = Keys([], ["2"], [], ["1"], [], ["n"], ["3"], [], ["n"], [], ["w"], [], ["r"], [], ["a"])
+def test_identification_surfaces_and_names_by_number_keys(xdisplay, shots):
+    """Choices that share a first letter or use capitals left the participant stuck: names
+    are now answered with the number shown beside each."""
+    keys = Keys([], ["2"], [], ["1"], [], ["n"], ["3"], [], ["n"], [], ["2"], [], ["1"], [],
+                ["3"])
     scr = make("identification", keys)
     try:
         visited: set[int] = set()
@@ -129,29 +199,68 @@ def test_identification_switches_surfaces_then_names_each(xdisplay, shots):
             order.append(k)
             visited.add(k)
             if len(visited) == 2:
-                scr.screenshot(shots / "identification-choose.png", text="Choose a surface: 1, 2 "
-                               "or 3", small="tapped: 1, 2", cursor=True)
-        # 'n' is refused until all three were tapped; '3' then completes the set
-        assert order == [1, 0, 2]
-        answers, rt = scr.identify(ID_TRIAL, ("rubber", "wood", "aluminum"), [], None)
-        assert answers == ["wood", "rubber", "aluminum"]
+                scr.screenshot(shots / "identification-choose.png",
+                               text="Choose a surface: 1, 2, 3", small="tapped: 1, 2",
+                               cursor=True)
+        assert order == [1, 0, 2]  # 'n' is refused until all three were tapped
+        choices = ("Rubber", "rosewood", "aluminum")  # a shared first letter, a capital
+        answers, _ = scr.identify(ID_TRIAL, choices, [], None)
+        assert answers == ["rosewood", "Rubber", "aluminum"]
+        assert scr.drawn_text[1] == "1 = Rubber   2 = rosewood   3 = aluminum"
         scr.screenshot(shots / "identification-answer.png", text="Surface 1 is …",
-                       small="R = rubber   W = wood   A = aluminum")
+                       small="1 = rubber   2 = wood   3 = aluminum")
     finally:
         scr.close()
 
 
-def test_pause_and_debrief(xdisplay, shots):
-    scr = make("realism", Keys([], ["s", "u", "d", "d", "e", "n", "backspace", "space", "s",
-                                    "t", "o", "p", "return"]))
+def test_pause_and_a_debrief_with_capitals_and_punctuation(xdisplay, shots):
+    shift = {"shift": True}
+    scr = make("realism", Keys([], [("a", shift), "space", "s", "u", "d", "d", "e", "n"],
+                               ["backspace", "comma", "space", "s", "t", "o", "p",
+                                ("1", shift), "return"]))
     try:
-        scr.pause()
+        scr.pause(fault=True)
         assert scr.drawn_text[0] == "Paused"
         scr.screenshot(shots / "pause.png", text="Paused",
-                       small="the experimenter will continue shortly")
+                       small="The experimenter will continue shortly.")
         text = scr.debrief()
-        assert text == "sudde stop"
+        assert text == "A sudde, stop!"
         scr.screenshot(shots / "debrief.png", text="What made a sample feel real or not?\n\n"
-                       "a sudden stop, no buzzing", small="type, then press ENTER")
+                       "A sudden stop, no buzzing.", small="Type, then press ENTER.")
+    finally:
+        scr.close()
+
+
+def test_texts_come_from_the_protocol(xdisplay):
+    p = edited("realism", "[saturation]", '[texts]\nlanguage = "de"\nwait = "Bitte warten"\n'
+               '[texts.instructions]\ntesting = "Klopfen Sie und bewerten Sie."\n\n[saturation]')
+    assert p.texts["language"] == "de"
+    scr = make(p, Keys([], [], ["space"]))
+    try:
+        scr.waiting(TRIAL)
+        assert scr.drawn_text[0] == "Bitte warten"
+        scr.instructions("testing")
+        assert scr.drawn_text[0] == "Klopfen Sie und bewerten Sie."
+    finally:
+        scr.close()
+
+
+@pytest.mark.parametrize("size", [(1024, 768), (1920, 1080)])
+def test_layout_scales_with_the_window(xdisplay, shots, size):
+    """The same screen at 1024×768 and 1920×1080: text, surface, cursor and bar keep their
+    places as fractions of the window."""
+    scr = make("factorial", Keys([]), size=size)
+    try:
+        w, h = scr.win.size
+        assert (w, h) == size
+        partial = WindowResult(10_000, 1.0, [ContactEvent(1.0, 0.1)])
+        partial.live_height = 0.01
+        scr._height = 0.01
+        name = shots / f"factorial-tap-{w}x{h}.png"
+        scr.screenshot(name, text="Tap", cursor=True, progress=0.5)
+        _, img = image_stats(name)
+        rows = np.flatnonzero((img > 90).sum(axis=1) > 0.5 * w)  # the surface band
+        assert rows.size and abs(rows.mean() / h - 0.7) < 0.02  # 0.2 h below the centre
+        assert abs(scr._text.height / h - 0.042) < 1e-6
     finally:
         scr.close()

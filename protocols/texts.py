@@ -1,0 +1,62 @@
+"""What the participant reads: the default texts, in English, and how a protocol changes them.
+
+A protocol's ``[texts]`` table replaces any of :data:`DEFAULT_TEXTS` (a lab translates or
+rewords them without touching code; ``language`` says which language they are in), and
+``[texts.instructions]`` gives a phase, by name, its own instructions. Placeholders in
+braces are filled in by the screen: ``{min}``, ``{max}`` (the scale), ``{keys}`` (the
+surface keys), ``{names}`` (the answer keys and names), ``{list}`` (surfaces tapped so far),
+``{i}`` (the surface being named), ``{block}`` (the real block to tap).
+
+The keys these texts name are the keys the screen uses: SPACE begins a phase, ENTER ends
+familiarization and confirms a typed or slider rating, R asks for the real block again,
+number keys choose surfaces and name them, N starts naming.
+"""
+
+from __future__ import annotations
+
+__all__ = ["DEFAULT_TEXTS", "INSTRUCTIONS_BY_KIND", "resolve_texts"]
+
+#: phase kind → default instructions (a phase's own, by name, in ``[texts.instructions]``)
+INSTRUCTIONS_BY_KIND = {
+    "free": "Tap freely on the sample in front of you.\n\nTake your time. When you are done, "
+            "press ENTER.\n\nPress SPACE to begin.",
+    "rated": "You will tap on a series of samples, one at a time, and rate each one.\n\n"
+             "Press SPACE to begin.",
+    "identification": "One scene, {n} surfaces. Press {keys} to choose a surface and tap it.\n"
+                      "When you have tapped them all, press N to name each one.\n\n"
+                      "Press SPACE to begin.",
+}
+
+DEFAULT_TEXTS: dict[str, str] = {
+    "language": "en",
+    "tap": "Tap",
+    "done_hint": "press ENTER when you are done",
+    "wait": "Please wait",
+    "wait_detail": "The experimenter is preparing the next sample.",
+    "reference_offer": "Press R to tap the real block again.",
+    "reference_requested": "The experimenter is placing the real block.",
+    "reference": "Tap the real block",
+    "reference_detail": "Compare the next samples with this one: {block}.",
+    "rating_keys": "Press a number key.",
+    "rating_typed": "Type a number from {min} to {max}, then press ENTER.",
+    "rating_slider": "Move the marker with the arrow keys (or click), then press ENTER.",
+    "rating_confirmed": "Your rating: {value}",
+    "rating_invalid": "{value} is not on the scale {min}–{max}.",
+    "choose": "Choose a surface: {keys}",
+    "tapped": "tapped: {list}",
+    "name_hint": "press N to name them",
+    "name": "Surface {i} is …",
+    "names": "{names}",
+    "paused": "Paused",
+    "paused_detail": "The experimenter will continue shortly.",
+    "debrief": "What made a sample feel real or not?",
+    "debrief_hint": "Type, then press ENTER.",
+    "thanks": "Thank you. The session is over.",
+}
+
+
+def resolve_texts(overrides: dict[str, str], instructions: dict[str, str]) -> dict:
+    """Defaults with a protocol's changes: ``{key: text, ..., "instructions": {phase: text}}``."""
+    out = {**DEFAULT_TEXTS, **overrides}
+    out["instructions"] = dict(instructions)
+    return out
