@@ -231,6 +231,7 @@ class SerialDevice(HapticDevice):
         rate = self._info.servo_rate_hz
         contacts: list[ContactEvent] = []
         sats: list[SaturationEvent] = []
+        height: float | None = None  # the stylus above the surface [m], from POSITION frames
         done: M.WindowDone | None = None
         faults: list[FaultEvent] = []
         self.link.pause_heartbeats(not heartbeats)
@@ -250,6 +251,8 @@ class SerialDevice(HapticDevice):
                         faults.append(self._fault)
                     elif isinstance(e, M.WindowDone) and e.window_id == wid:
                         done = e
+                    elif isinstance(e, M.Position) and e.window_id == wid:
+                        height = e.height_um * 1e-6
                 if gone is not None:
                     err = type(gone)(f"{gone}; the window was aborted after {len(contacts)} "
                                      "contacts")
@@ -261,7 +264,9 @@ class SerialDevice(HapticDevice):
                     raise DeviceTimeoutError(f"{self.port}: window {wid} did not end in time")
                 if on_progress is not None and time.monotonic() >= next_progress:
                     next_progress = time.monotonic() + 0.1
-                    on_progress(time.monotonic() - start, WindowResult(rate, None, list(contacts)))
+                    partial = WindowResult(rate, None, list(contacts))
+                    partial.live_height = height
+                    on_progress(time.monotonic() - start, partial)
         except BaseException:
             if self.link.gone is None:
                 self._stop_window()  # an exception in the caller's callback, an interrupt…

@@ -325,8 +325,16 @@ class Emulator:
         rate = self.sim.info.servo_rate_hz
         tick0 = self.sim.time
 
+        last_pos = [0.0]
+
         def progress(_t, partial) -> None:
             nonlocal sent
+            now = time.monotonic()
+            if partial.live_height is not None and now - last_pos[0] >= 0.025:
+                last_pos[0] = now  # the cursor's stream, ~40 Hz
+                tick = int(round((self.sim.time - tick0) * rate))
+                height = max(-2**31, min(2**31 - 1, int(round(partial.live_height * 1e6))))
+                self.send(M.Position(msg.window_id, tick, height))
             for c in partial.contacts[sent:]:
                 self.send(M.Contact(msg.window_id, int(round((c.t - tick0) * rate)),
                                     M.contact_velocity_nm_s(c.velocity)))

@@ -417,12 +417,24 @@ class TraceBlock(Message):
     items: tuple = ()
 
 
+@dataclass(frozen=True)
+class Position(Message):
+    """During a window, at 20–50 Hz: the stylus's height above the surface [µm, i32] at a
+    window tick (for the participant's cursor)."""
+
+    TYPE = 0x96
+    FMT = "HIi"
+    window_id: int = 0
+    tick: int = 0
+    height_um: int = 0
+
+
 MESSAGES: dict[int, type[Message]] = {
     m.TYPE: m for m in (Hello, Heartbeat, Ping, SceneBegin, SceneVelocities, SceneChunk,
                         SceneCommit, Home, StartWindow, StopWindow, PlayChunk, PlayStart, SetLimit,
                         EStop,
                         ClearFault, Zero, TraceRequest, Ack, HelloAck, Pong, Contact, Saturation,
-                        Fault, StatusReport, WindowDone, TraceBlock)}
+                        Fault, StatusReport, WindowDone, TraceBlock, Position)}
 
 CHUNK_ITEMS = 480  # i16 items per SceneChunk / PlayChunk (960 bytes of data)
 TRACE_ITEMS = 250  # f32 items per TraceBlock
