@@ -150,6 +150,7 @@ def _drive(runner, files, meta, console) -> SessionResult:
         console.say(msg)
         return SessionResult(files.folder, status, len(runner.log), msg)
 
+    started = time.monotonic()
     try:
         runner.run()
     except SessionInterrupted as exc:
@@ -161,6 +162,10 @@ def _drive(runner, files, meta, console) -> SessionResult:
                        f"{files.folder}")
     meta["times"]["finished_utc"] = utc_now()
     meta["status"] = "complete"
+    summary = runner.summary(time.monotonic() - started)
+    meta["summary"] = summary
+    console.say(f"session complete: {summary}")
+    runner.participant_ui.finished(summary)
     meta["link"] = runner.device.link_stats()
     if runner.timing:  # live pacing (the simulator in live mode): achieved servo rate
         rates = [t["achieved_rate_hz"] for t in runner.timing]
@@ -182,7 +187,8 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 data: str | Path = "data", responder: str = "person", seed: int | None = None,
                 row: int | None = None, group: str = "", traces: str = "full",
                 audio: bool = True, fullscreen: bool = False, quiet: bool = False,
-                operator_keys: bool | None = None,
+                operator_keys: bool | None = None, clear_fault: bool = False,
+                info_fields: dict | None = None,
                 say: Callable[[str], None] | None = None) -> SessionResult:
     """Run one session to the end (or until it is stopped) and record it.
 
@@ -214,7 +220,13 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     quiet : bool
         No console lines.
     operator_keys : bool, optional
-        Read operator keys from the terminal (default: when a person answers).
+        Read operator keys from the terminal (default: when a person answers; refused
+        without a terminal).
+    clear_fault : bool
+        Clear a fault the device latched before the session (the operator's decision).
+    info_fields : dict, optional
+        Ask the participant's details in a dialog first (the protocol's ``[participant]
+        fields`` when it declares them, else these); stored in session.json.
     say : callable, optional
         Where messages for the operator go (default: stderr).
 
@@ -225,7 +237,17 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     from app.console import make_console
     from app.ids import validate_participant
     from app.libraries import prepare_libraries, with_libraries
-    from app.preflight import data_folder_ready, expected_session_bytes
+    from app.preflight import (
+        PreflightError,
+        check_answers,
+        check_device,
+        check_display,
+        check_protocol_on,
+        check_terminal,
+        data_folder_ready,
+        expected_session_bytes,
+        failed,
+    )
     from app.recorder import SessionFiles, new_session_dir
     from app.runner import SessionRunner, session_meta
     from protocols import SessionEngine, parse_protocol, protocol_text, seed_from_entropy
@@ -242,21 +264,42 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     if not isinstance(seed, int) or seed < 0:
         raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
     engine = SessionEngine(proto, seed, participant, row)
-    # the data folder before any device or window opens: nothing starts that cannot be kept
-    data_folder_ready(data, expected_session_bytes(proto, traces))
     console = make_console(quiet=quiet)
     say = say or console.say
+    keys = operator_keys if operator_keys is not None else responder == "person"
+    # before any device or window opens: nothing starts that cannot be kept or answered
+    data_folder_ready(data, expected_session_bytes(proto, traces))
+    early = [check_answers(proto)]
+    if keys:
+        early.append(check_terminal())
+    if responder == "person":
+        early.append(check_display())
+    if failed(early):
+        raise PreflightError(failed(early))
     with _open(device, seed) as dev:
         close_at_exit(dev)
-        parse_protocol(text, source, dev.info)  # what this device cannot play stops here
+        if clear_fault and dev.fault is not None:
+            say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
+            dev.clear_fault()
+        checks = [check_device(dev, device), check_protocol_on(text, source, dev)]
+        if failed(checks):
+            raise PreflightError(failed(checks))
         limits = _apply_limit(proto, dev)
         libraries = prepare_libraries(proto, dev, device, say, ref=str(protocol))
         proto = with_libraries(proto, libraries)
+        info = None
+        if info_fields:  # the participant's details, asked before the window opens
+            from app.screen import info_dialog
+
+            info = info_dialog(dict(proto.participant_fields or info_fields))
+            if info is None:
+                raise UsageError("the participant information dialog was cancelled; nothing "
+                                 "was recorded")
         ui = _participant(responder, proto, seed, group, fullscreen)
         sound = None
         try:
             sound = _audio(audio, dev.info.backend, say)
-            if operator_keys if operator_keys is not None else responder == "person":
+            if keys:
                 console = make_console("keys", quiet, dev)
             folder, n = new_session_dir(Path(data), participant)
             files = SessionFiles(folder)
@@ -267,10 +310,12 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                                 sound is not None, group, KIND_OF[responder], libraries)
             meta["traces_mode"] = traces
             meta["limits"] = limits
+            if info is not None:
+                meta["participant"]["info"] = info
             files.write_meta(meta)
             console.say(f"session {folder} (seed {seed})")
             runner = SessionRunner(proto, engine, dev, files, ui, participant, n, seed, console,
-                                   sound, traces)
+                                   sound, traces, meta=meta)
             return _drive(runner, files, meta, console)
         finally:
             for part in (ui, sound, console):
@@ -387,7 +432,8 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
             if operator_keys if operator_keys is not None else responder == "person":
                 console = make_console("keys", quiet, dev)
             runner = SessionRunner(proto, engine, dev, files, ui, p["id"], meta["session"],
-                                   meta["seed"], console, sound, meta.get("traces_mode", "full"))
+                                   meta["seed"], console, sound, meta.get("traces_mode", "full"),
+                                   meta=meta)
             runner.load_log()
             try:
                 engine.next_trial(runner.log)
@@ -442,7 +488,9 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
     """Simulated participants' sessions, headless, through the same path as a real session.
 
     Participant k (1-based) of a study with seed S gets the id ``PREFIXkk`` and the session
-    seed ``SeedSequence([S, k])``, so a study is reproduced from S alone.
+    seed ``SeedSequence([S, k])``, so a study is reproduced from S alone; in a protocol whose
+    blocks are Williams-counterbalanced, participant k takes row (k − 1) mod the number of
+    rows, so every order is used equally often.
 
     Parameters
     ----------
@@ -473,13 +521,20 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
     if not (isinstance(speed, (int, float)) and math.isfinite(speed) and 0 < speed <= 20):
         raise UsageError(f"speed must be in (0, 20] (device seconds per wall second), got "
                          f"{speed!r}")
+    from protocols import SessionEngine, load_protocol
+
+    proto = load_protocol(protocol)
+    williams = [p for p in proto.phases if p.block_order == "williams"]
+    rows = len(SessionEngine(proto, 0, "x", 0).williams_rows(williams[0])) if williams else 0
     t0 = time.perf_counter()
     out: list[SessionResult] = []
     with _device_spec(device, speed) as spec:
         for k in range(1, participants + 1):
+            # a Williams-counterbalanced protocol: participant k takes row (k − 1) mod rows
             r = run_session(protocol, f"{prefix}{k:02d}", device=spec, data=data,
                             responder="simulated", seed=session_seed(seed, k), group=group,
-                            traces=traces, audio=False, quiet=True, operator_keys=False)
+                            traces=traces, audio=False, quiet=True, operator_keys=False,
+                            row=(k - 1) % rows if rows else None)
             out.append(r)
             if r.status != "complete":
                 break

@@ -202,6 +202,47 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _preflight(args: argparse.Namespace) -> int:
+    """Every check a session makes before it starts, each on its own line."""
+    from app.preflight import (
+        Check,
+        check_answers,
+        check_audio,
+        check_data_folder,
+        check_device,
+        check_display,
+        check_libraries,
+        check_limit,
+        check_protocol_on,
+        check_terminal,
+        expected_session_bytes,
+    )
+    from device import DeviceError, open_device
+    from protocols import parse_protocol, protocol_text
+
+    source, text = protocol_text(args.protocol)
+    proto = parse_protocol(text, source)
+    checks = [Check("protocol", True, f"{source}: '{proto.name}' ({proto.sha256[:12]}…)"),
+              check_data_folder(args.data, expected_session_bytes(proto, args.traces)),
+              check_answers(proto)]
+    if args.responder == "person":
+        checks += [check_terminal(), check_display()]
+    try:
+        with open_device(args.device) as dev:
+            checks += [check_device(dev, args.device), check_protocol_on(text, source, dev),
+                       check_limit(proto, dev), check_libraries(proto, dev, args.device,
+                                                                args.protocol)]
+    except DeviceError as exc:
+        checks.append(Check("device", False, str(exc), "check the cable, the port and the "
+                            "power"))
+    checks.append(check_audio(not args.no_audio, play=not args.no_audio))
+    for c in checks:
+        print(c.line())
+    bad = sum(not c.ok for c in checks)
+    print(f"{len(checks) - bad} passed, {bad} failed" + ("" if bad else ": ready to run"))
+    return 1 if bad else 0
+
+
 def _run(args: argparse.Namespace) -> int:
     from app.api import run_session
 
@@ -222,9 +263,11 @@ def _run(args: argparse.Namespace) -> int:
     r = run_session(args.protocol, args.participant, device=device, data=args.data,
                     responder=responder, seed=args.seed, row=args.row, group=args.group,
                     traces=args.traces, audio=not args.no_audio, fullscreen=args.fullscreen,
-                    quiet=args.quiet)
-    if r.status == "complete":
-        print(r.message)
+                    quiet=args.quiet, clear_fault=args.clear_fault,
+                    operator_keys=True if args.operator_keys else None,
+                    info_fields={"age": "", "handedness": ["right", "left", "both"]}
+                    if args.info_dialog else None)
+    _report(r, args.quiet)
     return r.exit_code
 
 
@@ -234,9 +277,17 @@ def _resume(args: argparse.Namespace) -> int:
     r = resume_session(args.session_dir, device=args.device,
                        audio=False if args.no_audio else None, clear_fault=args.clear_fault,
                        fullscreen=args.fullscreen, quiet=args.quiet)
+    _report(r, args.quiet)
+    return r.exit_code
+
+
+def _report(r, quiet: bool) -> None:
+    """A complete session's line on stdout; why it stopped on stderr, even with --quiet
+    (the console already said it when not quiet)."""
     if r.status == "complete":
         print(r.message)
-    return r.exit_code
+    elif quiet:
+        print(f"hapticlab: {r.message}", file=sys.stderr)
 
 
 def _list(text: str | None) -> list[str] | None:
@@ -354,8 +405,24 @@ def _add_session_parsers(sub) -> None:
                    help="raw device streams kept per attempt")
     r.add_argument("--fullscreen", action="store_true")
     r.add_argument("--group", default="", help="participant group label, e.g. expert or novice")
+    r.add_argument("--info-dialog", action="store_true", help="ask the participant's details "
+                   "(the protocol's [participant] fields, or age and handedness) in a dialog")
+    r.add_argument("--clear-fault", action="store_true",
+                   help="clear a fault the device latched before the session (when it is safe)")
+    r.add_argument("--operator-keys", action="store_true",
+                   help="read the operator's keys in a dry run too (to rehearse the operator's "
+                   "part; a session with a person always does)")
     r.add_argument("--quiet", action="store_true")
     r.set_defaults(func=_run)
+    pf = sub.add_parser("preflight", help="every check a session makes before it starts")
+    pf.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    pf.add_argument("--device", required=True, help="serial:PORT, sim or sim:RATE")
+    pf.add_argument("--data", default="data")
+    pf.add_argument("--responder", choices=("person", "scripted", "simulated"),
+                    default="person")
+    pf.add_argument("--traces", choices=("full", "contacts", "none"), default="full")
+    pf.add_argument("--no-audio", action="store_true")
+    pf.set_defaults(func=_preflight)
     rs = sub.add_parser("resume", help="continue an interrupted session exactly where it stopped")
     rs.add_argument("session_dir")
     rs.add_argument("--device", default=None, help="override the recorded device spec")

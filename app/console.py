@@ -1,77 +1,140 @@
-"""The operator console (terminal): what to place next, progress, saturations, contacts.
+"""The operator's console: what to place, what happened, and the keys that act on the trial
+in front of the operator.
 
-:class:`PlainConsole` prints lines (headless runs, logs, CI). :class:`RichConsole` draws a
-live panel and reads single keys from the terminal: ``r`` ready, ``p`` pause/resume,
-``e`` e-stop (latched), ``q`` abort and save, ``s`` skip, ``u`` re-queue.
+:class:`PlainConsole` prints lines (headless runs, logs, CI) and takes no keys: trials
+start at once. :class:`KeyConsole` reads single keys from the terminal and draws a live
+view (phase, trial k of n, what to place, the last tap speeds, saturations, elapsed time and
+time left). A key acts only in the state where it means something — otherwise it is
+discarded with a line saying so (a key pressed during a trial never skips the next one):
+
+======== ====================================================================
+state    keys
+======== ====================================================================
+placing  r ready · s skip · u re-queue · p pause · q stop and save · n note · e E-STOP
+trial    e E-STOP (everything else waits for the trial to end)
+paused   p resume (then r to start the trial) · q stop and save · n note · e E-STOP
+fault    c clear the fault and continue · q stop and save · n note
+reference r ready (the real block is in place) · n note · e E-STOP
+======== ====================================================================
+
+``e`` latches the device's e-stop at once, from the key reader's thread.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import os
 import sys
 import threading
+import time
 from collections import deque
+from dataclasses import dataclass, field
 
-__all__ = ["PlainConsole", "make_console"]
+__all__ = ["PlainConsole", "KeyConsole", "make_console", "OperatorView", "KEYS"]
+
+#: state → {key: action}
+KEYS: dict[str, dict[str, str]] = {
+    "placing": {"r": "go", "s": "skip", "u": "requeue", "p": "pause", "q": "abort",
+                "n": "note", "e": "estop"},
+    "trial": {"e": "estop"},
+    "paused": {"p": "resume", "q": "abort", "n": "note", "e": "estop"},
+    "fault": {"c": "clear", "q": "abort", "n": "note"},
+    "reference": {"r": "go", "n": "note", "e": "estop"},
+    "idle": {"e": "estop"},
+}
+_NAMES = {"go": "ready", "skip": "skip", "requeue": "re-queue", "pause": "pause",
+          "abort": "stop and save", "note": "note", "estop": "E-STOP", "resume": "resume",
+          "clear": "clear the fault"}
+_WHEN = {"s": "when the operator is placing the next item", "u": "when placing",
+         "r": "when the item is in place", "p": "between trials", "q": "between trials (for "
+         "a stop now press e)", "n": "between trials", "c": "after an e-stop"}
+
+
+@dataclass
+class OperatorView:
+    """What the live view shows (the runner keeps it up to date)."""
+
+    title: str = ""
+    phase: str = ""
+    trial: int = 0
+    total: int = 0
+    place: str = ""
+    detail: str = ""
+    block: str = ""
+    taps: deque = field(default_factory=lambda: deque(maxlen=8))
+    saturations: int = 0
+    started: float = field(default_factory=time.monotonic)
+    left_s: float | None = None
+    state: str = "idle"
+    messages: deque = field(default_factory=lambda: deque(maxlen=6))
 
 
 class PlainConsole:
-    """One line per event, to a stream (stderr by default)."""
+    """One line per event, to a stream (stderr by default); nobody at the keys.
+
+    ``poll`` answers ``go`` when a trial is to start (or an action a program queued), so a
+    headless session runs through without waiting.
+    """
+
+    interactive = False
 
     def __init__(self, stream=None, quiet: bool = False):
         self.stream = stream or sys.stderr
         self.quiet = quiet
         self.actions: deque[str] = deque()
         self._lock = threading.Lock()
-        self.saturations = 0
+        self.view = OperatorView()
+        self.notes: list[dict] = []
 
+    # ---------------------------------------------------------------- output
     def say(self, text: str) -> None:
+        self.view.messages.append(text)
         if not self.quiet:
             with self._lock:
                 print(text, file=self.stream, flush=True)
 
-    def place(self, trial, total: int, done: int) -> None:
-        where = trial.placement or "nothing to place (virtual scene)"
+    def set_state(self, state: str) -> None:
+        self.view.state = state
+
+    def place(self, trial, total: int, done: int, what: str = "", detail: str = "") -> None:
+        v = self.view
+        v.phase, v.trial, v.total = trial.phase, trial.trial_index, total
+        v.place, v.detail = what, detail
         self.say(f"[{done}/{total}] {trial.phase} #{trial.trial_index} (attempt {trial.attempt})"
-                 f": place {where}")
+                 f": place {what}" + (f" — {detail}" if detail else ""))
 
     def contact(self, velocity: float) -> None:
-        return None
+        self.view.taps.append(velocity)
 
     def saturated(self) -> None:
-        self.saturations += 1
-        self.say(f"  saturation (total {self.saturations}): redraw")
+        self.view.saturations += 1
+        self.say(f"  saturation (total {self.view.saturations}): redraw")
 
     def result(self, status: str, n_taps: int, detail: str = "") -> None:
         self.say(f"  {status}: {n_taps} taps{(' — ' + detail) if detail else ''}")
 
-    def next_action(self) -> str | None:
-        """An operator action queued from the keyboard (pause, estop, abort, skip, requeue)."""
-        return self.actions.popleft() if self.actions else None
+    # ---------------------------------------------------------------- keys
+    def poll(self, timeout: float = 0.0) -> str | None:
+        """An action for the current state, or None after ``timeout`` [s]."""
+        if self.actions:
+            return self.actions.popleft()
+        return {"placing": "go", "reference": "go", "paused": "resume"}.get(self.view.state)
 
-    def wait_ready(self) -> str:
-        """Nobody at the keys: go at once (or take an action queued by a program)."""
-        a = self.next_action()
-        return "go" if a in (None, "ready") else a
-
-    def wait_resume(self) -> str:
-        return "go"
+    def take_notes(self) -> list[dict]:
+        """Notes typed since the last call."""
+        out, self.notes = self.notes, []
+        return out
 
     def close(self) -> None:
         return None
 
 
 class KeyConsole(PlainConsole):
-    """The operator's terminal: prints like :class:`PlainConsole` and reads single keys.
+    """The operator's terminal: reads single keys (cbreak mode) and draws a live view."""
 
-    Before each trial it waits for ``r`` (ready: the item is in place); at any time ``p``
-    pauses/resumes, ``e`` latches the e-stop on the device at once, ``q`` aborts and saves,
-    ``s`` skips and ``u`` re-queues the next item.
-    """
+    interactive = True
 
-    KEYS = {"p": "pause", "e": "estop", "q": "abort", "s": "skip", "u": "requeue", "r": "ready"}
-
-    def __init__(self, device, stream=None):
+    def __init__(self, device, stream=None, live: bool = True):
         super().__init__(stream)
         import termios
         import tty
@@ -82,11 +145,60 @@ class KeyConsole(PlainConsole):
         tty.setcbreak(self._fd)
         self._stop = threading.Event()
         self._cv = threading.Condition()
+        self._note: list[str] | None = None  # characters of a note being typed
+        self._live = None
+        if live:
+            from rich.console import Console
+            from rich.live import Live
+
+            self._rich = Console(file=self.stream, force_terminal=True)
+            self._live = Live(self._render(), console=self._rich, refresh_per_second=4,
+                              transient=False, get_renderable=self._render)
+            self._live.start()
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
-        self.say("operator keys: r ready · p pause · e E-STOP · q abort & save · s skip · "
-                 "u re-queue")
+        if self._live is None:  # the live view shows the keys of the moment instead
+            self.say("operator keys: r ready · s skip · u re-queue · p pause · q stop and "
+                     "save · n note · e E-STOP")
 
+    # ---------------------------------------------------------------- the view
+    def say(self, text: str) -> None:
+        self.view.messages.append(text)
+        if self._live is None:
+            super().say(text)
+
+    def _render(self):
+        from rich.console import Group
+        from rich.panel import Panel
+        from rich.rule import Rule
+        from rich.table import Table
+        from rich.text import Text
+
+        v = self.view
+        t = Table.grid(padding=(0, 2))
+        t.add_column(style="bold", no_wrap=True)
+        t.add_column()
+        el = time.monotonic() - v.started
+        left = "—" if v.left_s is None else f"≈ {v.left_s / 60:.0f} min"
+        t.add_row("trial", f"{v.phase} · {v.trial} of {v.total} · elapsed {int(el // 60):02d}:"
+                           f"{int(el % 60):02d} · left {left}")
+        t.add_row("PLACE", Text.assemble((f" {v.place or '—'} ", "reverse bold"),
+                                         f"  {v.detail}"))
+        if v.block:
+            t.add_row("block", v.block)
+        t.add_row("taps", "  ".join(f"{x:.3f}" for x in v.taps) + (" m/s" if v.taps else "—"))
+        t.add_row("saturations", str(v.saturations))
+        keys = " · ".join(f"{k} {_NAMES[a]}" for k, a in KEYS.get(v.state, {}).items())
+        t.add_row("keys", Text.assemble((f"{v.state}:", "bold yellow" if v.state != "fault"
+                                         else "bold red"), f" {keys}"))
+        if self._note is not None:
+            t.add_row("NOTE", "".join(self._note) + "▏  (ENTER saves · ESC cancels)")
+        log = [Text(m, style="dim" if i < len(v.messages) - 1 else "") for i, m in
+               enumerate(v.messages)]  # wrapped, never cut: the newest may be an instruction
+        return Panel(Group(t, Rule(style="dim"), *log), title=v.title or "hapticlab",
+                     border_style="red" if v.state == "fault" else "cyan")
+
+    # ---------------------------------------------------------------- keys
     def _read(self) -> None:
         import select
 
@@ -95,53 +207,83 @@ class KeyConsole(PlainConsole):
                 r, _, _ = select.select([self._fd], [], [], 0.1)
                 if not r:
                     continue
-                ch = os.read(self._fd, 1).decode("utf-8", "ignore").lower()  # not the buffer
+                ch = os.read(self._fd, 1).decode("utf-8", "ignore")
             except (OSError, ValueError):  # the terminal went away: nobody is at the keys
                 return
-            action = self.KEYS.get(ch)
-            if action == "estop":  # at once, from this thread: never queued behind a trial
-                try:
-                    self.device.estop()
-                finally:
-                    self.say("E-STOP latched: output is zero")
-                continue
-            if action:
-                with self._cv:
-                    self.actions.append(action)
-                    self._cv.notify_all()
+            if not ch:
+                return
+            self._key(ch)
 
-    def _next(self) -> str:
+    def _key(self, ch: str) -> None:
+        if self._note is not None:  # typing a note: every key is text but ENTER and ESC
+            if ch in "\r\n":
+                text = "".join(self._note).strip()
+                self._note = None
+                if text:
+                    self.notes.append({"utc": dt.datetime.now(dt.UTC).isoformat(
+                        timespec="seconds"), "trial_index": self.view.trial, "text": text})
+                    self.say(f"note saved: {text}")
+            elif ch == "\x1b":
+                self._note = None
+                self.say("note cancelled")
+            elif ch in "\x7f\b":
+                self._note = self._note[:-1]
+            elif ch.isprintable():
+                self._note.append(ch)
+            return
+        key = ch.lower()
+        state = self.view.state
+        action = KEYS.get(state, {}).get(key)
+        if action is None:
+            if any(key in keys for keys in KEYS.values()):
+                self.say(f"key '{key}' ignored: {state} — it acts {_WHEN.get(key, 'later')}")
+            return
+        if action == "estop":  # at once, from this thread: never queued behind a trial
+            try:
+                self.device.estop()
+            finally:
+                self.say("E-STOP latched: output is zero")
+            return
+        if action == "note":
+            self._note = []
+            return
         with self._cv:
-            self._cv.wait_for(lambda: bool(self.actions))
-            return self.actions.popleft()
+            if self.actions:  # one action per state: a second key is not carried over
+                self.say(f"key '{key}' ignored: '{_NAMES[self.actions[0]]}' was pressed first")
+                return
+            self.actions.append(action)
+            self._cv.notify_all()
 
-    def wait_ready(self) -> str:
-        """Block until the operator is ready (``go``) or chose another action."""
-        self.say("  place the item, then press r")
-        a = self._next()
-        return "go" if a == "ready" else a
+    def set_state(self, state: str) -> None:
+        with self._cv:
+            self.view.state = state
+            self.actions.clear()  # nothing pressed in another state acts in this one
 
-    def wait_resume(self) -> str:
-        while True:
-            a = self._next()
-            if a == "pause":
-                return "go"
-            if a == "abort":
-                return a
-
-    def contact(self, velocity: float) -> None:
-        self.say(f"    tap {velocity:.3f} m/s")
+    def poll(self, timeout: float = 0.0) -> str | None:
+        with self._cv:
+            if not self.actions and timeout > 0:
+                self._cv.wait(timeout)
+            if not self.actions:
+                return None
+            action = self.actions.popleft()
+            if action == "go":  # the trial starts now: a second r already belongs to it
+                self.view.state = "trial"
+            self.actions.clear()
+            return action
 
     def close(self) -> None:
         import termios
 
         self._stop.set()
         self._reader.join(timeout=1.0)  # it wakes every 0.1 s; never read a closed terminal
+        if self._live is not None:
+            self._live.stop()  # its last frame stays on the terminal, summary included
         termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
 
 
-def make_console(kind: str = "plain", quiet: bool = False, device=None) -> PlainConsole:
+def make_console(kind: str = "plain", quiet: bool = False, device=None,
+                 live: bool = True) -> PlainConsole:
     """``keys`` when an operator sits at a terminal, ``plain`` otherwise."""
     if kind == "keys" and device is not None and sys.stdin.isatty():
-        return KeyConsole(device)
+        return KeyConsole(device, live=live)
     return PlainConsole(quiet=quiet)

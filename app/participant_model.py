@@ -218,6 +218,11 @@ class SimulatedParticipant(Participant):
         return len(self._familiar) < 2  # two familiarization windows
 
     def after_window(self, trial, sample_id, result) -> None:
+        if trial.kind == "reference":  # a real block, tapped to compare with: remember it
+            f = felt_features(result)
+            if np.all(np.isfinite(f)):
+                self.memory[sample_id] = self._perceive(f, self._mem_rng)
+            return
         if trial.kind == "free":
             f = felt_features(result)
             if np.all(np.isfinite(f)):
@@ -287,13 +292,21 @@ class SimulatedParticipant(Participant):
         return int(np.clip(round(y), lo, hi)), float(rng.lognormal(math.log(1.5), 0.3))
 
     def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:
-        if self._real_blocks is None:  # read once per person, not per answer
-            from protocols import load_protocol
+        # each name's real block: the protocol's reference of the surface of that name (tapped
+        # before the test, and remembered then)
+        refs = {}
+        for c in choices:
+            ref_id = self.protocol.samples[c].reference if c in self.protocol.samples else None
+            if ref_id is None:
+                if self._real_blocks is None:  # older protocols: the factorial's real blocks
+                    from protocols import load_protocol
 
-            self._real_blocks = load_protocol("factorial").samples  # "<material>-real"
-        refs = {c: self._real_blocks[f"{c}-real"].scene for c in choices}
+                    self._real_blocks = load_protocol("factorial").samples
+                refs[c] = (f"material:{c}", self._real_blocks[f"{c}-real"].scene)
+            else:
+                refs[c] = (ref_id, self.protocol.samples[ref_id].scene)
         felt = np.array([self._perceive(felt_features(r), rng) for r in results])
-        mem = np.array([self._feel_scene(f"material:{c}", refs[c]) for c in choices])
+        mem = np.array([self._feel_scene(*refs[c]) for c in choices])
         # relative judgement: the pattern of differences among the three surfaces is matched
         # to the pattern among the remembered materials (every rendering is softer than any
         # real block, so absolute distances would call everything the softest material)

@@ -35,6 +35,14 @@ class Participant:
     def waiting(self, trial) -> None:
         """Between trials: the operator is changing the sample."""
 
+    def poll(self) -> str | None:
+        """While waiting between trials: a request (``"reference"``: tap the real block
+        again), or None. A screen keeps its window alive here."""
+        return None
+
+    def reference(self, trial, sample) -> None:
+        """A real reference block is about to be tapped (``sample``)."""
+
     def before_window(self, trial, sample_id: str, device, rng: np.random.Generator) -> None:
         """Just before a tapping window on ``sample_id``."""
 
@@ -63,8 +71,11 @@ class Participant:
         """(a name for each surface in order, response time [s])."""
         raise NotImplementedError(f"{type(self).__name__} does not identify")
 
-    def pause(self) -> None:
-        """The operator paused the session."""
+    def pause(self, fault: bool = False) -> None:
+        """The operator paused the session (``fault``: an e-stop or the watchdog)."""
+
+    def finished(self, summary: str = "") -> None:
+        """The session is over."""
 
     def debrief(self) -> str:
         """Free-text criteria at the end."""

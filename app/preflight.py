@@ -9,14 +9,18 @@ from __future__ import annotations
 import errno
 import os
 import shutil
+import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import DataFolderError, DiskFullError, NotAFolderError, io_error
+from .errors import DataFolderError, DiskFullError, HapticlabError, NotAFolderError, io_error
 
 __all__ = ["Check", "check_data_folder", "expected_session_bytes", "data_folder_ready",
-           "PER_WINDOW_BYTES"]
+           "PER_WINDOW_BYTES", "PreflightError", "check_terminal", "check_display",
+           "check_device", "check_protocol_on", "check_limit", "check_libraries",
+           "check_answers", "check_audio", "failed"]
 
 #: bytes one tapping window's traces take on disk (compressed NumPy), by ``--traces`` mode;
 #: measured on realism sessions (15 MB full, 5 MB contacts over 49 windows)
@@ -101,3 +105,143 @@ def check_data_folder(folder: str | Path, need_bytes: int = 0) -> Check:
     free = shutil.disk_usage(_existing_ancestor(Path(folder))).free
     return Check("data folder", True, f"{folder} writable, {free / 1e9:.1f} GB free "
                                       f"(a session needs about {need_bytes / 1e6:.1f} MB)")
+
+
+class PreflightError(HapticlabError):
+    """A check before the session failed; nothing was recorded."""
+
+    def __init__(self, failed: list[Check]):
+        self.failed = failed
+        super().__init__("preflight: " + "; ".join(
+            f"{c.name}: {c.detail}" + (f" — {c.fix}" if c.fix else "") for c in failed))
+
+
+def check_terminal() -> Check:
+    """A person's session needs the operator at a terminal (r ready, e E-STOP)."""
+    if sys.stdin is not None and sys.stdin.isatty():
+        return Check("operator keys", True, "a terminal is attached")
+    return Check("operator keys", False, "no terminal is attached (started from a launcher or "
+                 "an IDE?)", "run hapticlab from a terminal: the operator's keys (r ready, "
+                 "e E-STOP) need one")
+
+
+def check_display() -> Check:
+    """A person's session needs a screen for the participant's window."""
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        return Check("participant screen", False, "no display (DISPLAY is not set)",
+                     "run on the computer whose screen the participant sees")
+    return Check("participant screen", True, os.environ.get("DISPLAY", "the system's display"))
+
+
+def check_device(dev, spec: str) -> Check:
+    i = dev.info
+    if dev.fault is not None:
+        return Check("device", False, f"{i.model} ({spec}) has a latched {dev.fault.code} "
+                     "fault", "make it safe, then run again with --clear-fault")
+    return Check("device", True, f"{i.model}, serial {i.serial_number}, firmware {i.firmware}, "
+                 f"{i.servo_rate_hz:g} Hz, {i.current_limit:g} A × {i.force_constant:g} N/A")
+
+
+def check_protocol_on(text: str, source: str, dev) -> Check:
+    from protocols import ProtocolError, parse_protocol
+
+    try:
+        parse_protocol(text, source, dev.info)
+    except ProtocolError as exc:
+        return Check("protocol on this device", False, str(exc))
+    return Check("protocol on this device", True, "every transient can be played and the "
+                 "limits are within the device's rating")
+
+
+def check_limit(protocol, dev) -> Check:
+    from device import DeviceError
+
+    want = protocol.limits.max_current
+    if want is None:
+        return Check("current limit", True, f"the device's rating, {dev.info.current_limit:g} A")
+    rating = dev.info.current_limit
+    if want > rating * (1 + 1e-12):
+        return Check("current limit", False, f"the protocol's [limits] max_current of {want:g} A "
+                     f"is above this device's rating of {rating:g} A", "lower max_current, or "
+                     "use the device the protocol was written for")
+    try:
+        got = dev.set_current_limit(min(want, rating))
+    except DeviceError as exc:
+        return Check("current limit", False, str(exc), "use a device that can lower its "
+                     "limit, or remove [limits] max_current")
+    return Check("current limit", True, f"{got:g} A applied on the device (protocol "
+                 f"{want:g} A, rating {dev.info.current_limit:g} A)")
+
+
+def check_libraries(protocol, dev, spec: str, ref: str, say=None) -> Check:
+    from .errors import MissingLibraryError
+    from .libraries import prepare_libraries
+
+    sim = dev.info.backend == "sim"
+    try:
+        found = prepare_libraries(protocol, dev, spec, say=say or (lambda _m: None),
+                                  build=sim and say is not None, ref=ref)
+    except MissingLibraryError as exc:
+        if sim:
+            return Check("libraries", True, "missing on this simulated device: built, "
+                         "announced, when the session starts")
+        return Check("libraries", False, str(exc))
+    if not found:
+        return Check("libraries", True, "no matched sample")
+    return Check("libraries", True, "built on this device: " + ", ".join(
+        f"{sid} ({Path(v['path']).name})" for sid, v in sorted(found.items())))
+
+
+def check_answers(protocol) -> Check:
+    """Every scale point and every answer can be given with the keys the screen offers (the
+    screen's own key maps), however the protocol object was made."""
+    parts, unreachable = [], []
+    if protocol.rating is not None:
+        r = protocol.rating
+        mode = r.entry_mode
+        if mode == "keys":
+            missing = sorted(set(r.values) - set(r.key_map().values()))
+            if missing:
+                unreachable.append(f"ratings {missing} have no key (one-key entry answers "
+                                   "0–9 only)")
+        how = {"keys": "one number key", "typed": "digits typed, then ENTER",
+               "slider": "a slider (arrow keys or the mouse, then ENTER)"}[mode]
+        parts.append(f"ratings {r.min}–{r.max}: {how}")
+    if protocol.answer is not None:
+        keys = protocol.answer.key_map()
+        missing = [c for c in protocol.answer.choices if c not in keys.values()]
+        if missing:
+            unreachable.append(f"answers {missing} have no number key (at most 9 choices)")
+        parts.append("names: " + ", ".join(f"{k} = {c}" for k, c in keys.items()
+                                            if not k.startswith("num_")))
+    if unreachable:
+        return Check("answers", False, "; ".join(unreachable), "set [rating] entry = \"typed\" "
+                     "or \"slider\", or name fewer choices")
+    return Check("answers", True, "; ".join(parts) or "nothing to answer")
+
+
+def check_audio(enabled: bool, play: bool = False) -> Check:
+    if not enabled:
+        return Check("audio", True, "off (--no-audio)")
+    from .audio import Audio, AudioUnavailable
+
+    try:
+        a = Audio()
+    except AudioUnavailable as exc:
+        return Check("audio", False, str(exc), "connect headphones, or pass --no-audio for a "
+                     "session without masking noise and cues")
+    try:
+        if play:
+            a.tap_cue()
+            time.sleep(0.8)
+            a.low_tone()
+            time.sleep(0.6)
+    finally:
+        a.close()
+    return Check("audio", True, "masking noise, the tap cue and the low tone play"
+                 + (" (played now: listen for them)" if play else ""))
+
+
+def failed(checks: list[Check]) -> list[Check]:
+    return [c for c in checks if not c.ok]

@@ -12,6 +12,7 @@ simulated participant's answers for an attempt come from
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import platform
 import subprocess
@@ -25,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from analysis.session_format import FORMAT_VERSION, PROTOCOL_COPY
-from device import DeviceError, HapticDevice
+from device import DeviceError, DeviceFaultError, HapticDevice
 from protocols import DONE, PAUSED, RNG_ALGORITHM, Attempt, Protocol, SessionEngine, Trial
 
 from .console import PlainConsole
@@ -36,6 +37,14 @@ from .recorder import SessionFiles
 __all__ = ["SessionRunner", "SessionInterrupted", "session_meta", "utc_now"]
 
 APP_VERSION = "0.1.0"
+
+
+class _FaultStop(Exception):
+    """A latched fault stopped a trial while an operator is at the keys: pause, not end."""
+
+    def __init__(self, fault):
+        super().__init__(fault.code)
+        self.fault = fault
 
 
 class SessionInterrupted(Exception):
@@ -128,7 +137,10 @@ class SessionRunner:
     traces: str = "full"
     log: list[Attempt] = field(default_factory=list)
     timing: list[dict] = field(default_factory=list)
+    meta: dict | None = None  # session.json's content (notes are added to it)
     _expected: list[dict] | None = None  # while replaying: the recorded rows still to meet
+    _durations: list[float] = field(default_factory=list)
+    _windows_in_attempt: int = 0
 
     def load_log(self) -> None:
         rows, torn = self.files.read_rows()
@@ -172,8 +184,9 @@ class SessionRunner:
         try:
             while self._expected:
                 row = self._expected[0]
-                if row["status"] in ("paused", "resumed") or row["reason"].startswith(
-                        "operator") or row["status"] in ("aborted_device", "excluded_device"):
+                if row["status"] in ("paused", "resumed", "estop") or row["reason"].startswith(
+                        ("operator", "participant asked")) or row["status"] in (
+                        "aborted_device", "excluded_device"):
                     self._expected.pop(0)
                     self.log.append(Attempt(row["item"], row["status"], row["reason"]))
                     continue
@@ -181,40 +194,233 @@ class SessionRunner:
                 if trial is DONE or trial is PAUSED:
                     raise SessionFileError(f"{self.files.trials}:{row['_line']}: the replayed "
                                            "session ended before its rows did")
-                self._attempt(trial)
+                self._references_due(trial)
+                if self._expected:
+                    self._attempt(trial)
         finally:
             self._expected = None
             self.console = console
 
     def _run(self) -> str:
+        v = self.console.view
+        v.title = f"{self.protocol.title} · {self.participant} · session {self.session}"
         while True:
+            self._save_notes()
             trial = self.engine.next_trial(self.log)
             if trial is DONE:
                 return "complete"
-            if trial is PAUSED:  # operator pause: wait for resume
+            if trial is PAUSED:  # a pause recorded in the log (older sessions)
                 time.sleep(0.05)
                 continue
-            done = len(self.engine.outcomes(self.log))
-            self.participant_ui.waiting(trial)
-            self.console.place(trial, self._total(), done)
-            action = self.console.wait_ready()
-            while action == "pause":
-                self.participant_ui.pause()
-                self.console.say("paused — press p to resume")
-                action = self.console.wait_resume()
+            self._references_due(trial)
+            action = self._wait_placed(trial)
             if action in ("skip", "requeue"):
                 status = "skipped" if action == "skip" else "requeued"
                 self._record(trial, status, reason=f"operator {action}", t_start=utc_now())
+                self.console.say(f"{'s: skipped' if action == 'skip' else 'u: re-queued'} trial "
+                                 f"{trial.trial_index} ({trial.item})")
                 continue
             if action == "abort":
-                raise SessionInterrupted("aborted by the operator; everything so far is saved")
-            self._attempt(trial)
+                self.console.say(f"q: stopped before trial {trial.trial_index}; everything so "
+                                 "far is saved")
+                raise SessionInterrupted("stopped by the operator; everything so far is saved")
+            t0 = time.monotonic()
+            try:
+                self._attempt(trial)
+            except _FaultStop as stop:
+                self._fault_pause(stop.fault)
+                continue
+            finally:
+                self.console.set_state("idle")
+            self._durations.append(time.monotonic() - t0)
+
+    # ------------------------------------------------------------------ between trials
+    def _placement(self, trial: Trial) -> tuple[str, str]:
+        """What the operator places for ``trial``, and what it is (never on the participant's
+        screen)."""
+        if trial.kind == "identification":
+            return "nothing (the scene's surfaces are virtual)", " / ".join(trial.samples)
+        sample = self.protocol.samples[trial.samples[0]]
+        what = trial.placement or "nothing"
+        detail = "real sample" if sample.is_real else f"virtual: {sample.id}"
+        return what, detail
+
+    def _block_line(self, trial: Trial) -> str:
+        sample = self.protocol.samples[trial.samples[0]]
+        block = trial.block or sample.block
+        if block is None and sample.reference is None:
+            return ""
+        ref = self.protocol.samples.get(sample.reference) if sample.reference else None
+        return (f"{block or ''}" + (f" — its real block: {ref.placement or ref.id}"
+                                    if ref is not None else ""))
+
+    def _wait_placed(self, trial: Trial) -> str:
+        """Until the operator has placed the item and pressed r (or chose another action);
+        meanwhile the participant sees 'please wait' and may ask for the real block."""
+        done = len(self.engine.outcomes(self.log))
+        what, detail = self._placement(trial)
+        v = self.console.view
+        v.block = self._block_line(trial)
+        rest = len(self.engine.remaining(self.log))
+        v.left_s = (float(np.median(self._durations)) * rest) if self._durations else None
+        self.participant_ui.waiting(trial)
+        self.console.place(trial, self._total(), done, what, detail)
+        self.console.set_state("placing")
+        while True:
+            self._save_notes()
+            if self.console.interactive and self.device.fault is not None:
+                self._fault_pause(self.device.fault)  # an e-stop pressed between trials
+                self.participant_ui.waiting(trial)
+                self.console.place(trial, self._total(), done, what, detail)
+                self.console.set_state("placing")
+            if self.participant_ui.poll() == "reference":
+                ref = self.protocol.samples[trial.samples[0]].reference
+                if ref is not None:
+                    self.console.say(f"the participant asks for the real block: {ref}")
+                    self._reference(trial, ref, asked=True)
+                    self.participant_ui.waiting(trial)
+                    self.console.place(trial, self._total(), done, what, detail)
+                    self.console.set_state("placing")
+            action = self.console.poll(0.03)
+            if action is None:
+                continue
+            if action == "pause":
+                action = self._paused(trial)
+                if action == "resume":  # back to placing: r starts the trial, nothing else
+                    self.participant_ui.waiting(trial)
+                    self.console.set_state("placing")
+                    self.console.say(f"p: resumed; trial {trial.trial_index} starts with r")
+                    continue
+            return action
+
+    def _paused(self, trial: Trial) -> str:
+        self.console.set_state("paused")
+        self.console.say(f"p: paused before trial {trial.trial_index} — p resumes, q stops")
+        self.participant_ui.pause()
+        while True:
+            self._save_notes()
+            a = self.console.poll(0.03)
+            if a in ("resume", "abort"):
+                return a
+
+    def _fault_pause(self, fault) -> None:
+        """An e-stop or the watchdog latched the device: the participant's window stays up,
+        the session waits for the operator to make it safe and clear the fault (c)."""
+        self.console.set_state("fault")
+        self.console.say(f"{fault.code.upper()}: output is off and latched ({fault.message}). "
+                         "Make it safe, then press c to clear it and continue, or q to stop and "
+                         "save")
+        self.participant_ui.pause(fault=True)
+        while True:
+            self._save_notes()
+            a = self.console.poll(0.03)
+            if a == "clear":
+                self.device.clear_fault()
+                self.console.say("c: fault cleared by the operator; the trial runs again")
+                return
+            if a == "abort":
+                raise SessionInterrupted(f"stopped by the operator after a {fault.code}; "
+                                         "everything so far is saved")
+
+    def _save_notes(self) -> None:
+        notes = self.console.take_notes()
+        if notes and self.meta is not None:
+            self.meta.setdefault("notes", []).extend(notes)
+            self.files.write_meta(self.meta)
+
+    # ------------------------------------------------------------------ reference blocks
+    def _referenced(self, item: str) -> bool:
+        return any(a.item == item and a.status == "reference" for a in self.log)
+
+    def _references_due(self, trial: Trial) -> None:
+        """The real blocks the protocol calls for before this trial: the block's own at the
+        start of each block, or all the phase's at its start."""
+        phase = next(p for p in self.protocol.phases if p.name == trial.phase)
+        if phase.references == "none" or trial.kind == "free":
+            return
+        if phase.references == "block":
+            refs = [self.protocol.samples[trial.samples[0]].reference]
+        else:
+            refs = list(dict.fromkeys(self.protocol.samples[s].reference
+                                      for s in phase.samples))
+        for ref in refs:
+            if ref is not None and not self._referenced(f"{trial.phase}/ref:{ref}"):
+                self._reference(trial, ref)
+
+    def _reference(self, trial: Trial, ref_id: str, asked: bool = False) -> None:
+        """The operator places a real reference block; the participant taps it (one window);
+        the taps are recorded as their own row (status ``reference``). An e-stop while it is
+        placed or tapped pauses the session like any trial; the block is tapped again."""
+        ref = self.protocol.samples[ref_id]
+        k = sum(a.status == "reference" for a in self.log)
+        rtrial = dataclasses.replace(trial, item=f"{trial.phase}/ref:{ref_id}", kind="reference",
+                                     samples=(ref_id,), placement=ref.placement or ref_id,
+                                     attempt=0, block=trial.block)
+        reason = "participant asked" if asked else ""
+        while True:
+            self.participant_ui.waiting(rtrial)
+            self.console.view.block = self._block_line(trial)
+            self.console.place(rtrial, self._total(), len(self.engine.outcomes(self.log)),
+                               ref.placement or ref_id, "real reference block (compare with it)")
+            self.console.set_state("reference")
+            while self.console.poll(0.03) != "go":
+                self._save_notes()
+                self.participant_ui.poll()
+                if self.console.interactive and self.device.fault is not None:
+                    self._fault_pause(self.device.fault)
+                    self.participant_ui.waiting(rtrial)
+                    self.console.set_state("reference")
+            self.console.set_state("trial")
+            self.participant_ui.reference(rtrial, ref)
+            t_start = utc_now()
+            self._windows_in_attempt = 0
+            try:
+                rng = np.random.default_rng(np.random.SeedSequence(
+                    [self.seed, trial.trial_index, 10_000 + k]))
+                res = self._window(rtrial, ref_id, rng,
+                                   reseed=[self.seed, trial.trial_index, 0, k])
+            except DeviceError as exc:
+                if not (isinstance(exc, DeviceFaultError) and self.console.interactive
+                        and self.device.fault is not None):
+                    raise SessionInterrupted(f"device error while tapping the real block "
+                                             f"{ref_id}: {exc}") from exc
+                self._fault_pause(self.device.fault)
+                continue
+            if res.faults:
+                f = res.faults[0]
+                self._record(rtrial, "estop", reason=f"{f.code}: {f.message}", t_start=t_start,
+                             result=res)
+                if not self.console.interactive:
+                    raise SessionInterrupted(f"{f.code} while tapping the real block {ref_id}: "
+                                             "output is off and latched; resume with "
+                                             "--clear-fault once it is safe")
+                self._fault_pause(f)
+                continue
+            self._record(rtrial, "reference", t_start=t_start, result=res, reason=reason)
+            self.console.result("reference", len(res.contacts), ref_id)
+            return
+
+    # ------------------------------------------------------------------ the end
+    def summary(self, seconds: float) -> str:
+        """One line for the operator: what the session recorded."""
+        rows, _ = self.files.read_rows()
+        c = {}
+        for r in rows:
+            c[r["status"]] = c.get(r["status"], 0) + 1
+        excluded = sum(v for k, v in c.items() if k.startswith("excluded"))
+        sat = c.get("saturated", 0) + c.get("excluded_saturated", 0)
+        return (f"{c.get('valid', 0)} valid, {sat} saturated, {excluded} excluded, "
+                f"{c.get('skipped', 0)} skipped, {c.get('timed_out', 0)} timed out, "
+                f"{c.get('reference', 0)} reference taps; "
+                f"{int(seconds // 60)} min {int(seconds % 60)} s")
 
     # ------------------------------------------------------------------ one attempt
     def _attempt(self, trial: Trial) -> None:
+        self._windows_in_attempt = 0
         rng = self._rng(trial)
         t_start = utc_now()
         self.participant_ui.ready(trial)
+        self.console.set_state("trial")
         if self.audio is not None:
             self.audio.tap_cue()
         results = []
@@ -235,6 +441,12 @@ class SessionRunner:
             else:
                 for sid in trial.samples:
                     results.append(self._window(trial, sid, rng))
+        except DeviceFaultError as exc:  # latched before the window (an e-stop between trials)
+            fault = self.device.fault
+            if not self.console.interactive or fault is None:
+                raise SessionInterrupted(f"trial {trial.trial_index}: {exc}; resume with "
+                                         "--clear-fault once it is safe") from exc
+            raise _FaultStop(fault) from exc
         except DeviceError as exc:
             status = self.engine.failure_status("aborted_device", trial, self.log)
             self._record(trial, status, reason=str(exc)[:200], t_start=t_start,
@@ -247,6 +459,10 @@ class SessionRunner:
         velocities = np.concatenate([r.velocities for r in results]) if results else []
         if any(r.faults for r in results):  # an e-stop or the watchdog during the window
             f = next(r.faults[0] for r in results if r.faults)
+            if self.console.interactive:  # the operator is there: pause until it is cleared
+                self._record(trial, "estop", reason=f"{f.code}: {f.message}",
+                             t_start=t_start, result=res, results=results)
+                raise _FaultStop(f)
             status = self.engine.failure_status("aborted_device", trial, self.log)
             self._record(trial, status, reason=f"{f.code}: {f.message}",
                          t_start=t_start, result=res, results=results)
@@ -270,6 +486,7 @@ class SessionRunner:
             return
         row: dict[str, Any] = {}
         if trial.kind == "rated":
+            self.console.set_state("rating")
             rating, rt = self.participant_ui.rate(trial, self.protocol.rating, res, rng)
             if not self.protocol.rating.min <= rating <= self.protocol.rating.max:
                 raise SessionInterrupted(f"the responder gave rating {rating!r}, outside the "
@@ -286,11 +503,17 @@ class SessionRunner:
         self.console.result("valid", len(velocities),
                             f"rating {row['rating']}" if "rating" in row else "")
 
-    def _window(self, trial: Trial, sample_id: str, rng: np.random.Generator):
+    def _window(self, trial: Trial, sample_id: str, rng: np.random.Generator,
+                reseed: list | None = None):
         sample = self.protocol.samples[sample_id]
         dev = self.device
         dev.load_scene(sample.scene)
-        dev.reseed([self.seed, trial.trial_index, trial.attempt, trial.samples.index(sample_id)])
+        # each window of an attempt its own stream (familiarization's several windows, a
+        # surface tapped twice): the same attempt repeats exactly, its windows differ
+        k = self._windows_in_attempt
+        self._windows_in_attempt += 1
+        dev.reseed([*(reseed or [self.seed, trial.trial_index, trial.attempt,
+                                 trial.samples.index(sample_id)]), k])
         self.participant_ui.before_window(trial, sample_id, dev, rng)
         dev.home()
         w = self.protocol.window
@@ -324,7 +547,8 @@ class SessionRunner:
             for k, r in enumerate(results):
                 if not r.traces:
                     continue
-                name = f"trial-{trial.trial_index:04d}-{k}.npz"
+                kind = "reference" if status == "reference" else "trial"
+                name = f"{kind}-{trial.trial_index:04d}-{k}.npz"
                 trace_file = self.files.save_trace(
                     name, _trace_payload(r, self.traces, self.device.info), r.contacts)
             if len(results) > 1:

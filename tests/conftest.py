@@ -115,7 +115,7 @@ def xdisplay():
     for n in range(90, 130):
         if not os.path.exists(f"/tmp/.X{n}-lock"):
             break
-    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1280x1024x24", "-nolisten",
+    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1920x1200x24", "-nolisten",
                              "tcp"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     for _ in range(100):
         if os.path.exists(f"/tmp/.X11-unix/X{n}"):
@@ -130,3 +130,142 @@ def xdisplay():
         os.environ["DISPLAY"] = old
     proc.terminate()
     proc.wait(timeout=5)
+
+
+class Terminal:
+    """A program in a real terminal (a tmux pane): keys typed in, the screen read back."""
+
+    def __init__(self, name: str, command: list[str], env: dict, size=(160, 48), cwd=None):
+        import shlex
+
+        if shutil_which("tmux") is None:
+            pytest.fail("tmux is missing: `make test` installs it from Debian's packages")
+        self.sock = f"hl-{name}-{os.getpid()}"
+        exports = " ".join(f"{k}={shlex.quote(str(v))}" for k, v in env.items())
+        line = (f"cd {shlex.quote(str(cwd or os.getcwd()))}; env {exports} "
+                f"{' '.join(shlex.quote(c) for c in command)}; echo EXIT=$?; sleep 3600")
+        self._tmux("new-session", "-d", "-s", "t", "-x", str(size[0]), "-y", str(size[1]),
+                   "bash", "-c", line)
+
+    def _tmux(self, *args: str) -> str:
+        # the pane's size is the terminal's: no COLUMNS/LINES inherited from pytest
+        env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+        out = subprocess.run(["tmux", "-L", self.sock, *args], capture_output=True, text=True,
+                             env=env)
+        return out.stdout
+
+    def keys(self, text: str) -> None:
+        """Type ``text`` (literally)."""
+        self._tmux("send-keys", "-t", "t", "-l", text)
+
+    def screen(self) -> str:
+        return self._tmux("capture-pane", "-p", "-t", "t")
+
+    def wait(self, text: str, timeout: float = 60.0) -> str:
+        import time
+
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            s = self.screen()
+            if text in s:
+                return s
+            time.sleep(0.1)
+        raise AssertionError(f"'{text}' did not appear in the terminal:\n{self.screen()}")
+
+    def exit_code(self, timeout: float = 120.0) -> int:
+        import re
+
+        s = self.wait("EXIT=", timeout)
+        return int(re.search(r"EXIT=(\d+)", s).group(1))
+
+    def close(self) -> None:
+        self._tmux("kill-server")
+
+    def save_png(self, path: Path, title: str = "operator terminal") -> None:
+        """The terminal's screen as an image (DejaVu Sans Mono, light on dark)."""
+        from PIL import Image, ImageDraw, ImageFont
+
+        lines = self.screen().splitlines() or [""]
+        font = ImageFont.truetype("/usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf", 15)
+        cw, ch = font.getbbox("M")[2], 19
+        img = Image.new("RGB", (max(len(ln) for ln in lines) * cw + 24, len(lines) * ch + 44),
+                        (24, 26, 30))
+        d = ImageDraw.Draw(img)
+        d.text((12, 8), title, fill=(140, 150, 160), font=font)
+        for i, ln in enumerate(lines):
+            d.text((12, 32 + i * ch), ln, fill=(220, 225, 230), font=font)
+        img.save(path)
+
+
+def shutil_which(name):
+    import shutil
+
+    return shutil.which(name)
+
+
+@pytest.fixture
+def terminal():
+    """Start programs in real terminals (tmux panes); all are closed afterwards."""
+    made = []
+
+    def start(name, command, env, **kw):
+        t = Terminal(name, command, env, **kw)
+        made.append(t)
+        return t
+
+    yield start
+    for t in made:
+        t.close()
+
+
+class Participant:
+    """A person at the PsychoPy window: real X key events (xdotool) and screenshots."""
+
+    def __init__(self, display: str):
+        self.display = display
+        self.env = {**os.environ, "DISPLAY": display}
+
+    def window(self, timeout: float = 30.0) -> str:
+        import time
+
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            out = subprocess.run(["xdotool", "search", "--onlyvisible", "--name", "PsychoPy"],
+                                 capture_output=True, text=True, env=self.env).stdout.split()
+            if out:
+                return out[-1]
+            time.sleep(0.1)
+        raise AssertionError("no PsychoPy window appeared")
+
+    def press(self, *keys: str) -> None:
+        """Press keys (X keysym names: 1, Return, space, r …) into the participant's window."""
+        import time
+
+        wid = self.window()
+        subprocess.run(["xdotool", "windowfocus", "--sync", wid], env=self.env,
+                       capture_output=True)
+        for k in keys:
+            subprocess.run(["xdotool", "key", "--clearmodifiers", k], env=self.env, check=True)
+            time.sleep(0.15)
+
+    def screenshot(self, path: Path, window: bool = True) -> Path:
+        from PIL import ImageGrab
+
+        img = ImageGrab.grab(xdisplay=self.display)
+        if window:
+            geo = subprocess.run(["xdotool", "getwindowgeometry", "--shell", self.window()],
+                                 capture_output=True, text=True, env=self.env).stdout
+            g = dict(line.split("=") for line in geo.split())
+            x, y, w, h = (int(g[k]) for k in ("X", "Y", "WIDTH", "HEIGHT"))
+            img = img.crop((x, y, x + w, y + h))
+        img.save(path)
+        return path
+
+
+@pytest.fixture
+def participant(xdisplay):
+    import shutil
+
+    if shutil.which("xdotool") is None:
+        pytest.fail("xdotool is missing: `make test` installs it from Debian's packages")
+    return Participant(xdisplay)

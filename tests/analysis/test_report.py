@@ -37,8 +37,12 @@ def test_load_sessions(study):
     assert d.attrs["sessions"] == 9 and d["participant"].nunique() == 9
     assert set(d["protocol"]) == {"realism", "factorial", "identification"}
     fac = d[d["protocol"] == "factorial"]
-    assert set(fac["frequency"]) == {"low", "high"} and set(fac["block"]) == {
+    rated = fac[fac["status"] != "reference"]
+    assert set(rated["frequency"]) == {"low", "high"} and set(rated["block"]) == {
         "rubber", "wood", "aluminum"}
+    refs = fac[fac["status"] == "reference"]  # the real blocks, one per material block
+    assert set(refs["frequency"]) == {""} and len(refs) == 3 * 3
+    assert set(refs["sample"]) == {"rubber-real", "wood-real", "aluminum-real"}
     assert d.attrs["files"] and not d.attrs["torn"]
     t = d.attrs["session_table"]
     assert set(t["kind"]) == {"dry-run"} and set(t["status"]) == {"complete"}

@@ -32,25 +32,44 @@ def _until(pred, limit=5.0):
     return pred()
 
 
-def test_keys_queue_actions_and_estop_acts_at_once(tty_stdin):
+def test_keys_act_only_in_their_state_and_estop_acts_at_once(tty_stdin):
+    """A key pressed where it means nothing is discarded with a line saying so; nothing
+    pressed in one state acts in the next (an s during a trial never skips the next one)."""
     dev = open_device("sim")
     dev.load_scene(Scene("firm", spring=680.0))
     dev.home()
-    con = KeyConsole(dev)
+    con = KeyConsole(dev, live=False)
     try:
-        os.write(tty_stdin, b"x")  # not an operator key: ignored
+        con.set_state("placing")
+        os.write(tty_stdin, b"x")  # not an operator key: nothing
         os.write(tty_stdin, b"r")
-        assert con.wait_ready() == "go"
+        assert con.poll(2.0) == "go"
+        con.set_state("trial")
+        os.write(tty_stdin, b"s")  # a skip during a trial: discarded, said so
+        assert _until(lambda: any("key 's' ignored" in m for m in con.view.messages))
+        assert con.poll(0.3) is None
+        con.set_state("placing")  # the next trial: the s did not carry over
+        assert con.poll(0.3) is None
         os.write(tty_stdin, b"s")
-        assert con.wait_ready() == "skip"
+        assert con.poll(2.0) == "skip"
         os.write(tty_stdin, b"p")
-        assert con.wait_ready() == "pause"
+        assert con.poll(2.0) == "pause"
+        con.set_state("paused")
+        os.write(tty_stdin, b"r")  # r does nothing while paused
+        assert con.poll(0.3) is None
         os.write(tty_stdin, b"p")
-        assert con.wait_resume() == "go"
+        assert con.poll(2.0) == "resume"
+        con.set_state("placing")
+        os.write(tty_stdin, b"ngrip looser\x7fr\r")  # a note, with a correction
+        assert _until(lambda: con.notes)
+        assert con.take_notes()[0]["text"] == "grip looser"
         os.write(tty_stdin, b"e")  # e-stop: on the device immediately, not queued
         assert _until(lambda: dev.fault is not None)
         assert dev.fault.code == "estop" and dev.output_force == 0.0
         assert not con.actions
+        con.set_state("fault")
+        os.write(tty_stdin, b"c")
+        assert con.poll(2.0) == "clear"
     finally:
         con.close()
 

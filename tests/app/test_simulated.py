@@ -259,7 +259,9 @@ def test_simulate_over_the_serial_link_to_the_emulator(tmp_path):
     assert out.returncode == 0, out.stderr
     d = load_sessions(tmp_path)
     assert (d["status"] == "valid").sum() == 24 and set(d["device_backend"]) == {"serial"}
-    assert d["rating"].between(1, 10).all() and d["rating"].nunique() > 2
+    assert (d["status"] == "reference").sum() == 3  # each material's real block, tapped once
+    rated = d[d["status"] == "valid"]
+    assert rated["rating"].between(1, 10).all() and rated["rating"].nunique() > 2
     bad = subprocess.run([*CLI, "simulate", "factorial", "--speed", "0"], capture_output=True,
                          text=True)
     assert bad.returncode == 2 and "--speed" in bad.stderr

@@ -1,0 +1,293 @@
+"""Test day, as a lab meets it: a person at the PsychoPy window (real X key events from
+xdotool under Xvfb), an operator at a real terminal (a tmux pane), a device on the serial
+port (the emulator). Screenshots go to tests/artifacts/screens/ (`make screens` copies the
+README's to docs/screens/)."""
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from analysis.session_format import read_trials
+
+ROOT = Path(__file__).resolve().parents[2]
+TEST_DAY = ROOT / "tests" / "data" / "test_day.toml"
+PY = [sys.executable, "-m", "app"]
+
+
+@pytest.fixture
+def shots(artifacts):
+    d = artifacts / "screens"
+    d.mkdir(exist_ok=True)
+    return d
+
+
+def env(display: str | None = None) -> dict:
+    import os
+
+    e = {k: os.environ[k] for k in ("PATH", "HOME", "HAPTICLAB_LIBRARIES", "TERM")
+         if k in os.environ}
+    if display:
+        e["DISPLAY"] = display
+    return e
+
+
+def rows_of(folder: Path) -> list[dict]:
+    rows, _ = read_trials(folder / "trials.tsv")
+    return rows
+
+
+def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp_path):
+    """The participant's details in a dialog; familiarization ended with ENTER; the real
+    block at the start of the block and again when the participant asks (R); 'please wait'
+    between trials; an e-stop that pauses and is cleared; ratings above 9 typed; a note;
+    the debrief; the end-of-session summary."""
+    data = tmp_path / "data"
+    t = terminal("person", [*PY, "run", str(TEST_DAY), "--participant", "P01", "--device",
+                            "sim", "--no-audio", "--seed", "7", "--data", str(data),
+                            "--info-dialog"], env(xdisplay), cwd=tmp_path)
+    # the participant information dialog (PsychoPy's, Qt) comes first
+    end = time.monotonic() + 30
+    while time.monotonic() < end and not subprocess.run(
+            ["xdotool", "search", "--onlyvisible", "--name", "Participant"], env=participant.env,
+            capture_output=True, text=True).stdout.strip():
+        time.sleep(0.2)
+    time.sleep(0.5)
+    participant.screenshot(shots / "info-dialog.png", window=False)
+    subprocess.run(["xdotool", "type", "31"], env=participant.env, check=True)
+    subprocess.run(["xdotool", "key", "Return"], env=participant.env, check=True)
+    # the operator's live view: what to place, the keys that act now
+    screen = t.wait("PLACE")
+    assert "real wood block" in screen and "placing: r ready" in screen
+    t.save_png(shots / "operator-view.png", "operator terminal — hapticlab run (live view)")
+    t.keys("r")
+    time.sleep(1.0)
+    participant.press("space")  # the instructions: SPACE begins
+    time.sleep(1.5)
+    participant.press("Return")  # familiarization: ENTER when done
+    t.wait("reference: r ready")  # the block's real block, before its first trial
+    t.keys("r")
+    t.wait("rating #2")
+    time.sleep(0.8)
+    participant.screenshot(shots / "between-trials-session.png")
+    t.keys("ngrip steady")
+    t.keys("\r")
+    t.wait("note saved: grip steady")
+    t.keys("e")  # E-STOP between trials: the session pauses, the window stays up
+    t.wait("press c to clear it")
+    time.sleep(0.8)
+    participant.screenshot(shots / "estop-pause.png")
+    t.keys("c")
+    t.wait("fault cleared by the operator")
+    t.keys("r")
+    time.sleep(1.0)
+    participant.press("space")  # the rating phase's instructions
+    time.sleep(1.5)
+    participant.press("1", "0", "Return")  # 10, typed and confirmed
+    t.wait("rating 10")
+    participant.press("r")  # the participant asks for the real block again
+    t.wait("the participant asks for the real block")
+    t.wait("reference: r ready")
+    time.sleep(0.5)
+    participant.screenshot(shots / "reference-requested.png")
+    t.keys("r")
+    for k in range(3):
+        t.wait("placing: r ready")
+        time.sleep(0.3)
+        t.keys("r")
+        time.sleep(1.2)
+        participant.press(str(4 + k), "Return")
+    time.sleep(1.5)
+    participant.press("shift+a", "space", "s", "u", "d", "d", "e", "n", "space", "s", "t", "o",
+                      "p", "period", "Return")
+    assert t.exit_code(60) == 0
+    end = t.screen()  # the operator still sees how the session went
+    assert "session complete: 5 valid, 0 saturated" in end, end
+    t.save_png(shots / "operator-end.png", "operator terminal — after the session")
+    folder = data / "sub-P01" / "ses-1"
+    rows = rows_of(folder)
+    statuses = [r["status"] for r in rows]
+    assert statuses.count("reference") == 2 and statuses.count("valid") == 5
+    asked = [r for r in rows if r["status"] == "reference" and r["reason"]]
+    assert len(asked) == 1 and asked[0]["reason"] == "participant asked"
+    ratings = [int(r["rating"]) for r in rows if r["phase"] == "rating" and r["rating"]]
+    assert ratings == [10, 4, 5, 6]
+    meta = json.loads((folder / "session.json").read_text())
+    assert meta["kind"] == "human" and meta["responder"] == "person"
+    assert meta["participant"]["info"] == {"age": "31", "handedness": "right"}
+    assert meta["participant"]["debrief"] == "A sudden stop."
+    assert [n["text"] for n in meta["notes"]] == ["grip steady"]
+    assert meta["summary"].startswith("5 valid, 0 saturated, 0 excluded, 0 skipped")
+
+
+def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp_path):
+    """Over the serial emulator (windows in real time): an s during a trial is discarded (it
+    used to skip the next trial), a double r starts one trial, un-pausing needs r, and s, u,
+    e and q are confirmed with the trial they acted on."""
+    proto = tmp_path / "six.toml"
+    proto.write_text((ROOT / "tests" / "data" / "protocols" / "six_on_nine.toml").read_text()
+                     .replace("duration = 3.0", "duration = 1.5"))
+    data = tmp_path / "data"
+    t = terminal("operator", [*PY, "run", str(proto), "--participant", "P02", "--device",
+                              f"serial:{emulator.port}", "--dry-run", "--operator-keys",
+                              "--no-audio", "--seed", "3", "--traces", "none", "--data",
+                              str(data)], env(), cwd=tmp_path)
+    folder = data / "sub-P02" / "ses-1"
+    t.wait("placing: r ready")
+    t.keys("r")  # familiarization: one window for the scripted responder
+    t.wait("#2 (attempt 1)")
+    t.keys("r")
+    time.sleep(0.5)
+    t.keys("s")  # during trial 2's window
+    t.wait("key 's' ignored: trial")
+    t.wait("#3 (attempt 1)")
+    time.sleep(1.5)
+    assert len(rows_of(folder)) == 2  # trial 3 neither skipped nor started without r
+    assert [r["status"] for r in rows_of(folder)] == ["valid", "valid"]
+    t.keys("rr")  # a double r: one trial
+    t.wait("key 'r' ignored")
+    t.wait("#4 (attempt 1)")
+    time.sleep(1.5)
+    assert len(rows_of(folder)) == 3
+    t.keys("p")
+    t.wait("p: paused before trial 4")
+    t.keys("p")
+    t.wait("trial 4 starts with r")
+    time.sleep(1.5)
+    assert len(rows_of(folder)) == 3  # un-pausing did not start the trial
+    t.keys("s")
+    t.wait("s: skipped trial 4")
+    t.wait("#5 (attempt 1)")
+    t.keys("u")
+    t.wait("u: re-queued trial 5")
+    t.keys("r")
+    time.sleep(0.6)
+    t.keys("e")  # E-STOP in the middle of a window
+    t.wait("press c to clear it")
+    time.sleep(0.5)
+    t.keys("c")
+    t.wait("fault cleared by the operator; the trial runs again")
+    t.wait("(attempt 2)")
+    t.keys("q")
+    t.wait("q: stopped before trial")
+    assert t.exit_code(30) == 3
+    rows = rows_of(folder)
+    st = [r["status"] for r in rows]
+    assert st[:3] == ["valid"] * 3 and st[3:6] == ["skipped", "requeued", "estop"]
+    assert rows[3]["reason"] == "operator skip" and rows[5]["reason"].startswith("estop")
+    assert json.loads((folder / "session.json").read_text())["status"] == "interrupted"
+    done = subprocess.run([*PY, "resume", str(folder), "--device", f"serial:{emulator.port}",
+                           "--quiet"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    final = rows_of(folder)
+    retried = [r for r in final if r["item"] == rows[5]["item"]]
+    assert [r["status"] for r in retried] == ["estop", "valid"]
+
+
+def test_a_person_without_a_terminal_is_refused_before_anything_opens(xdisplay, tmp_path):
+    out = subprocess.run([*PY, "run", str(TEST_DAY), "--participant", "P03", "--device", "sim",
+                          "--no-audio", "--data", str(tmp_path / "d")], capture_output=True,
+                         text=True, timeout=60, stdin=subprocess.DEVNULL,
+                         env={**env(xdisplay)})
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert "no terminal is attached" in out.stderr and "run hapticlab from a terminal" in \
+        out.stderr
+    assert not (tmp_path / "d").exists()
+    nodisplay = subprocess.run([*PY, "run", str(TEST_DAY), "--participant", "P03", "--device",
+                                "sim", "--no-audio", "--data", str(tmp_path / "d"),
+                                "--operator-keys"], capture_output=True, text=True, timeout=60,
+                               stdin=subprocess.DEVNULL, env=env())
+    assert nodisplay.returncode == 2 and "no display" in nodisplay.stderr
+
+
+def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulator_factory,
+                                                                           tmp_path):
+    """On a real device (the emulator) realism used to stop at its first matched sample
+    although validate and device check passed. The preflight names what is missing and the
+    command; after that command, preflight passes and a realism session completes over the
+    serial link with matched samples."""
+    emu = emulator_factory(11, "--speed", "10")
+    spec = f"serial:{emu.port}"
+    common = ["--device", spec, "--responder", "scripted", "--no-audio", "--data",
+              str(tmp_path / "d")]
+    pre = subprocess.run([*PY, "preflight", "realism", *common], capture_output=True,
+                         text=True, timeout=120)
+    assert pre.returncode == 1, pre.stdout
+    line = next(ln for ln in pre.stdout.splitlines() if ln.startswith("FAIL libraries"))
+    assert "matched_firm, matched_soft need(s) a library reproducing 'wood_on_foam'" in line
+    command = line.split("build it with: ")[1].split(";")[0].strip()
+    assert command == (f"hapticlab library build --device {spec} --protocol realism "
+                       "--source wood_on_foam")
+    build = subprocess.run([*PY, *command.split()[1:], "--windows", "4"], capture_output=True,
+                           text=True, timeout=600)
+    assert build.returncode == 0, build.stderr
+    pre = subprocess.run([*PY, "preflight", "realism", *common], capture_output=True,
+                         text=True, timeout=120)
+    assert pre.returncode == 0, pre.stdout
+    assert "ok   libraries: built on this device: matched_firm" in pre.stdout
+    proto = tmp_path / "short.toml"  # realism with one repetition, to keep the test short
+    proto.write_text((ROOT / "protocols" / "realism.toml").read_text()
+                     .replace("repetitions = 3", "repetitions = 1"))
+    run = subprocess.run([*PY, "run", str(proto), "--participant", "P04", *common, "--seed",
+                          "2", "--traces", "none", "--quiet"], capture_output=True, text=True,
+                         timeout=900)
+    assert run.returncode == 0, run.stderr
+    rows = rows_of(tmp_path / "d" / "sub-P04" / "ses-1")
+    matched = [r for r in rows if r["sample"].startswith("matched") and r["status"] == "valid"]
+    assert len(matched) == 4
+    meta = json.loads((tmp_path / "d" / "sub-P04" / "ses-1" / "session.json").read_text())
+    assert meta["libraries"]["matched_firm"]["path"].endswith(".npz")
+
+
+def test_clear_fault_over_serial_clears_a_fault_latched_before(emulator, tmp_path):
+    from device import Scene, open_device
+
+    with open_device(f"serial:{emulator.port}") as dev:  # a previous host e-stopped
+        dev.load_scene(Scene("s", spring=100.0))
+        dev.estop()
+    out = subprocess.run([*PY, "run", str(ROOT / "tests" / "data" / "protocols" /
+                                          "six_on_nine.toml"), "--participant", "P05",
+                          "--device", f"serial:{emulator.port}", "--dry-run", "--no-audio",
+                          "--data", str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "latched estop fault" in out.stderr
+    out = subprocess.run([*PY, "run", str(ROOT / "tests" / "data" / "protocols" /
+                                          "six_on_nine.toml"), "--participant", "P05",
+                          "--device", f"serial:{emulator.port}", "--dry-run", "--no-audio",
+                          "--data", str(tmp_path), "--clear-fault", "--traces", "none",
+                          "--quiet"], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+
+
+def test_the_cursor_follows_the_stylus_over_the_serial_link(emulator):
+    from device import Scene, open_device
+
+    heights = []
+    with open_device(f"serial:{emulator.port}") as dev:
+        dev.load_scene(Scene("s", spring=400.0))
+        dev.home()
+        dev.run_window(1.0, on_progress=lambda t, p: heights.append(p.live_height))
+    seen = [h for h in heights if h is not None]
+    assert len(seen) >= 5 and max(seen) > 0.005 and min(seen) < 0.002  # up and down
+
+
+def test_williams_rows_beyond_the_square_and_simulated_counterbalancing(tmp_path):
+    text = (ROOT / "protocols" / "factorial.toml").read_text().replace(
+        'block_order = "random"', 'block_order = "williams"')
+    p = tmp_path / "w.toml"
+    p.write_text(text)
+    out = subprocess.run([*PY, "run", str(p), "--participant", "P06", "--dry-run", "--row",
+                          "6", "--data", str(tmp_path / "d")], capture_output=True, text=True)
+    assert out.returncode == 2 and "rows 0–5" in out.stderr
+    sim = subprocess.run([*PY, "simulate", str(p), "--participants", "7", "--data",
+                          str(tmp_path / "s"), "--traces", "none"], capture_output=True,
+                         text=True, timeout=600)
+    assert sim.returncode == 0, sim.stderr
+    rows = {}
+    for k in range(1, 8):
+        meta = json.loads((tmp_path / "s" / f"sub-sim{k:02d}" / "ses-1" / "session.json")
+                          .read_text())
+        rows[k] = meta["participant"]["counterbalance_row"]
+    assert rows == {1: 0, 2: 1, 3: 2, 4: 3, 5: 4, 6: 5, 7: 0}
