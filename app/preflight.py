@@ -12,7 +12,7 @@ import shutil
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from .errors import DataFolderError, DiskFullError, HapticlabError, NotAFolderError, io_error
@@ -144,12 +144,21 @@ def check_device(dev, spec: str) -> Check:
 
 
 def check_protocol_on(text: str, source: str, dev) -> Check:
+    from device import LibraryTransient, SceneError
     from protocols import ProtocolError, parse_protocol
 
     try:
-        parse_protocol(text, source, dev.info)
+        proto = parse_protocol(text, source, dev.info)
     except ProtocolError as exc:
         return Check("protocol on this device", False, str(exc))
+    for sample in proto.samples.values():  # what only the device itself knows
+        scene = sample.scene
+        if isinstance(scene.transient, LibraryTransient):  # its file: check_libraries
+            scene = replace(scene, transient=None)
+        try:
+            dev.check_scene(scene)
+        except SceneError as exc:
+            return Check("protocol on this device", False, f"sample '{sample.id}': {exc}")
     return Check("protocol on this device", True, "every transient can be played and the "
                  "limits are within the device's rating")
 

@@ -111,19 +111,30 @@ class HapticDevice(ABC):
             on it).
         """
         self._check_open()
-        if not isinstance(scene, Scene):
-            raise TypeError(f"load_scene expects a device.Scene, got {type(scene).__name__}")
-        table = None
-        if scene.transient is not None:
-            table = self._tables.get(scene.transient)
-            if table is None:
-                from .render import transient_table
-
-                table = self._tables[scene.transient] = transient_table(scene.transient,
-                                                                        self.info)
+        table = self._table_for(scene)
         self._homed = False
         self._load_scene(scene, table)
         self._loaded = scene
+
+    def check_scene(self, scene: Scene) -> None:
+        """Raise :class:`~device.errors.SceneError` when this device could not present
+        ``scene``, without loading it (nothing moves; the loaded scene stays)."""
+        self._check_open()
+        self._check_scene(scene, self._table_for(scene))
+
+    def _table_for(self, scene: Scene) -> TransientTable | None:
+        """``scene``'s transient as this device plays it (built once per transient)."""
+        if not isinstance(scene, Scene):
+            raise TypeError(f"expects a device.Scene, got {type(scene).__name__}")
+        if scene.transient is None:
+            return None
+        table = self._tables.get(scene.transient)
+        if table is None:
+            from .render import transient_table
+
+            table = self._tables[scene.transient] = transient_table(scene.transient,
+                                                                    self.info)
+        return table
 
     def home(self, clearance: float | None = None) -> None:
         """Move the stylus to rest ``clearance`` [m] above the surface (None: the backend's
@@ -264,6 +275,11 @@ class HapticDevice(ABC):
     def _load_scene(self, scene: Scene, table: TransientTable | None) -> None:
         """Prepare ``scene``; ``table`` is its transient as this device plays it (None for a
         spring or a real sample)."""
+
+    def _check_scene(self, scene: Scene, table: TransientTable | None) -> None:
+        """Backend checks beyond the transient table's (the simulator models the scene);
+        raise SceneError. A backend that plays what it is given checks nothing more."""
+        return None
 
     @abstractmethod
     def _home(self, clearance: float | None) -> None:

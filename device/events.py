@@ -114,6 +114,10 @@ class WindowResult:
         True when no contact happened before the wait limit.
     timing : dict
         Backend timing report (e.g. achieved loop rate and jitter in live mode).
+    energy : dict
+        Work across the stylus's ports over the window [J], from backends that can know it
+        (the simulator): ``in`` the stylus did on the actuator and on a real sample, ``out``
+        they did on the stylus. A passive sample never gives out more than it took in.
     """
 
     rate_hz: float
@@ -124,6 +128,7 @@ class WindowResult:
     traces: dict[str, np.ndarray] = field(default_factory=dict)
     timed_out: bool = False
     timing: dict[str, float] = field(default_factory=dict)
+    energy: dict[str, float] = field(default_factory=dict)
     live_height: float | None = None  #: in progress callbacks: stylus above the surface [m]
 
     @property

@@ -30,6 +30,8 @@ __all__ = [
     "PUBLISHED_GRASP",
     "Scene",
     "Material",
+    "Support",
+    "MAX_BLOCK_KG",
     "Ringing",
     "Transient",
     "Pulse",
@@ -101,7 +103,8 @@ class Ringing:
         negative: with the normal velocity negative into the surface, ``A·v`` > 0 and
         the first push is out of the surface.
     decay : float [1/s]
-        B, exponential decay rate, >= 0.
+        B, exponential decay rate, > 0 (a vibration that never dies out, or grows, is
+        not a material's).
     frequency : float [Hz]
         f, > 0.
     """
@@ -111,7 +114,7 @@ class Ringing:
     frequency: float
 
     def __post_init__(self) -> None:
-        _set_checked(self, "ringing", slope=_ANY, decay=_NONNEG, frequency=_POS)
+        _set_checked(self, "ringing", slope=_ANY, decay=_POS, frequency=_POS)
 
     def acceleration(self, t, speed: float):
         """Model acceleration [m/s²] at times ``t`` [s] after a contact at ``speed`` [m/s]."""
@@ -123,25 +126,93 @@ class Ringing:
 
 
 @dataclass(frozen=True)
-class Material:
-    """A physical sample touched through the device (real, never rendered).
+class Support:
+    """What a block rests on, as a spring and damper to the ground (foam, a table top).
 
     Parameters
     ----------
     stiffness : float [N/m]
-        Contact stiffness, > 0.
+        > 0.
     damping : float [N·s/m]
-        Contact damping, >= 0.
+        >= 0.
+    """
+
+    stiffness: float
+    damping: float = 0.0
+
+    def __post_init__(self) -> None:
+        _set_checked(self, "support", stiffness=_POS, damping=_NONNEG)
+
+
+#: heaviest block a sample may be [kg] (a 3.5-cm cube of steel is 0.34 kg)
+MAX_BLOCK_KG = 5.0
+#: what to give a ringing sample so it can be simulated
+BLOCK_HINT = ("give the block's 'mass' [kg]: its vibration is the block moving on what it "
+              "rests on (a 3.5-cm cube of wood is about 0.026 kg, of aluminum 0.116 kg)")
+
+
+@dataclass(frozen=True)
+class Material:
+    """A physical sample touched through the device (real, never rendered): passive
+    physics only, so it can store and return energy but never create it.
+
+    Three forms:
+
+    - a sample fixed to the ground (foam, a rubber pad): the tip touches it through a
+      contact spring ``stiffness`` and damper ``damping``;
+    - a block, a second body of ``mass``, resting on a given ``support`` (balsa on foam):
+      the contact as above between the tip and the block;
+    - a block of ``mass`` that rings as measured (``ringing``, Table 1): ``stiffness`` is
+      then what pressing it feels (the contact and the support in series, Table 1's K),
+      and the simulator derives the contact's stiffness and damping and the support so the
+      tip and the block, bouncing against each other on the contact, ring at the measured
+      frequency and decay (:func:`device.sim.plant.block_model`). The slope A is not
+      imposed: how strongly the tip shakes is what the masses allow.
+
+    A tap moves a block; its vibration reaches the tip only through the contact.
+
+    Parameters
+    ----------
+    stiffness : float [N/m]
+        Contact stiffness (a ringing block: its quasi-static stiffness), > 0.
+    damping : float [N·s/m]
+        Contact damping, >= 0 (a ringing block: derived, not given).
     ringing : Ringing or None
-        Vibration excited at each contact by the true incoming velocity.
+        The vibration measured on the real sample (the simulator needs ``mass`` with it).
+    mass : float or None [kg]
+        The block's mass (0 < mass <= :data:`MAX_BLOCK_KG`); None: the sample does not move.
+    support : Support or None
+        What the block rests on (needs ``mass``; not with ``ringing``, which derives it).
     """
 
     stiffness: float
     damping: float = 0.0
     ringing: Ringing | None = None
+    mass: float | None = None
+    support: Support | None = None
 
     def __post_init__(self) -> None:
         _set_checked(self, "material", stiffness=_POS, damping=_NONNEG)
+        if self.mass is not None:
+            object.__setattr__(self, "mass", _finite("material", "mass", self.mass, minimum=0.0,
+                                                     strict=True, maximum=MAX_BLOCK_KG))
+            if self.ringing is None and self.support is None:
+                raise SceneError("a block needs what it rests on: give 'support' (stiffness, "
+                                 "damping) or the 'ringing' it was measured with", "mass",
+                                 where="material")
+            if self.ringing is not None and self.support is not None:
+                raise SceneError("give either 'ringing' (the support is derived from it) or "
+                                 "'support', not both", "support", where="material")
+        elif self.support is not None:
+            raise SceneError("'support' is what a block rests on: give the block's "
+                             "'mass' [kg] too", "mass", where="material")
+        # a ringing without a mass describes the sample (a real device never simulates it;
+        # older protocol copies say no more); the simulator asks for the mass (BLOCK_HINT)
+
+    @property
+    def is_block(self) -> bool:
+        """True when the sample is a second body that moves."""
+        return self.mass is not None
 
 
 BLENDS = tuple(b.label for b in Blend)
@@ -726,6 +797,11 @@ class Scene:
             if self.material.ringing is not None:
                 r = self.material.ringing
                 m["ringing"] = {"slope": r.slope, "decay": r.decay, "frequency": r.frequency}
+            if self.material.mass is not None:
+                m["mass"] = self.material.mass
+            if self.material.support is not None:
+                sp = self.material.support
+                m["support"] = {"stiffness": sp.stiffness, "damping": sp.damping}
             out["material"] = m
         return out
 
@@ -758,26 +834,37 @@ def _parse_transient(where: str, data: Any) -> Transient | None:
 def _parse_material(where: str, data: Any) -> Material:
     if not isinstance(data, Mapping):
         raise SceneError(f"expected a table, got {data!r}", where=where)
-    _check_keys(where, data, {"stiffness", "damping", "ringing"}, {"stiffness"})
-    ringing = None
-    if "ringing" in data:
-        r = data["ringing"]
-        if not isinstance(r, Mapping):
-            raise SceneError(f"expected a table, got {r!r}", part=("ringing",),
-                             where=f"{where}.ringing")
-        _in_part(("ringing",), lambda w, d: _check_keys(w, d, {"slope", "decay", "frequency"},
-                                                        {"slope", "decay", "frequency"}),
-                 f"{where}.ringing", r)
-        ringing = _in_part(("ringing",), _ringing, f"{where}.ringing", r)
+    _check_keys(where, data, {"stiffness", "damping", "ringing", "mass", "support"},
+                {"stiffness"})
+    if "damping" in data and "mass" in data and "ringing" in data:
+        raise SceneError("a ringing block's contact damping is derived from its ringing's "
+                         "decay; remove 'damping'", "damping", where=where)
+    ringing = _sub_table(where, data, "ringing", Ringing, {"slope", "decay", "frequency"},
+                         {"slope", "decay", "frequency"})
+    support = _sub_table(where, data, "support", Support, {"stiffness", "damping"},
+                         {"stiffness"})
     try:
         return Material(stiffness=data["stiffness"], damping=data.get("damping", 0.0),
-                        ringing=ringing)
+                        ringing=ringing, mass=data.get("mass"), support=support)
     except SceneError as exc:
         raise exc.within(where=where) from None
 
 
-def _ringing(where: str, data: Mapping[str, Any]) -> Ringing:
-    try:
-        return Ringing(**data)
-    except SceneError as exc:
-        raise exc.within(where=where) from None
+def _sub_table(where: str, data: Mapping[str, Any], key: str, cls, allowed: set[str],
+               required: set[str]):
+    """The optional sub-table ``key`` of a material, built as ``cls`` (None when absent)."""
+    if key not in data:
+        return None
+    r = data[key]
+    w = f"{where}.{key}"
+    if not isinstance(r, Mapping):
+        raise SceneError(f"expected a table, got {r!r}", part=(key,), where=w)
+
+    def build(w: str, d: Mapping[str, Any]):
+        _check_keys(w, d, allowed, required)
+        try:
+            return cls(**d)
+        except SceneError as exc:
+            raise exc.within(where=w) from None
+
+    return _in_part((key,), build, w, r)

@@ -26,7 +26,9 @@ __all__ = ["CHECKS", "CheckFailed", "run_selftest", "SUITE_SCENES"]
 Opener = Callable[[], HapticDevice]
 
 SUITE_SCENES = {
-    "wood": Scene("wood", material=Material(70_000.0, 40.0, Ringing(-1500.0, 600.0, 592.0))),
+    # a 3.5-cm wood cube ringing as Table 1's wood (its contact and support derived)
+    "wood": Scene("wood", material=Material(70_000.0, ringing=Ringing(-1500.0, 600.0, 592.0),
+                                            mass=0.026)),
     "firm_spring": Scene("firm_spring", spring=680.0),
     "pulse_firm": Scene("pulse_firm", spring=680.0, transient=Pulse(5.7, 0.020)),
     "hard_pulse": Scene("hard_pulse", spring=680.0, transient=Pulse(200.0, 0.010)),

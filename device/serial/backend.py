@@ -41,6 +41,10 @@ __all__ = ["SerialDevice", "DeviceGoneError", "DeviceTimeoutError", "PortBusyErr
 _OPTIONAL = ("true_position", "true_velocity", "true_accel")
 
 
+#: how long a device may take to acknowledge SCENE_COMMIT [s] (docs/wire-protocol.md)
+COMMIT_TIMEOUT_S = 2.0
+
+
 class SerialDevice(HapticDevice):
     """Driver for a device on a serial port (or any pyserial URL).
 
@@ -165,9 +169,12 @@ class SerialDevice(HapticDevice):
         self._command(M.SceneBegin(
             sid, int(kind), int(round(scene.surface_height * 1e6)), float(scene.spring or 0.0),
             m.stiffness if m else 0.0, m.damping if m else 0.0, ring.slope if ring else 0.0,
-            ring.decay if ring else 0.0, ring.frequency if ring else 0.0, 0.0, rows, row_len,
+            ring.decay if ring else 0.0, ring.frequency if ring else 0.0,
+            (m.mass or 0.0) if m else 0.0, rows, row_len,
             int(table.blend) if table is not None else 0,
             table.attenuation if table is not None else 1.0))
+        if m is not None and m.support is not None:
+            self._command(M.SceneSupport(sid, m.support.stiffness, m.support.damping))
         crc = 0
         if table is not None:  # only what the scene requires: springs upload no table
             self._command(M.SceneVelocities(sid, tuple(float(v) for v in table.velocities)))
@@ -176,7 +183,8 @@ class SerialDevice(HapticDevice):
                 part = q[a: a + M.CHUNK_ITEMS]
                 self._command(M.SceneChunk(sid, a, part.size, tuple(int(x) for x in part)))
             crc = zlib.crc32(q.tobytes()) & 0xFFFFFFFF
-        self._command(M.SceneCommit(sid, crc))
+        # a device may take a while to prepare a scene (it keeps sending STATUS meanwhile)
+        self._command(M.SceneCommit(sid, crc), timeout=COMMIT_TIMEOUT_S)
 
     def _set_current_limit(self, amps: float) -> None:
         self._command(M.SetLimit(int(round(amps * 1000))))

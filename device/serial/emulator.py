@@ -21,7 +21,7 @@ import zlib
 import numpy as np
 
 from ..codes import Blend, SceneKind
-from ..scene import Material, Ringing, Scene, TableTransient, TransientTable
+from ..scene import Material, Ringing, Scene, Support, TableTransient, TransientTable
 from ..sim.backend import SimDevice
 from . import messages as M
 from .framing import FrameDecoder
@@ -69,6 +69,8 @@ class Emulator:
         self._play = np.zeros(0)
         self._traces: dict[int, dict] = {}
         self._worker: threading.Thread | None = None
+        self._committing: tuple | None = None  # the SCENE_COMMIT being prepared
+        self._prepared: int | None = None  # its verdict, once prepared
         self._last_heartbeat = time.monotonic()
         self._stop = threading.Event()
         self._fault_sent = False
@@ -101,6 +103,7 @@ class Emulator:
                     for frame in self.decoder.feed(data):
                         self.frames_in += 1
                         self._handle(frame)
+            self._commit_done()
             now = time.monotonic()
             busy = self._worker is not None and self._worker.is_alive()
             wd = self.sim.info.watchdog_s
@@ -160,6 +163,9 @@ class Emulator:
             return
         self._last_heartbeat = time.monotonic()
         self.sim.heartbeat()
+        if isinstance(msg, M.SceneCommit):
+            self._commit(frame, msg)
+            return
         if isinstance(msg, M.Hello):
             self._last = None  # a new host session starts its sequence numbers again
             if self._busy():  # a window left running by a host that went away
@@ -174,6 +180,60 @@ class Emulator:
 
     def _busy(self) -> bool:
         return self._worker is not None and self._worker.is_alive()
+
+    def _commit(self, frame, msg: M.SceneCommit) -> None:
+        """SCENE_COMMIT: the scene is prepared (the simulator models it: a block's support
+        is derived, propagators computed) off the serve loop, so STATUS frames keep coming;
+        the ACK follows when it is ready. A repeat of the same frame meanwhile waits for it."""
+        key = (frame.seq, frame.type, frame.body)
+        if self._busy():
+            if self._committing == key:
+                return  # the host resent it: the ACK is on its way
+            self.send(M.Ack(frame.seq, M.Status.BUSY))
+            return
+        status, scene = self._check_commit(msg)
+        if status != M.Status.OK:
+            self._last = (*key, status)
+            self.send(M.Ack(frame.seq, status))
+            return
+        self._committing = key
+
+        def prepare(_msg) -> None:
+            try:
+                self.sim.load_scene(scene)
+                self._prepared = M.Status.OK
+            except (ValueError, TypeError):  # SceneError is a ValueError
+                self._prepared = M.Status.BAD_MESSAGE
+
+        self._prepared = None
+        self._start(prepare, msg)
+
+    def _commit_done(self) -> None:
+        """From the serve loop: once the scene is prepared (its thread ended, so the next
+        command does not find the emulator busy), the SCENE_COMMIT's ACK."""
+        if self._committing is None or self._busy():
+            return
+        seq, status = self._committing[0], self._prepared
+        if status is None:  # the thread died without a verdict (the emulator stops)
+            status = M.Status.BAD_MESSAGE
+        self._last = (*self._committing, status)
+        self._committing = None
+        self.send(M.Ack(seq, status))
+
+    def _check_commit(self, msg: M.SceneCommit):
+        """(status, scene) of a commit: the upload complete and intact, the scene built."""
+        S = M.Status
+        sc = self._scenes.get(msg.scene_id)
+        if sc is None:
+            return S.UNKNOWN_SCENE, None
+        crc = zlib.crc32(sc["table"].astype("<i2").tobytes()) & 0xFFFFFFFF
+        if sc["begin"].rows and crc != msg.crc32:
+            return S.TABLE_CRC, None
+        try:
+            sc["scene"] = self._build_scene(sc)
+        except (ValueError, TypeError):
+            return S.BAD_MESSAGE, None
+        return S.OK, sc["scene"]
 
     def _execute(self, msg: M.Message) -> int | None:
         S = M.Status
@@ -223,28 +283,23 @@ class Emulator:
                                           "table": np.zeros(msg.rows * msg.row_len, np.int16),
                                           "scene": None}
             return S.OK
-        if isinstance(msg, (M.SceneVelocities, M.SceneChunk, M.SceneCommit)):
+        if isinstance(msg, (M.SceneVelocities, M.SceneChunk, M.SceneSupport)):
             sc = self._scenes.get(msg.scene_id)
             if sc is None:
                 return S.UNKNOWN_SCENE
+            if isinstance(msg, M.SceneSupport):
+                if sc["begin"].kind != SceneKind.REAL:
+                    return S.BAD_MESSAGE
+                sc["support"] = msg
+                return S.OK
             if isinstance(msg, M.SceneVelocities):
                 if len(msg.items) != sc["begin"].rows:
                     return S.BAD_MESSAGE
                 sc["v"] = np.array(msg.items, float)
                 return S.OK
-            if isinstance(msg, M.SceneChunk):
-                if msg.offset + msg.n > sc["table"].size:
-                    return S.BAD_MESSAGE
-                sc["table"][msg.offset: msg.offset + msg.n] = msg.items
-                return S.OK
-            crc = zlib.crc32(sc["table"].astype("<i2").tobytes()) & 0xFFFFFFFF
-            if sc["begin"].rows and crc != msg.crc32:
-                return S.TABLE_CRC
-            try:
-                sc["scene"] = self._build_scene(sc)
-            except (ValueError, TypeError):
+            if msg.offset + msg.n > sc["table"].size:
                 return S.BAD_MESSAGE
-            sim.load_scene(sc["scene"])
+            sc["table"][msg.offset: msg.offset + msg.n] = msg.items
             return S.OK
         if sim.fault is not None and isinstance(msg, (M.Home, M.StartWindow, M.PlayStart)):
             return S.FAULT_LATCHED
@@ -285,7 +340,10 @@ class Emulator:
         name = f"scene-{b.scene_id}"
         if b.kind == SceneKind.REAL:
             ring = (Ringing(b.ring_slope, b.ring_decay, b.ring_freq) if b.ring_freq > 0 else None)
-            return Scene(name, surface_height=h, material=Material(b.stiffness, b.damping, ring))
+            sup = sc.get("support")
+            return Scene(name, surface_height=h, material=Material(
+                b.stiffness, b.damping, ring, mass=b.block_mass if b.block_mass > 0 else None,
+                support=Support(sup.stiffness, sup.damping) if sup is not None else None))
         if b.kind == SceneKind.SPRING:
             return Scene(name, surface_height=h, spring=b.spring)
         forces = sc["table"].reshape(b.rows, b.row_len).astype(float) * 1e-3
@@ -371,8 +429,9 @@ def warm_up(rate_hz: float) -> None:
     """Load the compiled servo loop once (virtual time), so the first window on the wire
     does not stall the emulator for the time it takes to load machine code."""
     dev = SimDevice(rate_hz=rate_hz)
-    for scene in (Scene("w", material=Material(70_000.0, 40.0, Ringing(-1500, 600, 592))),
-                  Scene("s", spring=680.0)):
+    from ..suite import SUITE_SCENES
+
+    for scene in (SUITE_SCENES["wood"], Scene("s", spring=680.0)):
         dev.load_scene(scene)
         dev.home()
         dev.run_window(0.05, from_first_contact=False)

@@ -131,9 +131,10 @@ class SceneBegin(Message):
 
     kind: 0 real sample (no rendering), 1 spring, 2 spring + transient table.
     surface_um: surface height [µm, i32]. spring: [N/m, f32].
-    stiffness, damping, ring_slope, ring_decay, ring_freq: the real sample's contact
-    [N/m], [N·s/m], [1/s], [1/s], [Hz] (f32) — firmware ignores them; an emulator
-    simulates the physical sample with them.
+    stiffness, damping, ring_slope, ring_decay, ring_freq, block_mass: the real sample
+    (:class:`~device.scene.Material`: [N/m], [N·s/m], [1/s], [1/s], [Hz], [kg; 0 for a
+    sample that does not move], f32) — firmware ignores them; an emulator simulates the
+    physical sample with them (a block's given support follows in SCENE_SUPPORT).
     rows, row_len: transient table size; blend: 0 scale, 1 nearest, 2 linear;
     attenuation: [1, f32].
     """
@@ -149,7 +150,7 @@ class SceneBegin(Message):
     ring_slope: float = 0.0
     ring_decay: float = 0.0
     ring_freq: float = 0.0
-    reserved: float = 0.0
+    block_mass: float = 0.0
     rows: int = 0
     row_len: int = 0
     blend: int = 0
@@ -178,6 +179,17 @@ class SceneChunk(Message):
     offset: int = 0
     n: int = 0
     items: tuple = ()
+
+
+@dataclass(frozen=True)
+class SceneSupport(Message):
+    """What a real block rests on: stiffness [N/m, f32], damping [N·s/m, f32] (emulators)."""
+
+    TYPE = 0x14
+    FMT = "Hff"
+    scene_id: int = 0
+    stiffness: float = 0.0
+    damping: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -431,6 +443,7 @@ class Position(Message):
 
 MESSAGES: dict[int, type[Message]] = {
     m.TYPE: m for m in (Hello, Heartbeat, Ping, SceneBegin, SceneVelocities, SceneChunk,
+                        SceneSupport,
                         SceneCommit, Home, StartWindow, StopWindow, PlayChunk, PlayStart, SetLimit,
                         EStop,
                         ClearFault, Zero, TraceRequest, Ack, HelloAck, Pong, Contact, Saturation,

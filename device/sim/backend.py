@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..base import DeviceInfo, HapticDevice, SimulatedHand
-from ..errors import DeviceError, DeviceSpecError
+from ..errors import DeviceError, DeviceSpecError, SceneError
 from ..events import ContactEvent, FaultEvent, Flags, SaturationEvent, WindowResult
 from ..scene import MAX_REACH_M, Scene, TransientTable
 from . import kernel as K
@@ -70,9 +70,8 @@ class CompiledScene:
         #: what the servo loop needs of this scene (:func:`device.sim.kernel.run_ticks`)
         self.kernel_args = (self.tick_prop, self.pieces, int(p.n_sub), p.accel_row,
                             float(p.surface_height), float(p.contact_stiffness),
-                            float(p.contact_damping), float(p.ring_gain), int(self.render),
-                            self.spring, self.table, self.table_v, self.blend,
-                            self.attenuation)
+                            float(p.contact_damping), int(self.render), self.spring,
+                            self.table, self.table_v, self.blend, self.attenuation)
 
 
 def compile_scene(scene: Scene, dev: DeviceParams, hand: HandParams,
@@ -281,10 +280,19 @@ class SimDevice(HapticDevice):
         return self._enabled
 
     # ---------------------------------------------------------------- control
-    def _load_scene(self, scene: Scene, table: TransientTable | None) -> None:
+    def _compiled(self, scene: Scene, table: TransientTable | None) -> CompiledScene:
         if scene not in self._cache:
-            self._cache[scene] = compile_scene(scene, self.params, self.hand, table)
-        self._scene = self._cache[scene]
+            try:
+                self._cache[scene] = compile_scene(scene, self.params, self.hand, table)
+            except SceneError as exc:
+                raise exc.within(where=f"scene '{scene.name}' {exc.where}".strip()) from None
+        return self._cache[scene]
+
+    def _check_scene(self, scene: Scene, table: TransientTable | None) -> None:
+        self._compiled(scene, table)
+
+    def _load_scene(self, scene: Scene, table: TransientTable | None) -> None:
+        self._scene = self._compiled(scene, table)
         self._enabled = False
         self._homed_clearance = None
         self._output_force = 0.0
@@ -378,6 +386,7 @@ class SimDevice(HapticDevice):
         total_s = (timeout + duration) if from_first_contact else duration
         plan = replace(self.tapper, top=self._homed_clearance).plan(
             self.rng_tapping, total_s + 1.0, cs.plant.surface_height)
+        self.last_plan = plan  # the intended taps of the last window (audits read them)
         n_max = int(math.ceil(total_s / dev.dt))
         stop_after = int(round(duration / dev.dt)) if from_first_contact else -1
         res = self._run(cs, plan, n_max, stop_after, _EMPTY, on_progress, heartbeats,
@@ -410,6 +419,7 @@ class SimDevice(HapticDevice):
         self._ist[K.IST_STOP] = -1 if stop_after >= 0 else n_max
         self._ist[K.IST_FIRST] = -1
         self._ist[K.IST_NEV] = 0
+        self._fst[K.FST_EIN] = self._fst[K.FST_EOUT] = 0.0
         tick0 = self._tick
         buf = _Buffers(min(n_max, int(round(initial_s / dt))), plan, self._pull_gains, dt)
         ev_tick = np.zeros(4096, dtype=np.int64)
@@ -449,6 +459,7 @@ class SimDevice(HapticDevice):
             if on_progress is not None:
                 on_progress(n * dt, self._result(buf, n, tick0, ev_tick, ev_vel))
         res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True)
+        res.energy = {"in": float(self._fst[K.FST_EIN]), "out": float(self._fst[K.FST_EOUT])}
         if self.live:
             wall = time.perf_counter() - wall0
             lat = np.asarray(late)
@@ -464,7 +475,13 @@ class SimDevice(HapticDevice):
     def _latch(self, t_f: float) -> None:
         """The servo loop zeroed output at device time ``t_f`` [s]: latch the fault it
         means (a non-finite command, the operator's e-stop, or the watchdog)."""
-        if self._ist[K.IST_FAULT_CODE] == K.FAULT_NAN:
+        if self._ist[K.IST_FAULT_CODE] == K.FAULT_DIVERGED:
+            if self._fault is None or self._fault.code != "diverged":
+                self._fault = FaultEvent(t_f, "diverged", "the simulated stylus left every "
+                                         f"physical bound (farther than {K.DIVERGED_M:g} m "
+                                         f"from the surface or faster than {K.DIVERGED_MPS:g} "
+                                         "m/s): output zeroed, window ended")
+        elif self._ist[K.IST_FAULT_CODE] == K.FAULT_NAN:
             if self._fault is None or self._fault.code != "nan_command":
                 self._fault = FaultEvent(t_f, "nan_command", "a force command that is not a "
                                          "finite number reached the clamp: output zeroed")

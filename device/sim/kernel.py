@@ -15,7 +15,14 @@ One call advances the simulation over a range of servo ticks. Per tick, in order
 5. propagate the continuous plant over the tick with the command held (exact ZOH).
    Real samples switch between free and contact modes; a switch inside a tick is
    located by bisection with precomputed power-of-two propagators, so the physics of
-   a real contact does not depend on the servo rate.
+   a real contact does not depend on the servo rate;
+6. account the energy through the two ports where something acts on the stylus — the
+   actuator (force on the motor side) and a real sample's contact (force on the tip) —
+   as work the stylus did on them (in) and they did on the stylus (out), by the
+   trapezoid rule over each propagated piece;
+7. guard: a tip farther than :data:`DIVERGED_M` from the surface, faster than
+   :data:`DIVERGED_MPS`, or not finite zeroes output, latches a ``diverged`` fault and
+   ends the window, so a blow-up can never pass silently.
 
 Per-tick work depends on the scene: ``render`` 0 (real sample) runs no rendering
 code, 1 (spring) no transient code, 2 (spring + transient) both.
@@ -28,7 +35,7 @@ import numpy as np
 from ..codes import Blend
 from ..events import Flags
 from ._jit import lazy_njit
-from .plant import FA, FH, QD, V2, Z1, Z2, Q, Y
+from .plant import FA, FH, V1, V2, VB, Z1, Z2, ZB, Y
 
 __all__ = ["run_ticks", "propagate_linear", "IST", "FST"]
 
@@ -37,10 +44,15 @@ IST_MODE, IST_ARMED, IST_PLAY, IST_SINCE_ENABLE, IST_FIRST, IST_NEV, IST_RB, IST
     IST_STOP, IST_FAULT_TICK, IST_ROW1, IST_ROW2, IST_FAULT_CODE = range(13)
 IST = 13
 # why the loop latched output off (IST_FAULT_CODE)
-FAULT_DEADLINE, FAULT_NAN = 1, 2  # the watchdog/e-stop deadline; a non-finite command
-# float state slots: the two table rows' coefficients of the transient playing
-FST_C1, FST_C2 = 0, 1
-FST = 2
+FAULT_DEADLINE, FAULT_NAN, FAULT_DIVERGED = 1, 2, 3  # the watchdog/e-stop deadline; a
+# non-finite command; a state beyond any physical bound
+# float state slots: the two table rows' coefficients of the transient playing; the energy
+# the stylus gave to (in) and received from (out) the actuator and the sample [J]
+FST_C1, FST_C2, FST_EIN, FST_EOUT = 0, 1, 2, 3
+FST = 4
+#: the divergence guard's bounds: tip distance from the surface [m] and speed [m/s]
+DIVERGED_M = 1.0
+DIVERGED_MPS = 10.0
 # how a contact speed picks table rows (TransientTable.blend), and the per-tick flags:
 # plain ints for the compiled loop, taken from the one definition of each code
 BLEND_SCALE, BLEND_NEAREST, BLEND_LINEAR = (int(b) for b in (Blend.SCALE, Blend.NEAREST,
@@ -77,16 +89,34 @@ def propagate_linear(P, x0, u, n, out):
 
 
 @lazy_njit
-def _crossed(mode, x, h, ks, bs):
-    if mode == 0:  # free → contact when the tip is below the surface and moving in
-        return x[Z2] < h and x[V2] < 0.0
-    # contact → free when the sample would have to pull
-    return ks * (h - x[Z2]) - bs * x[V2] <= 0.0
+def _sample_force(x, h, ks, bs, has_body):
+    """Force of the sample on the tip in contact [N]: k_s·(h + zb − z2) − b_s·(v2 − vb)."""
+    zb, vb = (x[ZB], x[VB]) if has_body else (0.0, 0.0)
+    return ks * (h + zb - x[Z2]) - bs * (x[V2] - vb)
 
 
 @lazy_njit
-def _advance_switching(pieces, x, u, ist, h, ks, bs, ring_gain, has_ring, tmp):
-    """Advance one substep in a two-mode (real contact) plant, locating switches."""
+def _crossed(mode, x, h, ks, bs, has_body):
+    zb, vb = (x[ZB], x[VB]) if has_body else (0.0, 0.0)
+    if mode == 0:  # free → contact when the tip is below the sample's top and moving in
+        return x[Z2] < h + zb and x[V2] - vb < 0.0
+    # contact → free when the sample would have to pull
+    return _sample_force(x, h, ks, bs, has_body) <= 0.0
+
+
+@lazy_njit
+def _account(w, fst):
+    """Add work ``w`` [J] the stylus did on a port (negative: the port did work on it)."""
+    if w >= 0.0:
+        fst[FST_EIN] += w
+    else:
+        fst[FST_EOUT] -= w
+
+
+@lazy_njit
+def _advance_switching(pieces, x, u, ist, fst, h, ks, bs, has_body, tmp):
+    """Advance one substep in a two-mode (real contact) plant, locating switches and
+    accounting the work across the contact."""
     levels = pieces.shape[1] - 1
     remaining = np.int64(1) << levels
     j = levels
@@ -96,22 +126,25 @@ def _advance_switching(pieces, x, u, ist, h, ks, bs, ring_gain, has_ring, tmp):
             j -= 1
         mode = ist[IST_MODE]
         _apply(pieces[mode, j], x, u, tmp)
-        if _crossed(mode, tmp, h, ks, bs) and switches < 64:
+        if _crossed(mode, tmp, h, ks, bs, has_body) and switches < 64:
             if j > 0:
                 j -= 1
                 continue
             # finest piece: accept it and switch mode
+            if mode == 1:
+                _account(-0.5 * (_sample_force(x, h, ks, bs, has_body)
+                                 + _sample_force(tmp, h, ks, bs, has_body))
+                         * (tmp[Z2] - x[Z2]), fst)
             x[:] = tmp
             remaining -= 1
             switches += 1
-            if mode == 0:
-                ist[IST_MODE] = 1
-                if has_ring:
-                    x[QD] += ring_gain * x[V2]
-            else:
-                ist[IST_MODE] = 0
+            ist[IST_MODE] = 1 - mode
             j = levels
         else:
+            if mode == 1:
+                _account(-0.5 * (_sample_force(x, h, ks, bs, has_body)
+                                 + _sample_force(tmp, h, ks, bs, has_body))
+                         * (tmp[Z2] - x[Z2]), fst)
             x[:] = tmp
             remaining -= np.int64(1) << j
 
@@ -170,8 +203,8 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
         ``(x, ist, fst, rb)``: plant state, integer and float loop state, encoder ring
         buffer (all updated in place).
     scene : tuple
-        ``(tick_prop, pieces, n_sub, accel_row, h, ks, bs, ring_gain, render, K, table,
-        tbl_v, blend, atten)`` from :class:`~device.sim.backend.CompiledScene`.
+        ``(tick_prop, pieces, n_sub, accel_row, h, ks, bs, render, K, table, tbl_v,
+        blend, atten)`` from :class:`~device.sim.backend.CompiledScene`.
     device : tuple
         ``(enc_res, vel_w, hyst, kt, i_max, ramp_ticks, rate)`` from the device parameters.
     u_hand : ndarray
@@ -188,14 +221,14 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
     Returns the first tick not simulated (n1, or earlier when ``ist[IST_STOP]`` is reached).
     """
     x, ist, fst, rb = state
-    (tick_prop, pieces, n_sub, accel_row, h, ks, bs, ring_gain, render, K, table, tbl_v,
+    (tick_prop, pieces, n_sub, accel_row, h, ks, bs, render, K, table, tbl_v,
      blend, atten) = scene
     enc_res, vel_w, hyst, kt, i_max, ramp_ticks, rate = device
     ns = x.shape[0]
     u = np.zeros(3)
     tmp = np.empty(ns)
     n_rb = rb.shape[0]
-    has_ring = ns > Q
+    has_body = ns > ZB
     n_modes = tick_prop.shape[0]
     inv_res = 1.0 / enc_res
     n_tab = table.shape[1]
@@ -290,11 +323,23 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
         for j in range(3):
             a2 += accel_row[mode, ns + j] * u[j]
         out[OUT_A2, n] = a2
-        # 5. propagate
+        # 5. propagate (6. the contact's work inside)
+        fa0, z10 = x[FA], x[Z1]
         if n_modes == 1:
             _apply(tick_prop[0], x, u, tmp)
             x[:] = tmp
         else:
             for _ in range(n_sub):
-                _advance_switching(pieces, x, u, ist, h, ks, bs, ring_gain, has_ring, tmp)
+                _advance_switching(pieces, x, u, ist, fst, h, ks, bs, has_body, tmp)
+        # 6. the actuator's work over the tick
+        _account(-0.5 * (fa0 + x[FA]) * (x[Z1] - z10), fst)
+        # 7. guard
+        if not (abs(x[Z2] - h) < DIVERGED_M and abs(x[V2]) < DIVERGED_MPS
+                and abs(x[V1]) < DIVERGED_MPS):
+            if ist[IST_FAULT] == 0:
+                ist[IST_FAULT] = 1
+                ist[IST_FAULT_TICK] = n
+                ist[IST_FAULT_CODE] = FAULT_DIVERGED
+            ist[IST_STOP] = n + 1
+            return n + 1
     return n1

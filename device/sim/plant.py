@@ -10,8 +10,8 @@ States (SI units)::
     5 y    accelerometer output before noise/ADC [m/s²]
     6 yd   its derivative [m/s³]
     7 fh   the hand's pull k_h·z_ref + b_h·v_ref towards its intended motion [N]
-    8 q    sample ringing acceleration [m/s²]   (only for real samples that ring)
-    9 qd   its derivative [m/s³]
+    8 zb   the block's displacement from rest [m]   (only for a real sample that is a block)
+    9 vb   its velocity [m/s]
 
 Inputs, held constant over each servo tick::
 
@@ -22,27 +22,32 @@ Inputs, held constant over each servo tick::
     2 one     constant 1 (carries k_s·h of the contact spring)
 
 A real sample adds a second *mode* (in contact), in which the tip feels
-k_s·(h − z2) − b_s·v2 from the sample; the ringing state, once excited at a
-contact, adds M2·q to the tip. Everything is linear within a mode, so the exact
-discrete propagator over a tick is the matrix exponential of the augmented matrix
-[[A, B], [0, 0]]·T (Van Loan); mode switches are located inside a tick by the
-kernel (see :mod:`device.sim.kernel`).
+k_s·(h + zb − z2) − b_s·(v2 − vb) from the sample. A sample that is a block (a second
+body of mass m_b on its support k_b, b_b) feels the opposite force; its vibration is
+excited by the contact itself and reaches the tip only through it, so the sample is
+passive: it returns at most the energy the tip brought. Everything is linear within a
+mode, so the exact discrete propagator over a tick is the matrix exponential of the
+augmented matrix [[A, B], [0, 0]]·T (Van Loan); mode switches are located inside a tick
+by the kernel (see :mod:`device.sim.kernel`).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import expm
 
-from ..scene import Material, Ringing
+from ..errors import SceneError
+from ..scene import BLOCK_HINT, Material, Support
 from .params import DeviceParams, HandParams
 
-__all__ = ["Plant", "build_plant", "zoh", "piece_propagators", "N_INPUTS"]
+__all__ = ["Plant", "build_plant", "zoh", "piece_propagators", "N_INPUTS", "block_model",
+           "BlockModel", "contact_modes", "SUPPORT_ZETA", "MAX_CONTACT_ZETA", "tip_share"]
 
-Z1, V1, Z2, V2, FA, Y, YD, FH, Q, QD = range(10)
+Z1, V1, Z2, V2, FA, Y, YD, FH, ZB, VB = range(10)
 U_CMD, U_HAND_RATE, U_ONE = range(3)
 N_INPUTS = 3
 N_LEVELS = 30  # bisection depth for locating a contact switch inside a substep
@@ -58,10 +63,12 @@ class Plant:
     B : ndarray, shape (n_modes, ns, N_INPUTS)
     accel_row : ndarray, shape (n_modes, ns + N_INPUTS)
         True tip acceleration as a row over [x; u].
-    ring_gain : float [1/s · rad/s]
-        Added to qd per unit normal velocity at a contact (A·ω); 0 without ringing.
     contact_stiffness, contact_damping : float
         k_s [N/m], b_s [N·s/m] of the real sample (0 for virtual samples).
+    support : Support or None
+        What the block rests on (given, or derived from the measured ringing).
+    block_mass : float [kg]
+        The block's mass (0 when the sample does not move).
     n_sub : int
         Substeps per tick for contact-switch detection (1 without a real sample).
     """
@@ -69,11 +76,12 @@ class Plant:
     A: np.ndarray
     B: np.ndarray
     accel_row: np.ndarray
-    ring_gain: float
     contact_stiffness: float
     contact_damping: float
     surface_height: float
     n_sub: int
+    support: Support | None = None
+    block_mass: float = 0.0
 
     @property
     def n_states(self) -> int:
@@ -84,10 +92,12 @@ class Plant:
         return self.A.shape[0]
 
 
-def _mode_matrices(dev: DeviceParams, hand: HandParams, ringing: Ringing | None,
-                   contact: Material | None, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """A and B of one mode; ``contact`` is the sample touching the tip (None: free)."""
-    ns = 10 if ringing is not None else 8
+def _mode_matrices(dev: DeviceParams, hand: HandParams, contact: Material | None,
+                   block: tuple[float, Support] | None, h: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """A and B of one mode; ``contact`` is the sample touching the tip (None: free),
+    ``block`` its mass [kg] and support when the sample is a block."""
+    ns = 10 if block is not None else 8
     m1 = dev.motor_mass
     m2 = dev.tip_mass + hand.mass
     A = np.zeros((ns, ns))
@@ -102,18 +112,25 @@ def _mode_matrices(dev: DeviceParams, hand: HandParams, ringing: Ringing | None,
     A[V2, V1], A[V2, V2] = bl / m2, -(bl + hand.damping) / m2
     A[V2, FH] = 1.0 / m2
     B[FH, U_HAND_RATE] = 1.0
-    if contact is not None:
-        A[V2, Z2] -= contact.stiffness / m2
-        A[V2, V2] -= contact.damping / m2
-        B[V2, U_ONE] = contact.stiffness * h / m2
-    if ringing is not None:
-        # The sample's vibration, once excited, keeps decaying in both modes and pushes
-        # the tip with M2·q: it lasts ~1/B, shorter than a bounce, and is not gated by it.
-        w = 2 * math.pi * ringing.frequency
-        A[V2, Q] = 1.0
-        A[Q, QD] = 1.0
-        A[QD, Q] = -(ringing.decay**2 + w * w)
-        A[QD, QD] = -2.0 * ringing.decay
+    if block is not None:  # the block on its support, in both modes
+        mb, sup = block
+        A[ZB, VB] = 1.0
+        A[VB, ZB] = -sup.stiffness / mb
+        A[VB, VB] = -sup.damping / mb
+    if contact is not None:  # F = k_s·(h + zb − z2) − b_s·(v2 − vb) on the tip, −F on the block
+        ks, bs = contact.stiffness, contact.damping
+        A[V2, Z2] -= ks / m2
+        A[V2, V2] -= bs / m2
+        B[V2, U_ONE] = ks * h / m2
+        if block is not None:
+            mb = block[0]
+            A[V2, ZB] += ks / m2
+            A[V2, VB] += bs / m2
+            A[VB, Z2] += ks / mb
+            A[VB, V2] += bs / mb
+            A[VB, ZB] -= ks / mb
+            A[VB, VB] -= bs / mb
+            B[VB, U_ONE] = -ks * h / mb
     wa = 2 * math.pi * dev.amplifier_bandwidth_hz
     A[FA, FA] = -wa
     B[FA, U_CMD] = wa
@@ -126,31 +143,174 @@ def _mode_matrices(dev: DeviceParams, hand: HandParams, ringing: Ringing | None,
     return A, B
 
 
+def contact_modes(contact: tuple[float, float], block: tuple[float, Support] | None = None,
+                  dev: DeviceParams | None = None, hand: HandParams | None = None
+                  ) -> np.ndarray:
+    """Eigenvalues [1/s] of device + hand + sample while in contact (the hand's pull held),
+    sorted by frequency; a ringing shows as −B ± i·2πf.
+
+    Parameters
+    ----------
+    contact : (float, float)
+        The contact's stiffness [N/m] and damping [N·s/m].
+    block : (float, Support), optional
+        The block's mass [kg] and what it rests on; None: the sample does not move.
+    """
+    dev, hand = dev or DeviceParams(), hand or HandParams()
+    A, _ = _mode_matrices(dev, hand, Material(*contact), block, 0.0)
+    keep = [Z1, V1, Z2, V2] + ([ZB, VB] if block is not None else [])
+    lam = np.linalg.eigvals(A[np.ix_(keep, keep)])
+    return lam[np.argsort(np.abs(lam.imag))]
+
+
+#: damping ratio of a derived support (a block alone on it rings down in ~3 periods / 0.05)
+SUPPORT_ZETA = 0.05
+#: the largest damping ratio of an elastic contact (stylus against block)
+MAX_CONTACT_ZETA = 0.5
+
+
+@dataclass(frozen=True)
+class BlockModel:
+    """A ringing block as the simulator models it (see :func:`block_model`).
+
+    Attributes
+    ----------
+    contact_stiffness, contact_damping : float
+        [N/m], [N·s/m] between the stylus tip and the block.
+    mass : float [kg]
+    support : Support
+        What the block rests on.
+    """
+
+    contact_stiffness: float
+    contact_damping: float
+    mass: float
+    support: Support
+
+    @property
+    def static_stiffness(self) -> float:
+        """What pressing the block feels [N/m]: contact and support in series."""
+        return 1.0 / (1.0 / self.contact_stiffness + 1.0 / self.support.stiffness)
+
+
+@functools.lru_cache(maxsize=64)
+def block_model(material: Material) -> BlockModel:
+    """The passive block that rings as ``material``'s measured ringing.
+
+    ``material.stiffness`` is what pressing the block feels (Table 1's K: the contact and
+    the support in series); the ringing is the mode in which the tip and the block bounce
+    against each other on the contact, touched by the reference stylus and hand (the
+    defaults of :class:`DeviceParams` and :class:`HandParams`: Table 1 was measured with one
+    stylus). Solved for: the contact's stiffness and damping, with the support's stiffness
+    following from the series and its damping ratio :data:`SUPPORT_ZETA`. The contact must
+    be elastic — underdamped, its damping ratio with the stylus against the block at most
+    :data:`MAX_CONTACT_ZETA` (a dashpot-like contact would push the tip with b·v the instant
+    it touches); where several such blocks ring as measured, the one whose ringing moves
+    the tip most is taken. It is a property of the block, the same whoever holds the
+    stylus later.
+
+    Raises
+    ------
+    SceneError
+        No passive block reproduces the ringing (naming why).
+    """
+    from scipy.optimize import fsolve
+
+    if material.ringing is None or not material.is_block or material.support is not None:
+        raise ValueError("block_model derives a ringing block (mass and ringing, no support)")
+    r, mb, K = material.ringing, float(material.mass), float(material.stiffness)
+    m2 = DeviceParams().tip_mass + HandParams().mass
+    mu = m2 * mb / (m2 + mb)  # the stylus and the block against each other
+    w0 = 2 * math.pi * r.frequency
+    target = complex(-r.decay, w0)
+
+    def unpack(p) -> BlockModel:
+        ks = K * (1.0 + abs(p[0]))  # stiffer than the series, so the support is finite
+        kb = 1.0 / (1.0 / K - 1.0 / ks)
+        sup = Support(kb, 2.0 * SUPPORT_ZETA * math.sqrt(kb * mb))
+        return BlockModel(ks, abs(p[1]) * mb * r.decay, mb, sup)
+
+    def nearest(b: BlockModel) -> complex:
+        lam = contact_modes((b.contact_stiffness, b.contact_damping), (b.mass, b.support))
+        return lam[np.argmin(np.abs(lam - target))]
+
+    def residual(p):
+        lam = nearest(unpack(p))
+        return [(lam.imag - target.imag) / w0, (lam.real - target.real) / w0]
+
+    found: list[tuple[float, BlockModel]] = []
+    for r0 in (0.05, 0.2, 0.5, 1.0, 2.0, 4.0, 9.0, 29.0):
+        for b0 in (0.1, 1.0, 5.0):
+            p, _, ok, _ = fsolve(residual, [r0, b0], full_output=True, xtol=1e-12)
+            if ok != 1:
+                continue
+            b = unpack(p)
+            if abs(nearest(b) - target) <= 1e-6 * w0 and \
+                    b.contact_damping <= 2 * MAX_CONTACT_ZETA * math.sqrt(
+                        b.contact_stiffness * mu):
+                found.append((tip_share(b, target), b))
+    if not found:
+        raise SceneError(f"no passive block of {mb:g} kg pressed at {K:g} N/m rings at "
+                         f"{r.frequency:g} Hz with decay {r.decay:g} 1/s through an elastic "
+                         "contact on this stylus; a heavier block or another stiffness may",
+                         "ringing",
+                         part=("material",), where="material")
+    return max(found, key=lambda t: t[0])[1]
+
+
+def tip_share(b: BlockModel, target: complex) -> float:
+    """How much the mode nearest ``target`` moves the tip after an impact (modal
+    amplitude of the tip's velocity per unit incoming velocity)."""
+    dev, hand = DeviceParams(), HandParams()
+    A, _ = _mode_matrices(dev, hand, Material(b.contact_stiffness, b.contact_damping),
+                          (b.mass, b.support), 0.0)
+    keep = [Z1, V1, Z2, V2, ZB, VB]
+    lam, V = np.linalg.eig(A[np.ix_(keep, keep)])
+    x0 = np.zeros(len(keep))
+    x0[3] = -1.0  # the tip arrives at 1 m/s, everything else at rest
+    c = np.linalg.solve(V, x0)
+    i = int(np.argmin(np.abs(lam - target)))
+    return float(2 * abs(c[i] * V[3, i]))
+
+
 def build_plant(dev: DeviceParams, hand: HandParams, material: Material | None = None,
                 surface_height: float = 0.0) -> Plant:
     """Assemble the continuous-time model for one scene.
 
     Only what the scene requires is modelled: a virtual scene has one mode and
-    eight states; a real sample adds the contact mode, and ringing adds two states.
+    eight states; a real sample adds the contact mode, and a block adds two states.
     """
-    ringing = material.ringing if material is not None else None
-    modes = [_mode_matrices(dev, hand, ringing, None, surface_height)]
-    ring_gain = 0.0
+    block = None
+    if material is not None and material.ringing is not None and not material.is_block:
+        raise SceneError(f"the simulator models a ringing sample as a block: {BLOCK_HINT}",
+                         "mass", part=("material",), where="material")
+    if material is not None and material.is_block:
+        if material.support is None:  # a measured ringing: the block that rings so
+            b = block_model(material)
+            material = Material(b.contact_stiffness, b.contact_damping)
+            block = (b.mass, b.support)
+        else:
+            block = (float(material.mass), material.support)
+    modes = [_mode_matrices(dev, hand, None, block, surface_height)]
     n_sub = 1
     if material is not None:
-        modes.append(_mode_matrices(dev, hand, ringing, material, surface_height))
-        if ringing is not None:
-            ring_gain = ringing.slope * 2 * math.pi * ringing.frequency
-        wc = math.sqrt(material.stiffness / (dev.tip_mass + hand.mass))
-        # substep <= 1/8 of the contact period: a contact cannot begin and end unseen
-        n_sub = max(1, math.ceil(dev.dt / (2 * math.pi / wc / 8)))
+        modes.append(_mode_matrices(dev, hand, material, block, surface_height))
+        m2 = dev.tip_mass + hand.mass
+        mu = m2 * block[0] / (m2 + block[0]) if block is not None else m2
+        fastest = math.sqrt(material.stiffness / mu)  # the contact's own oscillation
+        lam = np.linalg.eigvals(modes[1][0])
+        fastest = max(fastest, float(np.max(np.abs(lam[np.abs(lam.imag) > 0].imag),
+                                            initial=0.0)))
+        # substep <= 1/8 of the fastest contact period: a contact cannot begin and end unseen
+        n_sub = max(1, math.ceil(dev.dt / (2 * math.pi / fastest / 8)))
     A = np.stack([m[0] for m in modes])
     B = np.stack([m[1] for m in modes])
     accel_row = np.concatenate([A[:, V2, :], B[:, V2, :]], axis=1)
-    return Plant(A=A, B=B, accel_row=accel_row, ring_gain=ring_gain,
+    return Plant(A=A, B=B, accel_row=accel_row,
                  contact_stiffness=material.stiffness if material else 0.0,
                  contact_damping=material.damping if material else 0.0,
-                 surface_height=surface_height, n_sub=n_sub)
+                 surface_height=surface_height, n_sub=n_sub,
+                 support=block[1] if block else None, block_mass=block[0] if block else 0.0)
 
 
 def zoh(A: np.ndarray, B: np.ndarray, dt: float) -> np.ndarray:
@@ -171,11 +331,32 @@ def zoh(A: np.ndarray, B: np.ndarray, dt: float) -> np.ndarray:
     return np.ascontiguousarray(E[:ns, :])
 
 
+#: levels between direct matrix exponentials in :func:`piece_propagators`
+SQUARINGS = 5
+
+
 def piece_propagators(A: np.ndarray, B: np.ndarray, h: float, levels: int = N_LEVELS) -> np.ndarray:
     """Propagators over h·2^(j−levels), j = 0..levels (the last one spans ``h``).
+
+    Every (:data:`SQUARINGS` + 1)-th level is an exact matrix exponential; the levels in
+    between are squares of the one below (e^(M·2t) = (e^(M·t))², exact in exact arithmetic),
+    at most :data:`SQUARINGS` squarings from an exponential, so rounding grows by at most
+    2^5 = 32 machine epsilons — and a stiff contact's scene compiles ~6× faster than with
+    an exponential per level (the emulator prepares scenes while the host waits).
 
     Returns
     -------
     ndarray, shape (levels + 1, ns, ns + nu)
     """
-    return np.stack([zoh(A, B, h * 2.0 ** (j - levels)) for j in range(levels + 1)])
+    ns, nu = B.shape
+    out = np.empty((levels + 1, ns, ns + nu))
+    E = np.zeros((ns + nu, ns + nu))
+    E[ns:, ns:] = np.eye(nu)
+    for j in range(levels + 1):
+        if j % (SQUARINGS + 1) == 0:
+            P = zoh(A, B, h * 2.0 ** (j - levels))
+        else:
+            E[:ns, :] = out[j - 1]
+            P = (E @ E)[:ns, :]
+        out[j] = P
+    return out

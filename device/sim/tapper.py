@@ -55,6 +55,9 @@ class Tapper:
         Duration of the lift back to ``top``.
     pause : tuple of float [s]
         Range of the rest at the top between taps.
+    sweep : tuple of float [m/s]
+        When given, the intended speeds in turn (cycled) instead of drawn ones — for
+        measurements that must cover a range, such as the energy audit.
     """
 
     velocity_mean: float = 0.11
@@ -67,6 +70,7 @@ class Tapper:
     dwell: tuple[float, float] = (0.06, 0.12)
     rise_time: float = 0.20
     pause: tuple[float, float] = (0.05, 0.20)
+    sweep: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         checks = {
@@ -76,6 +80,7 @@ class Tapper:
             "accel_time": self.accel_time > 0, "rise_time": self.rise_time > 0,
             "dwell": 0 <= self.dwell[0] <= self.dwell[1],
             "pause": 0 <= self.pause[0] <= self.pause[1],
+            "sweep": all(np.isfinite(v) and v > 0 for v in self.sweep),
         }
         for name, ok in checks.items():
             if not ok:
@@ -97,6 +102,8 @@ class Tapper:
         strokes = []
         t = 0.0
         i = 0
+        if speeds is None and self.sweep:
+            speeds = np.asarray(self.sweep, dtype=float)
         while t < duration:
             if speeds is not None:
                 v = float(np.asarray(speeds, dtype=float)[i % len(speeds)])

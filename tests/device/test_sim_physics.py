@@ -11,7 +11,8 @@ from device.sim.metrics import passivity_margin, restitution
 from device.sim.params import DeviceParams, HandParams
 from device.sim.tapper import Tapper
 
-WOOD = Scene("wood", material=Material(70_000.0, 40.0, Ringing(-1500.0, 600.0, 592.0)))
+WOOD = Scene("wood", material=Material(70_000.0, ringing=Ringing(-1500.0, 600.0, 592.0),
+                                       mass=0.026))
 FIRM = Scene("firm", spring=680.0)
 SINE = Scene("sine", spring=680.0, transient=ForceSinusoid(15.9, 0.055, 36.2))
 
@@ -40,7 +41,7 @@ def test_stiff_wall_is_active_at_1khz_and_passive_at_10khz():
 
 def test_real_samples_are_passive_and_rate_independent():
     e = [restitution(WOOD, r).e for r in (1_000, 10_000)]
-    assert 0 < e[0] < 1 and e[0] == pytest.approx(e[1], abs=0.02)
+    assert 0 < e[0] < 1 and e[0] == pytest.approx(e[1], abs=1e-9)  # the same physics
 
 
 def test_wood_rings_at_its_measured_frequency():
@@ -51,7 +52,9 @@ def test_wood_rings_at_its_measured_frequency():
     spec = np.abs(np.fft.rfft(seg * np.hanning(len(seg)), n=8192))
     f = np.fft.rfftfreq(8192, 1 / res.rate_hz)
     band = (f > 300) & (f < 2000)
-    assert f[band][np.argmax(spec[band])] == pytest.approx(592.0, abs=15.0)
+    # the contact mode is at 592 Hz exactly; the first 50 ms of the tip's acceleration,
+    # other modes and the contact's opening included, peak at 618 Hz (+4.3 %)
+    assert f[band][np.argmax(spec[band])] == pytest.approx(592.0, rel=0.06)
 
 
 def test_transient_is_scaled_by_the_encoder_estimate_not_the_true_speed():
@@ -129,8 +132,9 @@ def test_heartbeats_keep_the_watchdog_quiet():
 
 
 def test_accelerometer_clips_at_its_range_and_quantizes():
-    alu = Scene("alu", material=Material(1e6, 50.0, Ringing(-100_000.0, 1500.0, 1153.0)))
-    dev, res = window(alu)
+    alu = Scene("alu", material=Material(5e5, ringing=Ringing(-100_000.0, 1500.0, 1153.0),
+                                         mass=0.116))
+    dev, res = window(alu, tapper=Tapper(velocity_mean=0.35, velocity_sd=0.0))  # hard taps
     acc = res.traces["accel"]
     rng = dev.info.accel_range
     assert np.max(np.abs(acc)) <= rng
@@ -180,7 +184,7 @@ def test_per_tick_work_follows_the_scene():
     real = compile_scene(WOOD, dev, hand)
     assert real.render == 0 and real.plant.n_modes == 2 and real.plant.n_states == 10
     plain = compile_scene(Scene("foam", material=Material(220.0, 2.0)), dev, hand)
-    assert plain.plant.n_states == 8  # no ringing states without ringing
+    assert plain.plant.n_states == 8  # no block states for a sample that does not move
     spring = compile_scene(FIRM, dev, hand)
     assert spring.render == 1 and spring.plant.n_modes == 1 and spring.table.size == 1
     sine = compile_scene(SINE, dev, hand)
