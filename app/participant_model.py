@@ -22,10 +22,14 @@ stroke):
 
 ``stop``   log of the time from contact until the stylus stops [s] (how abruptly it stops);
 ``jolt``   log of the peak |acceleration| in the first 60 ms per incoming speed [1/s];
-``pitch``  the spectral centroid of the acceleration's onset (first 30 ms, weighted by
-           exp(−t / 10 ms)) on a log-frequency axis, 10–1500 Hz [log Hz];
-``ring``   log of the ratio of the RMS acceleration in 0–15 ms to that in 15–45 ms
-           (how quickly the vibration dies out).
+``pitch``  the spectral centroid of the acceleration's onset on a log-frequency axis,
+           10–1500 Hz [log Hz]; the onset window is 1.5 periods of the contact's strongest
+           vibration (found in the first 150 ms), at least 30 ms and at most 150 ms, weighted
+           by exp(−3t / window): 30 ms and exp(−t / 10 ms) for anything above 50 Hz, while an
+           18-Hz ringing is heard over 83 ms (a fixed 30 ms read rubber's 18 Hz as ~63 Hz);
+``ring``   log of the ratio of the RMS acceleration in the first half of the onset window
+           to that in the next full window (0–15 / 15–45 ms above 50 Hz): how quickly the
+           vibration dies out.
 
 Nothing here reads a sample's name: rename a sample and the ratings stay; change its
 rendering and they change.
@@ -58,7 +62,13 @@ renderings are all softer than any real block, so absolute distances would name 
 surface after the softest material); the assignment of the three names with the smallest
 total weighted, JND-scaled squared difference is the answer (``ID_WEIGHT``: pitch counts
 most, as frequency is the strongest cue to material in the vibration literature the papers
-build on; jolt least, as it depends on how hard one taps).
+build on; jolt least, as it depends on how hard one taps). People get better with
+practice: the perception noise of the surfaces is multiplied by ``ID_LEARNING`` = 0.85 per
+repetition already done (the paper's Table 3: 35 of 42 answers correct overall, 12 of 14 on
+the third attempt).
+
+**Familiarization.** Each familiarization window is tapped afresh (its own seed from the
+session's), and the reference is the mean of the two windows' perceived features.
 """
 
 from __future__ import annotations
@@ -87,7 +97,43 @@ ID_WEIGHT = np.array([0.5, 0.25, 1.0, 0.5])
 FEATURE_NOISE = {"expert": 0.14, "novice": 0.25}
 #: Width of the range a person assumes before having felt it [JND units].
 RANGE_PRIOR = 3.0
+#: The onset window for pitch and ring-down spans this many periods of the strongest
+#: vibration, within [ONSET_MIN_S, ONSET_MAX_S] [s].
+ONSET_PERIODS = 1.5
+ONSET_MIN_S, ONSET_MAX_S = 0.030, 0.150
+#: Identification gets better with practice: perception noise is multiplied by this per
+#: repetition already done (SPEC §2, Table 3: 35 of 42 correct, 12 of 14 on the third).
+ID_LEARNING = 0.85
 _VOID = np.full(4, np.nan)
+
+
+def _dominant_hz(a: np.ndarray, rate: float) -> float:
+    """Frequency of the strongest vibration in ``a`` [Hz], HIGHPASS_HZ–1500 Hz (a falling
+    half-Hann taper, which keeps the onset where a fast-decaying ringing lives; zero-padded
+    8x); HIGHPASS_HZ when there is none."""
+    if len(a) < 4:
+        return HIGHPASS_HZ
+    freqs = np.fft.rfftfreq(8 * len(a), 1 / rate)
+    band = (freqs >= HIGHPASS_HZ) & (freqs <= 1500.0)
+    taper = np.hanning(2 * len(a))[len(a):]
+    power = np.abs(np.fft.rfft((a - a.mean()) * taper, 8 * len(a)))[band]
+    return float(freqs[band][np.argmax(power)]) if power.max() > 0 else HIGHPASS_HZ
+
+
+def _pitch_ring(a: np.ndarray, m: int, rate: float) -> tuple[float, float]:
+    """Pitch and ring-down of one contact's acceleration over an onset window of ``m``
+    samples: the spectral centroid on a log-frequency axis of ``a[:m]`` weighted by
+    exp(−t / (m/3)) [log Hz], and the log RMS ratio of ``a[:m/2]`` to ``a[m/2:3m/2]``."""
+    freqs = np.fft.rfftfreq(8 * m, 1 / rate)
+    band = (freqs >= HIGHPASS_HZ) & (freqs <= 1500.0)
+    onset = np.exp(-3.0 * np.arange(m) / m)  # the first periods count most
+    power = np.abs(np.fft.rfft(a[:m] * onset, 8 * m))[band] ** 2
+    pitch = float(np.sum(power * np.log(freqs[band])) / np.sum(power)) if power.sum() > 0 \
+        else math.log(HIGHPASS_HZ)
+    k1, k2 = m // 2, (3 * m) // 2
+    r1 = math.sqrt(float(np.mean(a[:k1] ** 2)) + 1e-12)
+    r2 = math.sqrt(float(np.mean(a[k1:k2] ** 2)) + 1e-12)
+    return pitch, math.log(r1 / r2)
 
 
 def felt_features(result, window: float = 0.060) -> np.ndarray:
@@ -118,31 +164,27 @@ def felt_features(result, window: float = 0.060) -> np.ndarray:
     sos = signal.butter(2, HIGHPASS_HZ, "highpass", fs=float(result.rate_hz), output="sos")
     acc = signal.sosfiltfilt(sos, np.asarray(acc, dtype=float))
     rate = float(result.rate_hz)
-    n = int(window * rate)
-    k1, k2 = int(0.015 * rate), int(0.045 * rate)
-    m = int(0.030 * rate)
-    freqs = np.fft.rfftfreq(8 * m, 1 / rate)
-    band = (freqs >= HIGHPASS_HZ) & (freqs <= 1500.0)
-    onset = np.exp(-np.arange(m) / (0.010 * rate))  # the first milliseconds count most
     rows = []
     last = -np.inf
     for c in result.contacts:
         # a tap is the first contact of a stroke; rebounds within 100 ms belong to it
         first, last = c.t - last > 0.1, c.t
         i = int(np.searchsorted(t, c.t))
-        if not first or i + n > len(t) or c.velocity <= 0:
+        if not first or c.velocity <= 0:
+            continue
+        # the onset window spans ONSET_PERIODS of the vibration, at least 30 ms: a slow
+        # ringing (rubber's 18 Hz) cannot be heard in a window shorter than its period
+        f0 = _dominant_hz(acc[i:i + int(ONSET_MAX_S * rate)], rate)
+        m = int(np.clip(ONSET_PERIODS / f0, ONSET_MIN_S, ONSET_MAX_S) * rate)
+        n = max(int(window * rate), int(1.5 * m))
+        if i + n > len(t):
             continue
         a = acc[i:i + n] - acc[i:i + n].mean()
         v = vel[i:i + n]
         up = np.nonzero(v >= 0)[0]  # the encoder velocity is negative moving into the surface
-        stop = (up[0] + 1) / rate if len(up) else window
-        jolt = np.max(np.abs(a)) / c.velocity
-        power = np.abs(np.fft.rfft(a[:m] * onset, 8 * m))[band] ** 2
-        pitch = float(np.sum(power * np.log(freqs[band])) / np.sum(power)) if power.sum() > 0 \
-            else math.log(HIGHPASS_HZ)  # log of the spectral centroid on a log-frequency axis
-        r1 = math.sqrt(float(np.mean(a[:k1] ** 2)) + 1e-12)
-        r2 = math.sqrt(float(np.mean(a[k1:k2] ** 2)) + 1e-12)
-        rows.append((math.log(stop), math.log(jolt + 1e-9), pitch, math.log(r1 / r2)))
+        stop = (up[0] + 1) / rate if len(up) else n / rate
+        jolt = np.max(np.abs(a[:int(window * rate)])) / c.velocity
+        rows.append((math.log(stop), math.log(jolt + 1e-9), *_pitch_ring(a, m, rate)))
     if not rows:
         return _VOID.copy()
     return np.median(np.array(rows), axis=0)
@@ -255,8 +297,10 @@ class SimulatedParticipant(Participant):
                 return "reference", self._feel_scene("reference", ref.scene)
         return "reference", self.memory.get("reference", _VOID)
 
-    def _perceive(self, f: np.ndarray, rng) -> np.ndarray:
-        return f + rng.normal(0.0, self.person.feature_noise, f.shape)
+    def _perceive(self, f: np.ndarray, rng, practice: int = 0) -> np.ndarray:
+        """``f`` with this person's perception noise, smaller after ``practice``
+        repetitions of the same task (``ID_LEARNING``)."""
+        return f + rng.normal(0.0, self.person.feature_noise * ID_LEARNING ** practice, f.shape)
 
     def distance(self, felt: np.ndarray, remembered: np.ndarray, rng) -> float:
         """JND-scaled distance between what is felt now (perceived with fresh noise) and
@@ -305,7 +349,8 @@ class SimulatedParticipant(Participant):
                 refs[c] = (f"material:{c}", self._real_blocks[f"{c}-real"].scene)
             else:
                 refs[c] = (ref_id, self.protocol.samples[ref_id].scene)
-        felt = np.array([self._perceive(felt_features(r), rng) for r in results])
+        practice = max(int(getattr(trial, "repetition", 1)) - 1, 0)
+        felt = np.array([self._perceive(felt_features(r), rng, practice) for r in results])
         mem = np.array([self._feel_scene(*refs[c]) for c in choices])
         # relative judgement: the pattern of differences among the three surfaces is matched
         # to the pattern among the remembered materials (every rendering is softer than any
