@@ -169,7 +169,8 @@ def _bench(args: argparse.Namespace) -> int:
         module = importlib.import_module(f"benchmarks.{args.what}")
     except ModuleNotFoundError:
         raise UsageError(f"no benchmark named {args.what!r}; "
-                         "available: sim, matching, link, crash, analysis, demo") from None
+                         "available: sim, matching, link, crash, analysis, demo, energy, "
+                         "orderings") from None
     return module.main(args)
 
 
@@ -524,7 +525,8 @@ def build_parser() -> argparse.ArgumentParser:
     ps.set_defaults(func=_protocol_show)
 
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
-    b.add_argument("what", help="which benchmark: sim, matching, link, crash, analysis, demo")
+    b.add_argument("what", help="which benchmark: sim, matching, link, crash, analysis, demo, "
+                   "energy, orderings")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
     b.add_argument("--fuzz", type=int, default=100_000,
@@ -532,6 +534,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--kills", type=int, default=1000, help="crash: kill -9 count")
     b.add_argument("--points", default=None, help="crash: kill after every write point "
                    "('all') or the listed ones ('3,17')")
+    b.add_argument("--seeds", default=None, help="orderings: study seeds (default 1,2,3,4,5)")
     b.set_defaults(func=_bench)
 
     d = sub.add_parser("demo", help="what `make demo` runs: a whole simulated study and its "
