@@ -51,12 +51,34 @@ def power_table(subjects=range(5, 31, 5), reps=range(1, 6), effect: float = 1.0,
 
 
 def variance_components(data: pd.DataFrame, dv: str = "rating", sample: str = "sample",
-                        subject: str = "participant") -> dict[str, float]:
+                        subject: str = "participant", sd_trial: float | None = None
+                        ) -> dict[str, float]:
     """Estimate sd_subject, sd_interaction and sd_trial from recorded ratings (method of
-    moments on the two-way layout with repetitions)."""
+    moments on the two-way layout with repetitions).
+
+    Parameters
+    ----------
+    sd_trial : float, optional
+        The trial-to-trial SD [scale points], when the pilot cannot give it: with one
+        rating per participant and sample (a factorial design rates each set once) trial
+        noise and participant × sample noise are confounded.
+
+    Raises
+    ------
+    ValueError
+        Fewer than 2 participants with every sample, or no cell rated twice and no
+        ``sd_trial`` given.
+    """
     d = data[[subject, sample, dv]].dropna()
     cell = d.groupby([subject, sample], observed=True)[dv]
-    sd_trial = float(np.sqrt(cell.var(ddof=1).dropna().mean()))
+    if sd_trial is None:
+        var = cell.var(ddof=1).dropna()
+        if var.empty:
+            raise ValueError("the trial-to-trial SD needs cells rated at least twice; this "
+                             "pilot has one rating per participant and sample, so trial and "
+                             "participant × sample noise cannot be told apart: give "
+                             "--sd-trial, or use a pilot with repetitions")
+        sd_trial = float(np.sqrt(var.mean()))
     reps = float(cell.size().mean())
     means = cell.mean().unstack(sample).dropna()  # participants with every sample
     if means.shape[0] < 2 or means.shape[1] < 2:

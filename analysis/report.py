@@ -102,9 +102,12 @@ def methods_text(a: dict, design: dict) -> str:
         missing = excl[excl["check"] == "missing_cells"] if len(excl) else excl
         ex_txt = ""
         if len(missing):
-            ex_txt = (f" {int(missing['n_excluded'].sum())} participant(s) missing a sample "
-                      "were left out of the ANOVA (listwise) and of the t-tests of the pairs "
-                      "they miss.")
+            left = int(missing["n_excluded"].sum())
+            ex_txt = (f" {left} participant(s) missing a sample were left out of the ANOVA "
+                      + ("and of every t-test (listwise, as pingouin and JASP)."
+                         if res.get("missing", "listwise") == "listwise" else
+                         "(listwise) and of the t-tests of the pairs they miss (pairwise, "
+                         "on request)."))
         return (f"{title}: {n} participants rated {k} samples on a {_scale_text(design)} scale, "
                 f"{res['repetitions']} time(s) each (median); ratings were averaged per "
                 f"participant and sample. One-way repeated-measures ANOVA on {n_anova} "
@@ -112,8 +115,10 @@ def methods_text(a: dict, design: dict) -> str:
                 "partial η² and generalized η² (Olejnik & Algina 2003). Paired two-sided "
                 f"t-tests on {tested}, p adjusted by Holm–Bonferroni and, separately, by "
                 "Benjamini–Hochberg; d_z = mean difference / SD of the differences; 95 % "
-                "confidence intervals from the t distribution. Samples whose Holm-adjusted "
-                f"p ≥ .05 are grouped as not distinguishable (connected pairs).{ex_txt}")
+                "confidence intervals from the t distribution. Differences within 1e-9 of the "
+                "ratings' magnitude count as equal (averaging in floating point). Letters "
+                "(compact letter display, Piepho 2004): samples sharing a letter are not "
+                f"significantly different (Holm p ≥ .05), pair by pair.{ex_txt}")
     if a["type"] == "factorial":
         factors = phase["within"]
         groups = list(res)
@@ -128,8 +133,10 @@ def methods_text(a: dict, design: dict) -> str:
                 f"{'block' if phase.get('by') else 'design'} ({shape} levels of "
                 f"{', '.join(factors)}) on a {_scale_text(design)} scale.{norm}{per} "
                 f"{shape} repeated-measures ANOVA ({', '.join(factors)} within subjects; "
-                "participants missing a cell left out, listwise); the most significant factor "
-                "is the main effect with the smallest p; the best set has the highest mean.")
+                "participants missing a cell left out, listwise; Greenhouse–Geisser and "
+                "Huynh–Feldt corrections for effects with more than one degree of freedom); "
+                "the most significant factor is the main effect with the smallest p when that "
+                "p is below .05, otherwise none is named; the best set has the highest mean.")
     k = res["surfaces"]
     chance = 100 * res["chance"]
     rule = (f"a repetition counts as correct only when all {k} surfaces are named right "
@@ -202,6 +209,8 @@ def _report_entry(a: dict) -> dict:
     if a["type"] == "oneway":
         base.update({
             "samples": r["samples"], "anova": r["anova"], "groups": r["groups"],
+            "letters": r["letters"], "missing": r["missing"],
+            "excluded_subjects": [str(x) for x in r["excluded_subjects"]],
             "pairwise": r["pairwise"][["A", "B", "mean_diff", "ci_low", "ci_high", "t", "dof",
                                        "p_unc", "p_holm", "p_fdr", "dz", "n"]],
             "anova_notes": r["anova"].attrs.get("notes", []),
@@ -213,6 +222,7 @@ def _report_entry(a: dict) -> dict:
     elif a["type"] == "factorial":
         base["groups"] = {g: {"anova": v["anova"], "most_significant": v["most_significant"],
                               "most_significant_p": v["most_significant_p"],
+                              "most_significant_text": _most(v),
                               "best_set": v["best_set"], "main_effects": v["main_effects"],
                               "sets": v["sets"], "exclusions": v["preflight"],
                               "n_subjects": v["n_subjects"]} for g, v in r.items()}
@@ -324,8 +334,9 @@ def _oneway_md(a: dict) -> list[str]:
            "per-participant z-scores)\n", _table(a["samples"]),
            "\n#### One-way repeated-measures ANOVA\n", _table(a["anova"])]
     out.extend(f"\n_{note}._\n" for note in a["anova_notes"])
-    out.append("\n#### Groups not distinguishable (Holm p ≥ .05)\n")
-    out.append("\n".join("- " + ", ".join(g) for g in a["groups"]) + "\n")
+    out.append("\n#### Letters (samples sharing a letter: Holm p ≥ .05 for every pair)\n")
+    out.append("\n".join(f"- **{ch}**: " + ", ".join(g) for ch, g in
+                          zip("abcdefghijklmnopqrstuvwxyz", a["groups"], strict=False)) + "\n")
     out.append("\n#### Paired t-tests (d_z: Cohen's d for paired data)\n")
     out.append(_table(a["pairwise"]))
     out.append("\n#### Exclusions\n")
@@ -345,10 +356,25 @@ def _oneway_md(a: dict) -> list[str]:
     return out
 
 
+def _most(v: dict, alpha: float = 0.05) -> str:
+    """The most significant factor, or a sentence saying none reached ``alpha``."""
+    p = v["most_significant_p"]
+    if p < alpha:
+        return f"{v['most_significant']} ({_p(p)})"
+    return f"none at α = {alpha:g} (smallest {_p(p)}, {v['most_significant']})"
+
+
+def _p(p: float) -> str:
+    """APA style: ``p < .001``, else ``p = `` with 2–3 decimals and no leading zero."""
+    if p < 0.001:
+        return "p < .001"
+    return "p = " + (f"{p:.3f}" if p < 0.01 else f"{p:.2f}").lstrip("0")
+
+
 def _factorial_md(a: dict) -> list[str]:
     groups = a["groups"]
     factors = a["design"]["within"]
-    rows = [{"group": g, **v["best_set"], "most significant": v["most_significant"]}
+    rows = [{"group": g, **v["best_set"], "most significant": _most(v)}
             for g, v in groups.items()]
     out = ["#### Best set per group\n", _table(rows)]
     for g, v in groups.items():

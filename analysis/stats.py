@@ -19,6 +19,10 @@ __all__ = ["preflight", "zscore_by_subject", "pairwise_ttests", "rm_anova",
            "identification_scores", "cell_means", "wide_means", "p_adjust", "StatsError"]
 
 PADJUST = ("none", "bonf", "holm", "fdr_bh")
+#: Values closer than this fraction of the data's magnitude are equal: floating-point
+#: averaging (7/3 − 4/3 = 0.9999999999999998) must not become an effect of 1e16 SDs.
+RTOL = 1e-9
+MISSING = ("listwise", "pairwise")
 
 
 class StatsError(ValueError):
@@ -35,6 +39,41 @@ def _check_columns(data: pd.DataFrame, cols: Sequence[str]) -> None:
         raise StatsError(f"columns not in the data: {missing}; it has {list(data.columns)}")
 
 
+def _rows(mask: pd.Series, limit: int = 8) -> str:
+    """The index labels where ``mask`` holds, as a short list for an error message."""
+    idx = list(mask[mask].index)
+    more = f" and {len(idx) - limit} more" if len(idx) > limit else ""
+    return ", ".join(map(str, idx[:limit])) + more
+
+
+def _check_values(data: pd.DataFrame, dv: str, labels: Sequence[str]) -> None:
+    """Refuse missing labels and non-finite values, naming the column and the rows.
+
+    A missing ``dv`` (NaN, empty) is allowed: it is dropped and listed by preflight. An
+    infinite one is refused: it is a recording or typing error, not a rating.
+    """
+    for c in labels:
+        bad = data[c].isna()
+        if bad.any():
+            raise StatsError(f"column {c!r} has no label in rows {_rows(bad)}: name the "
+                             f"{c} of every row, or drop those rows")
+    col = data[dv]
+    v = (col.astype(float) if pd.api.types.is_numeric_dtype(col)
+         else pd.to_numeric(col, errors="coerce"))
+    bad = np.isinf(v.to_numpy(float))
+    if bad.any():
+        raise StatsError(f"column {dv!r} is not finite in rows "
+                         f"{_rows(pd.Series(bad, index=data.index))}: a value of ±inf is not "
+                         "a measurement; correct or drop those rows")
+
+
+def _tol(values: np.ndarray) -> float:
+    """Absolute tolerance for 'equal' among ``values``: RTOL × their largest magnitude."""
+    v = np.abs(np.asarray(values, float))
+    v = v[np.isfinite(v)]
+    return RTOL * float(v.max()) if v.size else 0.0
+
+
 def wide_means(data: pd.DataFrame, dv: str, within: str, subject: str
                ) -> tuple[np.ndarray, list, list]:
     """Subject × level matrix of mean ``dv`` (NaN where a subject lacks a level).
@@ -47,6 +86,7 @@ def wide_means(data: pd.DataFrame, dv: str, within: str, subject: str
     (matrix, subjects, levels)
     """
     _check_columns(data, [dv, within, subject])
+    _check_values(data, dv, [within, subject])
     col = data[dv]
     v = (col.to_numpy(float) if pd.api.types.is_numeric_dtype(col)
          else pd.to_numeric(col, errors="coerce").to_numpy(float))
@@ -154,10 +194,12 @@ def preflight(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject:
     if n_cells >= 2 and len(w) == 1 and n_subj >= 2:
         cm = cell_means(clean[~clean[subject].isin(incomplete.index)], dv, w, subject)
         wide = cm.pivot(index=subject, columns=w[0], values=dv)
+        tol = _tol(wide.to_numpy())
         for a, b in itertools.combinations(wide.columns, 2):
             d = (wide[a] - wide[b]).dropna()
-            if len(d) >= 2 and d.std(ddof=1) == 0:
-                add("constant_differences", f"{a} − {b} is {d.iloc[0]:g} for every subject",
+            if len(d) >= 2 and d.std(ddof=1) <= tol:
+                m = float(d.mean()) if abs(d.mean()) > tol else 0.0
+                add("constant_differences", f"{a} − {b} is {m:.6g} for every subject",
                     "pair reported without t, p or d_z (undefined); listed here", ())
     if scale:
         scales = clean[scale].dropna().unique()
@@ -171,6 +213,7 @@ def preflight(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject:
 def _complete(data, dv, within, subject) -> pd.DataFrame:
     """Cell means of subjects with every cell, NaN rows dropped."""
     w = _as_list(within)
+    _check_values(data, dv, [*w, subject])
     vals = pd.to_numeric(data[dv], errors="coerce")
     clean = data[vals.notna()].assign(**{dv: vals[vals.notna()]})
     cm = cell_means(clean, dv, w, subject)
@@ -205,6 +248,7 @@ def zscore_by_subject(data: pd.DataFrame, dv: str, subject: str) -> pd.Series:
     [1.0]
     """
     _check_columns(data, [dv, subject])
+    _check_values(data, dv, [subject])
     v = pd.to_numeric(data[dv], errors="coerce")
     g = v.groupby(data[subject], observed=True)
     mean = g.transform("mean")
@@ -252,13 +296,17 @@ def p_adjust(p: np.ndarray, method: str) -> np.ndarray:
 
 
 def pairwise_ttests(data: pd.DataFrame, dv: str, within: str, subject: str,
-                    padjust: str = "holm", alpha: float = 0.05) -> pd.DataFrame:
+                    padjust: str = "holm", alpha: float = 0.05,
+                    missing: str = "listwise") -> pd.DataFrame:
     """Paired t-tests between every pair of levels of ``within``, on per-subject means.
 
-    Subjects missing a level are dropped for the pairs involving it (pairwise complete).
-    A pair whose differences are identical for every subject has no t, p or d_z; it is
-    left out of the table and listed in ``result.attrs["constant_pairs"]`` (and by
-    :func:`preflight`).
+    ``missing = "listwise"`` (the default, as pingouin and JASP, and as :func:`rm_anova`):
+    subjects missing any level are left out of every pair, and listed in
+    ``result.attrs["excluded_subjects"]``; ``"pairwise"``: they are dropped only from the
+    pairs involving the level they lack. A pair whose differences are the same for every
+    subject (within ``RTOL`` of the data's magnitude) has no t, p or d_z; it is left out
+    of the table and listed in ``result.attrs["constant_pairs"]`` (and by
+    :func:`preflight`). A mean difference within that tolerance of 0 is reported as 0.
 
     Returns
     -------
@@ -283,7 +331,14 @@ def pairwise_ttests(data: pd.DataFrame, dv: str, within: str, subject: str,
     0  firm   foam      0.917  4.568    5   0.048
     1  firm  pulse     -0.667 -6.325    5   0.013
     """
-    W, _subjects, levels = wide_means(data, dv, within, subject)
+    if missing not in MISSING:
+        raise StatsError(f"missing must be one of {', '.join(MISSING)}, got {missing!r}")
+    W, subjects, levels = wide_means(data, dv, within, subject)
+    gaps = np.isnan(W).any(axis=1)
+    excluded = [subjects[i] for i in np.nonzero(gaps)[0]]
+    if missing == "listwise":
+        W = W[~gaps]
+    tol = _tol(W)
     # every pair at once: an n × pairs matrix of differences (pairwise complete)
     ia, ib = np.triu_indices(len(levels), k=1)
     D = W[:, ia] - W[:, ib]
@@ -294,9 +349,10 @@ def pairwise_ttests(data: pd.DataFrame, dv: str, within: str, subject: str,
     mean = Dz.sum(axis=0) / nn
     var = (np.where(ok, D - mean, 0.0) ** 2).sum(axis=0) / np.maximum(n - 1, 1)
     sd = np.sqrt(var)
-    good = (n >= 2) & (sd > 0)
+    mean = np.where(np.abs(mean) <= tol, 0.0, mean)  # an exact zero is shown as 0
+    good = (n >= 2) & (sd > tol)
     constant = [(levels[a], levels[b], "fewer than 2 subjects" if k < 2 else
-                 f"difference {m:g} for every subject")
+                 f"difference {m:.6g} for every subject")
                 for a, b, k, m, g in zip(ia, ib, n, mean, good, strict=True) if not g]
     se = np.where(good, sd / np.sqrt(nn), 1.0)
     t = mean / se
@@ -311,6 +367,8 @@ def pairwise_ttests(data: pd.DataFrame, dv: str, within: str, subject: str,
         "dof": (n - 1)[g], "p_unc": p[g], "p_corr": p_adjust(p[g], padjust),
         "p_adjust": padjust, "dz": (mean / np.where(g, sd, 1.0))[g], "n": n[g]})
     out.attrs["constant_pairs"] = constant
+    out.attrs["missing"] = missing
+    out.attrs["excluded_subjects"] = excluded if missing == "listwise" else []
     return out
 
 
@@ -398,6 +456,16 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
             arr[(idx[r[subject]], *(li[r[f]] for f, li in zip(w, lidx, strict=True)))] = r[dv]
     n_total = arr.size
     nf = len(w)
+    # computed on data centred and scaled to magnitude 1 (F, p, η² and ε do not depend on
+    # the units; sums of squares are scaled back), so 1e±150 neither overflows nor
+    # underflows; differences within RTOL of the data's magnitude are zero
+    centre = float(arr.mean())
+    spread = float(np.abs(arr - centre).max())
+    if spread <= _tol(arr) or spread == 0.0:
+        raise StatsError(f"every cell mean of {dv!r} is the same ({centre:.6g}): there is "
+                         "no variation, so no effect can be tested (F is undefined)")
+    arr = (arr - centre) / spread
+    tiny = n_total * RTOL ** 2  # a sum of squares of differences within tolerance
 
     def ss(axes):
         eff = _effect(arr, axes)
@@ -412,68 +480,96 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
         df_e = (n_subj - 1) * math.prod(shape[i] - 1 for i in t)
         errors[t] = (ss_e, df_e)
     total_err = ss_subj + sum(e[0] for e in errors.values())
+    notes = []
     for t in terms:
+        name = " * ".join(w[i - 1] for i in t)
         ss_t = ss(t)
         df_t = math.prod(shape[i] - 1 for i in t)
         ss_e, df_e = errors[t]
+        if ss_t <= tiny:
+            ss_t = 0.0
+        if ss_e <= tiny:
+            raise StatsError(f"no error variance for {name.replace(' * ', ' × ')}: every "
+                             "subject shows the same effect (within rounding); the F test is "
+                             "undefined — report the effect descriptively")
         ms_t, ms_e = ss_t / df_t, ss_e / df_e
-        F = ms_t / ms_e if ms_e > 0 else (0.0 if ms_t == 0 else float("nan"))
-        if not math.isfinite(F):
-            raise StatsError(f"no error variance for {' × '.join(w[i - 1] for i in t)}: every "
-                             "subject shows exactly the same effect; the F test is undefined")
-        rows.append({"Source": " * ".join(w[i - 1] for i in t), "SS": ss_t, "DF": df_t,
-                     "MS": ms_t, "F": F, "p_unc": float(special.fdtrc(df_t, df_e, F)),
-                     "np2": ss_t / (ss_t + ss_e) if ss_t + ss_e > 0 else 0.0,
-                     "ng2": ss_t / (ss_t + total_err) if ss_t + total_err > 0 else 0.0,
-                     "SS_err": ss_e, "DF_err": df_e, "MS_err": ms_e})
-    notes = []
-    if nf == 1 and shape[1] > 2:
-        sph = _sphericity(arr)
-        df1, df2 = rows[0]["DF"], errors[(1,)][1]
-        sph["p_gg"] = float(special.fdtrc(df1 * sph["eps_gg"], df2 * sph["eps_gg"], rows[0]["F"]))
-        if "eps_hf" not in sph:
-            notes.append(f"Huynh–Feldt ε not computed: its estimate is undefined with "
-                         f"{n_subj} subjects for {shape[1]} levels; use the Greenhouse–Geisser "
-                         "ε")
-        if "W_mauchly" not in sph:
-            notes.append(f"Mauchly's test not computed: {n_subj} subjects give a singular "
-                         f"covariance of the {shape[1] - 1} contrasts (it needs at least "
-                         f"{shape[1]}); use the Greenhouse–Geisser p")
-        rows[0].update(sph)
+        F = ms_t / ms_e
+        row = {"Source": name, "n": n_subj, "SS": ss_t * spread ** 2, "DF": df_t,
+               "MS": ms_t * spread ** 2, "F": F,
+               "p_unc": float(special.fdtrc(df_t, df_e, F)),
+               "np2": ss_t / (ss_t + ss_e), "ng2": ss_t / (ss_t + total_err),
+               "SS_err": ss_e * spread ** 2, "DF_err": df_e, "MS_err": ms_e * spread ** 2}
+        if df_t > 1:  # sphericity: ε and Mauchly's test on the effect's own contrasts
+            sph = _sphericity(_contrast_scores(arr, t))
+            row.update(sph)
+            row["p_gg"] = float(special.fdtrc(df_t * sph["eps_gg"], df_e * sph["eps_gg"], F))
+            if "eps_hf" in sph:
+                row["p_hf"] = float(special.fdtrc(df_t * sph["eps_hf"], df_e * sph["eps_hf"],
+                                                  F))
+            else:
+                notes.append(f"{name}: Huynh–Feldt ε not computed: its estimate is undefined "
+                             f"with {n_subj} subjects for {df_t} contrasts; use the "
+                             "Greenhouse–Geisser ε")
+            if "W_mauchly" not in sph:
+                notes.append(f"{name}: Mauchly's test not computed: {n_subj} subjects give a "
+                             f"singular covariance of the {df_t} contrasts (it needs at least "
+                             f"{df_t + 1}); use the Greenhouse–Geisser p")
+        rows.append(row)
     out = pd.DataFrame(rows)
+    if nf == 1:  # the one-way notes need no effect name
+        notes = [n.split(": ", 1)[1] for n in notes]
     out.attrs["notes"] = notes
     return out
 
 
-def _sphericity(arr: np.ndarray) -> dict[str, float]:
-    """Mauchly's W and the Greenhouse–Geisser / Huynh–Feldt epsilons (one factor)."""
-    n, k = arr.shape
-    p = k - 1
-    # orthonormal contrasts (Helmert, normalised)
-    C = np.zeros((k, p))
-    for j in range(p):
+def _helmert(k: int) -> np.ndarray:
+    """k × (k − 1) orthonormal Helmert contrasts."""
+    C = np.zeros((k, k - 1))
+    for j in range(k - 1):
         C[: j + 1, j] = 1.0
         C[j + 1, j] = -(j + 1)
         C[:, j] /= np.linalg.norm(C[:, j])
-    Y = arr @ C
-    S = np.cov(Y, rowvar=False, ddof=1)
-    tr = np.trace(S)
-    eps_gg = float(tr ** 2 / (p * np.trace(S @ S))) if tr > 0 else 1.0
+    return C
+
+
+def _contrast_scores(arr: np.ndarray, term: tuple[int, ...]) -> np.ndarray:
+    """Subjects × contrasts of effect ``term`` (axes of ``arr``; 0 is subjects): the cell
+    means averaged over the other factors, times the Kronecker product of the term's
+    orthonormal contrasts."""
+    others = tuple(i for i in range(1, arr.ndim) if i not in term)
+    m = arr.mean(axis=others) if others else arr
+    K = np.ones((1, 1))
+    for i in term:
+        K = np.kron(K, _helmert(arr.shape[i]))
+    return m.reshape(m.shape[0], -1) @ K
+
+
+def _sphericity(Y: np.ndarray) -> dict[str, float]:
+    """Mauchly's W and the Greenhouse–Geisser / Huynh–Feldt epsilons from subjects ×
+    orthonormal contrast scores ``Y``."""
+    n, p = Y.shape
+    S = np.cov(Y, rowvar=False, ddof=1).reshape(p, p)
+    tr = float(np.trace(S))
+    if not tr > 0:
+        return {"eps_gg": 1.0}
+    S = S * (p / tr)  # scale-free: trace p, so det and W do not under- or overflow
+    eps_gg = float(p / np.trace(S @ S))
     out = {"eps_gg": min(1.0, eps_gg)}
     den = p * (n - 1 - p * eps_gg)
-    if den > 1e-9 * p * (n - 1):  # with very few subjects the Huynh–Feldt ε is undefined
+    if n - 1 > p * eps_gg and den > 1e-9 * p * (n - 1):  # else undefined (few subjects)
         eps_hf = (n * p * eps_gg - 2) / den
         out["eps_hf"] = float(min(1.0, max(eps_gg, eps_hf)))
-    if n - 1 < p:  # the contrasts' covariance is singular: Mauchly's test is undefined
+    if n - 1 < p or p < 2:  # singular covariance, or one contrast: no test of sphericity
         return out
-    det = max(float(np.linalg.det(S)), 0.0)
-    W = det / (tr / p) ** p if tr > 0 else 1.0
+    sign, logdet = np.linalg.slogdet(S)
+    W = float(math.exp(logdet)) if sign > 0 else 0.0
     # Bartlett's χ² with Anderson's second-order term (accurate at small n):
-    # P ≈ P(χ²_f ≥ z) + ω₂·[P(χ²_{f+4} ≥ z) − P(χ²_f ≥ z)]; the 3k (k conditions) in ω₂
-    # is as in R's mauchly.test, where Anderson writes 3p.
+    # P ≈ P(χ²_f ≥ z) + ω₂·[P(χ²_{f+4} ≥ z) − P(χ²_f ≥ z)]; the 3k (k = p + 1 conditions)
+    # in ω₂ is as in R's mauchly.test, where Anderson writes 3p.
+    k = p + 1
     nu = n - 1
     rho = 1 - (2 * p * p + p + 2) / (6 * p * nu)
-    chi2 = -nu * rho * math.log(W) if W > 0 else float("inf")
+    chi2 = -nu * rho * logdet if sign > 0 else float("inf")
     dfc = p * (p + 1) / 2 - 1
     w2 = ((p + 2) * (p - 1) * (p - 2) * (2 * p ** 3 + 6 * p * p + 3 * k + 2)
           / (288 * p * p * nu * nu * rho * rho))
@@ -482,7 +578,7 @@ def _sphericity(arr: np.ndarray) -> dict[str, float]:
         p_spher = float(min(1.0, max(0.0, base + w2 * (special.chdtrc(dfc + 4, chi2) - base))))
     else:
         p_spher = 0.0
-    out.update(W_mauchly=float(W), p_spher=p_spher)
+    out.update(W_mauchly=W, p_spher=p_spher)
     return out
 
 

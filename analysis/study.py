@@ -75,38 +75,82 @@ def _rated(d: pd.DataFrame, dv: str) -> pd.DataFrame:
     return d.copy()
 
 
-def _groups(levels: list[str], pw: pd.DataFrame, alpha: float) -> list[list[str]]:
-    """Samples not distinguishable at alpha: connected components of 'not different' pairs."""
-    parent = {s: s for s in levels}
+def compact_letters(levels: list, pw: pd.DataFrame, alpha: float = 0.05,
+                    p: str = "p_corr") -> dict:
+    """Compact letter display: levels sharing a letter are not significantly different.
 
-    def find(s):
-        while parent[s] != s:
-            parent[s] = parent[parent[s]]
-            s = parent[s]
-        return s
+    Insert-and-absorb (Piepho 2004): start with one group of all levels; for each
+    significant pair, split every group holding both into one without each; drop groups
+    contained in another. Every pair within a group is non-significant (unlike chains of
+    non-significant pairs, which are not transitive); a level may carry several letters.
+    A pair missing from ``pw`` (its difference constant, not tested) counts as different
+    when its difference is not 0.
 
-    for r in pw.itertuples():
-        if r.p_corr >= alpha:
-            parent[find(r.A)] = find(r.B)
-    comp: dict[str, list[str]] = {}
-    for s in levels:
-        comp.setdefault(find(s), []).append(s)
-    return sorted(comp.values(), key=lambda g: -len(g))
+    Parameters
+    ----------
+    levels : list
+        In display order (letters are given in this order: ``a`` to the first level's
+        group).
+    pw : DataFrame
+        ``A``, ``B`` and the p column ``p``.
+    alpha : float
+
+    Returns
+    -------
+    dict
+        level → letters (e.g. ``"ab"``).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> pw = pd.DataFrame({"A": ["x", "x", "y"], "B": ["y", "z", "z"],
+    ...                    "p_corr": [0.20, 0.01, 0.30]})
+    >>> compact_letters(["x", "y", "z"], pw)
+    {'x': 'a', 'y': 'ab', 'z': 'b'}
+    """
+    sig = [(r.A, r.B) for r in pw.itertuples() if getattr(r, p) < alpha]
+    sig += [(a, b) for a, b, why in pw.attrs.get("constant_pairs", [])
+            if not why.startswith("difference 0 ") and why != "fewer than 2 subjects"]
+    groups = [set(levels)]
+    for a, b in sig:
+        new = []
+        for g in groups:
+            if a in g and b in g:
+                new += [g - {a}, g - {b}]
+            else:
+                new.append(g)
+        groups = [g for g in new if g and not any(g < h for h in new)]
+        groups = [g for i, g in enumerate(groups) if g not in groups[:i]]
+    rank = {lv: i for i, lv in enumerate(levels)}
+    groups.sort(key=lambda g: sorted(rank[x] for x in g))
+    letters = {lv: "" for lv in levels}
+    for i, g in enumerate(groups):
+        for lv in g:
+            letters[lv] += _letter(i)
+    return letters
+
+
+def _letter(i: int) -> str:
+    return chr(ord("a") + i) if i < 26 else f"{chr(ord('a') + i // 26 - 1)}{chr(ord('a') + i % 26)}"
 
 
 def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample",
-                  subject: str = SUBJECT, alpha: float = 0.05) -> dict:
+                  subject: str = SUBJECT, alpha: float = 0.05,
+                  missing: str = "listwise") -> dict:
     """One-way repeated-measures analysis of ratings over the levels of ``within``.
 
     Per-level means with CIs (raw and z-scored per subject), per-subject averages, all
-    pairwise paired t-tests (Holm and Benjamini–Hochberg), groups not distinguishable,
+    pairwise paired t-tests (Holm and Benjamini–Hochberg), a compact letter display,
     a one-way RM ANOVA, and session length against power from these data's variances.
 
     Returns
     -------
     dict
-        ``samples`` (list of dicts: level, n, mean, ci_low, ci_high, mean_z, …),
-        ``pairwise``, ``anova`` (DataFrames), ``groups``, ``per_subject``, ``preflight``,
+        ``samples`` (list of dicts: level, n, mean, ci_low, ci_high, mean_z, letters, …),
+        ``pairwise``, ``anova`` (DataFrames), ``letters`` (compact letter display,
+        :func:`compact_letters`, on Holm p), ``groups`` (the levels of each letter),
+        ``missing`` and ``excluded_subjects`` (the t-tests' policy and whom it left out;
+        listwise, as the ANOVA, unless ``missing = "pairwise"``), ``per_subject``, ``preflight``,
         ``constant_pairs``, ``n_subjects``, ``n_levels``, ``repetitions`` (median per
         subject and level), ``session_length``.
     """
@@ -124,8 +168,8 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
     d[within] = pd.Categorical(d[within], categories=order, ordered=True)
     d = d.sort_values(within)
     pre = preflight(d, dv, within, subject, scale="scale" if "scale" in d else None)
-    holm = pairwise_ttests(d, dv, within, subject, "holm", alpha)
-    fdr = pairwise_ttests(d, dv, within, subject, "fdr_bh", alpha)
+    holm = pairwise_ttests(d, dv, within, subject, "holm", alpha, missing)
+    fdr = pairwise_ttests(d, dv, within, subject, "fdr_bh", alpha, missing)
     pw = holm.rename(columns={"p_corr": "p_holm"}).drop(columns="p_adjust")
     pw["p_fdr"] = fdr["p_corr"].to_numpy()
     pw["p_corr"] = pw["p_holm"]
@@ -142,8 +186,15 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
                                        comparisons=k * (k - 1) // 2, seed=0, **vc)}
     except ValueError as exc:
         length = f"not computed: {exc}"
+    letters = compact_letters(order, holm, alpha)
+    for r in samples:
+        r["letters"] = letters[r["sample"]]
+    groups = [[lv for lv in order if ch in letters[lv]]
+              for ch in sorted({c for v in letters.values() for c in v})]
     return {"samples": samples, "pairwise": pw, "anova": anova, "session_length": length,
-            "groups": _groups(order, holm, alpha), "per_subject": per_subject,
+            "groups": groups, "letters": letters, "missing": missing,
+            "excluded_subjects": holm.attrs.get("excluded_subjects", []),
+            "per_subject": per_subject,
             "preflight": pre, "constant_pairs": holm.attrs.get("constant_pairs", []),
             "n_subjects": int(d[subject].nunique()), "n_levels": k, "repetitions": reps}
 

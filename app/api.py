@@ -544,6 +544,31 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
     return StudyResult(out, time.perf_counter() - t0)
 
 
+def export(data: str | Path, out: str | Path, fmt: str = "long-csv", **selection) -> list[Path]:
+    """The analysed trials as files for JASP, SPSS or R (:func:`analysis.export.export`);
+    its errors come back as :class:`~app.errors.AnalysisError`.
+
+    Returns
+    -------
+    list of Path
+        The files written, ``codebook.csv`` last.
+    """
+    from analysis import LoadError, StatsError
+    from analysis.export import FORMATS
+    from analysis.export import export as _export
+
+    if fmt not in FORMATS:
+        raise UsageError(f"formats are {', '.join(FORMATS)}; got {fmt!r}")
+    try:
+        return _export(data, out, fmt, **selection)
+    except (LoadError, StatsError) as exc:
+        raise AnalysisError(str(exc)) from None
+    except OSError as exc:
+        from app.errors import io_error
+
+        raise io_error(exc, "cannot write the export") from None
+
+
 def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json"),
             protocol: str | list[str] | None = None, kind: str | None = None,
             status: str = "complete", participants: list[str] | None = None,

@@ -318,6 +318,30 @@ def _analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+def _selection_args(p: argparse.ArgumentParser) -> None:
+    """The session selection shared by analyze and export."""
+    p.add_argument("--protocol", help="protocol names to analyse, comma-separated")
+    p.add_argument("--kind", choices=("human", "dry-run", "simulated", "all"),
+                   help="session kind (default: human when any human session exists)")
+    p.add_argument("--status", choices=("complete", "all"), default="complete")
+    p.add_argument("--participants", help="participant ids, comma-separated")
+    p.add_argument("--since", help="sessions created on or after (YYYY-MM-DD, UTC)")
+    p.add_argument("--until", help="sessions created on or before (YYYY-MM-DD, UTC)")
+    p.add_argument("--drop-invalid", action="store_true",
+                   help="leave out recorded rows that cannot be analysed (a rating off the "
+                   "scale, …), listing each, instead of stopping at the first")
+
+
+def _export(args: argparse.Namespace) -> int:
+    from app.api import export
+
+    files = export(args.data_dir, args.out, args.format, drop_invalid=args.drop_invalid,
+                   protocol=_list(args.protocol), kind=args.kind, status=args.status,
+                   participants=_list(args.participants), since=args.since, until=args.until)
+    print(f"{len(files)} files written to {args.out}/: {', '.join(f.name for f in files)}")
+    return 0
+
+
 def _range(text: str) -> list[int]:
     """'5..30' (step 5 for subjects, 1 otherwise is given by --step) or '5,10,20'."""
     if ".." in text:
@@ -343,7 +367,8 @@ def _power(args: argparse.Namespace) -> int:
                          "power and precision are computed for rating studies")
     phase = oneway[-1]
     comparisons = math.comb(len(phase.samples), 2)
-    sd = {"sd_trial": args.sd_trial, "sd_interaction": args.sd_interaction,
+    sd = {"sd_trial": 0.9 if args.sd_trial is None else args.sd_trial,
+          "sd_interaction": args.sd_interaction,
           "sd_subject": args.sd_subject}
     if args.pilot:
         from analysis import LoadError, load_sessions
@@ -359,7 +384,7 @@ def _power(args: argparse.Namespace) -> int:
             raise UsageError(f"--pilot {args.pilot}: no valid ratings of {protocol.name!r} "
                              f"in phase {phase.name!r}")
         try:
-            sd = variance_components(d)
+            sd = variance_components(d, sd_trial=args.sd_trial)
         except ValueError as exc:
             raise UsageError(f"--pilot {args.pilot}: {exc}") from None
     t = power_table(subjects, reps, args.effect, alpha=args.alpha, comparisons=comparisons,
@@ -367,7 +392,7 @@ def _power(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"protocol": protocol.name, "phase": phase.name,
                           "effect": args.effect, "comparisons": comparisons, **sd,
-                          "rows": t.to_dict(orient="records")}, indent=2))
+                          "rows": t.to_dict(orient="records")}, indent=2, allow_nan=False))
         return 0
     print(f"{protocol.name}/{phase.name}: power of a {args.effect:g}-point paired difference at "
           f"alpha {args.alpha:g}/{comparisons} (Bonferroni) and the 95 % CI half-width of a "
@@ -486,7 +511,9 @@ def build_parser() -> argparse.ArgumentParser:
     pw.add_argument("--reps", default="1..5")
     pw.add_argument("--effect", type=float, default=1.0, help="key contrast [scale points]")
     pw.add_argument("--alpha", type=float, default=0.05)
-    pw.add_argument("--sd-trial", type=float, default=0.9)
+    pw.add_argument("--sd-trial", type=float, default=None,
+                    help="trial-to-trial SD [scale points] (default 0.9; with --pilot: "
+                    "estimated from it, or this value when the pilot rates each cell once)")
     pw.add_argument("--sd-interaction", type=float, default=0.5)
     pw.add_argument("--sd-subject", type=float, default=0.8)
     pw.add_argument("--pilot", help="session folder to estimate the SDs from")
@@ -497,17 +524,19 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("data_dir")
     an.add_argument("--out", required=True)
     an.add_argument("--format", default="html,md,json", help="comma-separated: html, md, json")
-    an.add_argument("--protocol", help="protocol names to analyse, comma-separated")
-    an.add_argument("--kind", choices=("human", "dry-run", "simulated", "all"),
-                    help="session kind (default: human when any human session exists)")
-    an.add_argument("--status", choices=("complete", "all"), default="complete")
-    an.add_argument("--participants", help="participant ids, comma-separated")
-    an.add_argument("--since", help="sessions created on or after (YYYY-MM-DD, UTC)")
-    an.add_argument("--until", help="sessions created on or before (YYYY-MM-DD, UTC)")
-    an.add_argument("--drop-invalid", action="store_true",
-                    help="leave out recorded rows that cannot be analysed (a rating off the "
-                    "scale, …), listing each, instead of stopping at the first")
+    _selection_args(an)
     an.set_defaults(func=_analyze)
+
+    ex = sub.add_parser("export", help="the analysed trials as CSV for JASP, SPSS or R, with "
+                        "a codebook")
+    ex.add_argument("data_dir")
+    ex.add_argument("--out", required=True, help="folder to write into")
+    ex.add_argument("--format", default="long-csv", choices=("long-csv", "wide-csv", "jasp", "r"),
+                    help="long-csv: one row per trial; wide-csv: one row per participant and "
+                    "one column per cell, per analysed phase; jasp: wide with names JASP and R "
+                    "read unchanged; r: long.csv and load.R")
+    _selection_args(ex)
+    ex.set_defaults(func=_export)
     _add_session_parsers(sub)
     pr = sub.add_parser("protocol", help="protocol files (validate, show)")
     psub = pr.add_subparsers(dest="protocol_command", required=True, metavar="ACTION")

@@ -116,3 +116,54 @@ def test_cli_analyze_and_its_errors(study, tmp_path):
     fmt = subprocess.run([*CLI, "analyze", str(study), "--out", str(tmp_path / "y"), "--format",
                           "pdf"], capture_output=True, text=True)
     assert fmt.returncode == 2 and "--format" in fmt.stderr
+
+
+def test_export_files_agree_with_the_report_cell_by_cell(study, tmp_path):
+    """`hapticlab export` in every format, opened with pandas: the wide realism file is the
+    report's per-participant means cell by cell (report.json keeps 12 significant digits);
+    the identification file's repetition columns average to the report's per-repetition
+    percentages; the long file holds every analysed trial and the codebook names every
+    column of every file."""
+    import pandas as pd
+
+    rep = analyze(study, tmp_path / "r")
+    files = {}
+    for fmt in ("long-csv", "wide-csv", "jasp", "r"):
+        out = subprocess.run([*CLI, "export", str(study), "--out", str(tmp_path / fmt),
+                              "--format", fmt], capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        files[fmt] = tmp_path / fmt
+    realism = _analysis(rep, "realism/testing")
+    wide = pd.read_csv(files["wide-csv"] / "wide_realism_testing.csv", keep_default_na=False,
+                       na_values=[""])
+    wide = wide.set_index("participant")
+    for row in realism["per_subject"]:
+        for sample, value in row.items():
+            if sample == "participant":
+                continue
+            got = wide.loc[row["participant"], sample]
+            assert (pd.isna(got) and value is None) or got == pytest.approx(value, rel=1e-10)
+    jasp = pd.read_csv(files["jasp"] / "wide_realism_testing.csv")
+    assert all(c.replace("_", "").isalnum() for c in jasp.columns)
+    assert jasp.drop(columns=["participant", "group"]).to_numpy() == pytest.approx(
+        wide.drop(columns="group").to_numpy(), rel=1e-12, nan_ok=True)
+    ident = _analysis(rep, "identification/identification")
+    pct = {r["scope"]: r["percent"] for r in ident["table"]}
+    wid = pd.read_csv(files["wide-csv"] / "wide_identification_identification.csv")
+    for k in (1, 2, 3):
+        assert 100 * wid[f"rep{k}"].mean() == pytest.approx(pct[f"repetition {k}"], rel=1e-10)
+    long = pd.read_csv(files["long-csv"] / "long.csv", keep_default_na=False, na_values=[""])
+    real_rows = long[(long["protocol"] == "realism")]
+    assert set(real_rows["phase"]) == {"testing"} and real_rows["rating"].notna().all()
+    means = real_rows.groupby(["participant", "sample"])["rating"].mean()
+    for row in realism["per_subject"]:
+        for sample, value in row.items():
+            if sample != "participant" and value is not None:
+                assert means[(row["participant"], sample)] == pytest.approx(value, rel=1e-10)
+    assert (files["r"] / "load.R").read_text().count("factor(") >= 2
+    for fmt, folder in files.items():
+        book = pd.read_csv(folder / "codebook.csv", keep_default_na=False)
+        for f in folder.glob("*.csv"):
+            if f.name != "codebook.csv":
+                cols = set(pd.read_csv(f, nrows=0).columns)
+                assert cols <= set(book[book["file"] == f.name]["column"]), (fmt, f.name)

@@ -230,6 +230,24 @@ def test_face_validity_factorial(study):
         assert res[mat]["preflight"].empty, mat
 
 
+def test_power_from_a_factorial_pilot_says_what_it_cannot_estimate(study_dir):
+    """A factorial pilot rates each set once: the trial SD cannot be told from the
+    participant × set SD. It used to print NaN (invalid JSON); now it says so, and with
+    --sd-trial it computes, every number finite."""
+    import json
+
+    out = subprocess.run([*CLI, "power", "factorial", "--pilot", str(study_dir), "--subjects",
+                          "9", "--reps", "1", "--experiments", "200", "--json"],
+                         capture_output=True, text=True)
+    assert out.returncode == 2 and "--sd-trial" in out.stderr and not out.stdout
+    out = subprocess.run([*CLI, "power", "factorial", "--pilot", str(study_dir), "--subjects",
+                          "9", "--reps", "1", "--experiments", "200", "--sd-trial", "0.8",
+                          "--json"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout, parse_constant=lambda c: pytest.fail(f"{c} in the JSON"))
+    assert got["sd_trial"] == 0.8 and got["sd_interaction"] >= 0
+
+
 def test_familiarization_windows_are_tapped_afresh(study_dir):
     """The two familiarization windows each get their own seed: no run of four tap speeds
     repeats within a participant's familiarization (it did, exactly, when both windows were

@@ -1,0 +1,221 @@
+"""Exports for analysts who continue elsewhere (JASP, SPSS, R), with a codebook.
+
+The rows are those the report analyses: the same session selection
+(:func:`analysis.load.select_sessions`) and, per analysed phase, its valid trials.
+
+Formats
+-------
+``long-csv``
+    ``long.csv``: one row per analysed trial.
+``wide-csv``
+    ``wide_<protocol>_<phase>.csv`` per analysed phase: one row per participant, one column
+    per cell (the participant's mean of the phase's dependent variable over its
+    repetitions; empty where the participant has none), as SPSS and JASP expect for
+    repeated measures. Participants missing a cell are kept (an empty cell); the report's
+    listwise analyses leave them out.
+``jasp``
+    The wide files, with column names JASP and R read unchanged (letters, digits and
+    ``_``), and the participant's group as a column for a between-subject factor.
+``r``
+    ``long.csv`` and ``load.R``, which reads it with every factor's levels in the order the
+    protocol declares them.
+
+Every format writes ``codebook.csv``: column, unit, meaning (and, for renamed columns, the
+original name).
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from pathlib import Path
+
+import pandas as pd
+
+from .load import load_sessions, select_sessions
+from .study import analysed_phases, phase_rows
+
+__all__ = ["export", "FORMATS", "LONG_COLUMNS"]
+
+FORMATS = ("long-csv", "wide-csv", "jasp", "r")
+
+#: column → (unit, meaning) of the long file.
+LONG_COLUMNS = {
+    "participant": ("", "participant id as entered at the session"),
+    "group": ("", "participant group (e.g. expert, novice); empty when none was given"),
+    "session": ("", "session number of this participant (ses-N)"),
+    "protocol": ("", "protocol name"),
+    "phase": ("", "phase of the protocol"),
+    "block": ("", "block (factorial material); empty when the phase has no blocks"),
+    "sample": ("", "sample id (a rendering or real sample; identification: the surfaces in "
+                   "order, joined by +)"),
+    "repetition": ("", "1-based repetition of the sample within its phase"),
+    "trial_index": ("", "1-based position of the attempt in the session"),
+    "rating": ("scale points", "the participant's rating on the protocol's scale"),
+    "scale": ("", "the rating scale, min-max"),
+    "answer": ("", "identification: the names given to the surfaces, in order"),
+    "correct": ("0/1", "identification: 1 when every surface was named right"),
+    "response_time": ("s", "from the rating screen's onset to the answer"),
+    "n_taps": ("", "contacts in the trial's window"),
+    "mean_tap_velocity": ("m/s", "mean incoming speed of the trial's taps"),
+    "peak_current": ("A", "largest commanded current in the window"),
+    "kind": ("", "session kind: real, dry-run or simulated"),
+}
+
+
+def _safe(name: str) -> str:
+    """A column name JASP, SPSS and R read unchanged: letters, digits and _."""
+    s = re.sub(r"[^0-9A-Za-z_]+", "_", str(name)).strip("_")
+    return s if s and not s[0].isdigit() else f"x_{s}"
+
+
+def _analysed(data: pd.DataFrame) -> list[tuple[dict, dict, pd.DataFrame]]:
+    """(design, phase, its valid trials) for every analysed phase, in report order."""
+    designs = data.attrs.get("designs", {})
+    out = []
+    for key in sorted(set(data["design_key"]) - {""}, key=lambda k: (designs[k]["protocol"], k)):
+        design = designs[key]
+        for phase in analysed_phases(design):
+            rows = phase_rows(data, key, phase["name"])
+            rows = rows[rows["valid"]]
+            if not rows.empty:
+                out.append((design, phase, rows))
+    return out
+
+
+def _long(parts) -> pd.DataFrame:
+    frames = []
+    for _design, phase, rows in parts:
+        f = rows.copy()
+        f.attrs = {}  # the loader's tables travel in attrs; concat compares them
+        factors = list(phase.get("within", []))
+        v = f["tap_velocities"].fillna("").astype(str).str.split(";")
+        f["mean_tap_velocity"] = [pd.to_numeric(pd.Series(x), errors="coerce").mean()
+                                  if x != [""] else float("nan") for x in v]
+        cols = [c for c in LONG_COLUMNS if c in f.columns]
+        cols += [c for c in factors if c in f.columns and c not in cols]
+        frames.append(f[cols])
+    out = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=[*LONG_COLUMNS])
+    return out.sort_values(["protocol", "phase", "participant", "session", "trial_index"],
+                           kind="stable").reset_index(drop=True)
+
+
+def _dv(phase: dict) -> str:
+    return "rating" if phase.get("dv") == "rating" else "correct"
+
+
+def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd.DataFrame, dict]:
+    """One row per participant, one column per cell; returns (table, column → meaning)."""
+    dv = _dv(phase)
+    cell = "repetition" if dv == "correct" else "sample"
+    vals = pd.to_numeric(rows[dv], errors="coerce")
+    r = rows.assign(**{dv: vals}).dropna(subset=[dv])
+    w = (r.groupby(["participant", cell], observed=True)[dv].mean().unstack(cell))
+    present = set(r[cell])
+    order = ([x for x in phase.get("samples", []) if x in present]  # the protocol's order
+             + sorted(present - set(phase.get("samples", [])), key=str)
+             if cell == "sample" else sorted(present))
+    w = w.reindex(columns=order)
+    groups = r.groupby("participant", observed=True)["group"].first()
+    w.insert(0, "group", groups.reindex(w.index).fillna(""))
+    w = w.reset_index()
+    meaning = {"participant": ("", "participant id"),
+               "group": ("", "participant group (between-subject factor); empty when none")}
+    rename = {}
+    for c in order:
+        name = f"rep{c}" if cell == "repetition" else str(c)
+        new = _safe(name) if safe else name
+        rename[c] = new
+        what = (f"proportion correct in repetition {c}" if cell == "repetition" else
+                f"mean {dv} of sample {c} over its repetitions")
+        scale = design.get("scale") or {}
+        unit = ("0/1" if dv == "correct" else
+                f"scale points ({scale['min']}–{scale['max']})" if scale else "scale points")
+        meaning[new] = (unit, what + ("" if new == str(name) else f" (column {name})"))
+    w = w.rename(columns=rename)
+    return w, meaning
+
+
+def _write_codebook(path: Path, entries: dict[str, tuple[str, str]], file: str) -> list[dict]:
+    return [{"file": file, "column": c, "unit": u, "meaning": m} for c, (u, m) in entries.items()]
+
+
+def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
+           drop_invalid: bool = False, **filters) -> list[Path]:
+    """Write the analysed trials of ``data_dir`` to ``out`` in format ``fmt``.
+
+    Parameters
+    ----------
+    data_dir : path
+        Folder of session folders.
+    out : path
+        Folder to write into (created).
+    fmt : {'long-csv', 'wide-csv', 'jasp', 'r'}
+    drop_invalid : bool
+        As :func:`analysis.report.analyze`.
+    **filters
+        protocol, kind, status, participants, since, until: as the report.
+
+    Returns
+    -------
+    list of Path
+        The files written (``codebook.csv`` last).
+    """
+    if fmt not in FORMATS:
+        raise ValueError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    data = load_sessions(data_dir, drop_invalid=drop_invalid)
+    selected, _table = select_sessions(data, **{k: v for k, v in filters.items()
+                                                if v is not None})
+    parts = _analysed(selected)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    written, book = [], []
+    if fmt in ("long-csv", "r"):
+        long = _long(parts)
+        p = out / "long.csv"
+        long.to_csv(p, index=False)
+        written.append(p)
+        entries = {c: LONG_COLUMNS.get(c, ("", f"level of factor {c} (low/high)"))
+                   for c in long.columns}
+        book += _write_codebook(p, entries, p.name)
+        if fmt == "r":
+            p = out / "load.R"
+            p.write_text(_r_script(long, parts))
+            written.append(p)
+    else:
+        for design, phase, rows in parts:
+            w, meaning = _wide(design, phase, rows, safe=fmt == "jasp")
+            name = f"wide_{_safe(design['protocol'])}_{_safe(phase['name'])}.csv"
+            p = out / name
+            w.to_csv(p, index=False)
+            written.append(p)
+            book += _write_codebook(p, meaning, name)
+    p = out / "codebook.csv"
+    with p.open("w", newline="") as fh:
+        wr = csv.DictWriter(fh, fieldnames=["file", "column", "unit", "meaning"])
+        wr.writeheader()
+        wr.writerows(book)
+    written.append(p)
+    return written
+
+
+def _r_script(long: pd.DataFrame, parts) -> str:
+    levels: dict[str, list] = {"sample": []}
+    for _design, phase, rows in parts:
+        present = set(rows["sample"])
+        levels["sample"] += [s for s in phase.get("samples", [])  # the protocol's order
+                             if s in present and s not in levels["sample"]]
+        levels["sample"] += sorted(present - set(levels["sample"]), key=str)
+        for f in phase.get("within", []):
+            if f in rows and f != "sample":
+                levels.setdefault(f, ["low", "high"] if set(rows[f].dropna()) <= {"low", "high"}
+                                  else sorted(set(rows[f].dropna()), key=str))
+    lines = ["# Reads long.csv (hapticlab export --format r); see codebook.csv for units.",
+             'd <- read.csv("long.csv", stringsAsFactors = FALSE, na.strings = "")',
+             "d$participant <- factor(d$participant)"]
+    for f, lv in levels.items():
+        if f in long.columns:
+            q = ", ".join(f'"{x}"' for x in lv)
+            lines.append(f"d${f} <- factor(d${f}, levels = c({q}))")
+    lines.append("str(d)")
+    return "\n".join(lines) + "\n"

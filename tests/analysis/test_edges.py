@@ -1,0 +1,217 @@
+"""Statistics at their edges (issue 15): every case below gave a wrong number before.
+
+Independent implementation: pingouin 0.7.0 (``pingouin.rm_anova``,
+``pingouin.pairwise_tests``), where both are defined; hand arithmetic otherwise, noted
+beside the number.
+"""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pingouin as pg
+import pytest
+from hypothesis import assume, given
+from hypothesis import strategies as st
+
+import analysis as A
+from analysis.stats import StatsError
+
+
+def _long(matrix, levels=None, reps=1):
+    """Subjects × levels cell values as long rows (each repeated ``reps`` times)."""
+    m = np.asarray(matrix, float)
+    levels = levels or [f"s{j}" for j in range(m.shape[1])]
+    return pd.DataFrame([(f"P{i:02d}", levels[j], m[i, j]) for i in range(m.shape[0])
+                         for j in range(m.shape[1]) for _ in range(reps)],
+                        columns=["participant", "sample", "rating"])
+
+
+def _thirds():
+    """Integer ratings averaged over 3 repetitions: x − y is exactly 1 for everyone, but
+    7/3 − 4/3 = 0.9999999999999998 in binary."""
+    rows = []
+    for i, (x, y) in enumerate([((3, 2, 2), (2, 1, 1)), ((4, 3, 3), (3, 2, 2)),
+                                ((2, 3, 2), (1, 2, 1)), ((5, 4, 5), (4, 3, 4))]):
+        rows += [(f"P{i}", "x", v) for v in x] + [(f"P{i}", "y", v) for v in y]
+        rows += [(f"P{i}", "z", v) for v in (1, 7, 4 + i)]
+    return pd.DataFrame(rows, columns=["participant", "sample", "rating"])
+
+
+def test_a_constant_difference_in_floating_point_is_not_a_huge_effect():
+    d = _thirds()
+    pw = A.pairwise_ttests(d, "rating", "sample", "participant")
+    assert ("x", "y") not in set(zip(pw["A"], pw["B"], strict=True))  # was t = 4.5e15
+    (a, b, why), = [c for c in pw.attrs["constant_pairs"] if {c[0], c[1]} == {"x", "y"}]
+    assert why == "difference 1 for every subject"  # 7/3 − 4/3 reads 1, as by hand
+    assert np.isfinite(pw[["t", "dz", "p_unc"]].to_numpy()).all()
+    assert (pw["dz"].abs() < 100).all()
+    pre = A.preflight(d, "rating", "sample", "participant")
+    assert "constant_differences" in set(pre["check"])
+
+
+def test_an_exact_zero_difference_is_shown_as_zero():
+    # x and y differ by +1 for two subjects and −1 for two: the mean difference is 0 by
+    # hand; floating-point averaging of thirds leaves ~1e-16
+    m = np.array([[7, 4, 1], [4, 7, 2], [7, 4, 3], [4, 7, 5]], float) / 3
+    pw = A.pairwise_ttests(_long(m), "rating", "sample", "participant")
+    row = pw[(pw["A"] == "s0") & (pw["B"] == "s1")].iloc[0]
+    assert row["mean_diff"] == 0.0 and row["t"] == 0.0 and row["p_unc"] == 1.0
+
+
+def test_identical_ratings_leave_the_anova_undefined_in_words():
+    d = _long(np.full((5, 3), 4.0))
+    with pytest.raises(StatsError, match="no variation"):
+        A.rm_anova(d, "rating", "sample", "participant")
+
+
+def test_two_participants_three_levels_give_numbers_or_a_note():
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        d = _long(rng.integers(1, 8, (2, 3)))
+        try:
+            aov = A.rm_anova(d, "rating", "sample", "participant")
+        except StatsError as exc:
+            assert "no variation" in str(exc) or "no error variance" in str(exc)
+            continue
+        assert np.isfinite(aov.select_dtypes("number").to_numpy()).all()
+        assert "p_spher" not in aov  # 2 subjects, 2 contrasts: singular, said in a note
+        assert any("Mauchly" in n for n in aov.attrs["notes"])
+
+
+def test_an_infinite_rating_is_refused_naming_column_and_row():
+    d = _long(np.arange(12.0).reshape(4, 3))
+    d.loc[5, "rating"] = np.inf
+    for fn in (lambda: A.rm_anova(d, "rating", "sample", "participant"),
+               lambda: A.pairwise_ttests(d, "rating", "sample", "participant"),
+               lambda: A.zscore_by_subject(d, "rating", "participant")):
+        with pytest.raises(StatsError, match=r"column 'rating' is not finite in rows 5"):
+            fn()
+
+
+@pytest.mark.parametrize("column", ["participant", "sample"])
+def test_a_missing_label_is_refused_naming_column_and_row(column):
+    d = _long(np.arange(12.0).reshape(4, 3))
+    d.loc[[2, 7], column] = None
+    with pytest.raises(StatsError, match=rf"column '{column}' has no label in rows 2, 7"):
+        A.rm_anova(d, "rating", "sample", "participant")
+
+
+@pytest.mark.parametrize("scale", [1e-150, 1e150])
+def test_mauchly_and_epsilons_do_not_depend_on_the_units(scale):
+    rng = np.random.default_rng(5)
+    m = rng.normal(4, 1, (8, 4))
+    ref = A.rm_anova(_long(m), "rating", "sample", "participant").iloc[0]
+    got = A.rm_anova(_long(m * scale), "rating", "sample", "participant").iloc[0]
+    for col in ("F", "p_unc", "np2", "eps_gg", "eps_hf", "W_mauchly", "p_spher"):
+        assert math.isfinite(got[col]), col
+        assert got[col] == pytest.approx(ref[col], rel=1e-9), col
+    assert got["SS"] == pytest.approx(ref["SS"] * scale ** 2, rel=1e-9)
+
+
+def test_listwise_by_default_and_pairwise_on_request():
+    rng = np.random.default_rng(8)
+    d = _long(rng.normal(4, 1, (6, 3)))
+    d = d[~((d["participant"] == "P02") & (d["sample"] == "s2"))]
+    lw = A.pairwise_ttests(d, "rating", "sample", "participant")
+    assert (lw["n"] == 5).all() and lw.attrs["excluded_subjects"] == ["P02"]
+    pw = A.pairwise_ttests(d, "rating", "sample", "participant", missing="pairwise")
+    assert pw.set_index(["A", "B"]).loc[("s0", "s1"), "n"] == 6
+    assert pw.attrs["excluded_subjects"] == []
+    # the ANOVA uses the same participants as the default t-tests
+    assert A.rm_anova(d, "rating", "sample", "participant")["n"].iloc[0] == 5
+    # pingouin (listwise by default) agrees on the default
+    ref = pg.pairwise_tests(d, dv="rating", within="sample", subject="participant",
+                            padjust="holm")
+    assert lw["t"].to_numpy() == pytest.approx(ref["T"].to_numpy(), rel=1e-9)
+    assert lw["p_corr"].to_numpy() == pytest.approx(ref["p_corr"].to_numpy(), rel=1e-9)
+    with pytest.raises(StatsError, match="missing must be one of"):
+        A.pairwise_ttests(d, "rating", "sample", "participant", missing="some")
+
+
+def test_sphericity_of_a_three_level_factor_in_a_two_factor_design():
+    """pingouin.rm_anova on two within factors gives ε_GG, Mauchly's W and its p per
+    effect (before, only a single factor got any sphericity correction); ours agree."""
+    rng = np.random.default_rng(11)
+    rows = [(f"P{i}", a, b, rng.normal(0, 1) + (a == "a2") + 0.5 * (b == "b1") * i / 9)
+            for i in range(10) for a in ("a0", "a1", "a2") for b in ("b0", "b1")]
+    d = pd.DataFrame(rows, columns=["participant", "A", "B", "y"])
+    ours = A.rm_anova(d, "y", ["A", "B"], "participant").set_index("Source")
+    ref = pg.rm_anova(d, dv="y", within=["A", "B"], subject="participant",
+                      effsize="np2").set_index("Source")
+    for src, theirs in (("A", "A"), ("A * B", "A * B")):
+        assert ours.loc[src, "F"] == pytest.approx(ref.loc[theirs, "F"], rel=1e-9)
+        assert ours.loc[src, "eps_gg"] == pytest.approx(ref.loc[theirs, "eps"], rel=1e-9)
+        assert ours.loc[src, "p_gg"] == pytest.approx(ref.loc[theirs, "p_GG_corr"], rel=1e-9)
+        assert ours.loc[src, "W_mauchly"] == pytest.approx(ref.loc[theirs, "W_spher"], rel=1e-9)
+        assert ours.loc[src, "p_spher"] == pytest.approx(ref.loc[theirs, "p_spher"], rel=1e-6)
+        assert "p_hf" in ours.columns and math.isfinite(ours.loc[src, "p_hf"])
+    assert "eps_gg" not in ours.columns or math.isnan(ours.loc["B", "eps_gg"])  # 2 levels
+
+
+# ---------------------------------------------------------------- property-based
+#: powers of ten of the data's units; half the examples in plain units (pingouin compared)
+exponents = st.one_of(st.just(0), st.integers(-150, 150))
+designs = st.tuples(st.integers(2, 40), st.integers(2, 12), st.integers(1, 3), exponents,
+                    st.integers(0, 2 ** 32 - 1),
+                    st.sampled_from(["random", "ties", "constant_column", "missing"]))
+
+
+@given(designs)
+def test_one_factor_numbers_are_finite_or_a_named_error_and_agree_with_pingouin(design):
+    n, k, reps, exp10, seed, kind = design
+    rng = np.random.default_rng(seed)
+    m = rng.integers(1, 8, (n, k, reps)).mean(axis=2)
+    if kind == "ties":
+        m[:, 1] = m[:, 0]
+    elif kind == "constant_column":
+        m[:, -1] = 4.0
+    d = _long(m * 10.0 ** exp10)
+    if kind == "missing":
+        d = d.drop(index=rng.choice(d.index, size=max(1, len(d) // 10), replace=False))
+    for fn in (A.rm_anova, A.pairwise_ttests):
+        try:
+            out = fn(d, "rating", "sample", "participant")
+        except StatsError as exc:
+            assert str(exc)
+            continue
+        assert np.isfinite(out.select_dtypes("number").to_numpy()).all()
+        if fn is A.pairwise_ttests:
+            assert (out["dz"].abs() < 1e6).all()  # a constant pair is listed, not tested
+        if exp10 == 0 and fn is A.rm_anova and kind != "missing":
+            try:  # pingouin 0.7.0 divides by zero in its sphericity test at n = 2
+                ref = pg.rm_anova(d, dv="rating", within="sample", subject="participant",
+                                  detailed=True, effsize="np2")
+            except ZeroDivisionError:
+                continue
+            assume(np.isfinite(ref.loc[0, "F"]))
+            assert out.loc[0, "F"] == pytest.approx(ref.loc[0, "F"], rel=1e-6)
+            assert out.loc[0, "p_unc"] == pytest.approx(ref.loc[0, "p_unc"], rel=1e-6,
+                                                        abs=1e-300)
+
+
+@given(st.integers(2, 12), st.integers(2, 4), st.integers(2, 3), exponents,
+       st.integers(0, 2 ** 32 - 1))
+def test_factorial_numbers_are_finite_or_a_named_error(n, ka, kb, exp10, seed):
+    rng = np.random.default_rng(seed)
+    rows = [(f"P{i}", f"a{a}", f"b{b}", float(rng.integers(1, 8)) * 10.0 ** exp10)
+            for i in range(n) for a in range(ka) for b in range(kb)]
+    d = pd.DataFrame(rows, columns=["participant", "A", "B", "y"])
+    try:
+        out = A.rm_anova(d, "y", ["A", "B"], "participant")
+    except StatsError as exc:
+        assert str(exc)
+        return
+    assert np.isfinite(out.drop(columns="Source").to_numpy(float)[
+        ~np.isnan(out.drop(columns="Source").to_numpy(float))]).all()
+    if exp10 == 0:
+        try:  # pingouin 0.7.0 divides by zero in its sphericity test at n = 2
+            ref = pg.rm_anova(d, dv="y", within=["A", "B"], subject="participant",
+                              effsize="np2")
+        except ZeroDivisionError:
+            return
+        for src in ("A", "B", "A * B"):
+            f_ref = float(ref.set_index("Source").loc[src, "F"])
+            if np.isfinite(f_ref):
+                assert float(out.set_index("Source").loc[src, "F"]) == pytest.approx(
+                    f_ref, rel=1e-6)
