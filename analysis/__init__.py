@@ -10,6 +10,8 @@ tidy DataFrame out::
     pairwise_ttests(data, dv, within, subject, padjust="holm")
     rm_anova(data, dv, within, subject)
     identification_scores(data, subject, correct, repetition=None, group=None)
+    friedman(data, dv, within, subject)      pairwise_wilcoxon(data, dv, within, subject)
+    dz_ci(dz, n)                             participant_identification_test(data, subject, correct)
 
 ``analysis.datasets`` holds a small committed example (the docstrings' examples run on it).
 """
@@ -18,14 +20,19 @@ from . import datasets
 from .load import LoadError, load_sessions, select_sessions, tap_velocities
 from .stats import (
     StatsError,
+    dz_ci,
+    friedman,
     identification_scores,
     p_adjust,
     pairwise_ttests,
+    pairwise_wilcoxon,
+    participant_identification_test,
     preflight,
     rm_anova,
     zscore_by_subject,
 )
 
-__all__ = ["LoadError", "StatsError", "datasets", "identification_scores", "load_sessions",
-           "p_adjust", "pairwise_ttests", "preflight", "rm_anova", "select_sessions",
+__all__ = ["LoadError", "StatsError", "datasets", "dz_ci", "friedman", "identification_scores",
+           "load_sessions", "p_adjust", "pairwise_ttests", "pairwise_wilcoxon",
+           "participant_identification_test", "preflight", "rm_anova", "select_sessions",
            "tap_velocities", "zscore_by_subject"]

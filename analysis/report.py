@@ -115,7 +115,10 @@ def methods_text(a: dict, design: dict) -> str:
                 "partial η² and generalized η² (Olejnik & Algina 2003). Paired two-sided "
                 f"t-tests on {tested}, p adjusted by Holm–Bonferroni and, separately, by "
                 "Benjamini–Hochberg; d_z = mean difference / SD of the differences; 95 % "
-                "confidence intervals from the t distribution. Differences within 1e-9 of the "
+                "confidence intervals from the t distribution (for d_z: from the noncentral t). "
+                "Ordinal companions: a Friedman test with Kendall's W and Wilcoxon signed-rank "
+                "tests of every pair (Holm), on the same participants. "
+                "Differences within 1e-9 of the "
                 "ratings' magnitude count as equal (averaging in floating point). Letters "
                 "(compact letter display, Piepho 2004): samples sharing a letter are not "
                 f"significantly different (Holm p ≥ .05), pair by pair.{ex_txt}")
@@ -144,7 +147,10 @@ def methods_text(a: dict, design: dict) -> str:
             f"each surface counts on its own (chance 1/{k} = {chance:.1f} %)")
     return (f"{title}: {res['n_subjects']} participants named {k} surfaces per repetition; "
             f"{rule}; percent correct is tested against chance with a one-sided exact "
-            "binomial test.")
+            "binomial test over all answers, which treats a person's repeated answers as "
+            "independent, and, with each participant as the unit, by a one-sided exact sign "
+            "test of the participants above chance and a one-sample t-test of their "
+            "proportions correct.")
 
 
 def _run(rows: pd.DataFrame, phase: dict):
@@ -212,7 +218,11 @@ def _report_entry(a: dict) -> dict:
             "letters": r["letters"], "missing": r["missing"],
             "excluded_subjects": [str(x) for x in r["excluded_subjects"]],
             "pairwise": r["pairwise"][["A", "B", "mean_diff", "ci_low", "ci_high", "t", "dof",
-                                       "p_unc", "p_holm", "p_fdr", "dz", "n"]],
+                                       "p_unc", "p_holm", "p_fdr", "dz", "dz_ci_low",
+                                       "dz_ci_high", "n"]],
+            "ordinal": r["ordinal"] if isinstance(r["ordinal"], str) else {
+                "friedman": r["ordinal"]["friedman"], "wilcoxon": r["ordinal"]["wilcoxon"],
+                "agreement": _agreement(r["pairwise"], r["ordinal"]["wilcoxon"])},
             "anova_notes": r["anova"].attrs.get("notes", []),
             "session_length": r["session_length"], "n_subjects": r["n_subjects"],
             "exclusions": r["preflight"],
@@ -228,11 +238,23 @@ def _report_entry(a: dict) -> dict:
                               "n_subjects": v["n_subjects"]} for g, v in r.items()}
     else:
         base.update({"table": r["table"], "chance": r["chance"], "scoring": r["scoring"],
-                     "n_subjects": r["n_subjects"],
+                     "n_subjects": r["n_subjects"], "per_participant": r["per_participant"],
                      "confusion": None if r["confusion"] is None else
                      {k: {kk: int(vv) for kk, vv in row.items()} for k, row in
                       r["confusion"].to_dict(orient="index").items()}})
     return base
+
+
+def _agreement(pw: pd.DataFrame, wx: pd.DataFrame, alpha: float = 0.05) -> dict:
+    """Where the paired t-tests and the Wilcoxon tests (both Holm) agree on significance."""
+    t_sig = {(a, b) for a, b, p in zip(pw["A"], pw["B"], pw["p_holm"], strict=True) if p < alpha}
+    w_sig = {(a, b) for a, b, p in zip(wx["A"], wx["B"], wx["p_corr"], strict=True) if p < alpha}
+    pairs = set(zip(pw["A"], pw["B"], strict=True)) | set(zip(wx["A"], wx["B"], strict=True))
+    only_t = sorted(f"{a}–{b}" for a, b in t_sig - w_sig)
+    only_w = sorted(f"{a}–{b}" for a, b in w_sig - t_sig)
+    return {"pairs": len(pairs), "significant_t": len(t_sig), "significant_wilcoxon": len(w_sig),
+            "agree": len(pairs) - len(only_t) - len(only_w), "only_t": only_t,
+            "only_wilcoxon": only_w}
 
 
 def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"),
@@ -337,8 +359,22 @@ def _oneway_md(a: dict) -> list[str]:
     out.append("\n#### Letters (samples sharing a letter: Holm p ≥ .05 for every pair)\n")
     out.append("\n".join(f"- **{ch}**: " + ", ".join(g) for ch, g in
                           zip("abcdefghijklmnopqrstuvwxyz", a["groups"], strict=False)) + "\n")
-    out.append("\n#### Paired t-tests (d_z: Cohen's d for paired data)\n")
+    out.append("\n#### Paired t-tests (d_z: Cohen's d for paired data, with its 95 % CI)\n")
     out.append(_table(a["pairwise"]))
+    out.append("\n#### Ordinal companions: Friedman and Wilcoxon signed-rank (Holm)\n")
+    o = a.get("ordinal")
+    if isinstance(o, str) or o is None:
+        out.append(f"{o or 'not computed'}\n")
+    else:
+        g = o["agreement"]
+        out.append(_table(o["friedman"]))
+        out.append(f"\nOf {g['pairs']} pairs, {g['significant_t']} differ by the t-tests and "
+                   f"{g['significant_wilcoxon']} by the Wilcoxon tests (Holm, α = .05); the two "
+                   f"agree on {g['agree']}"
+                   + (f"; only by t: {', '.join(g['only_t'])}" if g["only_t"] else "")
+                   + (f"; only by Wilcoxon: {', '.join(g['only_wilcoxon'])}"
+                      if g["only_wilcoxon"] else "") + ".\n\n")
+        out.append(_table(o["wilcoxon"]))
     out.append("\n#### Exclusions\n")
     out.append(_table(a["exclusions"]))
     sl = a["session_length"]
@@ -390,6 +426,9 @@ def _factorial_md(a: dict) -> list[str]:
 def _identification_md(a: dict) -> list[str]:
     out = [f"Chance: {100 * a['chance']:.1f} % (scoring: {a['scoring']}).\n\n",
            _table(a["table"])]
+    pp = a.get("per_participant")
+    out.append("\n#### With each participant as the unit\n")
+    out.append(f"{pp}\n" if isinstance(pp, str) or pp is None else _table(pp))
     if a["confusion"]:
         out.append("\n#### Confusion (rows presented, columns answered)\n")
         out.append(_table([{"presented": k, **a["confusion"][k]} for k in a["confusion"]]))

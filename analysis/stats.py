@@ -16,7 +16,8 @@ import pandas as pd
 from scipy import special, stats
 
 __all__ = ["preflight", "zscore_by_subject", "pairwise_ttests", "rm_anova",
-           "identification_scores", "cell_means", "wide_means", "p_adjust", "StatsError"]
+           "identification_scores", "cell_means", "wide_means", "p_adjust", "StatsError",
+           "friedman", "pairwise_wilcoxon", "dz_ci", "participant_identification_test"]
 
 PADJUST = ("none", "bonf", "holm", "fdr_bh")
 #: Values closer than this fraction of the data's magnitude are equal: floating-point
@@ -666,3 +667,171 @@ def identification_scores(data: pd.DataFrame, subject: str, correct: str,
                 conf.loc[t, a] += 1
         out["confusion"] = conf
     return out
+
+
+# --------------------------------------------------------------------- ordinal companions
+def friedman(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.DataFrame:
+    """Friedman test over the levels of ``within`` on per-subject means, with Kendall's W.
+
+    The rank-based companion of the one-way :func:`rm_anova` for ordinal ratings. Subjects
+    missing a level are left out (listwise). Ties within a subject get mid-ranks, and the
+    statistic is corrected for them (as scipy and R's ``friedman.test``).
+
+    Returns
+    -------
+    DataFrame, one row
+        ``Source``, ``n``, ``k`` (levels), ``Q`` (χ² statistic), ``dof`` (k − 1),
+        ``p_unc`` (χ² approximation), ``W`` (Kendall's coefficient of concordance,
+        Q / (n (k − 1)), 0–1).
+
+    Raises
+    ------
+    StatsError
+        Fewer than 2 complete subjects or 3 levels, or every subject's ratings tied.
+
+    Notes
+    -----
+    With R_j the rank sums, Q = [12 / (n k (k + 1)) Σ R_j² − 3 n (k + 1)] / C, where
+    C = 1 − Σ (t³ − t) / (n (k³ − k)) over tie groups t; W = Q / (n (k − 1)).
+
+    Examples
+    --------
+    >>> import analysis as A
+    >>> df = A.datasets.read_dataset("ratings")
+    >>> A.friedman(df, "rating", "sample", "participant")[["n", "k", "Q", "W"]].round(3)
+       n  k       Q      W
+    0  6  6  25.48  0.849
+    """
+    W_, subjects, levels = wide_means(data, dv, within, subject)
+    m = W_[~np.isnan(W_).any(axis=1)]
+    n, k = m.shape
+    if n < 2 or k < 3:
+        raise StatsError(f"the Friedman test needs at least 2 complete subjects and 3 levels "
+                         f"of {within!r}; has {n} and {k}")
+    tol = _tol(m)
+    m = np.round(m / tol) * tol if tol > 0 else m  # values equal within tolerance tie
+    ranks = np.apply_along_axis(stats.rankdata, 1, m)
+    ties = 0.0
+    for row in m:
+        _, counts = np.unique(row, return_counts=True)
+        ties += float(((counts ** 3) - counts).sum())
+    c = 1 - ties / (n * (k ** 3 - k))
+    if c <= 0:
+        raise StatsError(f"every subject gave every level of {within!r} the same {dv}: the "
+                         "Friedman test is undefined")
+    rj = ranks.sum(axis=0)
+    q = (12 / (n * k * (k + 1)) * float((rj ** 2).sum()) - 3 * n * (k + 1)) / c
+    return pd.DataFrame([{"Source": within, "n": n, "k": k, "Q": q, "dof": k - 1,
+                          "p_unc": float(special.chdtrc(k - 1, q)), "W": q / (n * (k - 1))}])
+
+
+def pairwise_wilcoxon(data: pd.DataFrame, dv: str, within: str, subject: str,
+                      padjust: str = "holm") -> pd.DataFrame:
+    """Wilcoxon signed-rank tests between every pair of levels, on per-subject means.
+
+    Listwise, as :func:`pairwise_ttests`. Zero differences are dropped (Wilcox's
+    convention, scipy's ``zero_method="wilcox"``); p is exact when n ≤ 50 without ties,
+    the normal approximation otherwise (scipy's ``method="auto"``). A pair with no non-zero
+    difference has no test and is listed in ``attrs["constant_pairs"]``.
+
+    Returns
+    -------
+    DataFrame, one row per pair
+        ``A``, ``B``, ``n`` (non-zero differences), ``W_val`` (the smaller rank sum),
+        ``p_unc``, ``p_corr``, ``p_adjust``, ``rbc`` (matched-pairs rank-biserial
+        correlation, (R⁺ − R⁻) / (R⁺ + R⁻), positive when A > B).
+    """
+    W_, _subjects, levels = wide_means(data, dv, within, subject)
+    m = W_[~np.isnan(W_).any(axis=1)]
+    tol = _tol(m)
+    rows, constant = [], []
+    for a, b in itertools.combinations(range(len(levels)), 2):
+        d = m[:, a] - m[:, b]
+        d = d[np.abs(d) > tol]
+        if d.size == 0:
+            constant.append((levels[a], levels[b], "no difference for any subject"))
+            continue
+        r = stats.rankdata(np.abs(d))
+        rp, rm = float(r[d > 0].sum()), float(r[d < 0].sum())
+        res = stats.wilcoxon(d, zero_method="wilcox", method="auto")
+        rows.append({"A": levels[a], "B": levels[b], "n": int(d.size),
+                     "W_val": float(min(rp, rm)), "p_unc": float(res.pvalue),
+                     "rbc": (rp - rm) / (rp + rm)})
+    out = pd.DataFrame(rows, columns=["A", "B", "n", "W_val", "p_unc", "rbc"])
+    out.insert(5, "p_corr", p_adjust(out["p_unc"].to_numpy(), padjust))
+    out.insert(6, "p_adjust", padjust)
+    out.attrs["constant_pairs"] = constant
+    return out
+
+
+def dz_ci(dz: float, n: int, alpha: float = 0.05) -> tuple[float, float]:
+    """Confidence interval of Cohen's d_z from the noncentral t distribution.
+
+    t = d_z·√n follows a noncentral t with n − 1 degrees of freedom and noncentrality
+    δ = d_z·√n; the interval inverts its CDF (Steiger & Fouladi 1997) and divides by √n.
+
+    Examples
+    --------
+    >>> [round(x, 3) for x in dz_ci(0.8, 20)]
+    [0.286, 1.298]
+    """
+    if n < 2 or not math.isfinite(dz):
+        raise StatsError(f"a CI of d_z needs n >= 2 and a finite d_z; got n = {n}, d_z = {dz}")
+    from scipy import optimize
+
+    t, df = dz * math.sqrt(n), n - 1
+
+    def cdf(nc: float) -> float:
+        # P(T <= t | nc) falls from 1 to 0 as nc grows; far in its tails scipy may return
+        # NaN, which is the limit on that side
+        v = float(special.nctdtr(df, nc, t))
+        return v if math.isfinite(v) else (1.0 if nc < t else 0.0)
+
+    def solve(target):
+        lo = hi = t
+        step = 1.0
+        while cdf(lo) <= target:
+            lo, step = lo - step, step * 2
+        step = 1.0
+        while cdf(hi) >= target:
+            hi, step = hi + step, step * 2
+        return optimize.brentq(lambda nc: cdf(nc) - target, lo, hi, xtol=1e-12)
+
+    return solve(1 - alpha / 2) / math.sqrt(n), solve(alpha / 2) / math.sqrt(n)
+
+
+def participant_identification_test(data: pd.DataFrame, subject: str, correct: str,
+                                    chance: float = 1 / 6) -> pd.DataFrame:
+    """Identification against chance with each person as the unit (repeated answers).
+
+    Each participant's proportion of correct repetitions is one observation; a one-sided
+    exact sign test asks whether more participants than chance would give are above the
+    chance proportion, and a one-sample t-test compares the mean proportion with chance.
+    Unlike the binomial test over all answers, neither treats one person's repeated answers
+    as independent.
+
+    Returns
+    -------
+    DataFrame, one row
+        ``n`` (participants), ``mean_percent``, ``chance_percent``, ``above`` (participants
+        above chance), ``p_sign`` (one-sided exact sign test of ``above`` against 1/2 among
+        participants not at chance), ``t``, ``dof``, ``p_t`` (one-sided).
+    """
+    _check_columns(data, [subject, correct])
+    c = pd.to_numeric(data[correct], errors="coerce")
+    if c.isna().any() or not c.isin([0, 1]).all():
+        raise StatsError(f"column {correct!r} must hold 0 or 1 for every answer")
+    p = c.groupby(data[subject], observed=True).mean()
+    n = int(p.size)
+    if n < 2:
+        raise StatsError(f"a per-participant test needs at least 2 participants, has {n}")
+    above, below = int((p > chance).sum()), int((p < chance).sum())
+    p_sign = float(stats.binomtest(above, above + below, 0.5, alternative="greater").pvalue) \
+        if above + below else 1.0
+    sd = float(p.std(ddof=1))
+    row = {"n": n, "mean_percent": 100 * float(p.mean()), "chance_percent": 100 * chance,
+           "above": above, "p_sign": p_sign}
+    if sd > _tol(p.to_numpy()) + 1e-15:
+        t = (float(p.mean()) - chance) / (sd / math.sqrt(n))
+        row.update(t=t, dof=n - 1, p_t=float(special.stdtr(n - 1, -t)))
+    return pd.DataFrame([row])

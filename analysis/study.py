@@ -23,8 +23,12 @@ from .load import tap_velocities
 from .power import power_table, variance_components
 from .stats import (
     StatsError,
+    dz_ci,
+    friedman,
     identification_scores,
     pairwise_ttests,
+    pairwise_wilcoxon,
+    participant_identification_test,
     preflight,
     rm_anova,
     zscore_by_subject,
@@ -173,6 +177,15 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
     pw = holm.rename(columns={"p_corr": "p_holm"}).drop(columns="p_adjust")
     pw["p_fdr"] = fdr["p_corr"].to_numpy()
     pw["p_corr"] = pw["p_holm"]
+    cis = [dz_ci(float(z), int(k), alpha) for z, k in zip(pw["dz"], pw["n"], strict=True)]
+    pw["dz_ci_low"] = [c[0] for c in cis]
+    pw["dz_ci_high"] = [c[1] for c in cis]
+    # the rank-based companions for ordinal ratings (report says where they agree)
+    try:
+        ordinal = {"friedman": friedman(d, dv, within, subject),
+                   "wilcoxon": pairwise_wilcoxon(d, dv, within, subject, "holm")}
+    except StatsError as exc:
+        ordinal = f"not computed: {exc}"
     anova = rm_anova(d, dv, within, subject)
     per_subject = (d.groupby([subject, within], observed=True)[dv].mean()
                    .unstack(within).reset_index())
@@ -192,7 +205,7 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
     groups = [[lv for lv in order if ch in letters[lv]]
               for ch in sorted({c for v in letters.values() for c in v})]
     return {"samples": samples, "pairwise": pw, "anova": anova, "session_length": length,
-            "groups": groups, "letters": letters, "missing": missing,
+            "groups": groups, "letters": letters, "missing": missing, "ordinal": ordinal,
             "excluded_subjects": holm.attrs.get("excluded_subjects", []),
             "per_subject": per_subject,
             "preflight": pre, "constant_pairs": holm.attrs.get("constant_pairs", []),
@@ -279,8 +292,13 @@ def answer_scores(data: pd.DataFrame, scoring: str = "all_correct",
         chance = 1 / math.factorial(k)
     res = identification_scores(scored, subject, "correct", repetition="repetition",
                                 group="group", chance=chance, answer="answer", truth="truth")
+    try:
+        per_person = participant_identification_test(scored, subject, "correct", chance)
+    except StatsError as exc:
+        per_person = f"not computed: {exc}"
     return {"table": res["summary"], "confusion": res.get("confusion"), "chance": chance,
-            "surfaces": k, "scoring": scoring, "n_subjects": int(d[subject].nunique())}
+            "surfaces": k, "scoring": scoring, "n_subjects": int(d[subject].nunique()),
+            "per_participant": per_person}
 
 
 def device_summary(data: pd.DataFrame, subject: str = SUBJECT) -> dict:

@@ -215,3 +215,53 @@ def test_factorial_numbers_are_finite_or_a_named_error(n, ka, kb, exp10, seed):
             if np.isfinite(f_ref):
                 assert float(out.set_index("Source").loc[src, "F"]) == pytest.approx(
                     f_ref, rel=1e-6)
+
+
+# ---------------------------------------------------------------- companions
+def test_friedman_and_wilcoxon_agree_with_pingouin():
+    """pingouin.friedman (Q, W, p) and pingouin.pairwise_tests(parametric=False) (W, p, p
+    Holm) on the committed example, which has ties."""
+    df = A.datasets.read_dataset("ratings")
+    ours = A.friedman(df, "rating", "sample", "participant").iloc[0]
+    ref = pg.friedman(df, dv="rating", within="sample", subject="participant").iloc[0]
+    for a, b in (("Q", "Q"), ("W", "W"), ("p_unc", "p_unc")):
+        assert ours[a] == pytest.approx(ref[b], rel=1e-9), a
+    w = A.pairwise_wilcoxon(df, "rating", "sample", "participant")
+    wr = pg.pairwise_tests(df, dv="rating", within="sample", subject="participant",
+                           parametric=False, padjust="holm")
+    assert list(zip(w["A"], w["B"], strict=True)) == list(zip(wr["A"], wr["B"], strict=True))
+    assert w["W_val"].to_numpy() == pytest.approx(wr["W_val"].to_numpy())
+    assert w["p_unc"].to_numpy() == pytest.approx(wr["p_unc"].to_numpy(), rel=1e-9)
+    assert w["p_corr"].to_numpy() == pytest.approx(wr["p_corr"].to_numpy(), rel=1e-9)
+
+
+def test_friedman_of_identical_ratings_is_undefined_in_words():
+    with pytest.raises(StatsError, match="Friedman test is undefined"):
+        A.friedman(_long(np.full((5, 4), 3.0)), "rating", "sample", "participant")
+
+
+def test_dz_interval_covers_at_its_level():
+    """Coverage of the noncentral-t interval over 2000 simulated studies of n = 12 with a
+    true d_z of 0.5 (normal differences): 95 % ± 1.5 % (Monte-Carlo SE 0.5 %)."""
+    rng = np.random.default_rng(0)
+    hits = 0
+    for _ in range(2000):
+        d = rng.normal(0.5, 1.0, 12)
+        lo, hi = A.dz_ci(d.mean() / d.std(ddof=1), 12)
+        hits += lo <= 0.5 <= hi
+    assert hits / 2000 == pytest.approx(0.95, abs=0.015)
+    lo, hi = A.dz_ci(16.17, 3)  # far in the tails scipy's noncentral t returns NaN
+    assert 0 < lo < 16.17 < hi and math.isfinite(hi)
+
+
+def test_identification_with_each_participant_as_the_unit():
+    """Table 3's 35 of 42 answers, spread as 9 people 3 of 3, 4 people 2 of 3 and one 0 of
+    3: with people as the unit, 13 of 14 are above chance (1/6) and one below, so the sign
+    test's p is P(X ≥ 13 | 14, ½) = 15 / 2¹⁴ by hand."""
+    correct = [1, 1, 1] * 9 + [1, 1, 0] * 4 + [0, 0, 0]  # 27 + 8 + 0 = 35 of 42
+    d = pd.DataFrame({"participant": [f"S{i // 3}" for i in range(42)], "correct": correct})
+    res = A.participant_identification_test(d, "participant", "correct").iloc[0]
+    assert res["n"] == 14 and res["above"] == 13
+    assert res["p_sign"] == pytest.approx(15 / 2 ** 14, rel=1e-12)
+    assert res["mean_percent"] == pytest.approx(100 * 35 / 42)
+    assert 0 < res["p_t"] < 1e-5
