@@ -3,8 +3,9 @@
 Rows: every sample of the three built-in protocols × servo rate (1, 10, 20 kHz), each a
 30-s window of taps sweeping 0.02–0.4 m/s (:func:`device.sim.audit.energy_audit`):
 energy the stylus put into the actuator and the sample, energy they gave back, the
-largest restitution of single taps at 0.02, 0.11 and 0.4 m/s, the fastest measured
-contact against the fastest intended tap, and the verdict. Every real sample must be
+largest restitution of single taps at 0.02, 0.11 and 0.4 m/s, the fastest arrival at the
+surface and the fastest departure from it (true tip speeds), the device's own estimate of
+the fastest contact, the fastest intended tap, and the verdict. Every real sample must be
 passive; a virtual scene's verdict says when and why it is active.
 
 Baseline, in the same process: a lossless real contact (70 kN/m, no damping) audited the
@@ -94,12 +95,13 @@ def main(args) -> int:
         return 0 if payload["real_samples_passive"] else 1
     print_table(f"energy audit: {WINDOW_S:g}-s windows of taps sweeping 0.02–0.4 m/s",
                 ["sample", "kind", "rate [Hz]", "in [mJ]", "out [mJ]", "out/in",
-                 "lossless out/in", "max e", "max contact [m/s]", "measured", "max tap [m/s]",
-                 "verdict"],
+                 "lossless out/in", "max e", "max contact [m/s]", "max rebound [m/s]",
+                 "measured", "max tap [m/s]", "verdict"],
                 [(r["scene"], r["kind"], int(r["rate_hz"]), f"{1e3 * r['energy_in_j']:.1f}",
                   f"{1e3 * r['energy_out_j']:.1f}", f"{r['out_over_in']:.3f}",
                   f"{r['lossless_out_over_in']:.4f}", f"{r['max_restitution']:.3f}",
-                  f"{r['max_contact_speed']:.3f}", f"{r['max_measured_contact_speed']:.3f}",
+                  f"{r['max_contact_speed']:.3f}", f"{r['max_rebound_speed']:.3f}",
+                  f"{r['max_measured_contact_speed']:.3f}",
                   f"{r['max_tap_speed']:.3f}", r["verdict"])
                  for r in rows])
     n_real = len(real)
