@@ -89,8 +89,8 @@ def factorial_interactions(a: dict, out: Path) -> list[str]:
                 ax.plot(levels, mm.to_numpy(), "o-", label=f"{f2} {lvl}")
             ax.set_xlabel(f1)
             ax.legend(fontsize=8)
-        axes[0][0].set_ylabel("mean rating" + (" (z)" if a["phase_design"].get("normalize")
-                                               == "zscore" else ""))
+        axes[0][0].set_ylabel("mean rating" + (" (z)" if (a["phase_design"].get("normalize")
+                                                          or "none") != "none" else ""))
         fig.suptitle(f"{a['id']} — {group}: interactions (most significant: "
                      f"{res['most_significant']})")
         files += _save(fig, out, f"{_name(a)}_{group}")

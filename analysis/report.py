@@ -117,7 +117,13 @@ def methods_text(a: dict, design: dict) -> str:
                 "Benjamini–Hochberg; d_z = mean difference / SD of the differences; 95 % "
                 "confidence intervals from the t distribution (for d_z: from the noncentral t). "
                 "Ordinal companions: a Friedman test with Kendall's W and Wilcoxon signed-rank "
-                "tests of every pair (Holm), on the same participants. "
+                "tests of every pair (Holm), on the same participants; on trial-level ratings, "
+                "keeping participants with missing cells, a linear mixed model (random "
+                "intercept per participant, Wald test of sample; statsmodels MixedLM; with no "
+                "random slope it tests samples against trial noise, more liberally than the "
+                "ANOVA when participants disagree about samples) and a "
+                "cumulative-link logit model (participants as fixed effects, likelihood-ratio "
+                "test of sample; statsmodels OrderedModel). "
                 "Differences within 1e-9 of the "
                 "ratings' magnitude count as equal (averaging in floating point). Letters "
                 "(compact letter display, Piepho 2004): samples sharing a letter are not "
@@ -127,9 +133,12 @@ def methods_text(a: dict, design: dict) -> str:
         groups = list(res)
         first = res[groups[0]]
         shape = " × ".join(str(len(first["sets"][f].unique())) for f in factors)
-        norm = (" Ratings were z-scored within each participant over the phase (mean 0, SD 1; "
-                "a participant with constant ratings gets z = 0)." if
-                phase.get("normalize") == "zscore" else "")
+        norm = {"zscore": " Ratings were z-scored within each participant over the phase "
+                          "(mean 0, SD 1; a participant with constant ratings gets z = 0).",
+                "zscore_block": " Ratings were z-scored within each participant and block "
+                                "(each material's sets: mean 0, SD 1, as the reality-based "
+                                "models study; constant ratings get z = 0)."}.get(
+                                    phase.get("normalize") or "none", "")
         per = f" Per block ({', '.join(groups)}), a" if phase.get("by") else " A"
         n = max(v["n_subjects"] for v in res.values())
         return (f"{title}: {n} participants rated {len(first['sets'])} sets per "
@@ -223,6 +232,8 @@ def _report_entry(a: dict) -> dict:
             "ordinal": r["ordinal"] if isinstance(r["ordinal"], str) else {
                 "friedman": r["ordinal"]["friedman"], "wilcoxon": r["ordinal"]["wilcoxon"],
                 "agreement": _agreement(r["pairwise"], r["ordinal"]["wilcoxon"])},
+            "models": r["models"],
+            "omnibus": _omnibus(r),
             "anova_notes": r["anova"].attrs.get("notes", []),
             "session_length": r["session_length"], "n_subjects": r["n_subjects"],
             "exclusions": r["preflight"],
@@ -235,14 +246,36 @@ def _report_entry(a: dict) -> dict:
                               "most_significant_text": _most(v),
                               "best_set": v["best_set"], "main_effects": v["main_effects"],
                               "sets": v["sets"], "exclusions": v["preflight"],
+                              "simple_effects": v["simple_effects"],
                               "n_subjects": v["n_subjects"]} for g, v in r.items()}
     else:
         base.update({"table": r["table"], "chance": r["chance"], "scoring": r["scoring"],
                      "n_subjects": r["n_subjects"], "per_participant": r["per_participant"],
+                     "groups_compared": r["groups_compared"],
                      "confusion": None if r["confusion"] is None else
                      {k: {kk: int(vv) for kk, vv in row.items()} for k, row in
                       r["confusion"].to_dict(orient="index").items()}})
     return base
+
+
+def _omnibus(r: dict, alpha: float = 0.05) -> str:
+    """One sentence: do the ANOVA and its companions agree that the samples differ?"""
+    tests = [("the repeated-measures ANOVA", float(r["anova"]["p_gg"].iloc[0])
+              if "p_gg" in r["anova"] else float(r["anova"]["p_unc"].iloc[0]))]
+    if not isinstance(r["ordinal"], str):
+        tests.append(("the Friedman test", float(r["ordinal"]["friedman"]["p_unc"].iloc[0])))
+    for key, name in (("mixed", "the mixed model"), ("ordinal", "the ordinal model")):
+        if not isinstance(r["models"][key], str):
+            tests.append((name, float(r["models"][key]["p_unc"].iloc[0])))
+    sig = [n for n, p in tests if p < alpha]
+    if len(sig) == len(tests):
+        return f"All {len(tests)} omnibus tests find that the samples differ (p < {alpha:g})."
+    if not sig:
+        return f"None of the {len(tests)} omnibus tests finds a difference (p ≥ {alpha:g})."
+    rest = [n for n, p in tests if p >= alpha]
+    return (f"The omnibus tests disagree: {', '.join(sig)} "
+            f"{'finds' if len(sig) == 1 else 'find'} a difference (p < {alpha:g}); "
+            f"{', '.join(rest)} {'does' if len(rest) == 1 else 'do'} not.")
 
 
 def _agreement(pw: pd.DataFrame, wx: pd.DataFrame, alpha: float = 0.05) -> dict:
@@ -375,6 +408,14 @@ def _oneway_md(a: dict) -> list[str]:
                    + (f"; only by Wilcoxon: {', '.join(g['only_wilcoxon'])}"
                       if g["only_wilcoxon"] else "") + ".\n\n")
         out.append(_table(o["wilcoxon"]))
+    out.append("\n#### Trial-level models (participants with missing cells kept)\n")
+    for key, title in (("mixed", "Linear mixed model (random intercept per participant)"),
+                       ("ordinal", "Cumulative-link model (participants as fixed effects)")):
+        m = (a.get("models") or {}).get(key)
+        out.append(f"\n{title}: " + (f"{m}\n" if isinstance(m, str) or m is None else
+                                      "\n\n" + _table(m)))
+    if a.get("omnibus"):
+        out.append(f"\n{a['omnibus']}\n")
     out.append("\n#### Exclusions\n")
     out.append(_table(a["exclusions"]))
     sl = a["session_length"]
@@ -418,6 +459,9 @@ def _factorial_md(a: dict) -> list[str]:
         out.append(_table(v["main_effects"]))
         out.append(f"\n#### {g}: {' × '.join(factors)} ANOVA\n")
         out.append(_table(v["anova"]))
+        if v.get("simple_effects"):
+            out.append(f"\n#### {g}: simple effects of the significant interactions (Holm)\n")
+            out.append(_table(v["simple_effects"]))
         out.append(f"\n#### {g}: exclusions\n")
         out.append(_table(v["exclusions"]))
     return out
@@ -429,6 +473,12 @@ def _identification_md(a: dict) -> list[str]:
     pp = a.get("per_participant")
     out.append("\n#### With each participant as the unit\n")
     out.append(f"{pp}\n" if isinstance(pp, str) or pp is None else _table(pp))
+    gc = a.get("groups_compared")
+    if gc:
+        out.append(f"\n{gc['group_a']} ({gc['n_a']} participants, {gc['mean_percent_a']:.1f} % "
+                   f"correct) against {gc['group_b']} ({gc['n_b']}, {gc['mean_percent_b']:.1f} "
+                   f"%): Mann–Whitney U = {gc['U']:g}, {_p(gc['p_mwu'])} (two-sided, each "
+                   "participant's proportion correct as one observation).\n")
     if a["confusion"]:
         out.append("\n#### Confusion (rows presented, columns answered)\n")
         out.append(_table([{"presented": k, **a["confusion"][k]} for k in a["confusion"]]))

@@ -17,7 +17,8 @@ from scipy import special, stats
 
 __all__ = ["preflight", "zscore_by_subject", "pairwise_ttests", "rm_anova",
            "identification_scores", "cell_means", "wide_means", "p_adjust", "StatsError",
-           "friedman", "pairwise_wilcoxon", "dz_ci", "participant_identification_test"]
+           "friedman", "pairwise_wilcoxon", "dz_ci", "participant_identification_test",
+           "mixed_oneway", "ordinal_oneway"]
 
 PADJUST = ("none", "bonf", "holm", "fdr_bh")
 #: Values closer than this fraction of the data's magnitude are equal: floating-point
@@ -801,7 +802,8 @@ def dz_ci(dz: float, n: int, alpha: float = 0.05) -> tuple[float, float]:
 
 
 def participant_identification_test(data: pd.DataFrame, subject: str, correct: str,
-                                    chance: float = 1 / 6) -> pd.DataFrame:
+                                    chance: float = 1 / 6, group: str | None = None
+                                    ) -> pd.DataFrame:
     """Identification against chance with each person as the unit (repeated answers).
 
     Each participant's proportion of correct repetitions is one observation; a one-sided
@@ -809,6 +811,12 @@ def participant_identification_test(data: pd.DataFrame, subject: str, correct: s
     chance proportion, and a one-sample t-test compares the mean proportion with chance.
     Unlike the binomial test over all answers, neither treats one person's repeated answers
     as independent.
+
+    With ``group`` (a between-subject factor, e.g. expert/novice) and exactly two groups,
+    the groups' proportions are compared by a two-sided Mann–Whitney U test (exact for
+    small groups without ties; scipy's ``method="auto"``): ``attrs["groups"]`` holds
+    ``group_a``, ``group_b``, ``n_a``, ``n_b``, ``mean_percent_a``, ``mean_percent_b``,
+    ``U``, ``p_mwu``.
 
     Returns
     -------
@@ -834,4 +842,139 @@ def participant_identification_test(data: pd.DataFrame, subject: str, correct: s
     if sd > _tol(p.to_numpy()) + 1e-15:
         t = (float(p.mean()) - chance) / (sd / math.sqrt(n))
         row.update(t=t, dof=n - 1, p_t=float(special.stdtr(n - 1, -t)))
-    return pd.DataFrame([row])
+    out = pd.DataFrame([row])
+    if group is not None:
+        _check_columns(data, [group])
+        g = data.groupby(subject, observed=True)[group].first().astype(str)
+        names = sorted(x for x in g.unique() if x)
+        if len(names) == 2:
+            a, b = (p[g.reindex(p.index) == x] for x in names)
+            if len(a) and len(b):
+                res = stats.mannwhitneyu(a, b, alternative="two-sided", method="auto")
+                out.attrs["groups"] = {"group_a": names[0], "group_b": names[1],
+                                       "n_a": int(len(a)), "n_b": int(len(b)),
+                                       "mean_percent_a": 100 * float(a.mean()),
+                                       "mean_percent_b": 100 * float(b.mean()),
+                                       "U": float(res.statistic), "p_mwu": float(res.pvalue)}
+    return out
+
+
+# --------------------------------------------------------------------- model companions
+def mixed_oneway(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.DataFrame:
+    """Linear mixed model on trial-level ratings: ``dv ~ C(within)`` with a random
+    intercept per subject (statsmodels ``MixedLM``, REML), and the Wald test that every
+    level has the same mean.
+
+    Unlike the repeated-measures ANOVA it keeps subjects with missing cells (each trial
+    counts where it was recorded).
+
+    Returns
+    -------
+    DataFrame, one row
+        ``Source``, ``n_subjects``, ``n_obs``, ``chi2`` (Wald), ``dof`` (levels − 1),
+        ``p_unc``, ``sd_subject`` (random-intercept SD), ``sd_resid``, ``converged``.
+
+    Raises
+    ------
+    StatsError
+        Fewer than 2 subjects or levels, no variation, or a fit that fails.
+    """
+    import warnings
+
+    import statsmodels.formula.api as smf
+
+    _check_columns(data, [dv, within, subject])
+    _check_values(data, dv, [within, subject])
+    d = data[[dv, within, subject]].copy()
+    d[dv] = pd.to_numeric(d[dv], errors="coerce")
+    d = d.dropna()
+    levels = list(dict.fromkeys(d[within]))
+    if d[subject].nunique() < 2 or len(levels) < 2:
+        raise StatsError(f"a mixed model needs at least 2 subjects and 2 levels of {within!r}")
+    scale = float(np.abs(d[dv] - d[dv].mean()).max())
+    if scale <= _tol(d[dv].to_numpy()) or scale == 0:
+        raise StatsError(f"every {dv} is the same: the mixed model is undefined")
+    d = d.assign(_y=(d[dv] - d[dv].mean()) / scale,
+                 _x=pd.Categorical(d[within].astype(str), [str(x) for x in levels]),
+                 _g=d[subject].astype(str))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            fit = smf.mixedlm("_y ~ _x", d, groups=d["_g"]).fit(reml=True)
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            raise StatsError(f"the mixed model could not be fitted: {exc}") from None
+    names = [n for n in fit.params.index if n.startswith("_x")]
+    b = fit.params[names].to_numpy()
+    V = fit.cov_params().loc[names, names].to_numpy()
+    try:
+        chi2 = float(b @ np.linalg.solve(V, b))
+    except np.linalg.LinAlgError:
+        raise StatsError("the mixed model's fixed effects are not estimable (singular "
+                         "covariance)") from None
+    sd_subj = float(np.sqrt(max(float(fit.cov_re.iloc[0, 0]), 0.0))) * scale
+    converged = bool(fit.converged) and not any("converge" in str(w.message).lower()
+                                                for w in caught)
+    return pd.DataFrame([{"Source": within, "n_subjects": int(d["_g"].nunique()),
+                          "n_obs": int(len(d)), "chi2": chi2, "dof": len(names),
+                          "p_unc": float(special.chdtrc(len(names), chi2)),
+                          "sd_subject": sd_subj, "sd_resid": float(np.sqrt(fit.scale)) * scale,
+                          "converged": converged}])
+
+
+def ordinal_oneway(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.DataFrame:
+    """Cumulative-link (proportional-odds, logit) model of trial-level ratings on the
+    levels of ``within``, with subjects as fixed effects (statsmodels ``OrderedModel``,
+    which has no random effects), and the likelihood-ratio test of ``within``.
+
+    Returns
+    -------
+    DataFrame, one row
+        ``Source``, ``n_subjects``, ``n_obs``, ``categories`` (rating values used),
+        ``lr`` (likelihood-ratio χ²), ``dof``, ``p_unc``, ``converged``.
+
+    Raises
+    ------
+    StatsError
+        Fewer than 3 rating values used, too few subjects or levels, or a fit that fails
+        (the message says why; the report prints it instead of a number).
+    """
+    import warnings
+
+    from statsmodels.miscmodels.ordinal_model import OrderedModel
+
+    _check_columns(data, [dv, within, subject])
+    _check_values(data, dv, [within, subject])
+    d = data[[dv, within, subject]].copy()
+    d[dv] = pd.to_numeric(d[dv], errors="coerce")
+    d = d.dropna()
+    cats = sorted(d[dv].unique())
+    if len(cats) < 3:
+        raise StatsError(f"an ordinal model needs at least 3 distinct values of {dv}; the "
+                         f"data use {len(cats)}")
+    if d[subject].nunique() < 2 or d[within].nunique() < 2:
+        raise StatsError(f"an ordinal model needs at least 2 subjects and 2 levels of "
+                         f"{within!r}")
+    y = pd.Categorical(d[dv], categories=cats, ordered=True)
+    subj = pd.get_dummies(d[subject].astype(str), prefix="s", drop_first=True, dtype=float)
+    lev = pd.get_dummies(d[within].astype(str), prefix="x", drop_first=True, dtype=float)
+
+    def fit(X):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                r = OrderedModel(y, X, distr="logit").fit(method="bfgs", disp=False,
+                                                           maxiter=2000)
+            except (np.linalg.LinAlgError, ValueError) as exc:
+                raise StatsError(f"the ordinal model could not be fitted: {exc}") from None
+        ok = bool(r.mle_retvals.get("converged", False)) and not any(
+            "converge" in str(w.message).lower() for w in caught)
+        return r, ok
+
+    full, ok1 = fit(pd.concat([lev, subj], axis=1).to_numpy())
+    reduced, ok2 = fit(subj.to_numpy())
+    lr = max(0.0, 2.0 * float(full.llf - reduced.llf))
+    return pd.DataFrame([{"Source": within, "n_subjects": int(d[subject].nunique()),
+                          "n_obs": int(len(d)), "categories": len(cats), "lr": lr,
+                          "dof": int(lev.shape[1]),
+                          "p_unc": float(special.chdtrc(lev.shape[1], lr)),
+                          "converged": ok1 and ok2}])

@@ -26,6 +26,9 @@ from .stats import (
     dz_ci,
     friedman,
     identification_scores,
+    mixed_oneway,
+    ordinal_oneway,
+    p_adjust,
     pairwise_ttests,
     pairwise_wilcoxon,
     participant_identification_test,
@@ -186,6 +189,12 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
                    "wilcoxon": pairwise_wilcoxon(d, dv, within, subject, "holm")}
     except StatsError as exc:
         ordinal = f"not computed: {exc}"
+    models = {}  # trial-level models: keep participants with missing cells
+    for name, fn in (("mixed", mixed_oneway), ("ordinal", ordinal_oneway)):
+        try:
+            models[name] = fn(d, dv, within, subject)
+        except StatsError as exc:
+            models[name] = f"not computed: {exc}"
     anova = rm_anova(d, dv, within, subject)
     per_subject = (d.groupby([subject, within], observed=True)[dv].mean()
                    .unstack(within).reset_index())
@@ -206,6 +215,7 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
               for ch in sorted({c for v in letters.values() for c in v})]
     return {"samples": samples, "pairwise": pw, "anova": anova, "session_length": length,
             "groups": groups, "letters": letters, "missing": missing, "ordinal": ordinal,
+            "models": models,
             "excluded_subjects": holm.attrs.get("excluded_subjects", []),
             "per_subject": per_subject,
             "preflight": pre, "constant_pairs": holm.attrs.get("constant_pairs", []),
@@ -216,7 +226,8 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
                      normalize: str = "zscore", dv: str = "rating",
                      subject: str = SUBJECT) -> dict:
     """Crossed within-subject design: an RM ANOVA over ``factors`` (per ``by`` group when
-    given), on ratings z-scored within each subject when ``normalize == "zscore"``.
+    given), on ratings z-scored within each subject when ``normalize == "zscore"``, or
+    within each subject and block when ``"zscore_block"``.
 
     Returns
     -------
@@ -230,6 +241,10 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
     y = dv
     if normalize == "zscore":
         d["rating_z"] = zscore_by_subject(d, dv, subject)
+        y = "rating_z"
+    elif normalize == "zscore_block":  # per participant and block (material), as the paper
+        key = d[subject].astype(str) + "\x1f" + d["block"].astype(str)
+        d["rating_z"] = zscore_by_subject(d.assign(_sb=key), dv, "_sb").to_numpy()
         y = "rating_z"
     by_col = {"block": "block"}.get(by or "", None)
     out = {}
@@ -260,7 +275,41 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
             "best_set": {"sample": str(best["sample"]), "mean": float(best["mean"]),
                          **{f: str(best[f]) for f in factors}},
             "sets": means, "preflight": preflight(g, y, list(factors), subject),
-            "n_subjects": int(g[subject].nunique())}
+            "n_subjects": int(g[subject].nunique()),
+            "simple_effects": simple_effects(g, y, list(factors), subject, anova)}
+    return out
+
+
+def simple_effects(data: pd.DataFrame, dv: str, factors: list[str], subject: str,
+                   anova: pd.DataFrame, alpha: float = 0.05) -> pd.DataFrame:
+    """Follow-ups of every significant two-way interaction: the effect of each factor at
+    each level of the other (one-way repeated-measures ANOVAs on cell means averaged over
+    the remaining factors), Holm-adjusted over the whole family.
+
+    Returns
+    -------
+    DataFrame
+        ``interaction``, ``effect`` (the factor tested), ``at`` (``factor=level``), ``F``,
+        ``DF``, ``DF_err``, ``p_unc``, ``p_holm``, ``np2``; empty when no two-way
+        interaction has p < alpha.
+    """
+    rows = []
+    for r in anova.itertuples():
+        parts = str(r.Source).split(" * ")
+        if len(parts) != 2 or r.p_unc >= alpha:
+            continue
+        for f, other in (parts, parts[::-1]):
+            for level, sub in data.groupby(other, observed=True):
+                try:
+                    a = rm_anova(sub, dv, f, subject).iloc[0]
+                except StatsError:
+                    continue
+                rows.append({"interaction": r.Source, "effect": f, "at": f"{other}={level}",
+                             "F": float(a["F"]), "DF": int(a["DF"]), "DF_err": int(a["DF_err"]),
+                             "p_unc": float(a["p_unc"]), "np2": float(a["np2"])})
+    out = pd.DataFrame(rows, columns=["interaction", "effect", "at", "F", "DF", "DF_err",
+                                      "p_unc", "np2"])
+    out.insert(7, "p_holm", p_adjust(out["p_unc"].to_numpy(), "holm"))
     return out
 
 
@@ -293,12 +342,15 @@ def answer_scores(data: pd.DataFrame, scoring: str = "all_correct",
     res = identification_scores(scored, subject, "correct", repetition="repetition",
                                 group="group", chance=chance, answer="answer", truth="truth")
     try:
-        per_person = participant_identification_test(scored, subject, "correct", chance)
+        per_person = participant_identification_test(scored, subject, "correct", chance,
+                                                     group="group")
     except StatsError as exc:
         per_person = f"not computed: {exc}"
     return {"table": res["summary"], "confusion": res.get("confusion"), "chance": chance,
             "surfaces": k, "scoring": scoring, "n_subjects": int(d[subject].nunique()),
-            "per_participant": per_person}
+            "per_participant": per_person,
+            "groups_compared": None if isinstance(per_person, str) else
+            per_person.attrs.get("groups")}
 
 
 def device_summary(data: pd.DataFrame, subject: str = SUBJECT) -> dict:

@@ -18,7 +18,7 @@ REFERENCES = ("none", "block", "start")
 #: what a phase is for: analysed, practice (rated but not analysed), or none (not rated)
 ROLES = ("analysed", "practice", "none")
 #: how ratings are normalised before a factorial analysis
-NORMALIZATIONS = ("none", "zscore")
+NORMALIZATIONS = ("none", "zscore", "zscore_block")
 #: how identification answers are scored: a repetition is right only when every surface is
 #: named right (the paper), or each surface counts on its own
 SCORINGS = ("all_correct", "per_surface")
@@ -178,7 +178,9 @@ class PhaseDesign:
     by : str or None
         ``block``: one analysis per block (a factorial design's material).
     normalize : str
-        ``none``, or ``zscore``: ratings z-scored within each participant first.
+        ``none``; ``zscore``: ratings z-scored within each participant over the phase;
+        ``zscore_block``: within each participant and block (the reality-based models
+        normalised each subject's ratings of one material's sets).
     scoring : str or None
         Identification answers: ``all_correct`` or ``per_surface``.
     """

@@ -265,3 +265,100 @@ def test_identification_with_each_participant_as_the_unit():
     assert res["p_sign"] == pytest.approx(15 / 2 ** 14, rel=1e-12)
     assert res["mean_percent"] == pytest.approx(100 * 35 / 42)
     assert 0 < res["p_t"] < 1e-5
+
+
+def test_trial_level_models_keep_participants_with_missing_cells():
+    """The mixed model's Wald χ² equals statsmodels' own wald_test_terms on the unscaled
+    data (174.2 on the example; ours fits centred, scaled ratings); both models keep the
+    participant who lacks a cell, which the ANOVA drops; the ordinal model's LR is ≥ 0 and
+    does not change when the samples are renamed."""
+    import statsmodels.formula.api as smf
+
+    from analysis.stats import mixed_oneway, ordinal_oneway
+
+    df = A.datasets.read_dataset("ratings")
+    ours = mixed_oneway(df, "rating", "sample", "participant").iloc[0]
+    ref = smf.mixedlm("rating ~ C(sample)", df, groups=df["participant"]).fit(reml=True)
+    assert ours["chi2"] == pytest.approx(float(ref.wald_test_terms().table.loc[
+        "C(sample)", "statistic"]), rel=1e-4)
+    gap = df[~((df["participant"] == df["participant"].iloc[0]) & (df["sample"] == "wood"))]
+    assert A.rm_anova(gap, "rating", "sample", "participant")["n"].iloc[0] == 5
+    assert mixed_oneway(gap, "rating", "sample", "participant")["n_subjects"].iloc[0] == 6
+    o = ordinal_oneway(gap, "rating", "sample", "participant").iloc[0]
+    assert o["n_subjects"] == 6 and o["lr"] >= 0 and o["converged"]
+    renamed = gap.assign(sample=gap["sample"].map(lambda s: f"z_{s}"))
+    assert ordinal_oneway(renamed, "rating", "sample", "participant")["lr"].iloc[0] == \
+        pytest.approx(o["lr"], rel=1e-4)
+    with pytest.raises(StatsError, match="at least 3 distinct values"):
+        ordinal_oneway(_long(np.tile([1.0, 2.0], (4, 2))), "rating", "sample", "participant")
+
+
+def test_factorial_z_scores_per_material_as_the_paper():
+    """normalize = "zscore_block": each participant's ratings of one block's sets have mean
+    0 and SD 1 (the reality-based models normalised per subject and material); "zscore"
+    pools the blocks, so a participant who rates one material higher overall shifts it."""
+    from analysis.study import rating_factorial
+
+    rng = np.random.default_rng(2)
+    rows = []
+    for i in range(6):
+        for block, shift in (("rubber", 0.0), ("wood", 3.0)):
+            for f in ("low", "high"):
+                for g in ("low", "high"):
+                    rows.append({"participant": f"P{i}", "block": block,
+                                 "sample": f"{block}-{f}{g}", "f": f, "g": g, "valid": True,
+                                 "rating": float(rng.integers(1, 6)) + shift})
+    d = pd.DataFrame(rows)
+    per_block = rating_factorial(d, ["f", "g"], by="block", normalize="zscore_block")
+    pooled = rating_factorial(d, ["f", "g"], by="block", normalize="zscore")
+    # per block, a subject's z-scores average 0 over the block's sets: the set means do too
+    for res in per_block.values():
+        assert res["sets"]["mean"].mean() == pytest.approx(0.0, abs=1e-12)
+    assert pooled["wood"]["sets"]["mean"].mean() > 0.5  # wood rated higher overall
+    # the set means against z computed by pandas directly (population SD per subject×block)
+    g = d.groupby(["participant", "block"])["rating"]
+    z = (d["rating"] - g.transform("mean")) / g.transform(lambda x: x.std(ddof=0))
+    ref = z.groupby(d["sample"]).mean()
+    got = pd.concat([r["sets"] for r in per_block.values()]).set_index("sample")["mean"]
+    assert got.sort_index().to_numpy() == pytest.approx(ref.sort_index().to_numpy(), abs=1e-12)
+
+
+def test_simple_effects_follow_a_significant_interaction():
+    """A matters only at B = b1: the interaction is significant, and the simple effect of
+    A at each level of B is the paired t² of scipy.stats.ttest_rel on that level's cells."""
+    from scipy import stats as sst
+
+    from analysis.study import simple_effects
+
+    rng = np.random.default_rng(4)
+    rows = [(f"P{i}", a, b, rng.normal(0, 0.3) + (2.0 if (a, b) == ("a1", "b1") else 0.0))
+            for i in range(10) for a in ("a0", "a1") for b in ("b0", "b1")]
+    d = pd.DataFrame(rows, columns=["participant", "A", "B", "y"])
+    aov = A.rm_anova(d, "y", ["A", "B"], "participant")
+    se = simple_effects(d, "y", ["A", "B"], "participant", aov)
+    assert set(se["at"]) == {"B=b0", "B=b1", "A=a0", "A=a1"}
+    for level in ("b0", "b1"):
+        sub = d[d["B"] == level].pivot(index="participant", columns="A", values="y")
+        t = sst.ttest_rel(sub["a1"], sub["a0"]).statistic
+        row = se[(se["effect"] == "A") & (se["at"] == f"B={level}")].iloc[0]
+        assert row["F"] == pytest.approx(t ** 2, rel=1e-9)
+    assert se.set_index("at").loc["B=b1", "p_holm"] < 0.001
+    assert (se["p_holm"] >= se["p_unc"]).all()
+
+
+def test_experts_and_novices_compared_with_each_person_as_one_observation():
+    """Proportions correct of 3 experts (1, 1, 2/3) and 4 novices (2/3, 1/3, 1/3, 0):
+    scipy.stats.mannwhitneyu on those seven numbers gives the same U and p."""
+    from scipy import stats as sst
+
+    per = {"E1": [1, 1, 1], "E2": [1, 1, 1], "E3": [1, 1, 0], "N1": [1, 1, 0],
+           "N2": [1, 0, 0], "N3": [0, 1, 0], "N4": [0, 0, 0]}
+    d = pd.DataFrame([(p, "expert" if p[0] == "E" else "novice", c)
+                      for p, cs in per.items() for c in cs],
+                     columns=["participant", "group", "correct"])
+    res = A.participant_identification_test(d, "participant", "correct", group="group")
+    g = res.attrs["groups"]
+    ref = sst.mannwhitneyu([1, 1, 2 / 3], [2 / 3, 1 / 3, 1 / 3, 0], alternative="two-sided")
+    assert (g["group_a"], g["n_a"], g["n_b"]) == ("expert", 3, 4)
+    assert g["U"] == ref.statistic and g["p_mwu"] == pytest.approx(ref.pvalue, rel=1e-12)
+    assert g["mean_percent_a"] == pytest.approx(100 * 8 / 9)
