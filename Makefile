@@ -19,17 +19,19 @@ venv: $(STAMP)
 # Debian packages the tests need: a virtual X server, Mesa GL, PortAudio, xdotool (a person's
 # keys into the participant's window), tmux (the operator's terminal), a monospace font, and
 # the X libraries Qt needs for PsychoPy's participant-information dialog; installed only
-# when missing.
+# when missing; chromium renders report.html headless for its screenshot test.
 system-deps:
 	@if ! command -v Xvfb >/dev/null 2>&1 || ! ldconfig -p | grep -q libportaudio \
 	    || ! command -v xdotool >/dev/null 2>&1 || ! command -v tmux >/dev/null 2>&1 \
+	    || ! command -v chromium >/dev/null 2>&1 \
 	    || [ ! -f /usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf ] \
 	    || ! dpkg -s libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 >/dev/null 2>&1; then \
-	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts and Qt's X libraries from Debian's packages"; \
+	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries and chromium from Debian's packages"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
 	    xvfb libgl1-mesa-dri libglu1-mesa libportaudio2 libasound2 libsndfile1 xdotool tmux \
 	    fonts-dejavu-core libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 libxkbcommon-x11-0 \
-	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 >/dev/null; \
+	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 \
+	    chromium >/dev/null; \
 	fi
 
 demo: $(STAMP)
@@ -46,7 +48,7 @@ test: $(STAMP) system-deps
 SCREENS := realism-instructions realism-tap realism-rating factorial-rating factorial-tap \
            factorial-tap-1920x1080 identification-choose identification-answer debrief pause \
            between-trials-session reference-requested reference-block estop-pause \
-           info-dialog operator-view operator-end
+           info-dialog operator-view operator-end report-first-screen report-realism
 screens:
 	@mkdir -p docs/screens
 	@for s in $(SCREENS); do cp tests/artifacts/screens/$$s.png docs/screens/ || exit 1; done

@@ -18,6 +18,7 @@ import html
 import json
 import math
 import platform
+import re
 from importlib import metadata
 from pathlib import Path
 
@@ -269,12 +270,12 @@ def _omnibus(r: dict, alpha: float = 0.05) -> str:
             tests.append((name, float(r["models"][key]["p_unc"].iloc[0])))
     sig = [n for n, p in tests if p < alpha]
     if len(sig) == len(tests):
-        return f"All {len(tests)} omnibus tests find that the samples differ (p < {alpha:g})."
+        return f"All {len(tests)} omnibus tests find that the samples differ (p < .05)."
     if not sig:
-        return f"None of the {len(tests)} omnibus tests finds a difference (p ≥ {alpha:g})."
+        return f"None of the {len(tests)} omnibus tests finds a difference (p ≥ .05)."
     rest = [n for n, p in tests if p >= alpha]
     return (f"The omnibus tests disagree: {', '.join(sig)} "
-            f"{'finds' if len(sig) == 1 else 'find'} a difference (p < {alpha:g}); "
+            f"{'finds' if len(sig) == 1 else 'find'} a difference (p < .05); "
             f"{', '.join(rest)} {'does' if len(rest) == 1 else 'do'} not.")
 
 
@@ -365,50 +366,56 @@ def _ver(p: str) -> str:
 
 def _table(rows: list[dict], cols: list[str] | None = None) -> str:
     if not rows:
-        return "_none_\n"
+        return "*none*\n"
     cols = cols or list(rows[0])
 
-    def fmt(v):
+    def fmt(v, col):
         if v is None:
             return "—"
         if isinstance(v, float):
-            return f"{v:.4g}"
+            if col.startswith("p_") or col in ("p", "p_spher"):
+                return _p(v)[4:] if v >= 0.001 else "< .001"  # APA: no leading zero
+            if v == 0:
+                return "0"
+            return f"{v:.3g}" if abs(v) < 1000 else f"{v:.0f}"
         return str(v)
 
-    def fmt_cell(v):  # escaped for Markdown: no cell can add columns or raw HTML
-        return (html.escape(fmt(v), quote=False).replace("|", "\\|")
+    def fmt_cell(v, col):  # escaped for Markdown: no cell can add columns or raw HTML
+        return (html.escape(fmt(v, col), quote=False).replace("|", "\\|")
                 .replace("\n", " ").replace("\r", " "))
 
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    lines += ["| " + " | ".join(fmt_cell(r.get(c, "")) for c in cols) + " |" for r in rows]
+    lines += ["| " + " | ".join(fmt_cell(r.get(c, ""), c) for c in cols) + " |" for r in rows]
     return "\n".join(lines) + "\n"
 
 
-def _oneway_md(a: dict) -> list[str]:
-    out = [f"{a['n_subjects']} participants.\n\n#### Samples (mean rating, 95 % CI; z: "
-           "per-participant z-scores)\n", _table(a["samples"]),
+def _oneway_md(a: dict) -> tuple[list[str], list[str]]:
+    """(the analysis' main text, its appendix tables)."""
+    rows = [{"sample": r["sample"], "letters": r.get("letters", ""), "n": r["n"],
+             "mean": r["mean"], "ci_low": r["ci_low"], "ci_high": r["ci_high"],
+             "mean_z": r["mean_z"]} for r in a["samples"]]
+    out = [f"{a['n_subjects']} participants.\n\n#### Samples (mean rating, 95 % CI; letters: "
+           "samples sharing a letter are not significantly different, Holm p ≥ .05 for every "
+           "pair; z: per-participant z-scores)\n", _table(rows),
            "\n#### One-way repeated-measures ANOVA\n", _table(a["anova"])]
-    out.extend(f"\n_{note}._\n" for note in a["anova_notes"])
-    out.append("\n#### Letters (samples sharing a letter: Holm p ≥ .05 for every pair)\n")
-    out.append("\n".join(f"- **{ch}**: " + ", ".join(g) for ch, g in
-                          zip("abcdefghijklmnopqrstuvwxyz", a["groups"], strict=False)) + "\n")
-    out.append("\n#### Paired t-tests (d_z: Cohen's d for paired data, with its 95 % CI)\n")
-    out.append(_table(a["pairwise"]))
-    out.append("\n#### Ordinal companions: Friedman and Wilcoxon signed-rank (Holm)\n")
+    out.extend(f"\n*{_md_text(note)}.*\n" for note in a["anova_notes"])
+    app = [f"\n### {_md_text(a['id'])}: paired t-tests (d_z: Cohen's d for paired data, with "
+           "its 95 % CI)\n", _table(a["pairwise"])]
+    out.append("\n#### Companions: ordinal tests and trial-level models\n")
     o = a.get("ordinal")
     if isinstance(o, str) or o is None:
-        out.append(f"{o or 'not computed'}\n")
+        out.append(f"Friedman and Wilcoxon: {o or 'not computed'}\n")
     else:
         g = o["agreement"]
         out.append(_table(o["friedman"]))
         out.append(f"\nOf {g['pairs']} pairs, {g['significant_t']} differ by the t-tests and "
-                   f"{g['significant_wilcoxon']} by the Wilcoxon tests (Holm, α = .05); the two "
-                   f"agree on {g['agree']}"
+                   f"{g['significant_wilcoxon']} by the Wilcoxon signed-rank tests (Holm, "
+                   f"α = .05); the two agree on {g['agree']}"
                    + (f"; only by t: {', '.join(g['only_t'])}" if g["only_t"] else "")
                    + (f"; only by Wilcoxon: {', '.join(g['only_wilcoxon'])}"
-                      if g["only_wilcoxon"] else "") + ".\n\n")
-        out.append(_table(o["wilcoxon"]))
-    out.append("\n#### Trial-level models (participants with missing cells kept)\n")
+                      if g["only_wilcoxon"] else "") + ".\n")
+        app += [f"\n### {_md_text(a['id'])}: Wilcoxon signed-rank tests (Holm; rbc: "
+                "rank-biserial r)\n", _table(o["wilcoxon"])]
     for key, title in (("mixed", "Linear mixed model (random intercept per participant)"),
                        ("ordinal", "Cumulative-link model (participants as fixed effects)")):
         m = (a.get("models") or {}).get(key)
@@ -417,7 +424,8 @@ def _oneway_md(a: dict) -> list[str]:
     if a.get("omnibus"):
         out.append(f"\n{a['omnibus']}\n")
     out.append("\n#### Exclusions\n")
-    out.append(_table(a["exclusions"]))
+    out.append(_table(a["exclusions"]) if a["exclusions"] else
+               "No participant or row was left out.\n")
     sl = a["session_length"]
     out.append("\n#### Session length against power and precision\n")
     if isinstance(sl, str):
@@ -428,9 +436,56 @@ def _oneway_md(a: dict) -> list[str]:
                    f"(trial {vc['sd_trial']:.2f}, participant×sample "
                    f"{vc['sd_interaction']:.2f}, participant {vc['sd_subject']:.2f}): power of "
                    f"a {sl['effect']:g}-point paired difference (Bonferroni over all pairs) and "
-                   "the median 95 % CI half-width of a sample's mean.\n\n")
-        out.append(_table(sl["table"], ["subjects", "reps", "power", "ci_halfwidth"]))
-    return out
+                   "the median 95 % CI half-width of a sample's mean (table in the "
+                   "appendix).\n")
+        app += [f"\n### {_md_text(a['id'])}: session length against power\n",
+                _table(sl["table"], ["subjects", "reps", "power", "ci_halfwidth"])]
+    return out, app
+
+
+def _summary(a: dict) -> str:
+    """One paragraph of findings in words, with APA-style numbers."""
+    if "result" in a:
+        return f"**{_md_text(a['id'])}**: {_md_text(a['result'])}"
+    n = a.get("n_subjects") or max((v["n_subjects"] for v in a.get("groups", {}).values()
+                                    if isinstance(v, dict)), default=0)
+    head = f"**{_md_text(a['id'])}** ({n} participants): "
+    if a["type"] == "oneway":
+        aov = a["anova"][0]
+        eps = aov.get("eps_gg")
+        p = aov.get("p_gg", aov["p_unc"])
+        dfs = (f"{aov['DF'] * eps:.2g}, {aov['DF_err'] * eps:.3g}" if eps is not None
+               else f"{aov['DF']}, {aov['DF_err']}")
+        top, low = a["samples"][0], a["samples"][-1]
+        sig = sum(1 for r in a["pairwise"] if r["p_holm"] < 0.05)
+        words = "differed" if p < 0.05 else "did not differ detectably"
+        return (head + f"ratings {words} among the {len(a['samples'])} samples, "
+                f"F({dfs}) = {aov['F']:.3g}, {_p(p)}"
+                + (" (Greenhouse–Geisser)" if eps is not None else "")
+                + f", ηp² = {aov['np2']:.2f}".replace("0.", ".") + ". Highest: {top['sample']} (M = {top['mean']:.2f}, "
+                f"95 % CI [{top['ci_low']:.2f}, {top['ci_high']:.2f}]); lowest: "
+                f"{low['sample']} (M = {low['mean']:.2f}). {sig} of {len(a['pairwise'])} "
+                "tested pairs differ (Holm). " + (a.get("omnibus") or ""))
+    if a["type"] == "factorial":
+        parts = []
+        for g, v in a["groups"].items():
+            best = v["best_set"]
+            parts.append(f"{g}: most significant factor {_most(v)}; best set {best['sample']}"
+                         if v["most_significant_p"] < 0.05 else
+                         f"{g}: no factor significant (smallest {_p(v['most_significant_p'])}, "
+                         f"{v['most_significant']}); best set {best['sample']}")
+        return head + "; ".join(parts) + "."
+    t = {r["scope"]: r for r in a["table"]}
+    al = t.get("all")
+    pp = a.get("per_participant")
+    txt = (head + f"{al['correct']} of {al['n']} repetitions ({al['percent']:.1f} %) named every "
+           f"surface right (chance {100 * a['chance']:.1f} %; binomial over answers "
+           f"{_p(al['p_binom'])})") if al else head
+    if isinstance(pp, list) and pp:
+        r = pp[0]
+        txt += (f"; with participants as the unit, {r['above']} of {r['n']} were above chance "
+                f"(sign test {_p(r['p_sign'])})")
+    return txt + "."
 
 
 def _most(v: dict, alpha: float = 0.05) -> str:
@@ -438,7 +493,7 @@ def _most(v: dict, alpha: float = 0.05) -> str:
     p = v["most_significant_p"]
     if p < alpha:
         return f"{v['most_significant']} ({_p(p)})"
-    return f"none at α = {alpha:g} (smallest {_p(p)}, {v['most_significant']})"
+    return f"none significant (smallest {_p(p)}, {v['most_significant']})"
 
 
 def _p(p: float) -> str:
@@ -448,7 +503,7 @@ def _p(p: float) -> str:
     return "p = " + (f"{p:.3f}" if p < 0.01 else f"{p:.2f}").lstrip("0")
 
 
-def _factorial_md(a: dict) -> list[str]:
+def _factorial_md(a: dict) -> tuple[list[str], list[str]]:
     groups = a["groups"]
     factors = a["design"]["within"]
     rows = [{"group": g, **v["best_set"], "most significant": _most(v)}
@@ -456,18 +511,21 @@ def _factorial_md(a: dict) -> list[str]:
     out = ["#### Best set per group\n", _table(rows)]
     for g, v in groups.items():
         out.append(f"\n#### {g}: preferred level of each factor\n")
-        out.append(_table(v["main_effects"]))
+        effects = [{k: x for k, x in e.items() if not (k == "level_means" and "mean_z_low" in e)}
+                   for e in v["main_effects"]]
+        out.append(_table(effects))
         out.append(f"\n#### {g}: {' × '.join(factors)} ANOVA\n")
         out.append(_table(v["anova"]))
         if v.get("simple_effects"):
             out.append(f"\n#### {g}: simple effects of the significant interactions (Holm)\n")
             out.append(_table(v["simple_effects"]))
         out.append(f"\n#### {g}: exclusions\n")
-        out.append(_table(v["exclusions"]))
-    return out
+        out.append(_table(v["exclusions"]) if v["exclusions"] else
+                   "No participant or row was left out.\n")
+    return out, []
 
 
-def _identification_md(a: dict) -> list[str]:
+def _identification_md(a: dict) -> tuple[list[str], list[str]]:
     out = [f"Chance: {100 * a['chance']:.1f} % (scoring: {a['scoring']}).\n\n",
            _table(a["table"])]
     pp = a.get("per_participant")
@@ -482,7 +540,7 @@ def _identification_md(a: dict) -> list[str]:
     if a["confusion"]:
         out.append("\n#### Confusion (rows presented, columns answered)\n")
         out.append(_table([{"presented": k, **a["confusion"][k]} for k in a["confusion"]]))
-    return out
+    return out, []
 
 
 def _md_text(text: str) -> str:
@@ -490,40 +548,72 @@ def _md_text(text: str) -> str:
     return html.escape(str(text), quote=False)
 
 
+def _figures_of(a: dict, figures: list[str]) -> list[str]:
+    prefix = a["id"].split(" (design")[0].replace("/", "-") + "_"
+    return [f for f in figures if f.startswith(prefix) and f.endswith(".png")]
+
+
+#: captions of the figures, by the end of their file name
+CAPTIONS = {"means": "Mean rating per sample with its 95 % CI.",
+            "pvalues": "Holm-adjusted p of every pair of samples (the letters summarise it).",
+            "session_length": "Power and CI half-width against participants and repetitions.",
+            "confusion": "Identification: surfaces presented (rows) against names given."}
+
+
+def _caption(name: str) -> str:
+    stem = name.rsplit(".", 1)[0]
+    for key, text in CAPTIONS.items():
+        if stem.endswith(key):
+            return text
+    return f"Interaction plots of {stem.split('_', 1)[-1]}: mean z-score per level."
+
+
 def _markdown(rep: dict) -> str:
-    out = ["# hapticlab report\n", "## Methods\n", _md_text(rep["methods"]) + "\n",
-           "## Sessions included and excluded\n",
-           _table(rep["selection"]["sessions"],
-                  ["participant", "session", "protocol", "kind", "status", "rows", "included",
-                   "reason", "session_dir"])]
+    """The report: a summary of findings, methods, one section per analysis (key tables and
+    its figures with captions), then an appendix with the long tables and provenance."""
+    general = rep["methods"]
+    for a in rep["analyses"]:
+        general = general.replace(" " + a["methods"], "").replace(a["methods"], "")
+    out = ["# hapticlab report\n", "## Summary of findings\n"]
+    out += [f"- {_summary(a)}" for a in rep["analyses"]] or [
+        "No analysed phase has data in the selected sessions."]
+    out += ["", "## Methods\n", _md_text(general) + "\n"]
+    appendix = []
     left_out = rep["selection"].get("rows_left_out") or []
-    if left_out:
-        out.append("\n### Recorded rows left out (--drop-invalid)\n")
-        out.append(_table(left_out, ["participant", "phase", "sample", "reason", "file", "line"]))
-    if not rep["analyses"]:
-        out.append("\nNo analysed phase has data in the selected sessions.\n")
     for a in rep["analyses"]:
         out.append(f"## {_md_text(a['id'])}\n")
         out.append(_md_text(a["methods"]) + "\n")
         if "result" in a:
             out.append(_md_text(a["result"]) + "\n")
             continue
-        out.extend({"oneway": _oneway_md, "factorial": _factorial_md}.get(
-            a["type"], _identification_md)(a))
+        main, app = {"oneway": _oneway_md, "factorial": _factorial_md}.get(
+            a["type"], _identification_md)(a)
+        out.extend(main)
+        appendix.extend(app)
         d = a["device"]
         if d and d["n_taps"]:
             sp = d["saturations_per_participant"]
             out.append("\n#### Device\n")
             out.append(f"Incoming speed over {d['n_taps']} valid taps: "
-                       f"{d['velocity_mean']:.4f} ± {d['velocity_sd'] or 0:.4f} m/s (mean ± SD). "
+                       f"{d['velocity_mean']:.3f} ± {d['velocity_sd'] or 0:.3f} m/s (mean ± SD). "
                        f"Saturations per participant: mean {sp['mean']:.2f}, range "
                        f"{sp['min']}–{sp['max']}.\n\n")
             out.append(_table([{"sample": k, "saturations": v}
                                for k, v in d["saturations_per_sample"].items()]))
-    out.append("\n## Figures\n")
-    out += [f"![{f}]({f})\n" for f in rep["figures"] if f.endswith(".png")]
+        for f in _figures_of(a, rep["figures"]):
+            out.append(f"\n![{_caption(f)}]({f})\n")
+            out.append(f"*Figure: {_caption(f)}*\n")
+    out.append("\n## Appendix\n")
+    out.append("### Sessions included and excluded\n")
+    out.append(_table(rep["selection"]["sessions"],
+                      ["participant", "session", "protocol", "kind", "status", "rows",
+                       "included", "reason", "session_dir"]))
+    if left_out:
+        out.append("\n### Recorded rows left out (--drop-invalid)\n")
+        out.append(_table(left_out, ["participant", "phase", "sample", "reason", "file", "line"]))
+    out.extend(appendix)
     p = rep["provenance"]
-    out.append("\n## Provenance\n")
+    out.append("\n### Provenance\n")
     out.append(f"Python {p['python']}; " + ", ".join(f"{k} {v}" for k, v in
                                                      p["packages"].items()) + ".\n\n")
     out.append(f"Seeds: {p['seeds']}. Sessions: {p['sessions']}. Torn lines set aside: "
@@ -532,9 +622,17 @@ def _markdown(rep: dict) -> str:
     return "\n".join(out)
 
 
+def _inline(text: str) -> str:
+    """Escaped text with the Markdown emphasis the report writes (**bold**, *italic*) as
+    HTML; nothing else is interpreted, so names with underscores stay as they are."""
+    out = html.escape(text)
+    out = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", out)
+    return re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"<em>\1</em>", out)
+
+
 def _html(md: str, rep: dict) -> str:
-    """A self-contained page: the Markdown's text, tables and images as HTML."""
-    body, in_table, rows = [], False, []
+    """A self-contained page: the Markdown's text, tables, lists and figures as HTML."""
+    body, in_table, rows, in_list = [], False, [], False
     for line in md.splitlines():
         if line.startswith("|"):
             if set(line.replace("|", "").strip()) <= {"-"}:
@@ -550,24 +648,41 @@ def _html(md: str, rep: dict) -> str:
                                   for r in rest) + "</table>")
             rows, in_table = [], False
         line = html.unescape(line)  # the Markdown escaped it; escape once, for HTML, below
+        if in_list and not line.startswith("- "):
+            body.append("</ul>")
+            in_list = False
         if line.startswith("#"):
             n = len(line) - len(line.lstrip("#"))
-            body.append(f"<h{n}>{html.escape(line[n:].strip())}</h{n}>")
+            title = line[n:].strip()
+            slug = re.sub(r"[^0-9a-z]+", "-", title.lower()).strip("-")
+            body.append(f'<h{n} id="{slug}">{html.escape(title)}</h{n}>')
         elif line.startswith("!["):
             src = line[line.index("(") + 1: line.rindex(")")]
-            body.append(f'<img src="{html.escape(src)}" style="max-width:100%">')
+            alt = line[2: line.index("]")]
+            body.append(f'<figure><img src="{html.escape(src)}" alt="{html.escape(alt)}" '
+                        f'style="max-width:100%">')
+        elif line.startswith("*Figure: "):
+            body.append(f"<figcaption>{_inline(line.strip('*'))}</figcaption></figure>")
         elif line.startswith("- "):
-            body.append(f"<li>{html.escape(line[2:])}</li>")
+            if not in_list:
+                body.append("<ul>")
+                in_list = True
+            body.append(f"<li>{_inline(line[2:])}</li>")
         elif line.strip():
-            body.append(f"<p>{html.escape(line)}</p>")
+            body.append(f"<p>{_inline(line)}</p>")
+    if in_list:
+        body.append("</ul>")
     if in_table and rows:
         head, *rest = rows
         body.append("<table><tr>" + "".join(f"<th>{c}</th>" for c in head) + "</tr>"
                     + "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>"
                               for r in rest) + "</table>")
     digest = hashlib.sha256(json.dumps(rep, sort_keys=True).encode()).hexdigest()[:16]
-    style = ("body{font-family:sans-serif;max-width:1000px;margin:auto}table{border-collapse:"
-             "collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}")
+    style = ("body{font-family:sans-serif;max-width:1000px;margin:auto;line-height:1.4}"
+             "table{border-collapse:collapse;font-size:12px;margin:6px 0}"
+             "td,th{border:1px solid #ccc;padding:2px 6px}th{background:#f3f3f3}"
+             "figure{margin:12px 0}figcaption{font-size:13px;color:#444}"
+             "h2{border-bottom:1px solid #ccc;margin-top:28px}")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>hapticlab report</title>"
             f"<style>{style}</style></head><body>{''.join(body)}<p><small>report digest "
             f"{digest}</small></p></body></html>")
