@@ -462,7 +462,8 @@ def _summary(a: dict) -> str:
         return (head + f"ratings {words} among the {len(a['samples'])} samples, "
                 f"F({dfs}) = {aov['F']:.3g}, {_p(p)}"
                 + (" (Greenhouse–Geisser)" if eps is not None else "")
-                + f", ηp² = {aov['np2']:.2f}".replace("0.", ".") + ". Highest: {top['sample']} (M = {top['mean']:.2f}, "
+                + f", ηp² = {aov['np2']:.2f}".replace("0.", ".")
+                + f". Highest: {top['sample']} (M = {top['mean']:.2f}, "
                 f"95 % CI [{top['ci_low']:.2f}, {top['ci_high']:.2f}]); lowest: "
                 f"{low['sample']} (M = {low['mean']:.2f}). {sig} of {len(a['pairwise'])} "
                 "tested pairs differ (Holm). " + (a.get("omnibus") or ""))
