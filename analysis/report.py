@@ -579,8 +579,15 @@ def _markdown(rep: dict) -> str:
     out += [f"- {_summary(a)}" for a in rep["analyses"]] or [
         "No analysed phase has data in the selected sessions."]
     out += ["", "## Methods\n", _md_text(general) + "\n"]
+    out.append("## Sessions included and excluded\n")
+    out.append(_table(rep["selection"]["sessions"],
+                      ["participant", "session", "protocol", "kind", "status", "rows",
+                       "included", "reason", "session_dir"]))
     appendix = []
     left_out = rep["selection"].get("rows_left_out") or []
+    if left_out:
+        out.append("\n### Recorded rows left out (--drop-invalid)\n")
+        out.append(_table(left_out, ["participant", "phase", "sample", "reason", "file", "line"]))
     for a in rep["analyses"]:
         out.append(f"## {_md_text(a['id'])}\n")
         out.append(_md_text(a["methods"]) + "\n")
@@ -605,13 +612,6 @@ def _markdown(rep: dict) -> str:
             out.append(f"\n![{_caption(f)}]({f})\n")
             out.append(f"*Figure: {_caption(f)}*\n")
     out.append("\n## Appendix\n")
-    out.append("### Sessions included and excluded\n")
-    out.append(_table(rep["selection"]["sessions"],
-                      ["participant", "session", "protocol", "kind", "status", "rows",
-                       "included", "reason", "session_dir"]))
-    if left_out:
-        out.append("\n### Recorded rows left out (--drop-invalid)\n")
-        out.append(_table(left_out, ["participant", "phase", "sample", "reason", "file", "line"]))
     out.extend(appendix)
     p = rep["provenance"]
     out.append("\n### Provenance\n")
@@ -631,6 +631,20 @@ def _inline(text: str) -> str:
     return re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"<em>\1</em>", out)
 
 
+#: tables longer than this are collapsed in the HTML (a click shows them)
+COLLAPSE_ROWS = 12
+
+
+def _html_table(rows: list[list[str]]) -> str:
+    head, *rest = rows
+    table = ("<table><tr>" + "".join(f"<th>{c}</th>" for c in head) + "</tr>"
+             + "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rest)
+             + "</table>")
+    if len(rest) > COLLAPSE_ROWS:
+        return f"<details><summary>{len(rest)} rows (show)</summary>{table}</details>"
+    return table
+
+
 def _html(md: str, rep: dict) -> str:
     """A self-contained page: the Markdown's text, tables, lists and figures as HTML."""
     body, in_table, rows, in_list = [], False, [], False
@@ -643,10 +657,7 @@ def _html(md: str, rep: dict) -> str:
             in_table = True
             continue
         if in_table:
-            head, *rest = rows
-            body.append("<table><tr>" + "".join(f"<th>{c}</th>" for c in head) + "</tr>"
-                        + "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>"
-                                  for r in rest) + "</table>")
+            body.append(_html_table(rows))
             rows, in_table = [], False
         line = html.unescape(line)  # the Markdown escaped it; escape once, for HTML, below
         if in_list and not line.startswith("- "):
@@ -674,10 +685,7 @@ def _html(md: str, rep: dict) -> str:
     if in_list:
         body.append("</ul>")
     if in_table and rows:
-        head, *rest = rows
-        body.append("<table><tr>" + "".join(f"<th>{c}</th>" for c in head) + "</tr>"
-                    + "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>"
-                              for r in rest) + "</table>")
+        body.append(_html_table(rows))
     digest = hashlib.sha256(json.dumps(rep, sort_keys=True).encode()).hexdigest()[:16]
     style = ("body{font-family:sans-serif;max-width:1000px;margin:auto;line-height:1.4}"
              "table{border-collapse:collapse;font-size:12px;margin:6px 0}"
