@@ -23,6 +23,7 @@ from .stats import (
     dz_ci,
     friedman,
     identification_scores,
+    np2_ci,
     p_adjust,
     pairwise_ttests,
     pairwise_wilcoxon,
@@ -33,6 +34,6 @@ from .stats import (
 )
 
 __all__ = ["LoadError", "StatsError", "datasets", "dz_ci", "friedman", "identification_scores",
-           "load_sessions", "p_adjust", "pairwise_ttests", "pairwise_wilcoxon",
+           "load_sessions", "np2_ci", "p_adjust", "pairwise_ttests", "pairwise_wilcoxon",
            "participant_identification_test", "preflight", "rm_anova", "select_sessions",
            "tap_velocities", "zscore_by_subject"]

@@ -417,7 +417,11 @@ def _oneway_md(a: dict) -> tuple[list[str], list[str]]:
         app += [f"\n### {_md_text(a['id'])}: Wilcoxon signed-rank tests (Holm; rbc: "
                 "rank-biserial r)\n", _table(o["wilcoxon"])]
     for key, title in (("mixed", "Linear mixed model (random intercept per participant)"),
-                       ("ordinal", "Cumulative-link model (participants as fixed effects)")):
+                       ("ordinal", "Cumulative-link model (participants as fixed effects)"),
+                       ("mixed_group", "Participant group as a between-subject factor "
+                                       "(mixed model, sample × group)")):
+        if key == "mixed_group" and key not in (a.get("models") or {}):
+            continue
         m = (a.get("models") or {}).get(key)
         out.append(f"\n{title}: " + (f"{m}\n" if isinstance(m, str) or m is None else
                                       "\n\n" + _table(m)))

@@ -18,7 +18,7 @@ from scipy import special, stats
 __all__ = ["preflight", "zscore_by_subject", "pairwise_ttests", "rm_anova",
            "identification_scores", "cell_means", "wide_means", "p_adjust", "StatsError",
            "friedman", "pairwise_wilcoxon", "dz_ci", "participant_identification_test",
-           "mixed_oneway", "ordinal_oneway"]
+           "mixed_oneway", "ordinal_oneway", "np2_ci"]
 
 PADJUST = ("none", "bonf", "holm", "fdr_bh")
 #: Values closer than this fraction of the data's magnitude are equal: floating-point
@@ -396,7 +396,8 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
     -------
     DataFrame, one row per effect (main effects, then interactions); every cell is a number
         ``Source``; ``SS`` (sum of squares); ``DF``; ``MS``; ``F``; ``p_unc``; ``np2``
-        (partial η² = SS_effect / (SS_effect + SS_error)); ``ng2`` (generalized η²,
+        (partial η² = SS_effect / (SS_effect + SS_error)); ``np2_ci_low``, ``np2_ci_high``
+        (its 95 % CI, :func:`np2_ci`); ``ng2`` (generalized η²,
         Olejnik & Algina 2003, all factors manipulated within subjects:
         SS_effect / (SS_effect + SS_subjects + Σ SS_errors)); ``SS_err``, ``DF_err``,
         ``MS_err`` (the effect × subject error term the F is taken against); and, for a
@@ -501,6 +502,7 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
                "p_unc": float(special.fdtrc(df_t, df_e, F)),
                "np2": ss_t / (ss_t + ss_e), "ng2": ss_t / (ss_t + total_err),
                "SS_err": ss_e * spread ** 2, "DF_err": df_e, "MS_err": ms_e * spread ** 2}
+        row["np2_ci_low"], row["np2_ci_high"] = np2_ci(F, df_t, df_e)
         if df_t > 1:  # sphericity: ε and Mauchly's test on the effect's own contrasts
             sph = _sphericity(_contrast_scores(arr, t))
             row.update(sph)
@@ -801,6 +803,41 @@ def dz_ci(dz: float, n: int, alpha: float = 0.05) -> tuple[float, float]:
     return solve(1 - alpha / 2) / math.sqrt(n), solve(alpha / 2) / math.sqrt(n)
 
 
+def np2_ci(F: float, df1: float, df2: float, alpha: float = 0.05) -> tuple[float, float]:
+    """Confidence interval of partial η² by inverting the noncentral F distribution.
+
+    The noncentrality λ with P(F' ≤ F | λ) = 1 − α/2 (lower) and α/2 (upper) — 0 when even
+    λ = 0 leaves less — becomes η² = λ / (λ + df1 + df2 + 1) (Steiger 2004). The lower bound
+    is above 0 exactly when p < α/2.
+
+    Examples
+    --------
+    >>> [round(x, 3) for x in np2_ci(10.0, 2, 20)]
+    [0.129, 0.664]
+    """
+    if not (math.isfinite(F) and F >= 0 and df1 > 0 and df2 > 0):
+        raise StatsError(f"a CI of partial η² needs a finite F ≥ 0 and positive degrees of "
+                         f"freedom; got F = {F}, df = ({df1}, {df2})")
+    from scipy import optimize
+
+    def cdf(lam: float) -> float:
+        v = float(special.ncfdtr(df1, df2, lam, F))
+        return v if math.isfinite(v) else 0.0
+
+    def solve(target: float) -> float:
+        if cdf(0.0) <= target:
+            return 0.0
+        hi = max(1.0, F * df1)
+        while cdf(hi) > target:
+            hi *= 2
+        return optimize.brentq(lambda lam: cdf(lam) - target, 0.0, hi, xtol=1e-10)
+
+    def eta(lam: float) -> float:
+        return lam / (lam + df1 + df2 + 1)
+
+    return eta(solve(1 - alpha / 2)), eta(solve(alpha / 2))
+
+
 def participant_identification_test(data: pd.DataFrame, subject: str, correct: str,
                                     chance: float = 1 / 6, group: str | None = None
                                     ) -> pd.DataFrame:
@@ -860,19 +897,22 @@ def participant_identification_test(data: pd.DataFrame, subject: str, correct: s
 
 
 # --------------------------------------------------------------------- model companions
-def mixed_oneway(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.DataFrame:
+def mixed_oneway(data: pd.DataFrame, dv: str, within: str, subject: str,
+                 between: str | None = None) -> pd.DataFrame:
     """Linear mixed model on trial-level ratings: ``dv ~ C(within)`` with a random
     intercept per subject (statsmodels ``MixedLM``, REML), and the Wald test that every
     level has the same mean.
 
     Unlike the repeated-measures ANOVA it keeps subjects with missing cells (each trial
-    counts where it was recorded).
+    counts where it was recorded). With ``between`` (a between-subject factor such as
+    expert/novice) the model is ``dv ~ C(within) * C(between)`` and there is a row for
+    ``within``, ``between`` and their interaction.
 
     Returns
     -------
-    DataFrame, one row
-        ``Source``, ``n_subjects``, ``n_obs``, ``chi2`` (Wald), ``dof`` (levels − 1),
-        ``p_unc``, ``sd_subject`` (random-intercept SD), ``sd_resid``, ``converged``.
+    DataFrame, one row per tested term
+        ``Source``, ``n_subjects``, ``n_obs``, ``chi2`` (Wald), ``dof``, ``p_unc``,
+        ``sd_subject`` (random-intercept SD), ``sd_resid``, ``converged``.
 
     Raises
     ------
@@ -883,42 +923,56 @@ def mixed_oneway(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.D
 
     import statsmodels.formula.api as smf
 
-    _check_columns(data, [dv, within, subject])
-    _check_values(data, dv, [within, subject])
-    d = data[[dv, within, subject]].copy()
+    cols = [dv, within, subject] + ([between] if between else [])
+    _check_columns(data, cols)
+    _check_values(data, dv, cols[1:])
+    d = data[cols].copy()
     d[dv] = pd.to_numeric(d[dv], errors="coerce")
     d = d.dropna()
     levels = list(dict.fromkeys(d[within]))
     if d[subject].nunique() < 2 or len(levels) < 2:
         raise StatsError(f"a mixed model needs at least 2 subjects and 2 levels of {within!r}")
+    if between and d.groupby(between)[subject].nunique().lt(2).any() | (d[between].nunique() < 2):
+        raise StatsError(f"a between-subject factor needs at least 2 groups of {between!r} "
+                         "with 2 subjects each")
     scale = float(np.abs(d[dv] - d[dv].mean()).max())
     if scale <= _tol(d[dv].to_numpy()) or scale == 0:
         raise StatsError(f"every {dv} is the same: the mixed model is undefined")
     d = d.assign(_y=(d[dv] - d[dv].mean()) / scale,
                  _x=pd.Categorical(d[within].astype(str), [str(x) for x in levels]),
                  _g=d[subject].astype(str))
+    formula = "_y ~ _x"
+    if between:
+        d = d.assign(_b=d[between].astype(str))
+        formula = "_y ~ _x * _b"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            fit = smf.mixedlm("_y ~ _x", d, groups=d["_g"]).fit(reml=True)
+            fit = smf.mixedlm(formula, d, groups=d["_g"]).fit(reml=True)
         except (np.linalg.LinAlgError, ValueError) as exc:
             raise StatsError(f"the mixed model could not be fitted: {exc}") from None
-    names = [n for n in fit.params.index if n.startswith("_x")]
-    b = fit.params[names].to_numpy()
-    V = fit.cov_params().loc[names, names].to_numpy()
-    try:
-        chi2 = float(b @ np.linalg.solve(V, b))
-    except np.linalg.LinAlgError:
-        raise StatsError("the mixed model's fixed effects are not estimable (singular "
-                         "covariance)") from None
     sd_subj = float(np.sqrt(max(float(fit.cov_re.iloc[0, 0]), 0.0))) * scale
     converged = bool(fit.converged) and not any("converge" in str(w.message).lower()
                                                 for w in caught)
-    return pd.DataFrame([{"Source": within, "n_subjects": int(d["_g"].nunique()),
-                          "n_obs": int(len(d)), "chi2": chi2, "dof": len(names),
-                          "p_unc": float(special.chdtrc(len(names), chi2)),
-                          "sd_subject": sd_subj, "sd_resid": float(np.sqrt(fit.scale)) * scale,
-                          "converged": converged}])
+    terms = {within: lambda n: n.startswith("_x") and ":" not in n}
+    if between:
+        terms[between] = lambda n: n.startswith("_b")
+        terms[f"{within} * {between}"] = lambda n: n.startswith("_x") and ":_b" in n
+    rows = []
+    for source, pick in terms.items():
+        names = [n for n in fit.params.index if pick(n)]
+        b = fit.params[names].to_numpy()
+        V = fit.cov_params().loc[names, names].to_numpy()
+        try:
+            chi2 = float(b @ np.linalg.solve(V, b))
+        except np.linalg.LinAlgError:
+            raise StatsError(f"the mixed model's {source} effects are not estimable "
+                             "(singular covariance)") from None
+        rows.append({"Source": source, "n_subjects": int(d["_g"].nunique()),
+                     "n_obs": int(len(d)), "chi2": chi2, "dof": len(names),
+                     "p_unc": float(special.chdtrc(len(names), chi2)), "sd_subject": sd_subj,
+                     "sd_resid": float(np.sqrt(fit.scale)) * scale, "converged": converged})
+    return pd.DataFrame(rows)
 
 
 def ordinal_oneway(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.DataFrame:

@@ -195,6 +195,13 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
             models[name] = fn(d, dv, within, subject)
         except StatsError as exc:
             models[name] = f"not computed: {exc}"
+    groups_present = sorted(g for g in d.get("group", pd.Series(dtype=str)).dropna().astype(str)
+                            .unique() if g)
+    if len(groups_present) >= 2:  # a between-subject factor (e.g. expert / novice)
+        try:
+            models["mixed_group"] = mixed_oneway(d, dv, within, subject, between="group")
+        except StatsError as exc:
+            models["mixed_group"] = f"not computed: {exc}"
     anova = rm_anova(d, dv, within, subject)
     per_subject = (d.groupby([subject, within], observed=True)[dv].mean()
                    .unstack(within).reset_index())

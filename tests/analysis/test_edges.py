@@ -362,3 +362,37 @@ def test_experts_and_novices_compared_with_each_person_as_one_observation():
     assert (g["group_a"], g["n_a"], g["n_b"]) == ("expert", 3, 4)
     assert g["U"] == ref.statistic and g["p_mwu"] == pytest.approx(ref.pvalue, rel=1e-12)
     assert g["mean_percent_a"] == pytest.approx(100 * 8 / 9)
+
+
+@given(st.floats(0.0, 60.0), st.integers(1, 6), st.integers(2, 80))
+def test_partial_eta_squared_interval_brackets_the_estimate_and_matches_p(F, df1, df2):
+    """The noncentral-F interval is ordered within [0, 1) and its lower bound leaves 0
+    exactly when the central F test's p (scipy.stats.f.sf) is below α/2: the inversion's
+    duality with the F test."""
+    lo, hi = A.np2_ci(F, df1, df2)
+    p = float(__import__("scipy").stats.f.sf(F, df1, df2))
+    assert 0.0 <= lo <= hi < 1.0
+    assume(abs(p - 0.025) > 1e-6)
+    assert (lo > 0) == (p < 0.025)
+
+
+def test_a_between_subject_group_in_the_mixed_model():
+    """Experts rate 1 point higher everywhere: the group row of sample × group is
+    significant and the interaction is not; statsmodels' own wald_test_terms on the
+    unscaled formula gives the same χ² (the reference beside the number)."""
+    import statsmodels.formula.api as smf
+
+    from analysis.stats import mixed_oneway
+
+    rng = np.random.default_rng(6)
+    rows = [(f"P{i}", "expert" if i < 8 else "novice", s,
+             3 + j + (1.0 if i < 8 else 0.0) + rng.normal(0, 0.3) + 0.2 * (i % 4))
+            for i in range(16) for j, s in enumerate(("a", "b", "c")) for _ in range(2)]
+    d = pd.DataFrame(rows, columns=["participant", "group", "sample", "rating"])
+    res = mixed_oneway(d, "rating", "sample", "participant", between="group")
+    res = res.set_index("Source")
+    assert res.loc["group", "p_unc"] < 0.01 and res.loc["sample * group", "p_unc"] > 0.01
+    ref = smf.mixedlm("rating ~ C(sample) * C(group)", d, groups=d["participant"]).fit(
+        reml=True).wald_test_terms().table
+    assert res.loc["group", "chi2"] == pytest.approx(float(ref.loc["C(group)", "statistic"]),
+                                                     rel=1e-3)
