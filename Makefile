@@ -23,7 +23,7 @@ venv: $(STAMP)
 system-deps:
 	@if ! command -v Xvfb >/dev/null 2>&1 || ! ldconfig -p | grep -q libportaudio \
 	    || ! command -v xdotool >/dev/null 2>&1 || ! command -v tmux >/dev/null 2>&1 \
-	    || ! command -v chromium >/dev/null 2>&1 \
+	    || ! command -v chromium >/dev/null 2>&1 || ! command -v cc >/dev/null 2>&1 \
 	    || [ ! -f /usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf ] \
 	    || ! dpkg -s libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 >/dev/null 2>&1; then \
 	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries and chromium from Debian's packages"; \
@@ -31,7 +31,7 @@ system-deps:
 	    xvfb libgl1-mesa-dri libglu1-mesa libportaudio2 libasound2 libsndfile1 xdotool tmux \
 	    fonts-dejavu-core libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 libxkbcommon-x11-0 \
 	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 \
-	    chromium >/dev/null; \
+	    chromium gcc libc6-dev make >/dev/null; \
 	fi
 
 demo: $(STAMP)
@@ -42,6 +42,7 @@ lint: $(STAMP)
 
 test: $(STAMP) system-deps
 	$(VENV)/bin/ruff check .
+	$(MAKE) -C firmware test
 	$(PY) -m pytest -q
 
 # The README's screenshots, from the last `make test` (look at them before committing).

@@ -23,7 +23,12 @@ _CRC = struct.Struct("<I")
 
 
 class FramingError(ValueError):
-    """A frame could not be decoded (bad COBS, length, CRC or version)."""
+    """A frame could not be decoded; ``kind`` says why: ``cobs``, ``length``, ``crc``,
+    ``version`` (or ``body`` for a message whose body misfits its type)."""
+
+    def __init__(self, message: str, kind: str = "body"):
+        super().__init__(message)
+        self.kind = kind
 
 
 def cobs_encode(data: bytes) -> bytes:
@@ -53,13 +58,13 @@ def cobs_decode(data: bytes) -> bytes:
     while i < n:
         code = data[i]
         if code == 0:
-            raise FramingError("zero byte inside a COBS frame")
+            raise FramingError("zero byte inside a COBS frame", "cobs")
         end = i + code
         if end > n:
-            raise FramingError("COBS block runs past the end of the frame")
+            raise FramingError("COBS block runs past the end of the frame", "cobs")
         block = data[i + 1: end]
         if 0 in block:
-            raise FramingError("zero byte inside a COBS block")
+            raise FramingError("zero byte inside a COBS block", "cobs")
         out += block
         i = end
         if code < 255 and i < n:
@@ -81,25 +86,30 @@ def encode_frame(mtype: int, seq: int, body: bytes = b"") -> bytes:
     payload = _HEAD.pack(PROTOCOL_VERSION, mtype, seq & 0xFFFF) + body
     payload += _CRC.pack(zlib.crc32(payload) & 0xFFFFFFFF)
     if len(payload) > MAX_PAYLOAD:
-        raise FramingError(f"payload of {len(payload)} bytes exceeds the maximum {MAX_PAYLOAD}")
+        raise FramingError(f"payload of {len(payload)} bytes exceeds the maximum {MAX_PAYLOAD}",
+                           "length")
     return cobs_encode(payload) + b"\x00"
 
 
 def decode_payload(encoded: bytes) -> Frame:
     """Decode one frame (without its delimiter): COBS, length, CRC, version."""
     if len(encoded) > MAX_PAYLOAD + MAX_PAYLOAD // 254 + 2:
-        raise FramingError(f"frame of {len(encoded)} bytes is longer than any valid frame")
+        raise FramingError(f"frame of {len(encoded)} bytes is longer than any valid frame",
+                           "length")
     payload = cobs_decode(encoded)
     if len(payload) < _HEAD.size + _CRC.size:
-        raise FramingError(f"frame of {len(payload)} bytes is shorter than header + CRC")
+        raise FramingError(f"frame of {len(payload)} bytes is shorter than header + CRC",
+                           "length")
     if len(payload) > MAX_PAYLOAD:
-        raise FramingError(f"payload of {len(payload)} bytes exceeds the maximum {MAX_PAYLOAD}")
+        raise FramingError(f"payload of {len(payload)} bytes exceeds the maximum {MAX_PAYLOAD}",
+                           "length")
     body, (crc,) = payload[:-4], _CRC.unpack(payload[-4:])
     if zlib.crc32(body) & 0xFFFFFFFF != crc:
-        raise FramingError("CRC mismatch")
+        raise FramingError("CRC mismatch", "crc")
     version, mtype, seq = _HEAD.unpack(body[:4])
     if version != PROTOCOL_VERSION:
-        raise FramingError(f"protocol version {version}, expected {PROTOCOL_VERSION}")
+        raise FramingError(f"protocol version {version}, expected {PROTOCOL_VERSION}",
+                           "version")
     return Frame(mtype, seq, body[4:])
 
 
@@ -134,7 +144,4 @@ class FrameDecoder:
                 out.append(decode_payload(chunk))
                 self.frames_ok += 1
             except FramingError as exc:
-                msg = str(exc)
-                key = ("crc" if "CRC" in msg else "version" if "version" in msg
-                       else "cobs" if "COBS" in msg else "length")
-                self.errors[key] += 1
+                self.errors[exc.kind if exc.kind in self.errors else "length"] += 1

@@ -1,0 +1,80 @@
+/* hapticlab wire protocol v1: framing (COBS, CRC-32) and message layouts.
+ *
+ * The contract is docs/wire-protocol.md; docs/wire-vectors.txt holds test vectors that
+ * this code and the Python host both decode. C11, no dynamic allocation: every function
+ * works on caller-provided buffers.
+ */
+#ifndef HL_WIRE_H
+#define HL_WIRE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define HL_PROTOCOL_VERSION 1u
+/* payload = version, type, seq (u16), body, CRC-32: at most this many bytes */
+#define HL_MAX_PAYLOAD 1024u
+/* the longest valid encoded frame (COBS overhead, no delimiter) */
+#define HL_MAX_ENCODED (HL_MAX_PAYLOAD + HL_MAX_PAYLOAD / 254u + 2u)
+#define HL_HEADER_SIZE 4u
+#define HL_CRC_SIZE 4u
+
+/* why a frame was discarded (checked in this order) */
+typedef enum {
+    HL_FRAME_OK = 0,
+    HL_ERR_LENGTH = 1,  /* encoded frame or payload too long, or shorter than header+CRC */
+    HL_ERR_COBS = 2,    /* a zero byte inside, or a block that runs past the end */
+    HL_ERR_CRC = 3,
+    HL_ERR_VERSION = 4
+} hl_frame_status;
+
+typedef struct {
+    uint8_t type;
+    uint16_t seq;
+    const uint8_t *body; /* points into the caller's payload buffer */
+    size_t body_len;
+} hl_frame;
+
+/* CRC-32/ISO-HDLC (zlib): crc32("123456789") == 0xCBF43926 */
+uint32_t hl_crc32(const uint8_t *data, size_t len);
+
+/* COBS-encode len bytes into out (capacity cap); returns the encoded length, or 0 when
+ * cap is too small. The output holds no zero byte; the 0x00 delimiter is not added. */
+size_t hl_cobs_encode(const uint8_t *in, size_t len, uint8_t *out, size_t cap);
+
+/* COBS-decode; returns the decoded length, or -1 on malformed input or when cap is too
+ * small. */
+long hl_cobs_decode(const uint8_t *in, size_t len, uint8_t *out, size_t cap);
+
+/* Decode one encoded frame (without its delimiter) into payload (capacity at least
+ * HL_MAX_PAYLOAD); on HL_FRAME_OK, *frame points into payload. */
+hl_frame_status hl_decode_frame(const uint8_t *encoded, size_t len, uint8_t *payload,
+                                hl_frame *frame);
+
+/* Build a frame: header, body, CRC, COBS and the 0x00 delimiter into out; returns the
+ * number of bytes written, or 0 when the payload would exceed HL_MAX_PAYLOAD or out is too
+ * small. */
+size_t hl_encode_frame(uint8_t type, uint16_t seq, const uint8_t *body, size_t body_len,
+                       uint8_t *out, size_t cap);
+
+/* Does a body of body_len bytes have the layout of message type (docs §5-6)? Fixed part,
+ * whole array items, and for chunked messages the count field equal to the items that
+ * follow. An unknown type does not fit. */
+int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len);
+
+/* Streaming receiver: feed bytes, get whole frames; bad frames are counted and skipped,
+ * and the receiver resynchronises at the next 0x00. */
+typedef struct {
+    uint8_t buf[HL_MAX_ENCODED + 1];
+    size_t len;
+    int overflow; /* the current frame outgrew buf: discard up to the next 0x00 */
+    uint32_t frames_ok;
+    uint32_t errors[5]; /* indexed by hl_frame_status */
+} hl_receiver;
+
+void hl_receiver_init(hl_receiver *rx);
+
+/* Push one byte; returns 1 when a frame is complete and valid (decoded into payload and
+ * *frame), 0 otherwise. */
+int hl_receiver_push(hl_receiver *rx, uint8_t byte, uint8_t *payload, hl_frame *frame);
+
+#endif

@@ -1,0 +1,218 @@
+/* Framing and message layouts of the hapticlab wire protocol v1 (see hl_wire.h). */
+#include "hl_wire.h"
+
+#include <string.h>
+
+uint32_t hl_crc32(const uint8_t *data, size_t len)
+{
+    uint32_t crc = 0xFFFFFFFFu;
+    for (size_t i = 0; i < len; i++) {
+        crc ^= data[i];
+        for (int k = 0; k < 8; k++) {
+            crc = (crc >> 1) ^ (0xEDB88320u & (uint32_t)(-(int32_t)(crc & 1u)));
+        }
+    }
+    return crc ^ 0xFFFFFFFFu;
+}
+
+size_t hl_cobs_encode(const uint8_t *in, size_t len, uint8_t *out, size_t cap)
+{
+    size_t code_at = 0, o = 1;
+    uint8_t code = 1;
+    if (cap == 0) {
+        return 0;
+    }
+    for (size_t i = 0; i < len; i++) {
+        if (in[i] == 0) {
+            out[code_at] = code;
+            code_at = o++;
+            code = 1;
+        } else {
+            if (o >= cap) {
+                return 0;
+            }
+            out[o++] = in[i];
+            code++;
+            if (code == 0xFF) {
+                out[code_at] = code;
+                code_at = o++;
+                code = 1;
+            }
+        }
+        if (o > cap) {
+            return 0;
+        }
+    }
+    if (code_at >= cap) {
+        return 0;
+    }
+    out[code_at] = code;
+    return o;
+}
+
+long hl_cobs_decode(const uint8_t *in, size_t len, uint8_t *out, size_t cap)
+{
+    size_t i = 0, o = 0;
+    while (i < len) {
+        uint8_t code = in[i];
+        if (code == 0 || i + code > len) {
+            return -1;
+        }
+        for (size_t k = i + 1; k < i + code; k++) {
+            if (in[k] == 0 || o >= cap) {
+                return -1;
+            }
+            out[o++] = in[k];
+        }
+        i += code;
+        if (code < 0xFF && i < len) {
+            if (o >= cap) {
+                return -1;
+            }
+            out[o++] = 0;
+        }
+    }
+    return (long)o;
+}
+
+static uint32_t get_u32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) |
+           ((uint32_t)p[3] << 24);
+}
+
+hl_frame_status hl_decode_frame(const uint8_t *encoded, size_t len, uint8_t *payload,
+                                hl_frame *frame)
+{
+    if (len > HL_MAX_ENCODED) {
+        return HL_ERR_LENGTH;
+    }
+    /* decode into a buffer large enough for any valid-length frame, then check length */
+    static const size_t cap = HL_MAX_ENCODED;
+    uint8_t tmp[HL_MAX_ENCODED];
+    long n = hl_cobs_decode(encoded, len, tmp, cap);
+    if (n < 0) {
+        return HL_ERR_COBS;
+    }
+    if ((size_t)n < HL_HEADER_SIZE + HL_CRC_SIZE || (size_t)n > HL_MAX_PAYLOAD) {
+        return HL_ERR_LENGTH;
+    }
+    size_t body_end = (size_t)n - HL_CRC_SIZE;
+    if (hl_crc32(tmp, body_end) != get_u32(tmp + body_end)) {
+        return HL_ERR_CRC;
+    }
+    if (tmp[0] != HL_PROTOCOL_VERSION) {
+        return HL_ERR_VERSION;
+    }
+    memcpy(payload, tmp, (size_t)n);
+    frame->type = payload[1];
+    frame->seq = (uint16_t)(payload[2] | (payload[3] << 8));
+    frame->body = payload + HL_HEADER_SIZE;
+    frame->body_len = body_end - HL_HEADER_SIZE;
+    return HL_FRAME_OK;
+}
+
+size_t hl_encode_frame(uint8_t type, uint16_t seq, const uint8_t *body, size_t body_len,
+                       uint8_t *out, size_t cap)
+{
+    uint8_t payload[HL_MAX_PAYLOAD];
+    size_t n = HL_HEADER_SIZE + body_len + HL_CRC_SIZE;
+    if (n > HL_MAX_PAYLOAD) {
+        return 0;
+    }
+    payload[0] = HL_PROTOCOL_VERSION;
+    payload[1] = type;
+    payload[2] = (uint8_t)(seq & 0xFFu);
+    payload[3] = (uint8_t)(seq >> 8);
+    if (body_len) {
+        memcpy(payload + HL_HEADER_SIZE, body, body_len);
+    }
+    uint32_t crc = hl_crc32(payload, n - HL_CRC_SIZE);
+    for (int k = 0; k < 4; k++) {
+        payload[n - HL_CRC_SIZE + (size_t)k] = (uint8_t)(crc >> (8 * k));
+    }
+    if (cap < 2) {
+        return 0;
+    }
+    size_t e = hl_cobs_encode(payload, n, out, cap - 1);
+    if (e == 0) {
+        return 0;
+    }
+    out[e] = 0;
+    return e + 1;
+}
+
+/* type, fixed body size, array item size (0: none), count: the fixed part ends with a
+ * u16 that must equal the number of items */
+typedef struct {
+    uint8_t type;
+    uint16_t fixed;
+    uint8_t item;
+    uint8_t counted;
+} layout;
+
+static const layout LAYOUTS[] = {
+    {0x01, 1, 0, 0},  {0x02, 0, 0, 0},  {0x03, 4, 0, 0},  {0x10, 43, 0, 0},
+    {0x11, 2, 4, 0},  {0x12, 8, 2, 1},  {0x13, 6, 0, 0},  {0x14, 10, 0, 0},
+    {0x20, 4, 0, 0},  {0x21, 11, 0, 0}, {0x22, 0, 0, 0},  {0x23, 6, 2, 1},
+    {0x24, 6, 0, 0},  {0x25, 2, 0, 0},  {0x30, 0, 0, 0},  {0x31, 0, 0, 0},
+    {0x32, 0, 0, 0},  {0x40, 11, 0, 0}, {0x80, 3, 0, 0},  {0x81, 87, 0, 0},
+    {0x83, 4, 0, 0},  {0x90, 10, 0, 0}, {0x91, 14, 0, 0}, {0x92, 9, 0, 0},
+    {0x93, 14, 0, 0}, {0x94, 24, 0, 0}, {0x95, 9, 4, 1},  {0x96, 10, 0, 0},
+};
+
+int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len)
+{
+    for (size_t i = 0; i < sizeof LAYOUTS / sizeof LAYOUTS[0]; i++) {
+        const layout *l = &LAYOUTS[i];
+        if (l->type != type) {
+            continue;
+        }
+        if (l->item == 0) {
+            return body_len == l->fixed;
+        }
+        if (body_len < l->fixed || (body_len - l->fixed) % l->item) {
+            return 0;
+        }
+        if (l->counted) {
+            size_t n = (size_t)body[l->fixed - 2] | ((size_t)body[l->fixed - 1] << 8);
+            return n == (body_len - l->fixed) / l->item;
+        }
+        return 1;
+    }
+    return 0;
+}
+
+void hl_receiver_init(hl_receiver *rx)
+{
+    memset(rx, 0, sizeof *rx);
+}
+
+int hl_receiver_push(hl_receiver *rx, uint8_t byte, uint8_t *payload, hl_frame *frame)
+{
+    if (byte != 0) {
+        if (rx->len < sizeof rx->buf) {
+            rx->buf[rx->len++] = byte;
+        } else {
+            rx->overflow = 1;
+        }
+        return 0;
+    }
+    if (rx->overflow) {
+        rx->errors[HL_ERR_LENGTH]++;
+        rx->overflow = 0;
+        rx->len = 0;
+        return 0;
+    }
+    if (rx->len == 0) {
+        return 0;
+    }
+    hl_frame_status s = hl_decode_frame(rx->buf, rx->len, payload, frame);
+    rx->len = 0;
+    if (s != HL_FRAME_OK) {
+        rx->errors[s]++;
+        return 0;
+    }
+    rx->frames_ok++;
+    return 1;
+}
