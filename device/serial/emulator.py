@@ -10,6 +10,7 @@ latched off, FAULT sent).
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import sys
@@ -29,6 +30,11 @@ from .framing import FrameDecoder
 __all__ = ["Emulator", "open_pty"]
 
 _FAULT = {name: code for code, name in M.FaultCode.NAMES.items()}
+#: field ranges the device enforces (docs/wire-protocol.md §5): HOME's clearance [µm],
+#: a window's duration and first-contact timeout [ms], a scene's table [items]
+MAX_CLEARANCE_UM = 500_000
+MAX_WINDOW_MS = 600_000
+MAX_TABLE_ITEMS = 1_000_000
 
 
 def _log(text: str) -> None:
@@ -279,6 +285,12 @@ class Emulator:
         if isinstance(msg, M.SceneBegin):
             if msg.kind not in tuple(SceneKind) or msg.blend not in tuple(Blend):
                 return S.BAD_MESSAGE
+            floats = (msg.spring, msg.stiffness, msg.damping, msg.ring_slope, msg.ring_decay,
+                      msg.ring_freq, msg.block_mass, msg.attenuation)
+            if not all(math.isfinite(x) for x in floats) or not 0 <= msg.attenuation <= 1:
+                return S.BAD_MESSAGE  # NaN/inf never reach the servo (docs §5 ranges)
+            if msg.rows * msg.row_len > MAX_TABLE_ITEMS:
+                return S.BAD_MESSAGE
             self._scenes[msg.scene_id] = {"begin": msg, "v": None,
                                           "table": np.zeros(msg.rows * msg.row_len, np.int16),
                                           "scene": None}
@@ -287,6 +299,10 @@ class Emulator:
             sc = self._scenes.get(msg.scene_id)
             if sc is None:
                 return S.UNKNOWN_SCENE
+            if isinstance(msg, (M.SceneVelocities, M.SceneSupport)) and not all(
+                    math.isfinite(float(x)) for x in (msg.items if isinstance(
+                        msg, M.SceneVelocities) else (msg.stiffness, msg.damping))):
+                return S.BAD_MESSAGE
             if isinstance(msg, M.SceneSupport):
                 if sc["begin"].kind != SceneKind.REAL:
                     return S.BAD_MESSAGE
@@ -310,11 +326,16 @@ class Emulator:
             _log(f"host: current limit {msg.current_ma} mA")
             return S.OK
         if isinstance(msg, M.Home):
+            if not 0 < msg.clearance_um <= MAX_CLEARANCE_UM:
+                return S.BAD_MESSAGE  # 0 once killed the emulator
             if sim.scene is None:
                 return S.BAD_STATE
             sim.home(msg.clearance_um * 1e-6)
             return S.OK
         if isinstance(msg, M.StartWindow):
+            if not (0 < msg.duration_ms <= MAX_WINDOW_MS and 0 < msg.timeout_ms <= MAX_WINDOW_MS
+                    and msg.from_contact in (0, 1)):
+                return S.BAD_MESSAGE  # 0 killed the emulator; 2³²−1 kept it busy forever
             if sim.scene is None or not sim.enabled:
                 return S.BAD_STATE
             self._start(self._run_window, msg)

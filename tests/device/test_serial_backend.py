@@ -241,3 +241,62 @@ def test_a_crc_storm_declares_the_link_unusable():
         assert link.link_stats()["crc_errors"] >= 20
     finally:
         link.shutdown()
+
+
+def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
+    """Commands that once killed the emulator or slipped past it, sent as raw frames over
+    the pty: HOME with clearance 0 and START_WINDOW with duration 0 (killed it), a duration
+    of 2³²−1 ms (busy forever), a NaN attenuation (reached the amplifier). Each gets
+    BAD_MESSAGE; PING still answers afterwards. (PLAY_START before HOME is allowed: it
+    enables output for the playback only, as docs §3 now says.)"""
+    import math
+    import os
+    import threading
+
+    import serial
+
+    from device.serial import messages as M
+    from device.serial.emulator import Emulator
+    from device.serial.framing import FrameDecoder
+    from device.sim.backend import SimDevice
+
+    master, slave, path = open_pty()
+    emu = Emulator(SimDevice(seed=1), master)
+    server = threading.Thread(target=emu.serve_forever, daemon=True)
+    server.start()
+    port = serial.Serial(path, timeout=0.05)
+    dec = FrameDecoder()
+    seq = [0]
+
+    def ask(msg):
+        seq[0] += 1
+        port.write(M.encode(msg, seq[0]))
+        end = time.monotonic() + 5
+        while time.monotonic() < end:
+            for f in dec.feed(port.read(4096)):
+                m = M.decode(f)
+                if isinstance(m, M.Ack) and m.ack_seq == seq[0]:
+                    return m.status
+                if isinstance(m, M.Pong) and isinstance(msg, M.Ping):
+                    return "pong"
+                if isinstance(m, M.HelloAck) and isinstance(msg, M.Hello):
+                    return "hello"
+        raise AssertionError(f"no answer to {msg}")
+
+    S = M.Status
+    try:
+        assert ask(M.Hello(1)) == "hello"
+        good = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
+        assert ask(M.Home(0)) == S.BAD_MESSAGE
+        assert ask(M.StartWindow(1, 0, 1000, 1)) == S.BAD_MESSAGE
+        assert ask(M.StartWindow(1, 2**32 - 1, 1000, 1)) == S.BAD_MESSAGE
+        nan = M.SceneBegin(2, 2, 0, 680.0, 0, 0, 0, 0, 0, 0, 1, 10, 0, math.nan)
+        assert ask(nan) == S.BAD_MESSAGE
+        assert ask(good) == S.OK
+        assert ask(M.Ping(5)) == "pong"  # still serving
+    finally:
+        port.close()
+        emu.stop()
+        server.join(timeout=5)
+        os.close(master)
+        os.close(slave)
