@@ -18,6 +18,7 @@ import threading
 import time
 import tty
 import zlib
+from collections import deque
 
 import numpy as np
 
@@ -35,6 +36,8 @@ _FAULT = {name: code for code, name in M.FaultCode.NAMES.items()}
 MAX_CLEARANCE_UM = 500_000
 MAX_WINDOW_MS = 600_000
 MAX_TABLE_ITEMS = 1_000_000
+#: trace blocks sent per turn of the serve loop (each ~1 KB)
+OUTBOX_PER_TURN = 2
 
 
 def _log(text: str) -> None:
@@ -81,6 +84,9 @@ class Emulator:
         self._stop = threading.Event()
         self._fault_sent = False
         self.frames_in = 0
+        #: trace blocks waiting to be sent: a few per loop turn, so a command that arrives
+        #: during an upload (ESTOP) is served between blocks, not after the whole trace
+        self._outbox: deque[M.Message] = deque()
 
     # ------------------------------------------------------------------ io
     def send(self, msg: M.Message) -> None:
@@ -99,7 +105,7 @@ class Emulator:
     def serve_forever(self) -> None:
         next_status = time.monotonic()
         while not self._stop.is_set():
-            r, _, _ = select.select([self.fd], [], [], 0.002)
+            r, _, _ = select.select([self.fd], [], [], 0.0 if self._outbox else 0.002)
             if r:
                 try:
                     data = os.read(self.fd, 65536)
@@ -110,6 +116,10 @@ class Emulator:
                         self.frames_in += 1
                         self._handle(frame)
             self._commit_done()
+            for _ in range(OUTBOX_PER_TURN):
+                if not self._outbox:
+                    break
+                self.send(self._outbox.popleft())
             now = time.monotonic()
             busy = self._worker is not None and self._worker.is_alive()
             wd = self.sim.info.watchdog_s
@@ -174,6 +184,7 @@ class Emulator:
             return
         if isinstance(msg, M.Hello):
             self._last = None  # a new host session starts its sequence numbers again
+            self._outbox.clear()  # the old session's trace upload is nobody's now
             if self._busy():  # a window left running by a host that went away
                 self.sim.request_stop()
                 self._worker.join(timeout=2.0)
@@ -442,8 +453,8 @@ class Emulator:
         end = req.start + req.count
         for a in range(req.start, end, M.TRACE_ITEMS):
             b = min(end, a + M.TRACE_ITEMS)
-            self.send(M.TraceBlock(req.window_id, req.channel, a, b - a,
-                                   tuple(np.float32(arr[a:b]).tolist())))
+            self._outbox.append(M.TraceBlock(req.window_id, req.channel, a, b - a,
+                                             tuple(np.float32(arr[a:b]).tolist())))
 
 
 def warm_up(rate_hz: float) -> None:

@@ -243,6 +243,67 @@ def test_a_crc_storm_declares_the_link_unusable():
         link.shutdown()
 
 
+class _RawHost:
+    """A host written against the document: raw frames over pyserial to an in-process
+    emulator on a pty (no driver in between)."""
+
+    def __init__(self):
+        import os
+        import threading
+
+        import serial
+
+        from device.serial.emulator import Emulator
+        from device.serial.framing import FrameDecoder
+        from device.sim.backend import SimDevice
+
+        self._os = os
+        self.master, self.slave, path = open_pty()
+        self.emu = Emulator(SimDevice(seed=1), self.master)
+        self.server = threading.Thread(target=self.emu.serve_forever, daemon=True)
+        self.server.start()
+        self.port = serial.Serial(path, timeout=0.05)
+        self.dec = FrameDecoder()
+        self.seq = 0
+        self.seen = []  # every device message, in arrival order
+
+    def send(self, msg):
+        from device.serial import messages as M
+
+        self.seq += 1
+        self.port.write(M.encode(msg, self.seq))
+        return self.seq
+
+    def read_until(self, pred, limit=10.0):
+        from device.serial import messages as M
+
+        end = time.monotonic() + limit
+        while time.monotonic() < end:
+            for f in self.dec.feed(self.port.read(4096)):
+                m = M.decode(f)
+                self.seen.append(m)
+                if pred(m):
+                    return m
+        raise AssertionError("the device did not answer")
+
+    def ask(self, msg):
+        from device.serial import messages as M
+
+        seq = self.send(msg)
+        if isinstance(msg, M.Hello):
+            return self.read_until(lambda m: isinstance(m, M.HelloAck)) and "hello"
+        if isinstance(msg, M.Ping):
+            return self.read_until(lambda m: isinstance(m, M.Pong)) and "pong"
+        return self.read_until(lambda m: isinstance(m, M.Ack) and m.ack_seq == seq).status
+
+    def close(self):
+        self.port.close()
+        self.emu.stop()
+        self.server.join(timeout=5)
+        self._os.close(self.master)
+        self._os.close(self.slave)
+
+
 def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
     """Commands that once killed the emulator or slipped past it, sent as raw frames over
     the pty: HOME with clearance 0 and START_WINDOW with duration 0 (killed it), a duration
@@ -250,53 +311,51 @@ def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
     BAD_MESSAGE; PING still answers afterwards. (PLAY_START before HOME is allowed: it
     enables output for the playback only, as docs §3 now says.)"""
     import math
-    import os
-    import threading
-
-    import serial
 
     from device.serial import messages as M
-    from device.serial.emulator import Emulator
-    from device.serial.framing import FrameDecoder
-    from device.sim.backend import SimDevice
-
-    master, slave, path = open_pty()
-    emu = Emulator(SimDevice(seed=1), master)
-    server = threading.Thread(target=emu.serve_forever, daemon=True)
-    server.start()
-    port = serial.Serial(path, timeout=0.05)
-    dec = FrameDecoder()
-    seq = [0]
-
-    def ask(msg):
-        seq[0] += 1
-        port.write(M.encode(msg, seq[0]))
-        end = time.monotonic() + 5
-        while time.monotonic() < end:
-            for f in dec.feed(port.read(4096)):
-                m = M.decode(f)
-                if isinstance(m, M.Ack) and m.ack_seq == seq[0]:
-                    return m.status
-                if isinstance(m, M.Pong) and isinstance(msg, M.Ping):
-                    return "pong"
-                if isinstance(m, M.HelloAck) and isinstance(msg, M.Hello):
-                    return "hello"
-        raise AssertionError(f"no answer to {msg}")
 
     S = M.Status
+    host = _RawHost()
     try:
-        assert ask(M.Hello(1)) == "hello"
+        assert host.ask(M.Hello(1)) == "hello"
         good = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
-        assert ask(M.Home(0)) == S.BAD_MESSAGE
-        assert ask(M.StartWindow(1, 0, 1000, 1)) == S.BAD_MESSAGE
-        assert ask(M.StartWindow(1, 2**32 - 1, 1000, 1)) == S.BAD_MESSAGE
+        assert host.ask(M.Home(0)) == S.BAD_MESSAGE
+        assert host.ask(M.StartWindow(1, 0, 1000, 1)) == S.BAD_MESSAGE
+        assert host.ask(M.StartWindow(1, 2**32 - 1, 1000, 1)) == S.BAD_MESSAGE
         nan = M.SceneBegin(2, 2, 0, 680.0, 0, 0, 0, 0, 0, 0, 1, 10, 0, math.nan)
-        assert ask(nan) == S.BAD_MESSAGE
-        assert ask(good) == S.OK
-        assert ask(M.Ping(5)) == "pong"  # still serving
+        assert host.ask(nan) == S.BAD_MESSAGE
+        assert host.ask(good) == S.OK
+        assert host.ask(M.Ping(5)) == "pong"  # still serving
     finally:
-        port.close()
-        emu.stop()
-        server.join(timeout=5)
-        os.close(master)
-        os.close(slave)
+        host.close()
+
+
+def test_an_estop_is_served_between_the_blocks_of_a_trace_upload():
+    """ESTOP sent right after a TRACE_REQUEST for a whole window's channel used to wait
+    until the whole upload was written (~550 ms on a loaded machine); now
+    the emulator writes a few blocks per turn of its loop and reads commands between
+    them: the ESTOP's ACK (sent once output is zero and latched) arrives before the
+    upload's last block, not after it."""
+    from device.serial import messages as M
+
+    S = M.Status
+    host = _RawHost()
+    try:
+        assert host.ask(M.Hello(1)) == "hello"
+        assert host.ask(M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)) == S.OK
+        assert host.ask(M.SceneCommit(1, 0)) == S.OK
+        assert host.ask(M.Home(20_000)) == S.OK
+        assert host.ask(M.StartWindow(1, 3000, 5000, 0)) == S.OK
+        done = host.read_until(lambda m: isinstance(m, M.WindowDone), limit=20)
+        n = done.n_ticks
+        req = host.send(M.TraceRequest(1, 0, 0, n))
+        stop = host.send(M.EStop())
+        blocks = -(-n // M.TRACE_ITEMS)
+        host.read_until(lambda m: isinstance(m, M.TraceBlock) and m.start + m.n == n, 30)
+        kinds = [(type(m).__name__, getattr(m, "ack_seq", None)) for m in host.seen]
+        at_req = kinds.index(("Ack", req))
+        at_stop = kinds.index(("Ack", stop))
+        n_blocks_before = sum(1 for k, _ in kinds[at_req:at_stop] if k == "TraceBlock")
+        assert blocks >= 4 and n_blocks_before < blocks - 1, (n_blocks_before, blocks)
+    finally:
+        host.close()
