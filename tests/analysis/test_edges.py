@@ -396,3 +396,24 @@ def test_a_between_subject_group_in_the_mixed_model():
         reml=True).wald_test_terms().table
     assert res.loc["group", "chi2"] == pytest.approx(float(ref.loc["C(group)", "statistic"]),
                                                      rel=1e-3)
+
+
+@given(st.integers(2, 12), st.integers(0, 2 ** 32 - 1), st.floats(0.0, 1.0))
+def test_letters_never_join_a_significant_pair(k, seed, share):
+    """Any pattern of significant pairs: two levels share a letter exactly when their pair
+    is not significant (Piepho's insert-and-absorb), and every level gets a letter; the old
+    groups chained non-significant pairs and held pairs with Holm p = .001."""
+    import itertools
+
+    from analysis.study import compact_letters
+
+    rng = np.random.default_rng(seed)
+    levels = [f"s{i}" for i in range(k)]
+    pairs = list(itertools.combinations(levels, 2))
+    p = np.where(rng.random(len(pairs)) < share, 0.2, 0.01)
+    pw = pd.DataFrame({"A": [a for a, _ in pairs], "B": [b for _, b in pairs], "p_corr": p})
+    letters = compact_letters(levels, pw)
+    assert all(letters[lv] for lv in levels)
+    for (a, b), pv in zip(pairs, p, strict=True):
+        shared = bool(set(letters[a]) & set(letters[b]))
+        assert shared == (pv >= 0.05), (a, b, pv, letters)
