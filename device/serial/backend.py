@@ -316,22 +316,29 @@ class SerialDevice(HapticDevice):
                 if name in _OPTIONAL:
                     continue
                 raise DeviceError(f"{self.port}: device has no trace '{name}' for window {wid}")
-            got = 0
-            deadline = time.monotonic() + 2.0 + n * 1e-5
+            covered = np.zeros(n, bool)  # coverage, not a count: a duplicated block
+            deadline = time.monotonic() + 2.0 + n * 1e-5  # must not hide a missing one
             others: list = []  # other events (a FAULT, a late CONTACT) keep their place
-            while got < n:
+            while not covered.all():
                 items, gone = self.link.take_events()
                 for e in items:
                     if isinstance(e, M.TraceBlock) and e.window_id == wid and e.channel == ch:
+                        if not 0 <= e.start <= e.start + e.n <= n:
+                            raise DeviceError(
+                                f"{self.port}: trace '{name}' block of samples {e.start}–"
+                                f"{e.start + e.n - 1} lies outside the window's {n} samples "
+                                "(a device or link fault; the window's traces are not used)")
                         buf[e.start: e.start + e.n] = e.items
-                        got += e.n
+                        covered[e.start: e.start + e.n] = True
                     elif not isinstance(e, M.TraceBlock):
                         others.append(e)
                 if gone is not None:
                     raise DeviceGoneError(f"{gone} while reading traces")
                 if time.monotonic() > deadline:
-                    raise DeviceTimeoutError(f"{self.port}: trace '{name}' incomplete "
-                                             f"({got} of {n} samples)")
+                    missing = np.flatnonzero(~covered)
+                    raise DeviceTimeoutError(
+                        f"{self.port}: trace '{name}' incomplete: {missing.size} of {n} "
+                        f"samples never arrived (first missing: {missing[0]})")
             self.link.put_back(others)
             out[name] = buf if name != "flags" else buf.astype(np.uint16)
         return out

@@ -359,3 +359,47 @@ def test_an_estop_is_served_between_the_blocks_of_a_trace_upload():
         assert blocks >= 4 and n_blocks_before < blocks - 1, (n_blocks_before, blocks)
     finally:
         host.close()
+
+
+@pytest.mark.parametrize("fault", ["duplicate", "outside"])
+def test_trace_blocks_are_checked_for_coverage_not_counted(fault):
+    """An emulator that sends one block twice instead of the next (the driver used to count
+    samples and return 250 NaN without a word), or a block past the window's end (a raw
+    numpy error): each is a named DeviceError, and no trace with holes is returned."""
+    import os
+    import threading
+
+    from device import DeviceError
+    from device.serial import messages as M
+    from device.serial.emulator import Emulator
+    from device.sim.backend import SimDevice
+
+    class Faulty(Emulator):
+        def _send_trace(self, req):
+            super()._send_trace(req)
+            blocks = list(self._outbox)
+            if len(blocks) >= 2 and fault == "duplicate":
+                blocks[1] = blocks[0]  # the second block never comes; the first comes twice
+            elif fault == "outside":
+                b = blocks[-1]
+                blocks[-1] = M.TraceBlock(b.window_id, b.channel, b.start + 10_000, b.n,
+                                          b.items)
+            self._outbox.clear()
+            self._outbox.extend(blocks)
+
+    master, slave, path = open_pty()
+    emu = Faulty(SimDevice(seed=1), master)
+    server = threading.Thread(target=emu.serve_forever, daemon=True)
+    server.start()
+    try:
+        with open_device(f"serial:{path}") as dev:
+            dev.load_scene(FIRM)
+            dev.home()
+            with pytest.raises(DeviceError, match="never arrived|lies outside") as err:
+                dev.run_window(0.2, from_first_contact=False)
+            assert "trace 'position'" in str(err.value)
+    finally:
+        emu.stop()
+        server.join(timeout=5)
+        os.close(master)
+        os.close(slave)
