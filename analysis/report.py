@@ -215,6 +215,20 @@ def build_report(data: pd.DataFrame, selection: pd.DataFrame, filters: dict) -> 
     return report, analyses
 
 
+#: ANOVA columns that exist only for effects with more than one degree of freedom
+_SPHERICITY = ("eps_gg", "eps_hf", "p_gg", "p_hf", "W_mauchly", "p_spher")
+
+
+def _anova_rows(aov: pd.DataFrame) -> list[dict]:
+    """The ANOVA table as rows; a sphericity column is left out of a row where it does not
+    apply (a one-df effect), instead of a NaN. Any other NaN still stops the report."""
+    rows = []
+    for r in aov.to_dict(orient="records"):
+        rows.append({k: v for k, v in r.items()
+                     if not (k in _SPHERICITY and isinstance(v, float) and math.isnan(v))})
+    return rows
+
+
 def _report_entry(a: dict) -> dict:
     r = a["result"]
     base = {"id": a["id"], "protocol": a["protocol"], "phase": a["phase"], "type": a["type"],
@@ -224,7 +238,7 @@ def _report_entry(a: dict) -> dict:
         return {**base, "result": r}
     if a["type"] == "oneway":
         base.update({
-            "samples": r["samples"], "anova": r["anova"], "groups": r["groups"],
+            "samples": r["samples"], "anova": _anova_rows(r["anova"]), "groups": r["groups"],
             "letters": r["letters"], "missing": r["missing"],
             "excluded_subjects": [str(x) for x in r["excluded_subjects"]],
             "pairwise": r["pairwise"][["A", "B", "mean_diff", "ci_low", "ci_high", "t", "dof",
@@ -242,7 +256,8 @@ def _report_entry(a: dict) -> dict:
             # a participant without a valid rating of a sample has no mean there: null
             "per_subject": _nan_to_none(r["per_subject"].to_dict(orient="records"))})
     elif a["type"] == "factorial":
-        base["groups"] = {g: {"anova": v["anova"], "most_significant": v["most_significant"],
+        base["groups"] = {g: {"anova": _anova_rows(v["anova"]),
+                              "most_significant": v["most_significant"],
                               "most_significant_p": v["most_significant_p"],
                               "most_significant_text": _most(v),
                               "best_set": v["best_set"], "main_effects": v["main_effects"],
@@ -367,7 +382,7 @@ def _ver(p: str) -> str:
 def _table(rows: list[dict], cols: list[str] | None = None) -> str:
     if not rows:
         return "*none*\n"
-    cols = cols or list(rows[0])
+    cols = cols or list(dict.fromkeys(k for r in rows for k in r))  # every row's columns
 
     def fmt(v, col):
         if v is None:

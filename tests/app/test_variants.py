@@ -100,7 +100,8 @@ def test_oneway_numbers_match_statsmodels_and_scipy(study, aid, protocol, phase)
     full = means.pivot(index="participant", columns="sample", values="rating")
     keys, ps = [], []
     for (x, y), p in got.items():
-        pair = full[[x, y]].dropna()  # the participants with both samples (as the methods say)
+        # listwise (the methods say so): the participants with every sample, as the ANOVA
+        pair = full.loc[wide.index, [x, y]]
         t = stats.ttest_rel(pair[x], pair[y])
         keys.append((x, y))
         ps.append(t.pvalue)
