@@ -284,13 +284,14 @@ def _omnibus(r: dict, alpha: float = 0.05) -> str:
         if not isinstance(r["models"][key], str):
             tests.append((name, float(r["models"][key]["p_unc"].iloc[0])))
     sig = [n for n, p in tests if p < alpha]
+    a_txt = f"{alpha:g}".lstrip("0")  # APA: .05
     if len(sig) == len(tests):
-        return f"All {len(tests)} omnibus tests find that the samples differ (p < .05)."
+        return f"All {len(tests)} omnibus tests find that the samples differ (p < {a_txt})."
     if not sig:
-        return f"None of the {len(tests)} omnibus tests finds a difference (p ≥ .05)."
+        return f"None of the {len(tests)} omnibus tests finds a difference (p ≥ {a_txt})."
     rest = [n for n, p in tests if p >= alpha]
     return (f"The omnibus tests disagree: {', '.join(sig)} "
-            f"{'finds' if len(sig) == 1 else 'find'} a difference (p < .05); "
+            f"{'finds' if len(sig) == 1 else 'find'} a difference (p < {a_txt}); "
             f"{', '.join(rest)} {'does' if len(rest) == 1 else 'do'} not.")
 
 
@@ -481,7 +482,7 @@ def _summary(a: dict) -> str:
         return (head + f"ratings {words} among the {len(a['samples'])} samples, "
                 f"F({dfs}) = {aov['F']:.3g}, {_p(p)}"
                 + (" (Greenhouse–Geisser)" if eps is not None else "")
-                + f", ηp² = {aov['np2']:.2f}".replace("0.", ".")
+                + f", ηp² = {aov['np2']:.2f}".replace("= 0.", "= .")
                 + f". Highest: {top['sample']} (M = {top['mean']:.2f}, "
                 f"95 % CI [{top['ci_low']:.2f}, {top['ci_high']:.2f}]); lowest: "
                 f"{low['sample']} (M = {low['mean']:.2f}). {sig} of {len(a['pairwise'])} "

@@ -464,7 +464,7 @@ def rm_anova(data: pd.DataFrame, dv: str, within: str | Sequence[str], subject: 
     # underflows; differences within RTOL of the data's magnitude are zero
     centre = float(arr.mean())
     spread = float(np.abs(arr - centre).max())
-    if spread <= _tol(arr) or spread == 0.0:
+    if spread <= _tol(arr):  # also all zeros: the tolerance is then 0
         raise StatsError(f"every cell mean of {dv!r} is the same ({centre:.6g}): there is "
                          "no variation, so no effect can be tested (F is undefined)")
     arr = (arr - centre) / spread
@@ -936,7 +936,7 @@ def mixed_oneway(data: pd.DataFrame, dv: str, within: str, subject: str,
         raise StatsError(f"a between-subject factor needs at least 2 groups of {between!r} "
                          "with 2 subjects each")
     scale = float(np.abs(d[dv] - d[dv].mean()).max())
-    if scale <= _tol(d[dv].to_numpy()) or scale == 0:
+    if scale <= _tol(d[dv].to_numpy()):
         raise StatsError(f"every {dv} is the same: the mixed model is undefined")
     d = d.assign(_y=(d[dv] - d[dv].mean()) / scale,
                  _x=pd.Categorical(d[within].astype(str), [str(x) for x in levels]),

@@ -310,9 +310,9 @@ class Emulator:
             sc = self._scenes.get(msg.scene_id)
             if sc is None:
                 return S.UNKNOWN_SCENE
-            if isinstance(msg, (M.SceneVelocities, M.SceneSupport)) and not all(
-                    math.isfinite(float(x)) for x in (msg.items if isinstance(
-                        msg, M.SceneVelocities) else (msg.stiffness, msg.damping))):
+            floats = (msg.items if isinstance(msg, M.SceneVelocities) else
+                      (msg.stiffness, msg.damping) if isinstance(msg, M.SceneSupport) else ())
+            if not all(math.isfinite(x) for x in floats):
                 return S.BAD_MESSAGE
             if isinstance(msg, M.SceneSupport):
                 if sc["begin"].kind != SceneKind.REAL:

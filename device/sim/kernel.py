@@ -126,27 +126,20 @@ def _advance_switching(pieces, x, u, ist, fst, h, ks, bs, has_body, tmp):
             j -= 1
         mode = ist[IST_MODE]
         _apply(pieces[mode, j], x, u, tmp)
-        if _crossed(mode, tmp, h, ks, bs, has_body) and switches < 64:
-            if j > 0:
-                j -= 1
-                continue
-            # finest piece: accept it and switch mode
-            if mode == 1:
-                _account(-0.5 * (_sample_force(x, h, ks, bs, has_body)
-                                 + _sample_force(tmp, h, ks, bs, has_body))
-                         * (tmp[Z2] - x[Z2]), fst)
-            x[:] = tmp
-            remaining -= 1
+        crossed = _crossed(mode, tmp, h, ks, bs, has_body) and switches < 64
+        if crossed and j > 0:  # a switch inside this piece: try a finer one
+            j -= 1
+            continue
+        if mode == 1:  # the piece is accepted: the work across the contact
+            _account(-0.5 * (_sample_force(x, h, ks, bs, has_body)
+                             + _sample_force(tmp, h, ks, bs, has_body))
+                     * (tmp[Z2] - x[Z2]), fst)
+        x[:] = tmp
+        remaining -= np.int64(1) << j
+        if crossed:  # the finest piece holds the switch: change mode
             switches += 1
             ist[IST_MODE] = 1 - mode
             j = levels
-        else:
-            if mode == 1:
-                _account(-0.5 * (_sample_force(x, h, ks, bs, has_body)
-                                 + _sample_force(tmp, h, ks, bs, has_body))
-                         * (tmp[Z2] - x[Z2]), fst)
-            x[:] = tmp
-            remaining -= np.int64(1) << j
 
 
 @lazy_njit
