@@ -16,7 +16,10 @@ from dataclasses import dataclass
 __all__ = ["cobs_encode", "cobs_decode", "encode_frame", "decode_payload", "FrameDecoder",
            "FramingError", "PROTOCOL_VERSION", "MAX_PAYLOAD", "Frame"]
 
-PROTOCOL_VERSION = 1
+#: the newest version this host speaks; frames of every version from PROTOCOL_MIN up are
+#: decoded (a HELLO always travels in version 1 so that any device reads it)
+PROTOCOL_VERSION = 2
+PROTOCOL_MIN = 1
 MAX_PAYLOAD = 1024  # bytes before COBS, CRC included
 _HEAD = struct.Struct("<BBH")
 _CRC = struct.Struct("<I")
@@ -79,11 +82,12 @@ class Frame:
     type: int
     seq: int
     body: bytes
+    version: int = 1
 
 
-def encode_frame(mtype: int, seq: int, body: bytes = b"") -> bytes:
-    """COBS-encoded, delimited frame for (type, seq, body)."""
-    payload = _HEAD.pack(PROTOCOL_VERSION, mtype, seq & 0xFFFF) + body
+def encode_frame(mtype: int, seq: int, body: bytes = b"", version: int = 1) -> bytes:
+    """COBS-encoded, delimited frame for (type, seq, body) in protocol ``version``."""
+    payload = _HEAD.pack(version, mtype, seq & 0xFFFF) + body
     payload += _CRC.pack(zlib.crc32(payload) & 0xFFFFFFFF)
     if len(payload) > MAX_PAYLOAD:
         raise FramingError(f"payload of {len(payload)} bytes exceeds the maximum {MAX_PAYLOAD}",
@@ -107,10 +111,10 @@ def decode_payload(encoded: bytes) -> Frame:
     if zlib.crc32(body) & 0xFFFFFFFF != crc:
         raise FramingError("CRC mismatch", "crc")
     version, mtype, seq = _HEAD.unpack(body[:4])
-    if version != PROTOCOL_VERSION:
-        raise FramingError(f"protocol version {version}, expected {PROTOCOL_VERSION}",
-                           "version")
-    return Frame(mtype, seq, body[4:])
+    if not PROTOCOL_MIN <= version <= PROTOCOL_VERSION:
+        raise FramingError(f"protocol version {version}, expected {PROTOCOL_MIN}–"
+                           f"{PROTOCOL_VERSION}", "version")
+    return Frame(mtype, seq, body[4:], version)
 
 
 class FrameDecoder:

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import DeviceError
 from . import messages as M
-from .framing import FrameDecoder
+from .framing import PROTOCOL_VERSION, FrameDecoder
 
 __all__ = ["Link", "DeviceGoneError", "DeviceTimeoutError", "PortBusyError",
            "ProtocolMismatchError", "CRCStormError", "SILENCE_PERIODS"]
@@ -78,6 +78,10 @@ class Link:
         self.timeout = float(timeout)
         self.retries = int(retries)
         self.baudrate = baudrate
+        #: the protocol version negotiated by :meth:`hello` (1 until then)
+        self.version = 1
+        #: a version-2 device's resources (LIMITS), None before HELLO or from a version-1 device
+        self.limits: M.Limits | None = None
         self._handler = handler
         self._ser = transport if transport is not None else self._open(port)
         self._decoder = FrameDecoder()
@@ -251,7 +255,7 @@ class Link:
         """Send a command and wait for its ACK; retries, then DeviceTimeoutError."""
         timeout = self.timeout if timeout is None else timeout
         seq = self.next_seq()
-        data = M.encode(msg, seq)
+        data = M.encode(msg, seq, self.version)
         for attempt in range(self.retries + 1):
             if attempt:
                 self.stats["retries"] += 1
@@ -272,15 +276,26 @@ class Link:
         raise DeviceTimeoutError(f"{self.port}: no acknowledgement of {type(msg).__name__} "
                                  f"after {self.retries + 1} tries of {timeout * 1e3:.0f} ms")
 
-    def hello(self) -> M.HelloAck:
-        """Open a host session: HELLO until HELLO_ACK (ProtocolMismatchError if none)."""
+    def hello(self, protocol: int = PROTOCOL_VERSION) -> M.HelloAck:
+        """Open a host session: HELLO until HELLO_ACK (ProtocolMismatchError if none).
+
+        The HELLO offers ``protocol`` (the newest version this host speaks) in a version-1
+        frame, which every device reads; the device answers in the version it chose, and
+        the link speaks that from then on. A version-2 device follows with LIMITS
+        (:attr:`limits`)."""
         deadline = time.monotonic() + max(1.0, 4 * self.timeout)
         seq = self.next_seq()
         while time.monotonic() < deadline:
-            self.write(M.encode(M.Hello(1), seq))
+            self.write(M.encode(M.Hello(protocol), seq, 1))
             if self.wait_for(lambda ev: any(isinstance(e, M.HelloAck) for e in ev),
                              self.timeout):
                 acks = self.remove(lambda e: isinstance(e, M.HelloAck))
+                self.version = acks[-1].protocol
+                if self.version >= 2:
+                    self.wait_for(lambda ev: any(isinstance(e, M.Limits) for e in ev),
+                                  self.timeout)
+                    limits = self.remove(lambda e: isinstance(e, M.Limits))
+                    self.limits = limits[-1] if limits else None
                 self.clear_events()
                 # what came before the session opened (a stream joined in the middle of a
                 # frame) is not the link's fault: count from here
@@ -292,7 +307,7 @@ class Link:
                               "out_of_order"):
                         self.stats[k] = 0
                 return acks[-1]
-        raise ProtocolMismatchError(f"{self.port}: no HELLO answer in protocol version 1 "
+        raise ProtocolMismatchError(f"{self.port}: no HELLO answer in protocol version 1 or 2 "
                                     f"(frames ok {self._decoder.frames_ok}, corrupt "
                                     f"{sum(self._decoder.errors.values())})")
 
@@ -301,7 +316,7 @@ class Link:
         self.check()
         stamp = int(time.monotonic() * 1e6) & 0xFFFFFFFF
         t0 = time.perf_counter()
-        self.write(M.encode(M.Ping(stamp), 0))
+        self.write(M.encode(M.Ping(stamp), 0, self.version))
         ok = self.wait_for(lambda ev: any(isinstance(e, M.Pong) and e.stamp == stamp
                                           for e in ev), timeout)
         if not ok:
@@ -321,7 +336,7 @@ class Link:
             while not self.closed and self._gone is None:
                 if not self._hb_pause.is_set():
                     try:
-                        self.write(M.encode(M.Heartbeat(), 0))
+                        self.write(M.encode(M.Heartbeat(), 0, self.version))
                     except DeviceError:
                         return
                 silent = time.monotonic() - self._last_rx
@@ -341,7 +356,7 @@ class Link:
             self._hb_pause.clear()
 
     def heartbeat(self) -> None:
-        self.write(M.encode(M.Heartbeat(), 0))
+        self.write(M.encode(M.Heartbeat(), 0, self.version))
 
     # ------------------------------------------------------------------ statistics
     def link_stats(self) -> dict:

@@ -1,4 +1,4 @@
-"""Messages of the hapticlab wire protocol, version 1 (docs/wire-protocol.md).
+"""Messages of the hapticlab wire protocol, versions 1 and 2 (docs/wire-protocol.md).
 
 Each message is a frozen dataclass with a fixed little-endian layout (``FMT``) and,
 for some, a trailing array (``ARRAY`` = struct code of its items). Units and
@@ -292,6 +292,17 @@ class TraceRequest(Message):
     count: int = 0
 
 
+@dataclass(frozen=True)
+class TraceConfig(Message):
+    """Version 2: the channels (bit mask, bit i = channel i) and decimation (1 record per
+    ``decimation`` servo ticks) streamed during the following windows and playbacks."""
+
+    TYPE = 0x41
+    FMT = "HH"
+    channels: int = 0x7F
+    decimation: int = 1
+
+
 # ---------------------------------------------------------------- device → host
 @dataclass(frozen=True)
 class Ack(Message):
@@ -335,6 +346,21 @@ class HelloAck(Message):
     def from_body(cls, body: bytes) -> Message:
         m = super().from_body(body)
         return cls(*astuple(m)[:8], *(b.rstrip(b"\x00") for b in astuple(m)[8:]))
+
+
+@dataclass(frozen=True)
+class Limits(Message):
+    """Version 2, sent right after HELLO_ACK: the device's resources. table_items and
+    play_items [i16 items]; ring_records: the trace ring buffer [records]; channels: the
+    channels it records (bit mask); max_decimation."""
+
+    TYPE = 0x82
+    FMT = "IIIHH"
+    table_items: int = 0
+    play_items: int = 0
+    ring_records: int = 0
+    channels: int = 0
+    max_decimation: int = 1
 
 
 @dataclass(frozen=True)
@@ -441,21 +467,58 @@ class Position(Message):
     height_um: int = 0
 
 
+@dataclass(frozen=True)
+class TraceChunk(Message):
+    """Version 2, streamed during a window: records start..start+n−1, each one binary32 per
+    channel of the mask in channel order (``items`` record-major)."""
+
+    TYPE = 0x97
+    FMT = "HHIH"
+    ARRAY = "f"
+    window_id: int = 0
+    channels: int = 1
+    start: int = 0
+    n: int = 0
+    items: tuple = ()
+
+    @property
+    def width(self) -> int:
+        return bin(self.channels).count("1")
+
+    def check_count(self) -> None:
+        if self.width == 0 or self.n * self.width != len(self.items):
+            raise MessageError(f"TraceChunk: {self.n} records of {self.width} channels but "
+                               f"{len(self.items)} items follow")
+
+
+@dataclass(frozen=True)
+class TraceLost(Message):
+    """Version 2: records start..start+n−1 of a window were dropped on the device (its ring
+    buffer overflowed); the trace has a gap there, said, never silent."""
+
+    TYPE = 0x98
+    FMT = "HII"
+    window_id: int = 0
+    start: int = 0
+    n: int = 0
+
+
 MESSAGES: dict[int, type[Message]] = {
     m.TYPE: m for m in (Hello, Heartbeat, Ping, SceneBegin, SceneVelocities, SceneChunk,
                         SceneSupport,
                         SceneCommit, Home, StartWindow, StopWindow, PlayChunk, PlayStart, SetLimit,
                         EStop,
                         ClearFault, Zero, TraceRequest, Ack, HelloAck, Pong, Contact, Saturation,
-                        Fault, StatusReport, WindowDone, TraceBlock, Position)}
+                        Fault, StatusReport, WindowDone, TraceBlock, Position, TraceConfig,
+                        Limits, TraceChunk, TraceLost)}
 
 CHUNK_ITEMS = 480  # i16 items per SceneChunk / PlayChunk (960 bytes of data)
 TRACE_ITEMS = 250  # f32 items per TraceBlock
 
 
-def encode(msg: Message, seq: int) -> bytes:
-    """The delimited frame carrying ``msg``."""
-    return encode_frame(msg.TYPE, seq, msg.body())
+def encode(msg: Message, seq: int, version: int = 1) -> bytes:
+    """The delimited frame carrying ``msg`` in protocol ``version``."""
+    return encode_frame(msg.TYPE, seq, msg.body(), version)
 
 
 def decode(frame: Frame) -> Message:

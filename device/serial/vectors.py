@@ -8,12 +8,12 @@ and this module disagree.
 
 Line format (fields separated by one space; ``#`` starts a comment line)::
 
-    NAME HEX frame TYPE SEQ BODY_HEX fit|misfit
+    NAME HEX frame VERSION TYPE SEQ BODY_HEX fit|misfit
     NAME HEX error crc|version|length|cobs
 
-``frame``: the frame decodes (COBS, length, CRC, version) to message TYPE (decimal) with
-sequence number SEQ and the body bytes; ``fit`` when the body has the layout of its type
-(docs/wire-protocol.md §5–6), ``misfit`` when it does not (the device answers
+``frame``: the frame decodes (COBS, length, CRC, version) to protocol VERSION, message
+TYPE (decimal) with sequence number SEQ and the body bytes; ``fit`` when the body has the
+layout of its type (docs/wire-protocol.md §5–6), ``misfit`` when it does not (the device answers
 ``ACK(BAD_MESSAGE)``). ``error``: the frame is discarded, for the reason given, checked in
 this order: an encoded frame longer than any valid one (length), COBS, payload length, CRC,
 version.
@@ -65,7 +65,16 @@ def _examples() -> list[tuple[str, M.Message]]:
         ("window_done", M.WindowDone(9, 2**35, 50000, -110000, 8, 1, 0, 0)),
         ("trace_block", M.TraceBlock(9, 1, 0, 3, (0.0, -1.5, 3.25))),
         ("position", M.Position(9, 777, -5000)),
+        # version 2
+        ("trace_config", M.TraceConfig(0x7F, 4)),
+        ("limits", M.Limits(16384, 16384, 1024, 0x7F, 100)),
+        ("trace_chunk", M.TraceChunk(9, 0x05, 40, 2, (0.25, -1.0, 0.5, 2.0))),
+        ("trace_lost", M.TraceLost(9, 1024, 35)),
     ]
+
+
+#: the examples sent in version-2 frames (the rest travel in version 1, as HELLO must)
+_V2 = {"trace_config", "limits", "trace_chunk", "trace_lost", "estop"}
 
 
 def _frame_hex(frame: bytes) -> str:
@@ -80,7 +89,7 @@ def _raw(version: int, mtype: int, seq: int, body: bytes, crc_xor: int = 0) -> b
 
 def vectors() -> list[tuple[str, bytes]]:
     """(name, encoded frame without its delimiter) of every vector, in file order."""
-    out = [(name, encode_frame(m.TYPE, 100 + i, m.body())[:-1])
+    out = [(name, encode_frame(m.TYPE, 100 + i, m.body(), 2 if name in _V2 else 1)[:-1])
            for i, (name, m) in enumerate(_examples())]
     # COBS past 254 bytes: a long run of non-zero bytes, zeros at the edges, and the most
     # items a frame holds (payload 1,024 bytes)
@@ -97,7 +106,8 @@ def vectors() -> list[tuple[str, bytes]]:
     out.append(("zeros_everywhere", _raw(1, 0x03, 0, b"\0\0\0\0")))
     # what a receiver must discard
     out.append(("error_crc", _raw(1, 0x03, 5, struct.pack("<I", 1), crc_xor=0x00010000)))
-    out.append(("error_version", _raw(2, 0x03, 5, struct.pack("<I", 1))))
+    out.append(("error_version", _raw(3, 0x03, 5, struct.pack("<I", 1))))
+    out.append(("error_version_0", _raw(0, 0x03, 5, struct.pack("<I", 1))))
     out.append(("error_short", cobs_encode(b"\x01\x03\x05")))
     out.append(("error_long_payload", _raw(1, 0x12, 3, bytes(MAX_PAYLOAD - 7))))
     out.append(("error_cobs_overrun", bytes([0x09, 0x01, 0x02])))
@@ -106,6 +116,8 @@ def vectors() -> list[tuple[str, bytes]]:
     out.append(("misfit_hello_long", encode_frame(0x01, 7, b"\x01\x02")[:-1]))
     out.append(("misfit_chunk_odd", encode_frame(0x12, 8, b"\x01\0\0\0\0\0\x01\0\xff")[:-1]))
     out.append(("misfit_unknown_type", encode_frame(0x7E, 9, b"")[:-1]))
+    out.append(("misfit_chunk_count", encode_frame(0x97, 10, M.TraceChunk(
+        1, 0x07, 0, 2, (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)).body()[:-4], 2)[:-1]))
     return out
 
 
@@ -120,14 +132,14 @@ def expectation(encoded: bytes) -> str:
         fit = "fit"
     except FramingError:
         fit = "misfit"
-    return f"frame {frame.type} {frame.seq} {frame.body.hex() or '-'} {fit}"
+    return f"frame {frame.version} {frame.type} {frame.seq} {frame.body.hex() or '-'} {fit}"
 
 
 def render() -> str:
-    lines = ["# hapticlab wire protocol v1 test vectors (device/serial/vectors.py; format in",
-             "# its docstring). NAME HEX frame TYPE SEQ BODY_HEX fit|misfit, or NAME HEX error",
-             "# KIND. HEX is the frame on the wire without its 0x00 delimiter; BODY_HEX '-' is",
-             "# an empty body."]
+    lines = ["# hapticlab wire protocol v2 test vectors (device/serial/vectors.py; format in",
+             "# its docstring). NAME HEX frame VERSION TYPE SEQ BODY_HEX fit|misfit, or",
+             "# NAME HEX error KIND. HEX is the frame on the wire without its 0x00 delimiter;",
+             "# BODY_HEX '-' is an empty body."]
     lines += [f"{name} {enc.hex()} {expectation(enc)}" for name, enc in vectors()]
     return "\n".join(lines) + "\n"
 

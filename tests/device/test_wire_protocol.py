@@ -102,7 +102,11 @@ def _strategy(cls):
 
     def build(v):
         *h, it = v
-        if "n" in names:  # the count field must match the items
+        if cls is M.TraceChunk:  # n records of one item per channel in the mask
+            h[names.index("channels")] = 0b101
+            it = it[: len(it) // 2 * 2]
+            h[names.index("n")] = len(it) // 2
+        elif "n" in names:  # the count field must match the items
             h[names.index("n")] = len(it)
         return cls(*h, it)
 
