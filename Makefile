@@ -19,11 +19,16 @@ venv: $(STAMP)
 # Debian packages the tests need: a virtual X server, Mesa GL, PortAudio, xdotool (a person's
 # keys into the participant's window), tmux (the operator's terminal), a monospace font, and
 # the X libraries Qt needs for PsychoPy's participant-information dialog; installed only
-# when missing; chromium renders report.html headless for its screenshot test.
+# when missing; chromium renders report.html headless for its screenshot test; gcc builds the
+# firmware's host build, arm-none-eabi-gcc (with newlib) its Cortex-M build, and
+# qemu-system-arm runs that on an emulated STM32F405.
 system-deps:
 	@if ! command -v Xvfb >/dev/null 2>&1 || ! ldconfig -p | grep -q libportaudio \
 	    || ! command -v xdotool >/dev/null 2>&1 || ! command -v tmux >/dev/null 2>&1 \
 	    || ! command -v chromium >/dev/null 2>&1 || ! command -v cc >/dev/null 2>&1 \
+	    || ! command -v arm-none-eabi-gcc >/dev/null 2>&1 \
+	    || ! command -v qemu-system-arm >/dev/null 2>&1 \
+	    || [ ! -d /usr/lib/arm-none-eabi/newlib ] \
 	    || [ ! -f /usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf ] \
 	    || ! dpkg -s libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 >/dev/null 2>&1; then \
 	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries and chromium from Debian's packages"; \
@@ -31,7 +36,8 @@ system-deps:
 	    xvfb libgl1-mesa-dri libglu1-mesa libportaudio2 libasound2 libsndfile1 xdotool tmux \
 	    fonts-dejavu-core libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 libxkbcommon-x11-0 \
 	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 \
-	    chromium gcc libc6-dev make >/dev/null; \
+	    chromium gcc libc6-dev make gcc-arm-none-eabi libnewlib-arm-none-eabi \
+	    qemu-system-arm >/dev/null; \
 	fi
 
 demo: $(STAMP)

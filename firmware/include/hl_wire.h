@@ -1,4 +1,4 @@
-/* hapticlab wire protocol v1: framing (COBS, CRC-32) and message layouts.
+/* hapticlab wire protocol v2: framing (COBS, CRC-32) and message layouts.
  *
  * The contract is docs/wire-protocol.md; docs/wire-vectors.txt holds test vectors that
  * this code and the Python host both decode. C11, no dynamic allocation: every function
@@ -10,7 +10,10 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define HL_PROTOCOL_VERSION 1u
+/* the version this firmware speaks; frames of every version from HL_PROTOCOL_MIN up are
+ * decoded (a HELLO comes in version 1, so that any device reads it) */
+#define HL_PROTOCOL_VERSION 2u
+#define HL_PROTOCOL_MIN 1u
 /* payload = version, type, seq (u16), body, CRC-32: at most this many bytes */
 #define HL_MAX_PAYLOAD 1024u
 /* the longest valid encoded frame (COBS overhead, no delimiter) */
@@ -28,6 +31,7 @@ typedef enum {
 } hl_frame_status;
 
 typedef struct {
+    uint8_t version;
     uint8_t type;
     uint16_t seq;
     const uint8_t *body; /* points into the caller's payload buffer */
@@ -53,6 +57,9 @@ hl_frame_status hl_decode_frame(const uint8_t *encoded, size_t len, uint8_t *pay
 /* Build a frame: header, body, CRC, COBS and the 0x00 delimiter into out; returns the
  * number of bytes written, or 0 when the payload would exceed HL_MAX_PAYLOAD or out is too
  * small. */
+size_t hl_encode_frame_v(uint8_t version, uint8_t type, uint16_t seq, const uint8_t *body,
+                         size_t body_len, uint8_t *out, size_t cap);
+/* the same in version HL_PROTOCOL_VERSION */
 size_t hl_encode_frame(uint8_t type, uint16_t seq, const uint8_t *body, size_t body_len,
                        uint8_t *out, size_t cap);
 

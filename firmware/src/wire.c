@@ -1,4 +1,4 @@
-/* Framing and message layouts of the hapticlab wire protocol v1 (see hl_wire.h). */
+/* Framing and message layouts of the hapticlab wire protocol v2 (see hl_wire.h). */
 #include "hl_wire.h"
 
 #include <string.h>
@@ -101,10 +101,11 @@ hl_frame_status hl_decode_frame(const uint8_t *encoded, size_t len, uint8_t *pay
     if (hl_crc32(tmp, body_end) != get_u32(tmp + body_end)) {
         return HL_ERR_CRC;
     }
-    if (tmp[0] != HL_PROTOCOL_VERSION) {
+    if (tmp[0] < HL_PROTOCOL_MIN || tmp[0] > HL_PROTOCOL_VERSION) {
         return HL_ERR_VERSION;
     }
     memcpy(payload, tmp, (size_t)n);
+    frame->version = payload[0];
     frame->type = payload[1];
     frame->seq = (uint16_t)(payload[2] | (payload[3] << 8));
     frame->body = payload + HL_HEADER_SIZE;
@@ -115,12 +116,18 @@ hl_frame_status hl_decode_frame(const uint8_t *encoded, size_t len, uint8_t *pay
 size_t hl_encode_frame(uint8_t type, uint16_t seq, const uint8_t *body, size_t body_len,
                        uint8_t *out, size_t cap)
 {
+    return hl_encode_frame_v(HL_PROTOCOL_VERSION, type, seq, body, body_len, out, cap);
+}
+
+size_t hl_encode_frame_v(uint8_t version, uint8_t type, uint16_t seq, const uint8_t *body,
+                         size_t body_len, uint8_t *out, size_t cap)
+{
     uint8_t payload[HL_MAX_PAYLOAD];
     size_t n = HL_HEADER_SIZE + body_len + HL_CRC_SIZE;
     if (n > HL_MAX_PAYLOAD) {
         return 0;
     }
-    payload[0] = HL_PROTOCOL_VERSION;
+    payload[0] = version;
     payload[1] = type;
     payload[2] = (uint8_t)(seq & 0xFFu);
     payload[3] = (uint8_t)(seq >> 8);
@@ -159,7 +166,18 @@ static const layout LAYOUTS[] = {
     {0x32, 0, 0, 0},  {0x40, 11, 0, 0}, {0x80, 3, 0, 0},  {0x81, 87, 0, 0},
     {0x83, 4, 0, 0},  {0x90, 10, 0, 0}, {0x91, 14, 0, 0}, {0x92, 9, 0, 0},
     {0x93, 14, 0, 0}, {0x94, 24, 0, 0}, {0x95, 9, 4, 1},  {0x96, 10, 0, 0},
+    /* version 2 */
+    {0x41, 4, 0, 0},  {0x82, 16, 0, 0}, {0x97, 10, 4, 0}, {0x98, 10, 0, 0},
 };
+
+static unsigned channels_in(uint16_t mask)
+{
+    unsigned n = 0;
+    for (; mask; mask &= (uint16_t)(mask - 1u)) {
+        n++;
+    }
+    return n;
+}
 
 int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len)
 {
@@ -177,6 +195,11 @@ int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len)
         if (l->counted) {
             size_t n = (size_t)body[l->fixed - 2] | ((size_t)body[l->fixed - 1] << 8);
             return n == (body_len - l->fixed) / l->item;
+        }
+        if (type == 0x97) { /* TRACE_CHUNK: n records of one f32 per channel in the mask */
+            size_t n = (size_t)body[8] | ((size_t)body[9] << 8);
+            unsigned k = channels_in((uint16_t)(body[2] | (body[3] << 8)));
+            return k > 0 && n * k == (body_len - l->fixed) / l->item;
         }
         return 1;
     }

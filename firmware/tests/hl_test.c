@@ -1,6 +1,7 @@
 /* Unit tests, test vectors and a seeded fuzz of the wire code (see firmware/README.md).
  *
- *   hl_test unit                 framing, CRC, COBS, layouts, the streaming receiver
+ *   hl_test unit                 framing, CRC, COBS, layouts, the streaming receiver,
+ *                                and the device (tests/device_test.c)
  *   hl_test vectors FILE         decode every vector; print "NAME EXPECTATION" per line;
  *                                exit 1 when any differs from the file
  *   hl_test fuzz FILE N SEED     N mutations of the valid vectors through the receiver:
@@ -84,7 +85,8 @@ static void expectation(const uint8_t *enc, size_t len, char *out, size_t cap)
     }
     static char body[2 * HL_MAX_PAYLOAD + 2];
     tohex(f.body, f.body_len, body);
-    snprintf(out, cap, "frame %u %u %s %s", (unsigned)f.type, (unsigned)f.seq, body,
+    snprintf(out, cap, "frame %u %u %u %s %s", (unsigned)f.version, (unsigned)f.type,
+             (unsigned)f.seq, body,
              hl_body_fits(f.type, f.body, f.body_len) ? "fit" : "misfit");
 }
 
@@ -157,7 +159,8 @@ static int run_vectors(void)
         uint8_t payload[HL_MAX_PAYLOAD], out[HL_MAX_ENCODED + 2];
         hl_frame f;
         if (hl_decode_frame(v->enc, v->len, payload, &f) == HL_FRAME_OK) {
-            size_t n = hl_encode_frame(f.type, f.seq, f.body, f.body_len, out, sizeof out);
+            size_t n = hl_encode_frame_v(f.version, f.type, f.seq, f.body, f.body_len, out,
+                                         sizeof out);
             if (n != v->len + 1 || memcmp(out, v->enc, v->len) != 0 || out[v->len] != 0) {
                 fprintf(stderr, "vector %s: re-encoding differs\n", v->name);
                 bad++;
@@ -307,6 +310,8 @@ static int run_fuzz(unsigned long n, unsigned long long seed)
     return accepted_corrupt != 0;
 }
 
+int device_tests(void);
+
 int main(int argc, char **argv)
 {
     if (argc >= 2 && strcmp(argv[1], "unit") == 0) {
@@ -317,7 +322,7 @@ int main(int argc, char **argv)
             test_receiver();
         }
         printf("unit: %d failure(s)\n", failures);
-        return failures != 0;
+        return (failures + device_tests()) != 0;
     }
     if (argc == 3 && strcmp(argv[1], "vectors") == 0) {
         if (load_vectors(argv[2])) return 2;

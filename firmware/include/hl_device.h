@@ -1,0 +1,68 @@
+/* The reference firmware: protocol v2 handler, state machine and the 10-kHz servo.
+ *
+ * One device per program (static storage, no dynamic allocation). The HAL (hl_hal.h)
+ * calls hl_servo_tick() at HL_SERVO_HZ and the main loop calls hl_device_poll(); on a
+ * Cortex-M the tick is an interrupt, and the two share state only through the rings and
+ * the flags documented in device.c.
+ */
+#ifndef HL_DEVICE_H
+#define HL_DEVICE_H
+
+#include <stdint.h>
+
+#include "hl_wire.h"
+
+/* ratings of the papers' one-axis device (SPEC section 1), as HELLO_ACK reports them */
+#define HL_SERVO_HZ 10000u
+#define HL_ENCODER_NM 10000u          /* encoder resolution [nm] */
+#define HL_FORCE_CONSTANT_MN_A 2150u  /* [mN/A] */
+#define HL_CURRENT_RATING_MA 1400u    /* [mA] */
+#define HL_EFFECTIVE_MASS_MG 55000u   /* [mg] */
+#define HL_WATCHDOG_MS 100u
+#define HL_ACCEL_RANGE_MMS2 490333u   /* +-50 g [mm/s^2] */
+
+/* resource limits, advertised in LIMITS (0x82); a build may lower them */
+#ifndef HL_TABLE_ITEMS
+#define HL_TABLE_ITEMS 1000000u  /* transient table [i16 items] */
+#endif
+#ifndef HL_PLAY_ITEMS
+#define HL_PLAY_ITEMS 1048576u   /* open-loop playback buffer [i16 items] */
+#endif
+#ifndef HL_RING_RECORDS
+#define HL_RING_RECORDS 8192u    /* trace ring buffer [records], a power of two */
+#endif
+#define HL_MAX_ROWS 255u
+#define HL_N_CHANNELS 7u         /* position velocity force_cmd force_out current accel flags */
+#define HL_CHANNEL_MASK 0x7Fu
+#define HL_MAX_DECIMATION 100u
+#define HL_CHUNK_FLOATS 250u     /* f32 items per TRACE_CHUNK */
+
+enum { HL_IDLE = 0, HL_HOMED = 1, HL_WINDOW = 2, HL_PLAYING = 3, HL_FAULT = 4 };
+enum { HL_OK = 0, HL_BAD_MESSAGE = 1, HL_BAD_STATE = 2, HL_FAULT_LATCHED = 3,
+       HL_UNKNOWN_SCENE = 4, HL_TABLE_CRC = 5, HL_BUSY = 6 };
+enum { HL_FAULT_NONE = 0, HL_FAULT_WATCHDOG = 1, HL_FAULT_ESTOP = 2 };
+/* trace flag bits (channel 6) */
+enum { HL_FLAG_CONTACT = 1, HL_FLAG_SATURATED = 2, HL_FLAG_TRANSIENT = 4, HL_FLAG_ZEROED = 8,
+       HL_FLAG_RAMP = 16 };
+
+void hl_device_init(const char *serial_number);
+void hl_servo_tick(void);
+void hl_device_poll(void);
+
+/* for tests and the host build's statistics */
+typedef struct {
+    int state;
+    int fault;
+    uint64_t ticks;          /* servo ticks since power-up (the device clock) */
+    float current;           /* last amplifier command [A] */
+    uint32_t frames_in;      /* intact frames received */
+    uint32_t tx_dropped;     /* control frames that found the UART full */
+    uint32_t records_lost;   /* trace records the ring could not hold */
+    uint32_t max_tick_cycles;
+} hl_device_view;
+hl_device_view hl_device_peek(void);
+
+/* the servo tick's cost, for the Cortex-M build's measurement (0 where not counted) */
+uint32_t hal_cycles(void);
+
+#endif

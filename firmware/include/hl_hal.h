@@ -1,0 +1,39 @@
+/* The hardware layer: one interface, three implementations.
+ *
+ *   src/hal_sim.c    simulated plant (src/plant.c) behind in-memory byte queues: the host
+ *                    build on a pseudo-terminal (src/main_host.c) and the unit tests
+ *   src/hal_stm32.c  STM32F405 (netduinoplus2 under QEMU, or the papers' device board):
+ *                    USART, SysTick at the servo rate, IWDG; its encoder, current and
+ *                    accelerometer come from the simulated plant unless HL_BOARD_IO is set
+ *
+ * Conventions: height and velocity are positive upwards (away from the surface), force is
+ * positive upwards, SI units unless a name says otherwise. The servo side is called from
+ * the servo tick (an interrupt on the Cortex-M build); the link side from the main loop.
+ */
+#ifndef HL_HAL_H
+#define HL_HAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* ---- servo side ---- */
+int32_t hal_encoder_counts(void);  /* stylus height [encoder counts of HL_ENCODER_NM] */
+void hal_current_set(float amps);  /* amplifier command [A], already clamped by the caller */
+float hal_accel_read(void);        /* stylus acceleration [m/s^2], up positive */
+void hal_watchdog_kick(void);      /* the hardware watchdog (the servo tick proves liveness) */
+
+/* ---- link side ---- */
+size_t hal_uart_read(uint8_t *buf, size_t cap);     /* non-blocking; bytes read */
+size_t hal_uart_space(void);                        /* bytes hal_uart_write accepts now */
+void hal_uart_write(const uint8_t *buf, size_t len); /* len <= hal_uart_space() */
+void hal_lock(void);   /* keep the servo tick out (mask its interrupt); nests once */
+void hal_unlock(void);
+
+/* ---- the simulated plant's hooks: no-ops on hardware, where a person places and moves the
+ * stylus and the real sample is a real object ---- */
+void hal_plant_scene(float surface_m, int real_sample, float stiffness, float damping);
+void hal_plant_home(float height_m);
+enum { HAL_TASK_REST = 0, HAL_TASK_TAP = 1, HAL_TASK_HOLD = 2 };
+void hal_plant_task(int task);
+
+#endif

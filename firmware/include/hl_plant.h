@@ -1,0 +1,31 @@
+/* A simulated plant for the firmware: the stylus held by a tapping hand, on a real sample
+ * or in free air. Used by the host build, the unit tests and the QEMU build (hal_sim.c,
+ * hal_stm32.c); never by a board with real I/O.
+ *
+ * One mass (device 55 g + hand 100 g) moves vertically. The hand pulls it towards an
+ * intended motion through 300 N/m and 4 N*s/m and adds its own model of the moving mass
+ * (mass x intended acceleration), as hapticlab's Python simulator does
+ * (device/sim/tapper.py); the taps follow the same stroke: raised-cosine speed-up, cruise
+ * at the tap's speed (normal, 0.11 +- 0.033 m/s, within 0.02-0.40 m/s) to 4 mm below the
+ * surface, dwell, half-cosine rise, pause. A real sample is a unilateral Kelvin-Voigt
+ * contact (it pushes, never pulls): passive, so the plant creates no energy. HOME and a
+ * playback's start place the stylus at rest (the person puts it there). Block
+ * ringing (Table 1) is not modelled here: the Python emulator does that.
+ */
+#ifndef HL_PLANT_H
+#define HL_PLANT_H
+
+#include <stdint.h>
+
+void plant_init(uint64_t seed, float rate_hz, float encoder_m, float force_constant);
+void plant_step(float current_a); /* one servo tick with this amplifier current */
+int32_t plant_encoder(void);      /* counts */
+float plant_accel(void);          /* [m/s^2], with the sensor's noise */
+float plant_height(void);         /* true height [m] */
+void plant_scene(float surface_m, int real_sample, float stiffness, float damping);
+void plant_home(float height_m);
+void plant_task(int task);        /* HAL_TASK_REST / TAP / HOLD */
+/* energy bookkeeping [J]: work done by the motor, and what the plant holds and lost */
+double plant_motor_work(void);
+
+#endif

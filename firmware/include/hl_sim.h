@@ -1,0 +1,17 @@
+/* The simulated-plant HAL's link side: in-memory byte queues that a program (the host
+ * build's pty loop, the unit tests) fills and drains. */
+#ifndef HL_SIM_H
+#define HL_SIM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+void sim_hal_init(uint64_t seed);
+/* bytes from the host to the device; returns how many fitted */
+size_t sim_uart_to_device(const uint8_t *buf, size_t n);
+/* bytes the device sent; returns how many were copied */
+size_t sim_uart_from_device(uint8_t *buf, size_t cap);
+/* the last amplifier current the servo commanded [A] */
+float sim_current(void);
+
+#endif

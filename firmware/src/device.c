@@ -1,0 +1,991 @@
+/* Protocol v2 handler, state machine and servo (docs/wire-protocol.md, hl_device.h).
+ *
+ * Shared between the servo tick (an interrupt on a Cortex-M) and the main loop:
+ *   - commands change servo state only inside hal_lock() … hal_unlock();
+ *   - the servo reports to the main loop through two single-producer rings: events
+ *     (contacts, saturation runs, faults, window ends) and trace records;
+ *   - ESTOP and ZERO set a request flag the next tick acts on, whatever is in flight.
+ */
+#include "hl_device.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "hl_hal.h"
+
+#define RAMP_TICKS (HL_SERVO_HZ / 20u)      /* the enable ramp: 50 ms */
+#define VEL_TICKS (HL_SERVO_HZ / 1000u)     /* speed estimate: least squares over 1 ms */
+#define HYST_UM 200 /* a new contact once the reading was 0.2 mm above the surface */
+#define REPORT_TICKS (HL_SERVO_HZ / 40u)    /* STATUS and POSITION at 40 Hz */
+#define WATCHDOG_TICKS (HL_WATCHDOG_MS * (HL_SERVO_HZ / 1000u))
+#define N_EVENTS 64u
+#define MAX_WINDOW_MS 600000u
+#define MAX_CLEARANCE_UM 500000u
+#define TX_RESERVE 2200u /* UART room kept for control frames while traces stream */
+
+static const float ENC_M = (float)HL_ENCODER_NM * 1e-9f;
+static const float KF = (float)HL_FORCE_CONSTANT_MN_A * 1e-3f;
+
+enum { EV_CONTACT = 1, EV_SATURATION, EV_FAULT, EV_DONE };
+typedef struct {
+    uint8_t type;
+    uint8_t code;
+    uint16_t window_id;
+    uint32_t tick;
+    int32_t a;
+    int32_t b;
+    uint64_t time_us;
+} event;
+
+typedef struct {
+    /* scene, written by commands while the servo does not render */
+    uint16_t scene_id;
+    uint8_t begun, kind, blend, rows, committed, have_v;
+    int32_t surface_um;
+    float spring, attenuation, stiffness, damping;
+    uint16_t row_len;
+    float v[HL_MAX_ROWS];
+} scene_t;
+
+static struct {
+    /* ---- servo state (the tick owns it; commands touch it under hal_lock) ---- */
+    volatile uint8_t state, fault, prev_enabled;
+    volatile uint8_t req_estop, req_zero, req_stop;
+    uint8_t enabled;
+    uint32_t ramp;
+    uint64_t ticks;
+    volatile uint64_t last_rx_tick;
+    float limit;           /* current clamp [A] */
+    int32_t enc[VEL_TICKS];
+    uint32_t enc_n;
+    float current;
+    /* the running window or playback */
+    uint16_t window_id;
+    uint32_t wtick, duration, timeout;
+    uint8_t from_contact, timed_out, armed;
+    int32_t first_contact;
+    uint16_t n_contacts, n_sats;
+    uint64_t t0_us;
+    uint32_t play_n;
+    /* transient in progress */
+    uint8_t tr_on;
+    uint32_t tr_k;
+    uint16_t tr_r1, tr_r2;
+    float tr_c1, tr_c2;
+    /* saturation run */
+    uint8_t sat_on;
+    uint32_t sat_start;
+    float sat_peak;
+    /* trace configuration and ring */
+    uint16_t mask;
+    uint16_t decim;
+    uint8_t nch;
+    volatile uint32_t ring_w, ring_r; /* record counters (not wrapped) */
+    uint32_t ring_idx[HL_RING_RECORDS];
+    float ring[HL_RING_RECORDS][HL_N_CHANNELS];
+    uint32_t records_lost, records_total;
+    /* events ring */
+    volatile uint32_t ev_w, ev_r;
+    event ev[N_EVENTS];
+    int32_t height_um; /* for POSITION */
+    volatile uint8_t position_due;
+    uint32_t max_tick_cycles;
+
+    /* ---- link state (main loop only) ---- */
+    hl_receiver rx;
+    uint8_t payload[HL_MAX_PAYLOAD];
+    uint8_t proto;
+    uint16_t tx_seq;
+    uint8_t have_last, last_type, last_status;
+    uint16_t last_seq;
+    uint32_t last_crc;
+    size_t last_len;
+    uint32_t frames_in, tx_dropped;
+    uint64_t next_status;
+    /* the window whose traces and WINDOW_DONE are being sent */
+    uint8_t done_pending;
+    event done;
+    uint32_t next_record, done_records;
+    uint16_t trace_window;
+    char serial[16];
+} D;
+
+static scene_t S;
+static int16_t TABLE[HL_TABLE_ITEMS];
+static int16_t PLAY[HL_PLAY_ITEMS];
+
+/* ------------------------------------------------------------------ little-endian helpers */
+static uint16_t get_u16(const uint8_t *p) { return (uint16_t)(p[0] | (p[1] << 8)); }
+static uint32_t get_u32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) |
+           ((uint32_t)p[3] << 24);
+}
+static float get_f32(const uint8_t *p)
+{
+    uint32_t u = get_u32(p);
+    float f;
+    memcpy(&f, &u, 4);
+    return f;
+}
+static uint8_t *put_u16(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)v;
+    p[1] = (uint8_t)(v >> 8);
+    return p + 2;
+}
+static uint8_t *put_u32(uint8_t *p, uint32_t v)
+{
+    for (int k = 0; k < 4; k++) {
+        p[k] = (uint8_t)(v >> (8 * k));
+    }
+    return p + 4;
+}
+static uint8_t *put_u64(uint8_t *p, uint64_t v)
+{
+    for (int k = 0; k < 8; k++) {
+        p[k] = (uint8_t)(v >> (8 * k));
+    }
+    return p + 8;
+}
+static uint8_t *put_f32(uint8_t *p, float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    return put_u32(p, u);
+}
+
+/* the clamp [A] for a limit in mA: the binary32 at or just below it, never above */
+static float clamp_of(uint32_t ma)
+{
+    float a = (float)ma / 1000.0f;
+    return (double)a > (double)ma / 1000.0 ? nextafterf(a, 0.0f) : a;
+}
+
+static uint64_t ticks_to_us(uint64_t t) { return t * (1000000u / HL_SERVO_HZ); }
+
+/* ------------------------------------------------------------------ servo side */
+static void push_event(uint8_t type, uint8_t code, uint32_t tick, int32_t a, int32_t b,
+                       uint64_t time_us)
+{
+    if (D.ev_w - D.ev_r >= N_EVENTS) {
+        return; /* the main loop drains 64 events per poll; cannot fill at 40 Hz of taps */
+    }
+    event *e = &D.ev[D.ev_w % N_EVENTS];
+    e->type = type;
+    e->code = code;
+    e->window_id = D.window_id;
+    e->tick = tick;
+    e->a = a;
+    e->b = b;
+    e->time_us = time_us;
+    D.ev_w = D.ev_w + 1;
+}
+
+/* incoming speed [m/s, > 0 into the surface]: least-squares slope of the last 1 ms */
+static float incoming_speed(void)
+{
+    if (D.enc_n < VEL_TICKS) {
+        return 0.0f;
+    }
+    int64_t num = 0;
+    for (uint32_t j = 0; j < VEL_TICKS; j++) {
+        int32_t x = D.enc[(D.enc_n - VEL_TICKS + j) % VEL_TICKS];
+        num += (int64_t)(2 * (int32_t)j - (int32_t)(VEL_TICKS - 1)) * x;
+    }
+    /* sum (2j - (N-1))^2 = N (N^2 - 1) / 3 */
+    const float den = (float)(VEL_TICKS * (VEL_TICKS * VEL_TICKS - 1u)) / 3.0f;
+    return -(float)num / den * 2.0f * (float)HL_SERVO_HZ * ENC_M;
+}
+
+static void pick_rows(float speed)
+{
+    uint16_t r1 = 0, r2 = 0;
+    float c1, c2 = 0.0f;
+    uint8_t n = S.rows;
+    if (S.blend == 0 || n == 1) {
+        c1 = speed / S.v[0];
+    } else if (S.blend == 1) {
+        for (uint16_t i = 1; i < n; i++) {
+            if (fabsf(S.v[i] - speed) < fabsf(S.v[r1] - speed)) {
+                r1 = i;
+            }
+        }
+        c1 = speed / S.v[r1];
+    } else if (speed <= S.v[0]) {
+        c1 = speed / S.v[0];
+    } else if (speed >= S.v[n - 1]) {
+        r1 = (uint16_t)(n - 1);
+        c1 = speed / S.v[n - 1];
+    } else {
+        uint16_t j = 0;
+        while (S.v[j + 1] < speed) {
+            j++;
+        }
+        float w = (speed - S.v[j]) / (S.v[j + 1] - S.v[j]);
+        r1 = j;
+        r2 = (uint16_t)(j + 1);
+        c1 = 1.0f - w;
+        c2 = w;
+    }
+    D.tr_r1 = r1;
+    D.tr_r2 = r2;
+    D.tr_c1 = c1 * S.attenuation * 1e-3f; /* table LSB is 1 mN */
+    D.tr_c2 = c2 * S.attenuation * 1e-3f;
+}
+
+static void latch_fault(uint8_t code)
+{
+    if (D.fault != HL_FAULT_NONE) {
+        return;
+    }
+    D.fault = code;
+    D.enabled = 0;
+    push_event(EV_FAULT, code, D.wtick, 0, 0, ticks_to_us(D.ticks));
+}
+
+static void end_run(uint8_t timed_out)
+{
+    if (D.sat_on) {
+        D.sat_on = 0;
+        push_event(EV_SATURATION, 0, D.sat_start, (int32_t)(D.wtick - D.sat_start),
+                   (int32_t)lroundf(D.sat_peak * 1000.0f), 0);
+    }
+    uint8_t playing = D.state == HL_PLAYING;
+    D.timed_out = timed_out;
+    push_event(EV_DONE, (uint8_t)(timed_out | (D.fault ? 2u : 0u)), D.wtick, D.first_contact,
+               (int32_t)((uint32_t)D.n_contacts | ((uint32_t)D.n_sats << 16)), D.t0_us);
+    D.tr_on = 0;
+    if (playing) {
+        D.enabled = D.prev_enabled; /* a playback enables output for itself only */
+    }
+    D.state = D.fault ? HL_FAULT : D.enabled ? HL_HOMED : HL_IDLE;
+    hal_plant_task(HAL_TASK_REST);
+}
+
+static void record(float pos, float vel, float fcmd, float fout, float cur, float acc,
+                   uint16_t flags)
+{
+    if (D.wtick % D.decim) {
+        return;
+    }
+    uint32_t idx = D.wtick / D.decim;
+    D.records_total = idx + 1;
+    if (D.ring_w - D.ring_r >= HL_RING_RECORDS) {
+        D.records_lost++; /* the main loop reports the gap as TRACE_LOST */
+        return;
+    }
+    uint32_t slot = D.ring_w % HL_RING_RECORDS;
+    const float all[HL_N_CHANNELS] = {pos, vel, fcmd, fout, cur, acc, (float)flags};
+    uint8_t k = 0;
+    for (uint8_t c = 0; c < HL_N_CHANNELS; c++) {
+        if (D.mask & (1u << c)) {
+            D.ring[slot][k++] = all[c];
+        }
+    }
+    D.ring_idx[slot] = idx;
+    D.ring_w = D.ring_w + 1;
+}
+
+void hl_servo_tick(void)
+{
+    uint32_t c0 = hal_cycles();
+    hal_watchdog_kick();
+    D.ticks++;
+    int32_t enc = hal_encoder_counts();
+    D.enc[D.enc_n % VEL_TICKS] = enc;
+    D.enc_n++;
+    float pos = (float)enc * ENC_M;
+    float speed = incoming_speed();
+    uint16_t flags = 0;
+    float fcmd = 0.0f;
+    uint8_t running = D.state == HL_WINDOW || D.state == HL_PLAYING;
+
+    /* requests from the link: acted on at this tick, whatever else is in flight */
+    if (D.req_estop) {
+        D.req_estop = 0;
+        latch_fault(HL_FAULT_ESTOP);
+    }
+    if (D.enabled && D.ticks - D.last_rx_tick > WATCHDOG_TICKS) {
+        latch_fault(HL_FAULT_WATCHDOG); /* armed while output is enabled */
+    }
+    if (D.req_zero) {
+        D.req_zero = 0;
+        D.enabled = 0;
+        D.prev_enabled = 0;
+    }
+
+    if (D.state == HL_WINDOW) {
+        int32_t above = enc * (int32_t)(HL_ENCODER_NM / 1000u) - S.surface_um; /* [um] */
+        if (above >= HYST_UM) {
+            D.armed = 1;
+        }
+        if (above < 0) {
+            flags |= HL_FLAG_CONTACT;
+            if (D.armed) {
+                D.armed = 0;
+                D.n_contacts++;
+                if (D.first_contact < 0) {
+                    D.first_contact = (int32_t)D.wtick;
+                }
+                float v = speed > 2.147f ? 2.147f : speed < -2.147f ? -2.147f : speed;
+                push_event(EV_CONTACT, 0, D.wtick, (int32_t)lroundf(v * 1e9f), 0, 0);
+                if (S.kind == 2) {
+                    pick_rows(speed);
+                    D.tr_on = 1;
+                    D.tr_k = 0;
+                }
+            }
+            if (S.kind != 0) {
+                fcmd += S.spring * ((float)(-above) * 1e-6f);
+            }
+        }
+        if (D.tr_on) {
+            uint32_t base = D.tr_k;
+            fcmd += D.tr_c1 * (float)TABLE[(uint32_t)D.tr_r1 * S.row_len + base] +
+                    D.tr_c2 * (float)TABLE[(uint32_t)D.tr_r2 * S.row_len + base];
+            flags |= HL_FLAG_TRANSIENT;
+            if (++D.tr_k >= S.row_len) {
+                D.tr_on = 0;
+            }
+        }
+        D.height_um = above;
+    } else if (D.state == HL_PLAYING) {
+        fcmd = (float)PLAY[D.wtick] * 1e-3f;
+    }
+
+    /* enable ramp, fault zeroing, NaN guard, clamp */
+    float gain = 0.0f;
+    if (D.enabled) {
+        if (D.ramp < RAMP_TICKS) {
+            D.ramp++;
+            flags |= HL_FLAG_RAMP;
+        }
+        gain = (float)D.ramp / (float)RAMP_TICKS;
+    }
+    if (D.fault) {
+        flags |= HL_FLAG_ZEROED;
+        gain = 0.0f;
+    }
+    float want = fcmd * gain / KF;
+    if (!(fabsf(want) <= 1e6f)) {
+        want = 0.0f; /* NaN or inf never reaches the amplifier */
+    }
+    float cur = want;
+    if (fabsf(want) > D.limit) {
+        cur = want > 0 ? D.limit : -D.limit;
+        flags |= HL_FLAG_SATURATED;
+    }
+    hal_current_set(cur);
+    D.current = cur;
+    float acc = hal_accel_read();
+
+    if (running) {
+        if (flags & HL_FLAG_SATURATED) {
+            if (!D.sat_on) {
+                D.sat_on = 1;
+                D.sat_start = D.wtick;
+                D.sat_peak = 0.0f;
+                D.n_sats++;
+            }
+            if (fabsf(want) > D.sat_peak) {
+                D.sat_peak = fabsf(want);
+            }
+        } else if (D.sat_on) {
+            D.sat_on = 0;
+            push_event(EV_SATURATION, 0, D.sat_start, (int32_t)(D.wtick - D.sat_start),
+                       (int32_t)lroundf(D.sat_peak * 1000.0f), 0);
+        }
+        record(pos, -speed, fcmd, cur * KF, cur, acc, flags);
+        if ((D.wtick % REPORT_TICKS) == 0) {
+            D.position_due = 1;
+        }
+        D.wtick++;
+        uint8_t over = 0, timed_out = 0;
+        if (D.fault || D.req_stop) {
+            over = 1;
+        } else if (D.state == HL_PLAYING) {
+            over = D.wtick >= D.play_n;
+        } else if (!D.from_contact) {
+            over = D.wtick >= D.duration;
+        } else if (D.first_contact >= 0) {
+            over = D.wtick > (uint32_t)D.first_contact + D.duration;
+        } else if (D.wtick >= D.timeout) {
+            over = timed_out = 1;
+        }
+        D.req_stop = 0;
+        if (over) {
+            end_run(timed_out);
+        }
+    } else if (D.fault && D.state != HL_FAULT) {
+        D.state = HL_FAULT;
+    } else if (!D.enabled && D.state == HL_HOMED) {
+        D.state = HL_IDLE;
+    }
+    D.req_stop = 0;
+    uint32_t c = hal_cycles() - c0;
+    if (c > D.max_tick_cycles) {
+        D.max_tick_cycles = c;
+    }
+}
+
+/* ------------------------------------------------------------------ link side */
+/* control frames (ACK, events, HELLO_ACK) take any room; trace chunks and the periodic
+ * STATUS and POSITION leave TX_RESERVE for them, and are skipped, not counted, when a host
+ * stops reading */
+static int send(uint8_t type, const uint8_t *body, size_t len, int control)
+{
+    uint8_t out[HL_MAX_ENCODED + 1];
+    size_t n = hl_encode_frame(type, (uint16_t)(D.tx_seq + 1u), body, len, out, sizeof out);
+    if (n == 0) {
+        return 0;
+    }
+    size_t room = hal_uart_space();
+    if (room < n || (!control && room < n + TX_RESERVE)) {
+        if (control) {
+            D.tx_dropped++;
+        }
+        return 0;
+    }
+    D.tx_seq++;
+    hal_uart_write(out, n);
+    return 1;
+}
+
+static void send_ack(uint16_t seq, uint8_t status)
+{
+    uint8_t b[3];
+    put_u16(b, seq);
+    b[2] = status;
+    send(0x80, b, 3, 1);
+}
+
+static void copy_str(uint8_t *dst, const char *s, size_t n)
+{
+    memset(dst, 0, n);
+    for (size_t i = 0; i < n && s[i]; i++) {
+        dst[i] = (uint8_t)s[i];
+    }
+}
+
+static void send_hello_ack(void)
+{
+    uint8_t b[87], *p = b;
+    *p++ = D.proto;
+    p = put_u32(p, HL_SERVO_HZ);
+    p = put_u16(p, HL_CURRENT_RATING_MA);
+    p = put_u16(p, HL_FORCE_CONSTANT_MN_A);
+    p = put_u32(p, HL_EFFECTIVE_MASS_MG);
+    p = put_u16(p, HL_WATCHDOG_MS);
+    p = put_u32(p, HL_ENCODER_NM);
+    p = put_u32(p, HL_ACCEL_RANGE_MMS2);
+    copy_str(p, "hapticlab reference firmware", 32);
+    copy_str(p + 32, D.serial, 16);
+    copy_str(p + 48, "hlfw-2.0 " HL_BUILD, 16);
+    send(0x81, b, sizeof b, 1);
+    uint8_t l[16];
+    p = put_u32(l, HL_TABLE_ITEMS);
+    p = put_u32(p, HL_PLAY_ITEMS);
+    p = put_u32(p, HL_RING_RECORDS);
+    p = put_u16(p, HL_CHANNEL_MASK);
+    put_u16(p, HL_MAX_DECIMATION);
+    send(0x82, l, sizeof l, 1);
+}
+
+static int finite_all(const uint8_t *p, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        if (!isfinite(get_f32(p + 4 * i))) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+static uint8_t popcount16(uint16_t m)
+{
+    uint8_t n = 0;
+    for (; m; m &= (uint16_t)(m - 1u)) {
+        n++;
+    }
+    return n;
+}
+
+static int running(void) { return D.state == HL_WINDOW || D.state == HL_PLAYING; }
+
+/* a scene upload command: allowed unless running; it turns output off (docs §4 table) */
+static uint8_t scene_gate(void)
+{
+    if (running()) {
+        return HL_BUSY;
+    }
+    hal_lock();
+    D.enabled = 0;
+    if (D.state == HL_HOMED) {
+        D.state = HL_IDLE;
+    }
+    hal_unlock();
+    return HL_OK;
+}
+
+static void begin_run(uint8_t state, uint16_t window_id)
+{
+    D.window_id = window_id;
+    D.wtick = 0;
+    D.first_contact = -1;
+    D.n_contacts = 0;
+    D.n_sats = 0;
+    D.timed_out = 0;
+    D.sat_on = 0;
+    D.tr_on = 0;
+    D.req_stop = 0;
+    D.armed = D.enc[(D.enc_n + VEL_TICKS - 1u) % VEL_TICKS] * (int32_t)(HL_ENCODER_NM / 1000u) >
+              S.surface_um;
+    D.t0_us = ticks_to_us(D.ticks + 1u);
+    D.ring_w = 0;
+    D.ring_r = 0;
+    D.records_total = 0;
+    D.next_record = 0;
+    D.trace_window = window_id;
+    D.state = state;
+}
+
+static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
+{
+    (void)len;
+    switch (type) {
+    case 0x10: { /* SCENE_BEGIN */
+        uint8_t st = scene_gate();
+        if (st != HL_OK) {
+            return st;
+        }
+        uint8_t kind = b[2], rows = b[35], blend = b[38];
+        uint16_t row_len = get_u16(b + 36);
+        float atten = get_f32(b + 39);
+        if (kind > 2 || blend > 2 || !finite_all(b + 7, 7) || !isfinite(get_f32(b + 31)) ||
+            !isfinite(atten) || atten < 0.0f || atten > 1.0f) {
+            return HL_BAD_MESSAGE;
+        }
+        if (kind == 2 ? (rows == 0 || row_len == 0 ||
+                         (uint32_t)rows * row_len > HL_TABLE_ITEMS)
+                      : (rows != 0 || row_len != 0)) {
+            return HL_BAD_MESSAGE;
+        }
+        memset(&S, 0, sizeof S);
+        S.scene_id = get_u16(b);
+        S.kind = kind;
+        S.begun = 1;
+        S.surface_um = (int32_t)get_u32(b + 3);
+        S.spring = get_f32(b + 7);
+        S.stiffness = get_f32(b + 11);
+        S.damping = get_f32(b + 15);
+        S.rows = rows;
+        S.row_len = row_len;
+        S.blend = blend;
+        S.attenuation = atten;
+        if (kind == 2) {
+            memset(TABLE, 0, (size_t)rows * row_len * sizeof TABLE[0]);
+        }
+        return HL_OK;
+    }
+    case 0x11: case 0x12: case 0x14: case 0x13: {
+        uint8_t st = scene_gate();
+        if (st != HL_OK) {
+            return st;
+        }
+        if (!S.begun || get_u16(b) != S.scene_id) {
+            return HL_UNKNOWN_SCENE;
+        }
+        if (type == 0x11) { /* SCENE_VELOCITIES */
+            size_t n = (len - 2) / 4;
+            if (n != S.rows || !finite_all(b + 2, n)) {
+                return HL_BAD_MESSAGE;
+            }
+            for (size_t i = 0; i < n; i++) {
+                float v = get_f32(b + 2 + 4 * i);
+                if (!(v > 0.0f) || (i > 0 && !(v > S.v[i - 1]))) {
+                    return HL_BAD_MESSAGE; /* > 0 and ascending */
+                }
+                S.v[i] = v;
+            }
+            S.have_v = 1;
+            return HL_OK;
+        }
+        if (type == 0x12) { /* SCENE_CHUNK */
+            uint32_t off = get_u32(b + 2), n = get_u16(b + 6);
+            if (off > (uint32_t)S.rows * S.row_len || n > (uint32_t)S.rows * S.row_len - off) {
+                return HL_BAD_MESSAGE;
+            }
+            for (uint32_t i = 0; i < n; i++) {
+                TABLE[off + i] = (int16_t)get_u16(b + 8 + 2 * i);
+            }
+            return HL_OK;
+        }
+        if (type == 0x14) { /* SCENE_SUPPORT: the firmware renders nothing for a block */
+            return (S.kind == 0 && finite_all(b + 2, 2)) ? HL_OK : HL_BAD_MESSAGE;
+        }
+        /* SCENE_COMMIT */
+        uint32_t items = (uint32_t)S.rows * S.row_len;
+        uint32_t crc = items ? hl_crc32((const uint8_t *)TABLE, items * 2u) : 0u;
+        if (S.kind == 2 && !S.have_v) {
+            return HL_BAD_MESSAGE;
+        }
+        if (crc != get_u32(b + 2)) {
+            return HL_TABLE_CRC;
+        }
+        S.committed = 1;
+        hal_plant_scene((float)S.surface_um * 1e-6f, S.kind == 0, S.stiffness, S.damping);
+        return HL_OK;
+    }
+    case 0x20: { /* HOME */
+        uint32_t c = get_u32(b);
+        if (c == 0 || c > MAX_CLEARANCE_UM) {
+            return HL_BAD_MESSAGE;
+        }
+        if (D.state == HL_FAULT) {
+            return HL_FAULT_LATCHED;
+        }
+        if (running()) {
+            return HL_BUSY;
+        }
+        if (!S.committed) {
+            return HL_BAD_STATE;
+        }
+        hal_plant_home((float)S.surface_um * 1e-6f + (float)c * 1e-6f);
+        hal_lock();
+        D.enabled = 1;
+        D.ramp = 0;
+        D.state = HL_HOMED;
+        hal_unlock();
+        return HL_OK;
+    }
+    case 0x21: { /* START_WINDOW */
+        uint32_t dur = get_u32(b + 2), to = get_u32(b + 6);
+        uint8_t fc = b[10];
+        if (dur == 0 || dur > MAX_WINDOW_MS || to == 0 || to > MAX_WINDOW_MS || fc > 1) {
+            return HL_BAD_MESSAGE;
+        }
+        if (D.state == HL_FAULT) {
+            return HL_FAULT_LATCHED;
+        }
+        if (running()) {
+            return HL_BUSY;
+        }
+        if (D.state != HL_HOMED) {
+            return HL_BAD_STATE;
+        }
+        hal_lock();
+        D.duration = dur * (HL_SERVO_HZ / 1000u);
+        D.timeout = to * (HL_SERVO_HZ / 1000u);
+        D.from_contact = fc;
+        begin_run(HL_WINDOW, get_u16(b));
+        hal_unlock();
+        hal_plant_task(HAL_TASK_TAP);
+        return HL_OK;
+    }
+    case 0x22: /* STOP_WINDOW */
+        if (running()) {
+            D.req_stop = 1;
+        }
+        return HL_OK;
+    case 0x23: { /* PLAY_CHUNK */
+        if (running()) {
+            return HL_BUSY;
+        }
+        uint32_t off = get_u32(b), n = get_u16(b + 4);
+        if (off > HL_PLAY_ITEMS || n > HL_PLAY_ITEMS - off) {
+            return HL_BAD_MESSAGE;
+        }
+        for (uint32_t i = 0; i < n; i++) {
+            PLAY[off + i] = (int16_t)get_u16(b + 6 + 2 * i);
+        }
+        return HL_OK;
+    }
+    case 0x24: { /* PLAY_START */
+        uint32_t n = get_u32(b + 2);
+        if (n == 0 || n > HL_PLAY_ITEMS) {
+            return HL_BAD_MESSAGE;
+        }
+        if (D.state == HL_FAULT) {
+            return HL_FAULT_LATCHED;
+        }
+        if (running()) {
+            return HL_BUSY;
+        }
+        hal_plant_task(HAL_TASK_HOLD);
+        hal_lock();
+        D.prev_enabled = D.enabled;
+        if (!D.enabled) {
+            D.enabled = 1;
+            D.ramp = 0;
+        }
+        D.play_n = n;
+        begin_run(HL_PLAYING, get_u16(b));
+        hal_unlock();
+        return HL_OK;
+    }
+    case 0x25: { /* SET_LIMIT */
+        uint16_t ma = get_u16(b);
+        if (ma == 0 || ma > HL_CURRENT_RATING_MA) {
+            return HL_BAD_MESSAGE;
+        }
+        if (running()) {
+            return HL_BUSY;
+        }
+        D.limit = clamp_of(ma);
+        return HL_OK;
+    }
+    case 0x30: /* ESTOP */
+        D.req_estop = 1;
+        return HL_OK;
+    case 0x31: /* CLEAR_FAULT */
+        if (D.state == HL_FAULT) {
+            hal_lock();
+            D.fault = HL_FAULT_NONE;
+            D.enabled = 0;
+            D.state = HL_IDLE;
+            hal_unlock();
+        }
+        return HL_OK;
+    case 0x32: /* ZERO */
+        D.req_zero = 1;
+        if (running()) {
+            D.req_stop = 1;
+        }
+        return HL_OK;
+    case 0x41: { /* TRACE_CONFIG */
+        uint16_t mask = get_u16(b), dec = get_u16(b + 2);
+        if (mask == 0 || (mask & ~HL_CHANNEL_MASK) || dec == 0 || dec > HL_MAX_DECIMATION) {
+            return HL_BAD_MESSAGE;
+        }
+        if (running()) {
+            return HL_BUSY;
+        }
+        D.mask = mask;
+        D.decim = dec;
+        D.nch = popcount16(mask);
+        return HL_OK;
+    }
+    default:
+        return HL_BAD_MESSAGE; /* a device -> host type, or v1's TRACE_REQUEST */
+    }
+}
+
+static void handle(const hl_frame *f, uint8_t version)
+{
+    D.frames_in++;
+    D.last_rx_tick = D.ticks; /* every intact frame feeds the watchdog */
+    if (f->type == 0x01) { /* HELLO: any header version */
+        if (f->body_len != 1) {
+            return;
+        }
+        D.proto = 2; /* the only version this firmware speaks; a v1 host closes the link */
+        D.have_last = 0;
+        hal_lock();
+        if (running()) {
+            D.req_stop = 1;
+        }
+        D.enabled = 0;
+        D.prev_enabled = 0;
+        D.limit = clamp_of(HL_CURRENT_RATING_MA);
+        D.mask = HL_CHANNEL_MASK;
+        D.decim = 1;
+        D.nch = HL_N_CHANNELS;
+        hal_unlock();
+        D.done_pending = 0;
+        send_hello_ack();
+        return;
+    }
+    if (version != 2) {
+        send_ack(f->seq, HL_BAD_MESSAGE);
+        return;
+    }
+    if (f->type == 0x02) {
+        return;
+    }
+    if (f->type == 0x03) {
+        if (f->body_len == 4) {
+            send(0x83, f->body, 4, 1);
+        }
+        return;
+    }
+    if (!hl_body_fits(f->type, f->body, f->body_len)) {
+        send_ack(f->seq, HL_BAD_MESSAGE);
+        return;
+    }
+    uint32_t crc = hl_crc32(f->body, f->body_len);
+    if (D.have_last && f->seq == D.last_seq && f->type == D.last_type && crc == D.last_crc &&
+        f->body_len == D.last_len) {
+        send_ack(f->seq, D.last_status); /* a re-sent command: answered, not redone */
+        return;
+    }
+    uint8_t st = execute(f->type, f->body, f->body_len);
+    D.have_last = 1;
+    D.last_seq = f->seq;
+    D.last_type = f->type;
+    D.last_crc = crc;
+    D.last_len = f->body_len;
+    D.last_status = st;
+    send_ack(f->seq, st);
+}
+
+static void send_events(void)
+{
+    while (D.ev_r != D.ev_w) {
+        event e = D.ev[D.ev_r % N_EVENTS];
+        uint8_t b[24], *p;
+        if (e.type == EV_DONE) {
+            D.done = e;
+            D.done_pending = 1;
+            D.done_records = D.records_total;
+            D.ev_r = D.ev_r + 1;
+            return; /* WINDOW_DONE waits for the window's last trace record */
+        }
+        switch (e.type) {
+        case EV_CONTACT:
+            p = put_u16(b, e.window_id);
+            p = put_u32(p, e.tick);
+            put_u32(p, (uint32_t)e.a);
+            send(0x90, b, 10, 1);
+            break;
+        case EV_SATURATION:
+            p = put_u16(b, e.window_id);
+            p = put_u32(p, e.tick);
+            p = put_u32(p, (uint32_t)e.a);
+            put_u32(p, (uint32_t)e.b);
+            send(0x91, b, 14, 1);
+            break;
+        case EV_FAULT:
+            b[0] = e.code;
+            put_u64(b + 1, e.time_us);
+            send(0x92, b, 9, 1);
+            break;
+        default:
+            break;
+        }
+        D.ev_r = D.ev_r + 1;
+    }
+}
+
+static void send_lost(uint32_t start, uint32_t n)
+{
+    uint8_t b[10], *p = put_u16(b, D.trace_window);
+    p = put_u32(p, start);
+    put_u32(p, n);
+    send(0x98, b, 10, 1);
+}
+
+/* stream the ring: TRACE_CHUNKs of consecutive records, TRACE_LOST for a gap */
+static void send_traces(void)
+{
+    for (int budget = 8; budget > 0; budget--) {
+        uint32_t w = D.ring_w, r = D.ring_r;
+        if (r == w) {
+            break;
+        }
+        uint32_t per = HL_CHUNK_FLOATS / D.nch;
+        uint32_t first = D.ring_idx[r % HL_RING_RECORDS];
+        if (first != D.next_record) {
+            send_lost(D.next_record, first - D.next_record);
+            D.next_record = first;
+        }
+        uint32_t n = 0;
+        while (n < per && r + n != w && D.ring_idx[(r + n) % HL_RING_RECORDS] == first + n) {
+            n++;
+        }
+        if (n < per && !D.done_pending && running()) {
+            break; /* wait for a full chunk while the window runs */
+        }
+        uint8_t b[10 + 4 * HL_CHUNK_FLOATS], *p = put_u16(b, D.trace_window);
+        p = put_u16(p, D.mask);
+        p = put_u32(p, first);
+        p = put_u16(p, n);
+        for (uint32_t i = 0; i < n; i++) {
+            const float *rec = D.ring[(r + i) % HL_RING_RECORDS];
+            for (uint8_t k = 0; k < D.nch; k++) {
+                p = put_f32(p, rec[k]);
+            }
+        }
+        if (!send(0x97, b, (size_t)(p - b), 0)) {
+            break; /* the UART is full: the ring holds the records meanwhile */
+        }
+        D.ring_r = r + n;
+        D.next_record = first + n;
+    }
+    if (D.done_pending && D.ring_r == D.ring_w) {
+        if (D.next_record < D.done_records) {
+            send_lost(D.next_record, D.done_records - D.next_record);
+            D.next_record = D.done_records;
+        }
+        uint8_t b[24], *p = put_u16(b, D.done.window_id);
+        p = put_u64(p, D.done.time_us);
+        p = put_u32(p, D.done.tick);
+        p = put_u32(p, (uint32_t)D.done.a);
+        p = put_u16(p, (uint32_t)D.done.b & 0xFFFFu);
+        p = put_u16(p, (uint32_t)D.done.b >> 16);
+        *p++ = D.done.code & 1u;
+        *p = (D.done.code & 2u) ? 1u : 0u;
+        send(0x94, b, 24, 1);
+        D.done_pending = 0;
+    }
+}
+
+void hl_device_init(const char *serial_number)
+{
+    memset(&D, 0, sizeof D);
+    memset(&S, 0, sizeof S);
+    hl_receiver_init(&D.rx);
+    D.state = HL_IDLE;
+    D.limit = clamp_of(HL_CURRENT_RATING_MA);
+    D.mask = HL_CHANNEL_MASK;
+    D.decim = 1;
+    D.nch = HL_N_CHANNELS;
+    D.proto = 2;
+    copy_str((uint8_t *)D.serial, serial_number, sizeof D.serial - 1);
+}
+
+void hl_device_poll(void)
+{
+    uint8_t buf[256];
+    size_t n;
+    while ((n = hal_uart_read(buf, sizeof buf)) > 0) {
+        for (size_t i = 0; i < n; i++) {
+            hl_frame f;
+            if (hl_receiver_push(&D.rx, buf[i], D.payload, &f)) {
+                handle(&f, D.payload[0]);
+            }
+        }
+    }
+    if (!D.done_pending) {
+        send_events();
+    }
+    send_traces();
+    hal_lock();
+    uint64_t now = D.ticks;
+    uint8_t pos_due = D.position_due;
+    D.position_due = 0;
+    int32_t height = D.height_um;
+    uint32_t wt = D.wtick;
+    hal_unlock();
+    if (pos_due && D.state == HL_WINDOW) {
+        uint8_t b[10], *p = put_u16(b, D.window_id);
+        p = put_u32(p, wt);
+        put_u32(p, (uint32_t)height);
+        send(0x96, b, 10, 0);
+    }
+    if (now >= D.next_status) {
+        D.next_status = now + REPORT_TICKS;
+        uint8_t b[14], *p = put_u64(b, ticks_to_us(now));
+        *p++ = D.state;
+        p = put_u32(p, (uint32_t)(int32_t)lroundf(D.current * KF * 1000.0f));
+        *p = D.fault;
+        send(0x93, b, 14, 0);
+    }
+}
+
+hl_device_view hl_device_peek(void)
+{
+    hl_device_view v = {D.state, D.fault, D.ticks, D.current, D.frames_in, D.tx_dropped,
+                        D.records_lost, D.max_tick_cycles};
+    return v;
+}

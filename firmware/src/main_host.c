@@ -1,0 +1,133 @@
+/* The host build: the firmware and its simulated plant on a pseudo-terminal.
+ *
+ *   build/hlfw-host [--seed N]
+ *
+ * Prints the pty's path as its first line (as `hapticlab device emulate` does), then
+ * runs the servo at HL_SERVO_HZ paced to the monotonic clock until SIGINT/SIGTERM.
+ * Ticks are computed as they fall due; input is read the moment it arrives (ppoll), so an
+ * ESTOP acts at the next tick computed after its last byte. Statistics go to stderr at
+ * exit.
+ */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "hl_device.h"
+#include "hl_sim.h"
+
+static volatile sig_atomic_t stop_flag;
+static void on_signal(int sig)
+{
+    (void)sig;
+    stop_flag = 1;
+}
+
+static uint64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}
+
+int main(int argc, char **argv)
+{
+    unsigned long long seed = 0;
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--seed") == 0 && i + 1 < argc) {
+            seed = strtoull(argv[++i], NULL, 10);
+        } else {
+            fprintf(stderr, "usage: %s [--seed N]\n", argv[0]);
+            return 2;
+        }
+    }
+    int master = posix_openpt(O_RDWR | O_NOCTTY);
+    if (master < 0 || grantpt(master) || unlockpt(master)) {
+        perror("hlfw-host: pty");
+        return 1;
+    }
+    const char *path = ptsname(master);
+    int slave = open(path, O_RDWR | O_NOCTTY); /* held open: a host closing its end is no EOF */
+    struct termios t;
+    if (slave < 0 || tcgetattr(slave, &t)) {
+        perror("hlfw-host: pty");
+        return 1;
+    }
+    cfmakeraw(&t);
+    tcsetattr(slave, TCSANOW, &t);
+    tcgetattr(master, &t);
+    cfmakeraw(&t);
+    tcsetattr(master, TCSANOW, &t);
+    fcntl(master, F_SETFL, fcntl(master, F_GETFL) | O_NONBLOCK);
+    signal(SIGINT, on_signal);
+    signal(SIGTERM, on_signal);
+    signal(SIGPIPE, SIG_IGN);
+
+    char serial[16];
+    snprintf(serial, sizeof serial, "HOST-%llu", seed);
+    sim_hal_init(seed);
+    hl_device_init(serial);
+    printf("%s\n", path);
+    fflush(stdout);
+    fprintf(stderr, "reference firmware (host build, simulated plant, seed %llu) at %u Hz "
+            "on %s; stop with Ctrl-C\n", seed, HL_SERVO_HZ, path);
+
+    const uint64_t period = 1000000000ull / HL_SERVO_HZ;
+    uint64_t start = now_ns(), done = 0, late = 0;
+    static uint8_t out[65536], in[4096];
+    size_t out_len = 0;
+    while (!stop_flag) {
+        uint64_t due = (now_ns() - start) / period;
+        if (due > done + HL_SERVO_HZ) { /* suspended (a debugger, a stopped process) */
+            late += due - done - HL_SERVO_HZ;
+            done = due - HL_SERVO_HZ;
+        }
+        for (int k = 0; k < 20 && done < due; k++, done++) {
+            hl_servo_tick();
+            hl_device_poll(); /* between ticks, as the Cortex-M main loop runs */
+        }
+        ssize_t r;
+        while ((r = read(master, in, sizeof in)) > 0) {
+            sim_uart_to_device(in, (size_t)r);
+        }
+        hl_device_poll();
+        if (out_len == 0) {
+            out_len = sim_uart_from_device(out, sizeof out);
+        }
+        if (out_len > 0) {
+            ssize_t w = write(master, out, out_len);
+            if (w > 0) {
+                memmove(out, out + w, out_len - (size_t)w);
+                out_len -= (size_t)w;
+            }
+        }
+        if (done < due) {
+            continue;
+        }
+        uint64_t next = start + (done + 1) * period, now = now_ns();
+        if (next > now && out_len == 0) {
+            struct timespec ts = {0, (long)(next - now)};
+            struct pollfd p = {master, POLLIN, 0};
+            ppoll(&p, 1, &ts, NULL);
+        } else if (next > now) {
+            struct timespec ts = {0, (long)(next - now)};
+            struct pollfd p = {master, POLLIN | POLLOUT, 0};
+            ppoll(&p, 1, &ts, NULL);
+        }
+    }
+    hl_device_view v = hl_device_peek();
+    fprintf(stderr, "hlfw-host: %llu ticks, %u frames in, %u control frames dropped, %u trace "
+            "records lost, %llu ticks skipped while suspended\n",
+            (unsigned long long)v.ticks, v.frames_in, v.tx_dropped, v.records_lost,
+            (unsigned long long)late);
+    close(slave);
+    close(master);
+    return 0;
+}

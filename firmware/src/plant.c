@@ -1,0 +1,213 @@
+/* The simulated plant (hl_plant.h). Semi-implicit Euler, sub-stepped so that the stiffest
+ * contact (a few MN/m on 155 g) stays well inside the method's stability limit. */
+#include "hl_plant.h"
+
+#include <math.h>
+
+#include "hl_hal.h"
+
+#define PI_F 3.14159265f
+
+static const float MASS = 0.155f;     /* device 0.055 + hand 0.100 [kg] */
+static const float K_HAND = 300.0f;   /* [N/m] */
+static const float B_HAND = 4.0f;     /* [N*s/m] */
+static const float B_MOTOR = 0.3f;    /* [N*s/m] */
+static const float TOP = 0.02f;       /* stroke start above the surface [m] */
+static const float PRESS = 0.004f;    /* intended depth below it [m] */
+static const float T_ACCEL = 0.06f, T_RISE = 0.20f;
+static const float ACCEL_NOISE = 0.3f, ACCEL_RANGE = 490.333f, ACCEL_LSB = 490.333f / 2048.0f;
+
+enum { P_ACCEL, P_CRUISE, P_DWELL, P_RISE, P_PAUSE };
+
+typedef struct {
+    uint64_t rng;
+    float dt, enc_m, kf;
+    float z, v, a;             /* stylus height, velocity, acceleration */
+    float zr, vr, ar;          /* intended motion */
+    float surface, k, b;
+    int real;
+    int task, phase;
+    float t_phase, v_tap, z_from, hold;
+    int32_t enc;
+    int sub; /* integration steps per tick */
+    double work;
+} plant_state;
+
+static plant_state P;
+
+static uint64_t next_u64(void)
+{
+    /* xorshift64* */
+    P.rng ^= P.rng >> 12;
+    P.rng ^= P.rng << 25;
+    P.rng ^= P.rng >> 27;
+    return P.rng * 2685821657736338717ull;
+}
+
+static float uniform(void) { return (float)((next_u64() >> 40) + 1u) / 16777217.0f; }
+
+/* a standard normal deviate, approximately: the sum of 12 uniforms minus 6 (Irwin-Hall;
+ * tails cut at +-6 sd). Cheap enough for every tick on a microcontroller without libm
+ * calls, which matters for the sensor noise drawn at 10 kHz. */
+static float normal(void)
+{
+    uint32_t sum = 0;
+    for (int k = 0; k < 3; k++) {
+        uint64_t r = next_u64();
+        for (int j = 0; j < 4; j++) {
+            sum += (uint32_t)(r >> (16 * j)) & 0xFFFFu;
+        }
+    }
+    return (float)sum / 65536.0f - 6.0f;
+}
+
+void plant_init(uint64_t seed, float rate_hz, float encoder_m, float force_constant)
+{
+    P = (plant_state){0};
+    P.rng = seed * 0x9E3779B97F4A7C15ull + 1u;
+    P.dt = 1.0f / rate_hz;
+    P.enc_m = encoder_m;
+    P.kf = force_constant;
+    P.z = P.zr = TOP;
+    P.sub = 1;
+    P.task = HAL_TASK_REST;
+}
+
+void plant_scene(float surface_m, int real_sample, float stiffness, float damping)
+{
+    P.surface = surface_m;
+    P.real = real_sample;
+    P.k = stiffness > 0 ? stiffness : 0.0f;
+    /* a sample given without damping gets 10 % of critical on the held stylus, so that it
+     * does not chatter forever (wood's derived contact damping is of that size) */
+    P.b = damping > 0 ? damping : 0.2f * sqrtf(P.k * MASS);
+    /* semi-implicit Euler is stable for w*h < 2; keep w*h <= 0.25 on the contact */
+    float wh = sqrtf(P.k / MASS) * P.dt;
+    P.sub = P.real ? 1 + (int)(wh / 0.25f) : 1;
+}
+
+void plant_home(float height_m)
+{
+    P.z = P.zr = height_m;
+    P.v = P.vr = P.ar = 0.0f;
+}
+
+static void new_tap(void)
+{
+    float v;
+    do {
+        v = 0.11f + 0.033f * normal();
+    } while (v < 0.02f || v > 0.40f);
+    P.v_tap = v;
+    P.phase = P_ACCEL;
+    P.t_phase = 0.0f;
+    P.z_from = P.zr;
+}
+
+void plant_task(int task)
+{
+    if (task == HAL_TASK_TAP && P.task != HAL_TASK_TAP) {
+        new_tap();
+    }
+    if (task == HAL_TASK_HOLD) { /* the hand holds the stylus still in free air */
+        plant_home(fmaxf(P.z, P.surface + TOP));
+    }
+    P.task = task;
+}
+
+/* the intended motion, one tick on: position, velocity and acceleration of smooth strokes
+ * (the cruise's end is a stop of the reference only; the hand's feedforward never kicks) */
+static void intend(void)
+{
+    P.ar = 0.0f;
+    if (P.task != HAL_TASK_TAP) {
+        P.vr = 0.0f;
+        return;
+    }
+    P.t_phase += P.dt;
+    switch (P.phase) {
+    case P_ACCEL: {
+        float s = fminf(P.t_phase / T_ACCEL, 1.0f);
+        P.vr = -P.v_tap * 0.5f * (1.0f - cosf(PI_F * s));
+        P.ar = -P.v_tap * 0.5f * PI_F / T_ACCEL * sinf(PI_F * s);
+        P.zr += P.vr * P.dt;
+        if (s >= 1.0f) {
+            P.phase = P_CRUISE;
+        }
+        break;
+    }
+    case P_CRUISE:
+        P.vr = -P.v_tap;
+        P.zr += P.vr * P.dt;
+        if (P.zr <= P.surface - PRESS) {
+            P.zr = P.surface - PRESS;
+            P.vr = 0.0f;
+            P.phase = P_DWELL;
+            P.t_phase = 0.0f;
+            P.hold = 0.06f + 0.06f * uniform();
+        }
+        break;
+    case P_DWELL:
+        if (P.t_phase >= P.hold) {
+            P.phase = P_RISE;
+            P.t_phase = 0.0f;
+            P.z_from = P.zr;
+        }
+        break;
+    case P_RISE: {
+        float s = fminf(P.t_phase / T_RISE, 1.0f), w = PI_F / T_RISE;
+        float half = 0.5f * (P.surface + TOP - P.z_from);
+        P.zr = P.z_from + half * (1.0f - cosf(PI_F * s));
+        P.vr = half * w * sinf(PI_F * s);
+        P.ar = half * w * w * cosf(PI_F * s);
+        if (s >= 1.0f) {
+            P.vr = P.ar = 0.0f;
+            P.phase = P_PAUSE;
+            P.t_phase = 0.0f;
+            P.hold = 0.05f + 0.15f * uniform();
+        }
+        break;
+    }
+    default: /* P_PAUSE */
+        if (P.t_phase >= P.hold) {
+            new_tap();
+        }
+        break;
+    }
+}
+
+void plant_step(float current_a)
+{
+    intend();
+    const int sub = P.sub;
+    const float h = P.dt / (float)sub;
+    float motor = current_a * P.kf;
+    float f_sum = 0.0f;
+    for (int i = 0; i < sub; i++) {
+        float f = motor + K_HAND * (P.zr - P.z) + B_HAND * (P.vr - P.v) + MASS * P.ar -
+                  B_MOTOR * P.v;
+        if (P.real && P.z < P.surface) {
+            float fc = P.k * (P.surface - P.z) - P.b * P.v;
+            f += fc > 0.0f ? fc : 0.0f; /* a sample pushes, never pulls */
+        }
+        P.v += f / MASS * h;
+        P.z += P.v * h;
+        P.work += (double)motor * (double)P.v * (double)h;
+        f_sum += f;
+    }
+    P.a = f_sum / (float)sub / MASS;
+    P.enc = (int32_t)floorf(P.z / P.enc_m + 0.5f);
+}
+
+int32_t plant_encoder(void) { return P.enc; }
+
+float plant_accel(void)
+{
+    float a = P.a + ACCEL_NOISE * normal();
+    a = fmaxf(-ACCEL_RANGE, fminf(ACCEL_RANGE, a));
+    return roundf(a / ACCEL_LSB) * ACCEL_LSB;
+}
+
+float plant_height(void) { return P.z; }
+
+double plant_motor_work(void) { return P.work; }

@@ -1,0 +1,419 @@
+/* Unit tests of the device: the state table, field ranges and NaN, clamp, ramp, watchdog,
+ * e-stop and the trace stream, driven through the simulated-plant HAL's byte queues
+ * exactly as a host drives it (frames in, frames out). Called from hl_test.c. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "hl_device.h"
+#include "hl_sim.h"
+#include "hl_wire.h"
+
+int device_tests(void);
+
+static int fails;
+#define EXPECT(cond)                                                                    \
+    do {                                                                                \
+        if (!(cond)) {                                                                  \
+            fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond);    \
+            fails++;                                                                    \
+        }                                                                               \
+    } while (0)
+
+static uint16_t seq;
+static hl_receiver host_rx;
+static uint8_t payload[HL_MAX_PAYLOAD];
+/* what the device said since the last drain, by type */
+static int seen[256];
+static uint8_t last_body[256][HL_MAX_PAYLOAD];
+static uint32_t chunk_records, chunk_next, lost_records;
+static int chunk_gap;
+
+static void drain(void)
+{
+    uint8_t buf[4096];
+    size_t n;
+    while ((n = sim_uart_from_device(buf, sizeof buf)) > 0) {
+        for (size_t i = 0; i < n; i++) {
+            hl_frame f;
+            if (!hl_receiver_push(&host_rx, buf[i], payload, &f)) {
+                continue;
+            }
+            EXPECT(hl_body_fits(f.type, f.body, f.body_len));
+            seen[f.type]++;
+            memcpy(last_body[f.type], f.body, f.body_len);
+            if (f.type == 0x97) {
+                uint32_t start = (uint32_t)f.body[4] | ((uint32_t)f.body[5] << 8) |
+                                 ((uint32_t)f.body[6] << 16) | ((uint32_t)f.body[7] << 24);
+                uint32_t k = (uint32_t)f.body[8] | ((uint32_t)f.body[9] << 8);
+                chunk_gap |= start != chunk_next;
+                chunk_next = start + k;
+                chunk_records += k;
+            } else if (f.type == 0x98) {
+                uint32_t start = (uint32_t)f.body[2] | ((uint32_t)f.body[3] << 8) |
+                                 ((uint32_t)f.body[4] << 16) | ((uint32_t)f.body[5] << 24);
+                uint32_t k = (uint32_t)f.body[6] | ((uint32_t)f.body[7] << 8) |
+                             ((uint32_t)f.body[8] << 16) | ((uint32_t)f.body[9] << 24);
+                chunk_gap |= start != chunk_next;
+                chunk_next = start + k;
+                lost_records += k;
+            }
+        }
+    }
+}
+
+static void ticks(uint32_t n, int poll, int read)
+{
+    for (uint32_t i = 0; i < n; i++) {
+        hl_servo_tick();
+        if (poll) {
+            hl_device_poll();
+        }
+        if (read) {
+            drain();
+        }
+    }
+}
+
+static void put(uint8_t version, uint8_t type, const uint8_t *body, size_t len);
+
+/* n ticks with the host heartbeating every 25 ms and reading everything */
+static void ticks_fed(uint32_t n)
+{
+    uint8_t none[1] = {0};
+    for (uint32_t i = 0; i < n; i += 250) {
+        put(2, 0x02, none, 0);
+        ticks(n - i < 250 ? n - i : 250, 1, 1);
+    }
+}
+
+static void put(uint8_t version, uint8_t type, const uint8_t *body, size_t len)
+{
+    uint8_t out[HL_MAX_ENCODED + 1];
+    size_t n = hl_encode_frame_v(version, type, ++seq, body, len, out, sizeof out);
+    sim_uart_to_device(out, n);
+    hl_device_poll();
+    drain();
+}
+
+/* send a command, return the ACK's status (-1: no ACK) */
+static int cmd_v(uint8_t version, uint8_t type, const uint8_t *body, size_t len)
+{
+    seen[0x80] = 0;
+    put(version, type, body, len);
+    if (!seen[0x80]) {
+        return -1;
+    }
+    uint16_t acked = (uint16_t)(last_body[0x80][0] | (last_body[0x80][1] << 8));
+    EXPECT(acked == seq);
+    return last_body[0x80][2];
+}
+static int cmd(uint8_t type, const uint8_t *body, size_t len) { return cmd_v(2, type, body, len); }
+
+static void le32(uint8_t *p, uint32_t v)
+{
+    for (int k = 0; k < 4; k++) {
+        p[k] = (uint8_t)(v >> (8 * k));
+    }
+}
+static void lef(uint8_t *p, float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    le32(p, u);
+}
+
+static int scene_spring(uint16_t id, float k, float atten)
+{
+    uint8_t b[43] = {0};
+    b[0] = (uint8_t)id;
+    b[2] = 1;
+    lef(b + 7, k);
+    lef(b + 39, atten);
+    int st = cmd(0x10, b, sizeof b);
+    if (st != 0) {
+        return st;
+    }
+    uint8_t c[6] = {(uint8_t)id, 0, 0, 0, 0, 0};
+    return cmd(0x13, c, 6);
+}
+
+static int home(uint32_t um)
+{
+    uint8_t b[4];
+    le32(b, um);
+    return cmd(0x20, b, 4);
+}
+
+static int window(uint16_t id, uint32_t ms, uint8_t from_contact)
+{
+    uint8_t b[11];
+    b[0] = (uint8_t)id;
+    b[1] = 0;
+    le32(b + 2, ms);
+    le32(b + 6, ms);
+    b[10] = from_contact;
+    return cmd(0x21, b, 11);
+}
+
+static int play(const int16_t *f, uint16_t n)
+{
+    uint8_t b[6 + 2 * 480];
+    le32(b, 0);
+    b[4] = (uint8_t)n;
+    b[5] = (uint8_t)(n >> 8);
+    memcpy(b + 6, f, 2u * n); /* little-endian host */
+    int st = cmd(0x23, b, 6 + 2u * n);
+    if (st != 0) {
+        return st;
+    }
+    uint8_t s[6] = {9, 0};
+    le32(s + 2, n);
+    return cmd(0x24, s, 6);
+}
+
+static void hello(void)
+{
+    memset(seen, 0, sizeof seen);
+    uint8_t b[1] = {2};
+    put(1, 0x01, b, 1);
+    EXPECT(seen[0x81] == 1 && last_body[0x81][0] == 2); /* HELLO_ACK in protocol 2 */
+    EXPECT(seen[0x82] == 1);                            /* then LIMITS */
+}
+
+static void fresh(uint64_t seed)
+{
+    sim_hal_init(seed);
+    hl_device_init("TEST");
+    hl_receiver_init(&host_rx);
+    seq = 0;
+    chunk_records = chunk_next = lost_records = 0;
+    chunk_gap = 0;
+    hello();
+}
+
+static void test_state_table(void)
+{
+    fresh(1);
+    uint8_t none[1] = {0};
+    /* IDLE, no scene */
+    EXPECT(home(20000) == HL_BAD_STATE);
+    EXPECT(window(1, 100, 0) == HL_BAD_STATE);
+    EXPECT(cmd(0x22, none, 0) == HL_OK);  /* STOP_WINDOW: nothing runs */
+    EXPECT(cmd(0x31, none, 0) == HL_OK);  /* CLEAR_FAULT: none latched */
+    uint8_t sup[10] = {7, 0};
+    EXPECT(cmd(0x14, sup, 10) == HL_UNKNOWN_SCENE);
+    /* a version-1 frame after a version-2 HELLO_ACK */
+    EXPECT(cmd_v(1, 0x32, none, 0) == HL_BAD_MESSAGE);
+    /* v1's TRACE_REQUEST and a device -> host type */
+    uint8_t tr[11] = {0};
+    EXPECT(cmd(0x40, tr, 11) == HL_BAD_MESSAGE);
+    uint8_t ack[3] = {0};
+    EXPECT(cmd(0x80, ack, 3) == HL_BAD_MESSAGE);
+    /* HOMED */
+    EXPECT(scene_spring(3, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(hl_device_peek().state == HL_HOMED);
+    /* WINDOW: uploads, limits and a second window are BUSY; stop works */
+    EXPECT(window(2, 1000, 0) == HL_OK);
+    ticks(10, 1, 1);
+    EXPECT(hl_device_peek().state == HL_WINDOW);
+    EXPECT(scene_spring(4, 100.0f, 1.0f) == HL_BUSY);
+    EXPECT(home(20000) == HL_BUSY);
+    EXPECT(window(3, 100, 0) == HL_BUSY);
+    uint8_t lim[2] = {0xF4, 0x01};
+    EXPECT(cmd(0x25, lim, 2) == HL_BUSY);
+    uint8_t tc[4] = {1, 0, 1, 0};
+    EXPECT(cmd(0x41, tc, 4) == HL_BUSY);
+    EXPECT(cmd(0x22, none, 0) == HL_OK);
+    ticks(2, 1, 1);
+    EXPECT(hl_device_peek().state == HL_HOMED);
+    EXPECT(seen[0x94] == 1); /* WINDOW_DONE after the stop */
+    /* a scene upload turns output off: IDLE */
+    EXPECT(scene_spring(5, 680.0f, 1.0f) == HL_OK);
+    ticks(1, 1, 1);
+    EXPECT(hl_device_peek().state == HL_IDLE);
+    /* a re-sent command is answered with the first status, not executed again */
+    uint8_t h[4];
+    le32(h, 20000);
+    uint8_t out[64];
+    size_t n = hl_encode_frame(0x20, 77, h, 4, out, sizeof out);
+    seen[0x80] = 0;
+    sim_uart_to_device(out, n);
+    sim_uart_to_device(out, n);
+    hl_device_poll();
+    drain();
+    EXPECT(seen[0x80] == 2);
+}
+
+static void test_ranges_and_nan(void)
+{
+    fresh(2);
+    EXPECT(scene_spring(1, 680.0f, NAN) == HL_BAD_MESSAGE);
+    EXPECT(scene_spring(1, INFINITY, 1.0f) == HL_BAD_MESSAGE);
+    EXPECT(scene_spring(1, 680.0f, 1.5f) == HL_BAD_MESSAGE);
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(0) == HL_BAD_MESSAGE);
+    EXPECT(home(500001) == HL_BAD_MESSAGE);
+    EXPECT(home(500000) == HL_OK);
+    EXPECT(window(1, 0, 0) == HL_BAD_MESSAGE);
+    EXPECT(window(1, 600001, 0) == HL_BAD_MESSAGE);
+    EXPECT(window(1, 0xFFFFFFFFu, 1) == HL_BAD_MESSAGE);
+    uint8_t lim[2] = {0, 0};
+    EXPECT(cmd(0x25, lim, 2) == HL_BAD_MESSAGE);
+    lim[0] = 0x79; /* 1401 mA: above the rating */
+    lim[1] = 0x05;
+    EXPECT(cmd(0x25, lim, 2) == HL_BAD_MESSAGE);
+    uint8_t tc[4] = {0x80, 0, 1, 0}; /* a channel this device lacks */
+    EXPECT(cmd(0x41, tc, 4) == HL_BAD_MESSAGE);
+    tc[0] = 1;
+    tc[2] = 101; /* decimation above the limit */
+    EXPECT(cmd(0x41, tc, 4) == HL_BAD_MESSAGE);
+    /* a table scene: velocities must be > 0 and ascending; the commit's CRC checked */
+    uint8_t b[43] = {0};
+    b[0] = 9;
+    b[2] = 2;
+    b[35] = 2;
+    b[36] = 3;
+    lef(b + 39, 1.0f);
+    EXPECT(cmd(0x10, b, 43) == HL_OK);
+    uint8_t v[10] = {9, 0};
+    lef(v + 2, 0.2f);
+    lef(v + 6, 0.1f);
+    EXPECT(cmd(0x11, v, 10) == HL_BAD_MESSAGE);
+    lef(v + 2, 0.1f);
+    lef(v + 6, 0.2f);
+    EXPECT(cmd(0x11, v, 10) == HL_OK);
+    uint8_t ch[8 + 12] = {9, 0, 0, 0, 0, 0, 6, 0};
+    for (int i = 0; i < 6; i++) {
+        ch[8 + 2 * i] = (uint8_t)(100 * (i + 1));
+    }
+    EXPECT(cmd(0x12, ch, 20) == HL_OK);
+    uint8_t over[8 + 2] = {9, 0, 6, 0, 0, 0, 1, 0, 1, 0}; /* offset 6 of 6 items */
+    EXPECT(cmd(0x12, over, 10) == HL_BAD_MESSAGE);
+    uint8_t c[6] = {9, 0};
+    le32(c + 2, 0x12345678u);
+    EXPECT(cmd(0x13, c, 6) == HL_TABLE_CRC);
+    le32(c + 2, hl_crc32(ch + 8, 12));
+    EXPECT(cmd(0x13, c, 6) == HL_OK);
+}
+
+static void test_ramp_clamp_estop(void)
+{
+    fresh(3);
+    /* playback in free air: ramp over 50 ms, then the clamp at SET_LIMIT */
+    uint8_t lim[2] = {0xF4, 0x01}; /* 500 mA */
+    EXPECT(cmd(0x25, lim, 2) == HL_OK);
+    static int16_t f[480];
+    for (int i = 0; i < 480; i++) {
+        f[i] = 430; /* 0.43 N = 0.2 A */
+    }
+    EXPECT(play(f, 480) == HL_OK);
+    ticks(1, 0, 0);
+    float i1 = hl_device_peek().current;
+    ticks(249, 0, 0);
+    float i250 = hl_device_peek().current;
+    ticks(300, 1, 1);
+    float i_end = sim_current();
+    EXPECT(fabsf(i1 - 0.2f / 500.0f) < 1e-6f);      /* first ramp step: 1/500 */
+    EXPECT(fabsf(i250 - 0.2f * 0.5f) < 1e-5f);      /* halfway at 25 ms */
+    EXPECT(hl_device_peek().state == HL_IDLE);      /* a playback enables output for itself */
+    EXPECT(fabsf(i_end) < 1e-12f);
+    EXPECT(seen[0x94] == 1);
+    for (int i = 0; i < 480; i++) {
+        f[i] = 10000; /* 10 N: 4.65 A, clamped at 0.5 */
+    }
+    EXPECT(play(f, 480) == HL_OK);
+    ticks(600, 1, 1);
+    EXPECT(seen[0x91] >= 1);                        /* a SATURATION run was reported */
+    uint32_t peak = (uint32_t)last_body[0x91][10] | ((uint32_t)last_body[0x91][11] << 8);
+    /* 10 N / 2.15 N/A before the clamp, at the ramp's 480/500: the playback is 48 ms */
+    EXPECT(peak == 4465);
+    /* e-stop in a window: zero at the next tick, latched, FAULT_LATCHED until cleared */
+    EXPECT(scene_spring(2, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(window(4, 2000, 0) == HL_OK);
+    ticks(700, 1, 1);
+    uint8_t none[1] = {0};
+    memset(seen, 0, sizeof seen);
+    EXPECT(cmd(0x30, none, 0) == HL_OK);
+    ticks(1, 0, 0);
+    EXPECT(hl_device_peek().fault == HL_FAULT_ESTOP);
+    EXPECT(sim_current() == 0.0f);
+    ticks(5, 1, 1);
+    EXPECT(seen[0x92] == 1 && seen[0x94] == 1);
+    EXPECT(last_body[0x94][23] == 1); /* WINDOW_DONE says a fault ended it */
+    EXPECT(home(20000) == HL_FAULT_LATCHED);
+    EXPECT(window(5, 100, 0) == HL_FAULT_LATCHED);
+    EXPECT(cmd(0x31, none, 0) == HL_OK);
+    EXPECT(hl_device_peek().state == HL_IDLE);
+    EXPECT(home(20000) == HL_OK);
+}
+
+static void test_watchdog(void)
+{
+    fresh(4);
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    ticks(5000, 1, 1); /* output off: the watchdog is not armed */
+    EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
+    EXPECT(home(20000) == HL_OK);
+    ticks(990, 1, 1);
+    uint8_t none[1] = {0};
+    put(2, 0x02, none, 0); /* a heartbeat feeds it */
+    ticks(990, 1, 1);
+    EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
+    ticks(20, 1, 1);
+    EXPECT(hl_device_peek().fault == HL_FAULT_WATCHDOG);
+    EXPECT(sim_current() == 0.0f);
+    EXPECT(seen[0x92] == 1);
+}
+
+static void test_stream(void)
+{
+    /* a window streamed while the host reads: every record once, in order */
+    fresh(5);
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(window(1, 500, 0) == HL_OK);
+    ticks_fed(5200);
+    EXPECT(seen[0x94] == 1);
+    EXPECT(chunk_records == 5000 && lost_records == 0 && !chunk_gap);
+    /* decimation 10 and two channels */
+    uint8_t tc[4] = {0x05, 0, 10, 0};
+    EXPECT(cmd(0x41, tc, 4) == HL_OK);
+    chunk_records = chunk_next = 0;
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(window(2, 500, 0) == HL_OK);
+    ticks_fed(5200);
+    EXPECT(chunk_records == 500 && lost_records == 0 && !chunk_gap);
+    /* a host that stops reading: the UART fills, the ring overflows, and the records
+     * that could not be kept are reported as TRACE_LOST, never a silent gap */
+    fresh(6);
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(window(1, 3000, 0) == HL_OK);
+    uint8_t none[1] = {0};
+    for (int k = 0; k < 120; k++) {
+        ticks(250, 1, 0);
+        uint8_t out[32];
+        size_t n = hl_encode_frame(0x02, 0, none, 0, out, sizeof out);
+        sim_uart_to_device(out, n); /* heartbeats keep coming */
+    }
+    ticks_fed(20000);
+    EXPECT(seen[0x94] == 1);
+    EXPECT(lost_records > 0 && !chunk_gap);
+    EXPECT(chunk_records + lost_records == 30000);
+    EXPECT(hl_device_peek().records_lost == lost_records);
+    EXPECT(hl_device_peek().tx_dropped == 0); /* control frames kept their room */
+}
+
+int device_tests(void)
+{
+    test_state_table();
+    test_ranges_and_nan();
+    test_ramp_clamp_estop();
+    test_watchdog();
+    test_stream();
+    printf("device: %d failure(s)\n", fails);
+    return fails;
+}
