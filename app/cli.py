@@ -128,6 +128,13 @@ def _matching(args: argparse.Namespace) -> int:
 
 
 def _device_emulate(args: argparse.Namespace) -> int:
+    if args.firmware != "python":
+        from device.serial.firmware import serve
+
+        if args.speed != 1.0 or args.rate != 10_000.0:
+            raise UsageError("the firmware runs at its own 10 kHz in real time: --rate and "
+                             "--speed apply to --firmware python only")
+        return serve(args.firmware, args.seed)
     from device.serial.emulator import main as emulate
 
     if not 1_000 <= args.rate <= 20_000:
@@ -499,6 +506,10 @@ def build_parser() -> argparse.ArgumentParser:
     em.add_argument("--rate", type=float, default=10_000.0, help="servo rate [Hz]")
     em.add_argument("--seed", type=int, default=0)
     em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
+    em.add_argument("--firmware", choices=("python", "host", "qemu"), default="python",
+                    help="what serves the port: the Python emulator (protocol 1), or the C "
+                    "reference firmware (protocol 2) built for this machine or run on an "
+                    "emulated STM32F405 under QEMU")
     em.set_defaults(func=_device_emulate)
     from app.matching_cli import add_parsers
 

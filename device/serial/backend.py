@@ -73,6 +73,7 @@ class SerialDevice(HapticDevice):
         self.link = Link(port, timeout, retries, transport, baudrate, handler=self._on_message)
         try:
             self._info = self._identify(self.link.hello())
+            self._stream = self._configure_traces()
             # the device reports its state at >= 20 Hz: wait for the first report, so a fault
             # it latched before this host connected is known as soon as the device is open
             self._status_seen.wait(timeout=max(0.2, 3 * self.link.timeout))
@@ -109,9 +110,9 @@ class SerialDevice(HapticDevice):
 
     @staticmethod
     def _identify(h: M.HelloAck) -> DeviceInfo:
-        if h.protocol != 1:
+        if h.protocol not in (1, 2):
             raise ProtocolMismatchError(f"device speaks protocol {h.protocol}, this host "
-                                        "speaks 1")
+                                        "speaks 1 and 2")
         model, serial_no, fw = h.strings
         return DeviceInfo(backend="serial", model=model, serial_number=serial_no, firmware=fw,
                           servo_rate_hz=float(h.servo_rate_hz),
@@ -119,6 +120,26 @@ class SerialDevice(HapticDevice):
                           / 1000, effective_mass=h.effective_mass * 1e-6,
                           watchdog_s=h.watchdog_ms / 1000, encoder_resolution=h.encoder_nm * 1e-9,
                           accel_range=h.accel_range / 1000)
+
+    def _configure_traces(self) -> tuple[str, ...]:
+        """Version 2: stream every base channel the device records, one record per tick
+        (the channels :class:`~device.events.WindowResult` carries). Returns the streamed
+        channel names in order; () for a version-1 device, whose traces are read after
+        each window with TRACE_REQUEST."""
+        if self.link.version < 2:
+            return ()
+        lim = self.link.limits
+        if lim is None:
+            raise ProtocolMismatchError(f"{self.port}: a version-2 device sent no LIMITS "
+                                        "after HELLO_ACK")
+        base = [ch for ch, name in enumerate(M.Channel.NAMES) if name not in _OPTIONAL]
+        missing = [M.Channel.NAMES[ch] for ch in base if not lim.channels >> ch & 1]
+        if missing:
+            raise DeviceError(f"{self.port}: the device records no {', '.join(missing)} "
+                              "trace")
+        mask = sum(1 << ch for ch in base) | (lim.channels & ~0x7F)
+        self._command(M.TraceConfig(mask, 1))
+        return tuple(M.Channel.NAMES[ch] for ch in range(16) if mask >> ch & 1)
 
     def _command(self, msg: M.Message, timeout: float | None = None) -> None:
         status = self.link.request(msg, timeout)
@@ -166,6 +187,10 @@ class SerialDevice(HapticDevice):
         kind = (SceneKind.REAL if m is not None else
                 SceneKind.TABLE if table is not None else SceneKind.SPRING)
         rows, row_len = (table.forces.shape if table is not None else (0, 0))
+        lim = self.link.limits
+        if lim is not None and rows * row_len > lim.table_items:
+            raise DeviceError(f"{self.port}: scene '{scene.name}' has a transient table of "
+                              f"{rows * row_len} items; this device holds {lim.table_items}")
         self._command(M.SceneBegin(
             sid, int(kind), int(round(scene.surface_height * 1e6)), float(scene.spring or 0.0),
             m.stiffness if m else 0.0, m.damping if m else 0.0, ring.slope if ring else 0.0,
@@ -226,6 +251,11 @@ class SerialDevice(HapticDevice):
 
     def _play_force(self, f: np.ndarray, heartbeats: bool) -> WindowResult:
         q = np.clip(np.round(f * 1000), -32768, 32767).astype("<i2")
+        lim = self.link.limits
+        if lim is not None and q.size > lim.play_items:
+            secs = lim.play_items / self._info.servo_rate_hz
+            raise DeviceError(f"{self.port}: a playback of {q.size} samples; this device "
+                              f"holds {lim.play_items} ({secs:.2f} s)")
         for a in range(0, q.size, M.CHUNK_ITEMS):
             part = q[a: a + M.CHUNK_ITEMS]
             self._command(M.PlayChunk(a, part.size, tuple(int(x) for x in part)))
@@ -242,6 +272,8 @@ class SerialDevice(HapticDevice):
         height: float | None = None  # the stylus above the surface [m], from POSITION frames
         done: M.WindowDone | None = None
         faults: list[FaultEvent] = []
+        chunks: list[M.TraceChunk] = []  # version 2: the trace, streamed during the window
+        lost: list[M.TraceLost] = []
         self.link.pause_heartbeats(not heartbeats)
         start = time.monotonic()
         deadline = start + limit
@@ -261,6 +293,10 @@ class SerialDevice(HapticDevice):
                         done = e
                     elif isinstance(e, M.Position) and e.window_id == wid:
                         height = e.height_um * 1e-6
+                    elif isinstance(e, M.TraceChunk) and e.window_id == wid:
+                        chunks.append(e)
+                    elif isinstance(e, M.TraceLost) and e.window_id == wid:
+                        lost.append(e)
                 if gone is not None:
                     err = type(gone)(f"{gone}; the window was aborted after {len(contacts)} "
                                      "contacts")
@@ -282,7 +318,8 @@ class SerialDevice(HapticDevice):
         finally:
             self.link.pause_heartbeats(False)
         t0 = done.t0_us * 1e-6
-        traces = self._fetch_traces(wid, done.n_ticks)
+        traces = (self._assemble(wid, done.n_ticks, chunks, lost) if self._stream else
+                  self._fetch_traces(wid, done.n_ticks))
         traces["t"] = t0 + np.arange(done.n_ticks) / rate
         res = WindowResult(rate, None if done.first_contact < 0 else t0 + done.first_contact / rate,
                            [ContactEvent(t0 + c.t, c.velocity) for c in contacts],
@@ -303,6 +340,36 @@ class SerialDevice(HapticDevice):
             self.link.request(M.StopWindow(), timeout=0.05)
         except DeviceError:
             pass
+
+    def _assemble(self, wid: int, n: int, chunks: list, lost: list) -> dict[str, np.ndarray]:
+        """Version 2: the window's traces from the chunks streamed during it. Every record
+        must be covered exactly once; a gap the device reported (TRACE_LOST) or one it did
+        not is a DeviceError naming the records, never a silent hole."""
+        names = self._stream
+        data = np.full((n, len(names)), np.nan, dtype=np.float32)
+        seen = np.zeros(n, np.int16)
+        for c in chunks:
+            if c.channels != sum(1 << M.Channel.NAMES.index(x) for x in names):
+                raise DeviceError(f"{self.port}: window {wid} streamed channels "
+                                  f"0x{c.channels:x}, not the configured ones")
+            if not 0 <= c.start <= c.start + c.n <= n:
+                raise DeviceError(f"{self.port}: trace records {c.start}–{c.start + c.n - 1} "
+                                  f"lie outside window {wid}'s {n} records")
+            data[c.start:c.start + c.n] = np.asarray(c.items, np.float32).reshape(c.n, -1)
+            seen[c.start:c.start + c.n] += 1
+        if lost:
+            said = ", ".join(f"{x.start}–{x.start + x.n - 1}" for x in lost[:3])
+            raise DeviceError(f"{self.port}: the device dropped trace records {said} of window "
+                              f"{wid} ({sum(x.n for x in lost)} of {n}; its ring buffer "
+                              "overflowed: the link is too slow for the channels asked)")
+        if (seen != 1).any():
+            bad = np.flatnonzero(seen != 1)
+            what = "missing" if seen[bad[0]] == 0 else "sent twice"
+            raise DeviceError(f"{self.port}: window {wid}'s trace record {bad[0]} is {what} "
+                              f"({bad.size} of {n} records not covered exactly once)")
+        out = {name: data[:, k].astype(float) for k, name in enumerate(names)}
+        out["flags"] = out["flags"].astype(np.uint16)
+        return out
 
     def _fetch_traces(self, wid: int, n: int) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}

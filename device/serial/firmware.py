@@ -1,0 +1,96 @@
+"""The reference firmware (``firmware/``) as a device on a pseudo-terminal.
+
+Two builds serve the protocol with the firmware's simulated plant: ``host`` (the C code
+compiled for this machine, paced to its clock) and ``qemu`` (the Cortex-M build on an
+emulated STM32F405, netduinoplus2, its USART on a pty). :func:`command` says how to start
+either, building it with ``make -C firmware`` when the binary is missing; the caller
+(``hapticlab device emulate --firmware``) prints the port as its first line.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+from ..errors import DeviceError
+
+__all__ = ["FIRMWARE_DIR", "binary", "host_command", "qemu_command", "serve", "QEMU_PTY"]
+
+FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
+_TARGETS = {"host": "build/hlfw-host", "qemu": "build/hlfw-stm32.elf"}
+_TOOLS = {"host": ("cc", "build-essential"), "qemu": ("arm-none-eabi-gcc", "gcc-arm-none-eabi")}
+#: what qemu-system-arm prints when it puts a serial port on a pty
+QEMU_PTY = re.compile(r"char device redirected to (/dev/pts/\d+)")
+
+
+def binary(kind: str) -> Path:
+    """The firmware build ``kind`` (``host`` or ``qemu``), built first when missing.
+
+    Raises
+    ------
+    DeviceError
+        No such build, no compiler (the message names the Debian package), or the build
+        failed (with the compiler's last lines).
+    """
+    if kind not in _TARGETS:
+        raise DeviceError(f"firmware build '{kind}' does not exist; choose host or qemu")
+    path = FIRMWARE_DIR / _TARGETS[kind]
+    if path.exists():
+        return path
+    tool, package = _TOOLS[kind]
+    if shutil.which(tool) is None or shutil.which("make") is None:
+        raise DeviceError(f"the {kind} firmware is not built and {tool} or make is missing: "
+                          f"install Debian's {package} and make (`make test` does), then "
+                          f"`make -C firmware {_TARGETS[kind]}`")
+    run = subprocess.run(["make", "-C", str(FIRMWARE_DIR), _TARGETS[kind]],
+                         capture_output=True, text=True)
+    if run.returncode != 0 or not path.exists():
+        tail = "\n".join((run.stdout + run.stderr).strip().splitlines()[-8:])
+        raise DeviceError(f"building the {kind} firmware failed:\n{tail}")
+    return path
+
+
+def host_command(seed: int = 0) -> list[str]:
+    """The host build's command line; it prints its pty as its first line."""
+    return [str(binary("host")), "--seed", str(int(seed))]
+
+
+def qemu_command() -> list[str]:
+    """qemu-system-arm running the Cortex-M build with its USART1 on a new pty (QEMU
+    prints the pty's path: :data:`QEMU_PTY`)."""
+    if shutil.which("qemu-system-arm") is None:
+        raise DeviceError("qemu-system-arm is missing: install Debian's qemu-system-arm "
+                          "(`make test` does)")
+    return ["qemu-system-arm", "-M", "netduinoplus2", "-accel", "tcg,thread=single",
+            "-nographic", "-monitor", "none",
+            "-serial", "pty", "-kernel", str(binary("qemu"))]
+
+
+def serve(kind: str, seed: int = 0) -> int:
+    """Run firmware build ``kind`` until SIGINT/SIGTERM, printing its pty first."""
+    import os
+    import signal
+    import sys
+
+    if kind == "host":
+        cmd = host_command(seed)
+        sys.stdout.flush()
+        os.execv(cmd[0], cmd)  # the binary prints its port and handles the signals itself
+    proc = subprocess.Popen(qemu_command(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            stdin=subprocess.DEVNULL, text=True)
+    stop = lambda *_: proc.terminate()  # noqa: E731
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    for line in proc.stdout:
+        m = QEMU_PTY.search(line)
+        if m:
+            print(m.group(1), flush=True)
+            print(f"reference firmware on an emulated STM32F405 (QEMU netduinoplus2) at "
+                  f"{m.group(1)}; stop with Ctrl-C", file=sys.stderr, flush=True)
+            break
+        print(line.rstrip(), file=sys.stderr, flush=True)
+    for line in proc.stdout:  # QEMU's own complaints, if any
+        print(line.rstrip(), file=sys.stderr, flush=True)
+    return proc.wait()
