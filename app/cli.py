@@ -575,6 +575,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--points", default=None, help="crash: kill after every write point "
                    "('all') or the listed ones ('3,17')")
     b.add_argument("--seeds", default=None, help="orderings: study seeds (default 1,2,3,4,5)")
+    b.add_argument("--firmware", choices=("host", "qemu"), default=None,
+                   help="link: measure the reference firmware (against the Python emulator)")
     b.set_defaults(func=_bench)
 
     d = sub.add_parser("demo", help="what `make demo` runs: a whole simulated study and its "

@@ -9,6 +9,11 @@
   device tick, the clock offset taken from the fastest STATUS frame of the window (so
   the figure is the latency above the fastest frame);
 * fuzz: ``--fuzz N`` mutated frames through the decoder (0 corrupt frames accepted).
+
+``--firmware host`` measures the reference firmware instead (:func:`firmware_main`): PING,
+ESTOP-to-zero during a streaming window, the trace stream's rate and the wait between a
+window's last tick and its traces in hand (the moment a rating can be asked), against the
+Python emulator measured the same way.
 """
 
 from __future__ import annotations
@@ -63,6 +68,8 @@ def main(args) -> int:
     from device.serial.fuzz import fuzz
     from protocols import load_protocol
 
+    if getattr(args, "firmware", None):
+        return firmware_main(args)
     n_ping = 2000
     proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", "--seed", "3"],
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
@@ -144,4 +151,114 @@ def main(args) -> int:
     if fz:
         print(f"fuzz: {fz.frames} frames, {fz.mutated} mutated → {fz.accepted_corrupt} corrupt "
               f"frames accepted, {fz.intact_lost} clean frames lost after corruption")
+    return 0
+
+
+def _start(*args: str) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    return proc, proc.stdout.readline().strip()
+
+
+def _window_figures(port: str, n_windows: int) -> dict:
+    """PING, ESTOP-to-zero, trace streaming and the window-end-to-rating wait on one port.
+
+    Device events are put on the host's clock with the offset of the fastest STATUS frame
+    (host receive time − device time, minimum over the run), so a latency derived from it
+    is an upper bound: it includes the fastest frame's one-way delay."""
+    from device import open_device
+    from device.suite import SUITE_SCENES
+
+    with open_device(f"serial:{port}") as dev:
+        for _ in range(50):
+            dev.ping()
+        rtt = np.array([dev.ping() for _ in range(1000)])
+        offsets: list[float] = []
+
+        def note(*_):
+            if dev.last_status is not None:
+                offsets.append(dev.last_status[0] - dev.last_status[1])
+
+        waits, rates, zero, ack = [], [], [], []
+        for _ in range(n_windows):  # window end → traces in hand (the rating can be asked)
+            dev.load_scene(SUITE_SCENES["firm_spring"])
+            dev.home()
+            t_start = time.perf_counter()
+            res = dev.run_window(1.0, from_first_contact=False, on_progress=note)
+            t_back = time.perf_counter()
+            note()
+            n = len(res.traces["t"])
+            t_end_host = min(offsets) + res.traces["t"][0] + n / res.rate_hz
+            waits.append(t_back - t_end_host)
+            rates.append(n / (t_back - t_start))
+        for _ in range(n_windows):  # ESTOP during a streaming window → output zero
+            dev.load_scene(SUITE_SCENES["pulse_firm"])
+            dev.home()
+            sent: list[float] = []
+
+            def stop(t, _p, sent=sent):
+                note()
+                if t >= 0.3 and not sent:
+                    sent.append(time.perf_counter())
+                    dev.estop()
+                    ack.append(time.perf_counter() - sent[0])
+
+            res = dev.run_window(1.0, from_first_contact=False, on_progress=stop)
+            if res.faults and sent:
+                zero.append(min(offsets) + res.faults[0].t - sent[0])
+            dev.clear_fault()
+        rate = dev.info.servo_rate_hz
+        version = dev.link.version
+    ms = lambda a, q: float(np.percentile(a, q) * 1e3)  # noqa: E731
+    if zero and min(zero) < 0:
+        # a zeroing before its ESTOP was sent: the device's FAULT time and STATUS time are
+        # not one clock (the Python emulator's), so the figure cannot be formed
+        zero = []
+    return {"protocol": version,
+            "rtt_ms": {"p50": ms(rtt, 50), "p99": ms(rtt, 99), "n": int(rtt.size)},
+            "estop_to_zero_ms": {"p50": ms(zero, 50), "max": float(max(zero) * 1e3),
+                                 "n": len(zero), "servo_tick_ms": 1e3 / rate} if zero else None,
+            "estop_ack_ms": {"p50": ms(ack, 50), "max": float(max(ack) * 1e3)} if ack else None,
+            "stream_records_per_s": float(np.median(rates)),
+            "stream_kB_per_s": float(np.median(rates) * 7 * 4 / 1e3),
+            "window_end_to_traces_ms": {"p50": ms(waits, 50), "max": float(max(waits) * 1e3),
+                                        "n": len(waits)}}
+
+
+def firmware_main(args) -> int:
+    """``hapticlab bench link --firmware host``: the figures over the host-built firmware
+    (protocol 2, traces streamed), with the Python emulator (protocol 1, traces fetched
+    after the window) measured the same way in the same process as the baseline."""
+    rows = {}
+    for label, emu_args in (("firmware (host build, v2)", ("--firmware", args.firmware,
+                                                              "--seed", "3")),
+                            ("Python emulator (v1), baseline", ("--seed", "3"))):
+        proc, port = _start(*emu_args)
+        try:
+            rows[label] = _window_figures(port, max(5, args.repeats))
+        finally:
+            proc.terminate()
+            proc.wait(timeout=10)
+    fw, base = rows.values()
+    payload = {"firmware": fw, "baseline_python_emulator": base,
+               "window_end_wait_ratio_p50": fw["window_end_to_traces_ms"]["p50"]
+               / base["window_end_to_traces_ms"]["p50"],
+               "goal_window_end_wait_ms": 50.0}
+    if args.json:
+        emit(payload, True)
+        return 0
+    table = []
+    for label, r in rows.items():
+        z = r["estop_to_zero_ms"]
+        w = r["window_end_to_traces_ms"]
+        table.append((label, f"{r['rtt_ms']['p50']:.3f} / {r['rtt_ms']['p99']:.3f}",
+                      f"{z['p50']:.2f} / {z['max']:.2f}" if z else "not one clock",
+                      f"{r['stream_records_per_s']:.0f} ({r['stream_kB_per_s']:.0f} kB/s)",
+                      f"{w['p50']:.1f} / {w['max']:.1f}"))
+    print_table("link over the firmware vs the Python emulator (medians / worst)",
+                ["device", "PING p50/p99 [ms]", "ESTOP→zero p50/max [ms]",
+                 "trace records/s", "window end → traces [ms]"], table)
+    print(f"window end → traces, firmware / Python emulator (p50): "
+          f"{payload['window_end_wait_ratio_p50']:.3f}×; goal ≤ 50 ms: "
+          f"{'met' if fw['window_end_to_traces_ms']['max'] <= 50 else 'NOT met'} (worst case)")
     return 0
