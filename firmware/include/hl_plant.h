@@ -21,11 +21,8 @@ void plant_init(uint64_t seed, float rate_hz, float encoder_m, float force_const
 void plant_step(float current_a); /* one servo tick with this amplifier current */
 int32_t plant_encoder(void);      /* counts */
 float plant_accel(void);          /* [m/s^2], with the sensor's noise */
-float plant_height(void);         /* true height [m] */
 void plant_scene(float surface_m, int real_sample, float stiffness, float damping);
 void plant_home(float height_m);
 void plant_task(int task);        /* HAL_TASK_REST / TAP / HOLD */
-/* energy bookkeeping [J]: work done by the motor, and what the plant holds and lost */
-double plant_motor_work(void);
 
 #endif

@@ -62,7 +62,7 @@ static struct {
     /* the running window or playback */
     uint16_t window_id;
     uint32_t wtick, duration, timeout;
-    uint8_t from_contact, timed_out, armed;
+    uint8_t from_contact, armed;
     int32_t first_contact;
     uint16_t n_contacts, n_sats;
     uint64_t t0_us;
@@ -252,7 +252,6 @@ static void end_run(uint8_t timed_out)
                    (int32_t)lroundf(D.sat_peak * 1000.0f), 0);
     }
     uint8_t playing = D.state == HL_PLAYING;
-    D.timed_out = timed_out;
     push_event(EV_DONE, (uint8_t)(timed_out | (D.fault ? 2u : 0u)), D.wtick, D.first_contact,
                (int32_t)((uint32_t)D.n_contacts | ((uint32_t)D.n_sats << 16)), D.t0_us);
     D.tr_on = 0;
@@ -535,7 +534,6 @@ static void begin_run(uint8_t state, uint16_t window_id)
     D.first_contact = -1;
     D.n_contacts = 0;
     D.n_sats = 0;
-    D.timed_out = 0;
     D.sat_on = 0;
     D.tr_on = 0;
     D.req_stop = 0;
@@ -550,9 +548,14 @@ static void begin_run(uint8_t state, uint16_t window_id)
     D.state = state;
 }
 
+/* HOME, START_WINDOW, PLAY_START: refused with a latched fault or while running */
+static uint8_t run_gate(void)
+{
+    return D.state == HL_FAULT ? HL_FAULT_LATCHED : running() ? HL_BUSY : HL_OK;
+}
+
 static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
 {
-    (void)len;
     switch (type) {
     case 0x10: { /* SCENE_BEGIN */
         uint8_t st = scene_gate();
@@ -642,11 +645,9 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         if (c == 0 || c > MAX_CLEARANCE_UM) {
             return HL_BAD_MESSAGE;
         }
-        if (D.state == HL_FAULT) {
-            return HL_FAULT_LATCHED;
-        }
-        if (running()) {
-            return HL_BUSY;
+        uint8_t gate = run_gate();
+        if (gate != HL_OK) {
+            return gate;
         }
         if (!S.committed) {
             return HL_BAD_STATE;
@@ -665,11 +666,9 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         if (dur == 0 || dur > MAX_WINDOW_MS || to == 0 || to > MAX_WINDOW_MS || fc > 1) {
             return HL_BAD_MESSAGE;
         }
-        if (D.state == HL_FAULT) {
-            return HL_FAULT_LATCHED;
-        }
-        if (running()) {
-            return HL_BUSY;
+        uint8_t gate = run_gate();
+        if (gate != HL_OK) {
+            return gate;
         }
         if (D.state != HL_HOMED) {
             return HL_BAD_STATE;
@@ -706,11 +705,9 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         if (n == 0 || n > HL_PLAY_ITEMS) {
             return HL_BAD_MESSAGE;
         }
-        if (D.state == HL_FAULT) {
-            return HL_FAULT_LATCHED;
-        }
-        if (running()) {
-            return HL_BUSY;
+        uint8_t gate = run_gate();
+        if (gate != HL_OK) {
+            return gate;
         }
         hal_plant_task(HAL_TASK_HOLD);
         hal_lock();

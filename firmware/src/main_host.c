@@ -112,13 +112,9 @@ int main(int argc, char **argv)
             continue;
         }
         uint64_t next = start + (done + 1) * period, now = now_ns();
-        if (next > now && out_len == 0) {
+        if (next > now) { /* sleep to the next tick, or until input (or room to write) */
             struct timespec ts = {0, (long)(next - now)};
-            struct pollfd p = {master, POLLIN, 0};
-            ppoll(&p, 1, &ts, NULL);
-        } else if (next > now) {
-            struct timespec ts = {0, (long)(next - now)};
-            struct pollfd p = {master, POLLIN | POLLOUT, 0};
+            struct pollfd p = {master, (short)(POLLIN | (out_len ? POLLOUT : 0)), 0};
             ppoll(&p, 1, &ts, NULL);
         }
     }

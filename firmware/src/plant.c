@@ -30,7 +30,6 @@ typedef struct {
     float t_phase, v_tap, z_from, hold;
     int32_t enc;
     int sub; /* integration steps per tick */
-    double work;
 } plant_state;
 
 static plant_state P;
@@ -192,7 +191,6 @@ void plant_step(float current_a)
         }
         P.v += f / MASS * h;
         P.z += P.v * h;
-        P.work += (double)motor * (double)P.v * (double)h;
         f_sum += f;
     }
     P.a = f_sum / (float)sub / MASS;
@@ -208,6 +206,3 @@ float plant_accel(void)
     return roundf(a / ACCEL_LSB) * ACCEL_LSB;
 }
 
-float plant_height(void) { return P.z; }
-
-double plant_motor_work(void) { return P.work; }
