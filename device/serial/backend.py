@@ -137,9 +137,10 @@ class SerialDevice(HapticDevice):
         if missing:
             raise DeviceError(f"{self.port}: the device records no {', '.join(missing)} "
                               "trace")
-        mask = sum(1 << ch for ch in base) | (lim.channels & ~0x7F)
+        known = (1 << len(M.Channel.NAMES)) - 1  # a bit beyond them names no channel
+        mask = sum(1 << ch for ch in base) | (lim.channels & known & ~0x7F)
         self._command(M.TraceConfig(mask, 1))
-        return tuple(M.Channel.NAMES[ch] for ch in range(16) if mask >> ch & 1)
+        return tuple(name for ch, name in enumerate(M.Channel.NAMES) if mask >> ch & 1)
 
     def _command(self, msg: M.Message, timeout: float | None = None) -> None:
         status = self.link.request(msg, timeout)
