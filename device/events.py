@@ -102,13 +102,14 @@ class WindowResult:
     Attributes
     ----------
     rate_hz : float [Hz]
-        Servo rate of the traces.
+        Rate of the traces: the servo rate, or the servo rate / decimation when the
+        device's link is too narrow to stream every tick (a 1-Mbaud UART).
     t_first_contact : float or None [s]
         Device time of the first contact (the window is measured from it).
     contacts, saturations, faults : list
         Events in time order.
     traces : dict of str → ndarray
-        Channels of :data:`TRACE_CHANNELS`, one sample per servo tick; backends may
+        Channels of :data:`TRACE_CHANNELS`, one sample per record (``rate_hz``); backends may
         add more (the simulator adds ``true_*`` channels).
     timed_out : bool
         True when no contact happened before the wait limit.

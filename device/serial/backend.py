@@ -45,6 +45,38 @@ _OPTIONAL = ("true_position", "true_velocity", "true_accel")
 COMMIT_TIMEOUT_S = 2.0
 
 
+def stream_decimation(lim: M.Limits, n_channels: int, servo_rate_hz: float,
+                      share: float = 0.8) -> int:
+    """The smallest trace decimation whose framed stream fits in ``share`` of the device's
+    link (``LIMITS.link_bytes_s``; the rest is for control frames, STATUS and POSITION).
+
+    Parameters
+    ----------
+    lim : Limits
+        What the device advertised.
+    n_channels : int
+        Channels streamed per record.
+    servo_rate_hz : float [Hz]
+        Servo rate (one record per tick at decimation 1).
+
+    Raises
+    ------
+    DeviceError
+        Even ``LIMITS.max_decimation`` does not fit the link.
+    """
+    if lim.link_bytes_s <= 0:
+        return 1
+    per = M.TRACE_ITEMS // n_channels  # records in a full chunk, as the device fills them
+    full = M.TraceChunk(0, 0, 0, per, (0.0,) * (per * n_channels))
+    bytes_per_record = len(M.encode(full, 0, 2)) / per
+    for d in range(1, max(1, lim.max_decimation) + 1):
+        if servo_rate_hz / d * bytes_per_record <= share * lim.link_bytes_s:
+            return d
+    raise DeviceError(f"the device's link carries {lim.link_bytes_s} B/s: too little for "
+                      f"{n_channels} trace channels even at its largest decimation "
+                      f"({lim.max_decimation})")
+
+
 class SerialDevice(HapticDevice):
     """Driver for a device on a serial port (or any pyserial URL).
 
@@ -68,6 +100,7 @@ class SerialDevice(HapticDevice):
         self._output = 0.0
         self._scene_id = 0
         self._window_id = 0
+        self._decimation = 1  # servo ticks per trace record
         self._status_seen = threading.Event()
         self.last_status: tuple[float, float] | None = None  # (host perf time, device time)
         self.link = Link(port, timeout, retries, transport, baudrate, handler=self._on_message)
@@ -122,10 +155,11 @@ class SerialDevice(HapticDevice):
                           accel_range=h.accel_range / 1000)
 
     def _configure_traces(self) -> tuple[str, ...]:
-        """Version 2: stream every base channel the device records, one record per tick
-        (the channels :class:`~device.events.WindowResult` carries). Returns the streamed
-        channel names in order; () for a version-1 device, whose traces are read after
-        each window with TRACE_REQUEST."""
+        """Version 2: stream every base channel the device records (the channels
+        :class:`~device.events.WindowResult` carries), one record per tick unless the
+        device's link is too narrow for that (:func:`stream_decimation`). Returns the
+        streamed channel names in order; () for a version-1 device, whose traces are read
+        after each window with TRACE_REQUEST."""
         if self.link.version < 2:
             return ()
         lim = self.link.limits
@@ -139,7 +173,9 @@ class SerialDevice(HapticDevice):
                               "trace")
         known = (1 << len(M.Channel.NAMES)) - 1  # a bit beyond them names no channel
         mask = sum(1 << ch for ch in base) | (lim.channels & known & ~0x7F)
-        self._command(M.TraceConfig(mask, 1))
+        self._decimation = stream_decimation(lim, bin(mask).count("1"),
+                                             self._info.servo_rate_hz)
+        self._command(M.TraceConfig(mask, self._decimation))
         return tuple(name for ch, name in enumerate(M.Channel.NAMES) if mask >> ch & 1)
 
     def _command(self, msg: M.Message, timeout: float | None = None) -> None:
@@ -319,19 +355,23 @@ class SerialDevice(HapticDevice):
         finally:
             self.link.pause_heartbeats(False)
         t0 = done.t0_us * 1e-6
-        traces = (self._assemble(wid, done.n_ticks, chunks, lost) if self._stream else
+        d = self._decimation if self._stream else 1
+        n_rec = -(-done.n_ticks // d)  # record i is the window's tick i·d
+        traces = (self._assemble(wid, n_rec, chunks, lost) if self._stream else
                   self._fetch_traces(wid, done.n_ticks))
-        traces["t"] = t0 + np.arange(done.n_ticks) / rate
-        res = WindowResult(rate, None if done.first_contact < 0 else t0 + done.first_contact / rate,
+        traces["t"] = t0 + np.arange(n_rec) * d / rate
+        first = None if done.first_contact < 0 else t0 + done.first_contact / rate
+        res = WindowResult(rate / d, first,
                            [ContactEvent(t0 + c.t, c.velocity) for c in contacts],
                            [SaturationEvent(t0 + s.t, s.peak_current, s.duration) for s in sats],
                            [f for f in faults if f is not None][:1], traces,
                            timed_out=bool(done.timed_out))
         if res.faults:
-            # the device reports its own time; express it on the window's clock
+            # the device reports its own time; express it on the window's clock, within the
+            # window's ticks (its last tick may lie after the last record when decimated)
             f = res.faults[0]
-            res.faults = [FaultEvent(max(t0, min(f.t, traces["t"][-1] if done.n_ticks else t0)),
-                                     f.code, f.message)]
+            t_last = t0 + max(done.n_ticks - 1, 0) / rate
+            res.faults = [FaultEvent(max(t0, min(f.t, t_last)), f.code, f.message)]
             self._fault = res.faults[0]
         return res
 

@@ -352,15 +352,18 @@ class HelloAck(Message):
 class Limits(Message):
     """Version 2, sent right after HELLO_ACK: the device's resources. table_items and
     play_items [i16 items]; ring_records: the trace ring buffer [records]; channels: the
-    channels it records (bit mask); max_decimation."""
+    channels it records (bit mask); max_decimation; link_bytes_s: the bytes per second its
+    link carries towards the host [B/s] (e.g. 100,000 for a 1-Mbaud UART), 0 when the link
+    is no limit (USB, a pty)."""
 
     TYPE = 0x82
-    FMT = "IIIHH"
+    FMT = "IIIHHI"
     table_items: int = 0
     play_items: int = 0
     ring_records: int = 0
     channels: int = 0
     max_decimation: int = 1
+    link_bytes_s: int = 0
 
 
 @dataclass(frozen=True)
@@ -513,7 +516,7 @@ MESSAGES: dict[int, type[Message]] = {
                         Limits, TraceChunk, TraceLost)}
 
 CHUNK_ITEMS = 480  # i16 items per SceneChunk / PlayChunk (960 bytes of data)
-TRACE_ITEMS = 250  # f32 items per TraceBlock
+TRACE_ITEMS = 250  # f32 items per TraceBlock, and at most per TraceChunk (n × k)
 
 
 def encode(msg: Message, seq: int, version: int = 1) -> bytes:

@@ -31,6 +31,9 @@
 #ifndef HL_RING_RECORDS
 #define HL_RING_RECORDS 8192u    /* trace ring buffer [records], a power of two */
 #endif
+#ifndef HL_LINK_BYTES_S
+#define HL_LINK_BYTES_S 0u       /* link towards the host [B/s]; 0: no limit (USB, a pty) */
+#endif
 #define HL_MAX_ROWS 255u
 #define HL_N_CHANNELS 7u         /* position velocity force_cmd force_out current accel flags */
 #define HL_CHANNEL_MASK 0x7Fu

@@ -482,12 +482,13 @@ static void send_hello_ack(void)
     copy_str(p + 32, D.serial, 16);
     copy_str(p + 48, "hlfw-2.0 " HL_BUILD, 16);
     send(0x81, b, sizeof b, 1);
-    uint8_t l[16];
+    uint8_t l[20];
     p = put_u32(l, HL_TABLE_ITEMS);
     p = put_u32(p, HL_PLAY_ITEMS);
     p = put_u32(p, HL_RING_RECORDS);
     p = put_u16(p, HL_CHANNEL_MASK);
-    put_u16(p, HL_MAX_DECIMATION);
+    p = put_u16(p, HL_MAX_DECIMATION);
+    put_u32(p, HL_LINK_BYTES_S);
     send(0x82, l, sizeof l, 1);
 }
 

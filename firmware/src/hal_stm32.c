@@ -4,7 +4,8 @@
  * papers' board they are TIM2's encoder mode, the DAC to the amplifier and the SPI
  * accelerometer (firmware/README.md, pin map), which this build does not drive yet.
  *
- * Main loop: poll the USART, hl_device_poll(), drain the TX ring. SysTick: hl_servo_tick().
+ * Main loop: hl_device_poll(), then sleep (WFI) until an interrupt. SysTick (highest
+ * priority): hl_servo_tick(). USART1 interrupt: bytes in and out of two rings.
  */
 #include <stdint.h>
 
@@ -29,10 +30,25 @@
 #define SR_RXNE (1u << 5)
 #define SR_TXE (1u << 7)
 #define CPU_HZ 168000000u
+#ifndef HL_EMULATED_USART
+#define HL_EMULATED_USART 0 /* 1: the QEMU build (Makefile) */
+#endif
 
-#define TX_BYTES 8192u /* a power of two */
+#define TX_BYTES 8192u /* powers of two */
+#define RX_BYTES 2048u
+#define CR1_BASE ((1u << 13) | (1u << 5) | (1u << 3) | (1u << 2)) /* UE, RXNEIE, TE, RE */
+#define CR1_TXEIE (1u << 7)
+#define NVIC_ISER1 REG(0xE000E104u)
+#define NVIC_ISPR1 REG(0xE000E204u)
+#define NVIC_IPR(n) (*(volatile uint8_t *)(0xE000E400u + (n)))
+#define SHPR3 REG(0xE000ED20u)
+#define USART1_IRQ 37u
+
+/* single producer, single consumer rings between the USART interrupt and the main loop */
 static uint8_t tx_ring[TX_BYTES];
 static volatile uint32_t tx_head, tx_tail;
+static uint8_t rx_ring[RX_BYTES];
+static volatile uint32_t rx_head, rx_tail;
 static volatile uint32_t lock_depth;
 
 static float last_current;
@@ -46,11 +62,41 @@ void hal_current_set(float amps)
 float hal_accel_read(void) { return plant_accel(); }
 void hal_watchdog_kick(void) { IWDG_KR = 0xAAAAu; }
 
+/* USART1: every received byte into rx_ring (a byte that finds it full is lost, and the
+ * frame it belonged to fails its CRC: the host resends); TX empties tx_ring while the
+ * data register takes bytes, then turns its own interrupt off. Only this handler moves
+ * tx_tail and rx_head, only the main loop tx_head and rx_tail. */
+void usart1_handler(void);
+void usart1_handler(void)
+{
+    while (USART1_SR & SR_RXNE) {
+        uint8_t b = (uint8_t)USART1_DR;
+        if (rx_head - rx_tail < RX_BYTES) {
+            rx_ring[rx_head % RX_BYTES] = b;
+            rx_head++;
+        }
+    }
+#if HL_EMULATED_USART
+    /* QEMU's USART sends each byte synchronously and keeps TXE set; reading SR costs a
+     * wake-up of QEMU's I/O thread per byte, which halves the emulated board's speed */
+    while (tx_tail != tx_head) {
+#else
+    while (tx_tail != tx_head && (USART1_SR & SR_TXE)) {
+#endif
+        USART1_DR = tx_ring[tx_tail % TX_BYTES];
+        tx_tail++;
+    }
+    if (tx_tail == tx_head) {
+        USART1_CR1 = CR1_BASE;
+    }
+}
+
 size_t hal_uart_read(uint8_t *buf, size_t cap)
 {
     size_t n = 0;
-    while (n < cap && (USART1_SR & SR_RXNE)) {
-        buf[n++] = (uint8_t)USART1_DR;
+    while (n < cap && rx_tail != rx_head) {
+        buf[n++] = rx_ring[rx_tail % RX_BYTES];
+        rx_tail++;
     }
     return n;
 }
@@ -63,14 +109,10 @@ void hal_uart_write(const uint8_t *buf, size_t len)
         tx_ring[tx_head % TX_BYTES] = buf[i];
         tx_head++;
     }
-}
-
-static void uart_drain(void)
-{
-    while (tx_tail != tx_head && (USART1_SR & SR_TXE)) {
-        USART1_DR = tx_ring[tx_tail % TX_BYTES];
-        tx_tail++;
-    }
+    /* the interrupt sends them: TXE keeps it coming on the chip; pending it by hand starts
+     * it (QEMU 7.2's USART model raises no TXE interrupt, and its TXE is always set) */
+    USART1_CR1 = CR1_BASE | CR1_TXEIE;
+    NVIC_ISPR1 = 1u << (USART1_IRQ - 32u);
 }
 
 void hal_lock(void)
@@ -104,7 +146,10 @@ int main(void)
     RCC_AHB1ENR |= 1u;        /* GPIOA */
     RCC_APB2ENR |= 1u << 4;   /* USART1 */
     USART1_BRR = 84000000u / 1000000u; /* 1 Mbaud from the 84-MHz APB2 clock */
-    USART1_CR1 = (1u << 13) | (1u << 3) | (1u << 2); /* UE, TE, RE */
+    USART1_CR1 = CR1_BASE;
+    SHPR3 = (SHPR3 & 0x00FFFFFFu);      /* SysTick (the servo) at the highest priority */
+    NVIC_IPR(USART1_IRQ) = 0x40u;       /* the link below it: the servo preempts it */
+    NVIC_ISER1 = 1u << (USART1_IRQ - 32u);
     DEMCR |= 1u << 24;        /* trace enable, for the cycle counter */
     DWT_CYCCNT = 0;
     DWT_CTRL |= 1u;
@@ -116,6 +161,12 @@ int main(void)
     SYST_CSR = 7u; /* processor clock, interrupt, enable */
     for (;;) {
         hl_device_poll();
-        uart_drain();
+        /* sleep until the next interrupt (the servo tick at the latest) unless a byte came
+         * in meanwhile; with interrupts masked, a pending one still ends the WFI */
+        __asm__ volatile("cpsid i" ::: "memory");
+        if (rx_tail == rx_head) {
+            __asm__ volatile("wfi");
+        }
+        __asm__ volatile("cpsie i" ::: "memory");
     }
 }

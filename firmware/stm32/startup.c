@@ -4,6 +4,7 @@
 extern uint32_t _data_load, _data_start, _data_end, _bss_start, _bss_end, _stack_top;
 int main(void);
 void systick_handler(void);
+void usart1_handler(void);
 
 void reset_handler(void);
 void default_handler(void);
@@ -31,8 +32,12 @@ void reset_handler(void)
     }
 }
 
-__attribute__((section(".isr_vector"), used)) static void (*const vectors[16])(void) = {
-    (void (*)(void))(&_stack_top), reset_handler, default_handler, default_handler,
-    default_handler, default_handler, default_handler, 0, 0, 0, 0, default_handler,
-    default_handler, 0, default_handler, systick_handler,
+/* 16 system exceptions and the STM32F405's 82 interrupts; the link uses USART1 (37) */
+#define DH default_handler
+#define DH8 DH, DH, DH, DH, DH, DH, DH, DH
+__attribute__((section(".isr_vector"), used)) static void (*const vectors[16 + 82])(void) = {
+    (void (*)(void))(&_stack_top), reset_handler, DH, DH, DH, DH, DH, 0, 0, 0, 0, DH, DH, 0,
+    DH, systick_handler,
+    DH8, DH8, DH8, DH8, DH, DH, DH, DH, DH, usart1_handler, DH, DH, /* IRQ 0-39 */
+    DH8, DH8, DH8, DH8, DH8, DH, DH, /* IRQ 40-81 */
 };
