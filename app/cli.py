@@ -177,7 +177,7 @@ def _bench(args: argparse.Namespace) -> int:
     except ModuleNotFoundError:
         raise UsageError(f"no benchmark named {args.what!r}; "
                          "available: sim, matching, link, crash, analysis, demo, energy, "
-                         "orderings") from None
+                         "orderings, tick") from None
     return module.main(args)
 
 
@@ -566,7 +566,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
     b.add_argument("what", help="which benchmark: sim, matching, link, crash, analysis, demo, "
-                   "energy, orderings")
+                   "energy, orderings, tick (the firmware's servo tick on the Cortex-M4)")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
     b.add_argument("--fuzz", type=int, default=100_000,

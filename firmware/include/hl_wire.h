@@ -9,6 +9,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 /* the version this firmware speaks; frames of every version from HL_PROTOCOL_MIN up are
  * decoded (a HELLO comes in version 1, so that any device reads it) */
@@ -83,5 +84,19 @@ void hl_receiver_init(hl_receiver *rx);
 /* Push one byte; returns 1 when a frame is complete and valid (decoded into payload and
  * *frame), 0 otherwise. */
 int hl_receiver_push(hl_receiver *rx, uint8_t byte, uint8_t *payload, hl_frame *frame);
+
+/* little-endian field writers for code that builds message bodies (tests, the tick bench) */
+static inline void hl_le32(uint8_t *p, uint32_t v)
+{
+    for (int k = 0; k < 4; k++) {
+        p[k] = (uint8_t)(v >> (8 * k));
+    }
+}
+static inline void hl_lef(uint8_t *p, float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    hl_le32(p, u);
+}
 
 #endif

@@ -67,9 +67,3 @@ void hal_uart_write(const uint8_t *buf, size_t len) { (void)q_put(&TX, buf, len)
 void hal_lock(void) {}
 void hal_unlock(void) {}
 uint32_t hal_cycles(void) { return 0; }
-void hal_plant_scene(float surface_m, int real_sample, float stiffness, float damping)
-{
-    plant_scene(surface_m, real_sample, stiffness, damping);
-}
-void hal_plant_home(float height_m) { plant_home(height_m); }
-void hal_plant_task(int task) { plant_task(task); }

@@ -130,12 +130,6 @@ void hal_unlock(void)
 
 uint32_t hal_cycles(void) { return DWT_CYCCNT; }
 
-void hal_plant_scene(float surface_m, int real_sample, float stiffness, float damping)
-{
-    plant_scene(surface_m, real_sample, stiffness, damping);
-}
-void hal_plant_home(float height_m) { plant_home(height_m); }
-void hal_plant_task(int task) { plant_task(task); }
 
 void systick_handler(void);
 void systick_handler(void) { hl_servo_tick(); }

@@ -110,26 +110,13 @@ static int cmd_v(uint8_t version, uint8_t type, const uint8_t *body, size_t len)
 }
 static int cmd(uint8_t type, const uint8_t *body, size_t len) { return cmd_v(2, type, body, len); }
 
-static void le32(uint8_t *p, uint32_t v)
-{
-    for (int k = 0; k < 4; k++) {
-        p[k] = (uint8_t)(v >> (8 * k));
-    }
-}
-static void lef(uint8_t *p, float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, 4);
-    le32(p, u);
-}
-
 static int scene_spring(uint16_t id, float k, float atten)
 {
     uint8_t b[43] = {0};
     b[0] = (uint8_t)id;
     b[2] = 1;
-    lef(b + 7, k);
-    lef(b + 39, atten);
+    hl_lef(b + 7, k);
+    hl_lef(b + 39, atten);
     int st = cmd(0x10, b, sizeof b);
     if (st != 0) {
         return st;
@@ -141,7 +128,7 @@ static int scene_spring(uint16_t id, float k, float atten)
 static int home(uint32_t um)
 {
     uint8_t b[4];
-    le32(b, um);
+    hl_le32(b, um);
     return cmd(0x20, b, 4);
 }
 
@@ -150,8 +137,8 @@ static int window(uint16_t id, uint32_t ms, uint8_t from_contact)
     uint8_t b[11];
     b[0] = (uint8_t)id;
     b[1] = 0;
-    le32(b + 2, ms);
-    le32(b + 6, ms);
+    hl_le32(b + 2, ms);
+    hl_le32(b + 6, ms);
     b[10] = from_contact;
     return cmd(0x21, b, 11);
 }
@@ -159,7 +146,7 @@ static int window(uint16_t id, uint32_t ms, uint8_t from_contact)
 static int play(const int16_t *f, uint16_t n)
 {
     uint8_t b[6 + 2 * 480];
-    le32(b, 0);
+    hl_le32(b, 0);
     b[4] = (uint8_t)n;
     b[5] = (uint8_t)(n >> 8);
     memcpy(b + 6, f, 2u * n); /* little-endian host */
@@ -168,7 +155,7 @@ static int play(const int16_t *f, uint16_t n)
         return st;
     }
     uint8_t s[6] = {9, 0};
-    le32(s + 2, n);
+    hl_le32(s + 2, n);
     return cmd(0x24, s, 6);
 }
 
@@ -235,7 +222,7 @@ static void test_state_table(void)
     EXPECT(hl_device_peek().state == HL_IDLE);
     /* a re-sent command is answered with the first status, not executed again */
     uint8_t h[4];
-    le32(h, 20000);
+    hl_le32(h, 20000);
     uint8_t out[64];
     size_t n = hl_encode_frame(0x20, 77, h, 4, out, sizeof out);
     seen[0x80] = 0;
@@ -275,14 +262,14 @@ static void test_ranges_and_nan(void)
     b[2] = 2;
     b[35] = 2;
     b[36] = 3;
-    lef(b + 39, 1.0f);
+    hl_lef(b + 39, 1.0f);
     EXPECT(cmd(0x10, b, 43) == HL_OK);
     uint8_t v[10] = {9, 0};
-    lef(v + 2, 0.2f);
-    lef(v + 6, 0.1f);
+    hl_lef(v + 2, 0.2f);
+    hl_lef(v + 6, 0.1f);
     EXPECT(cmd(0x11, v, 10) == HL_BAD_MESSAGE);
-    lef(v + 2, 0.1f);
-    lef(v + 6, 0.2f);
+    hl_lef(v + 2, 0.1f);
+    hl_lef(v + 6, 0.2f);
     EXPECT(cmd(0x11, v, 10) == HL_OK);
     uint8_t ch[8 + 12] = {9, 0, 0, 0, 0, 0, 6, 0};
     for (int i = 0; i < 6; i++) {
@@ -292,9 +279,9 @@ static void test_ranges_and_nan(void)
     uint8_t over[8 + 2] = {9, 0, 6, 0, 0, 0, 1, 0, 1, 0}; /* offset 6 of 6 items */
     EXPECT(cmd(0x12, over, 10) == HL_BAD_MESSAGE);
     uint8_t c[6] = {9, 0};
-    le32(c + 2, 0x12345678u);
+    hl_le32(c + 2, 0x12345678u);
     EXPECT(cmd(0x13, c, 6) == HL_TABLE_CRC);
-    le32(c + 2, hl_crc32(ch + 8, 12));
+    hl_le32(c + 2, hl_crc32(ch + 8, 12));
     EXPECT(cmd(0x13, c, 6) == HL_OK);
 }
 

@@ -128,3 +128,25 @@ def test_selftest_passes_against_the_cortex_m_build_under_qemu():
             assert np.allclose(np.diff(res.traces["t"]), 4e-4, rtol=0, atol=1e-9)
     finally:
         stop_emulator(emu)
+
+
+@pytest.mark.skipif(shutil.which("qemu-system-arm") is None,
+                    reason="qemu-system-arm missing: `make test` installs it")
+def test_the_servo_tick_fits_its_budget_on_the_cortex_m4():
+    """`hapticlab bench tick`: the Cortex-M build's own device code, counted in instructions
+    under QEMU's -icount. The count's scale is checked on a loop of known length (2
+    instructions × 60,000 rounds; SysTick's 5.95-instruction resolution and the call add a
+    few); the scripted session must reach every costly path; and the worst tick must fit
+    the 16,800 cycles of a 100-µs tick at 168 MHz even at 3 cycles per instruction."""
+    from benchmarks.tick import run_tickbench
+
+    res = run_tickbench()
+    assert abs(res["calibration"] - 120_000) <= 12
+    ev = res["events"]
+    assert ev["contacts"] >= 1 and ev["saturations"] >= 1 and ev["trace_chunks"] >= 100
+    assert ev["faults"] == 1 and ev["windows_done"] == 1
+    assert ev["acks_refused"] == 0 and ev["records_lost"] == 0
+    window = res["states"]["window"]
+    assert window["ticks"] > 10_000
+    assert window["median"] <= window["p99"] <= window["max"]
+    assert 3 * max(s["max"] for s in res["states"].values()) < 16_800

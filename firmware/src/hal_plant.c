@@ -1,0 +1,12 @@
+/* The HAL's simulated-plant hooks (hl_hal.h) for every build that links src/plant.c: the
+ * host build, the unit tests, the QEMU build and the tick bench. A board's HAL defines
+ * them as no-ops instead (a person places the stylus; the real sample is a real object). */
+#include "hl_hal.h"
+#include "hl_plant.h"
+
+void hal_plant_scene(float surface_m, int real_sample, float stiffness, float damping)
+{
+    plant_scene(surface_m, real_sample, stiffness, damping);
+}
+void hal_plant_home(float height_m) { plant_home(height_m); }
+void hal_plant_task(int task) { plant_task(task); }
