@@ -56,6 +56,11 @@ def _record_at(res: WindowResult, t: float) -> int:
     return int(math.ceil((t - res.traces["t"][0]) * res.rate_hz - 1e-6))
 
 
+def _decimation(dev: HapticDevice, res: WindowResult) -> int:
+    """Servo ticks per trace record: 1 unless the link is too narrow for every tick."""
+    return int(round(dev.info.servo_rate_hz / res.rate_hz))
+
+
 def check_info(opener: Opener) -> str:
     with opener() as dev:
         i = dev.info
@@ -104,7 +109,7 @@ def check_transient_scaling(opener: Opener) -> str:
         _require(len(res.contacts) >= 1, "no contact")
         pulse = sc.transient
         n_pulse = int(round(pulse.duration * res.rate_hz))  # records
-        slack = 0 if res.rate_hz == dev.info.servo_rate_hz else 1  # a decimated stream
+        slack = 0 if _decimation(dev, res) == 1 else 1  # a record more or less
         worst = 0.0
         for c in res.contacts:
             i = _record_at(res, c.t)
@@ -228,7 +233,7 @@ def check_play_force(opener: Opener) -> str:
         force = np.where(t > 0.1, 0.5 * np.sin(2 * np.pi * 100 * t), 0.0)  # after the ramp
         res = dev.play_force(force)
         tr = res.traces
-        d = int(round(rate / res.rate_hz))  # servo ticks per record (1 unless decimated)
+        d = _decimation(dev, res)
         t, force = t[::d], force[::d]
         _require(len(tr["t"]) == t.size, f"{len(tr['t'])} records for {n} commanded ticks "
                  f"at decimation {d}")
