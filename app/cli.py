@@ -128,20 +128,23 @@ def _matching(args: argparse.Namespace) -> int:
 
 
 def _device_emulate(args: argparse.Namespace) -> int:
+    if not 0 < args.speed <= 20:
+        raise UsageError(f"--speed must be in (0, 20] (device seconds per wall second), "
+                         f"got {args.speed:g}")
     if args.firmware != "python":
         from device.serial.firmware import serve
 
-        if args.speed != 1.0 or args.rate != 10_000.0:
-            raise UsageError("the firmware runs at its own 10 kHz in real time: --rate and "
-                             "--speed apply to --firmware python only")
-        return serve(args.firmware, args.seed)
+        if args.rate != 10_000.0:
+            raise UsageError("the firmware's servo runs at its own 10 kHz: --rate applies to "
+                             "--firmware python only")
+        if args.firmware == "qemu" and args.speed != 1.0:
+            raise UsageError("the firmware under QEMU runs in real time: --speed applies to "
+                             "--firmware python and host")
+        return serve(args.firmware, args.seed, args.speed)
     from device.serial.emulator import main as emulate
 
     if not 1_000 <= args.rate <= 20_000:
         raise UsageError(f"--rate must be 1,000–20,000 Hz, got {args.rate:g}")
-    if not 0 < args.speed <= 20:
-        raise UsageError(f"--speed must be in (0, 20] (device seconds per wall second), "
-                         f"got {args.speed:g}")
     return emulate(args.rate, args.seed, args.speed)
 
 

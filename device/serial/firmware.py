@@ -26,7 +26,8 @@ QEMU_PTY = re.compile(r"char device redirected to (/dev/pts/\d+)")
 
 
 def binary(kind: str) -> Path:
-    """The firmware build ``kind`` (``host`` or ``qemu``), built first when missing.
+    """The firmware build ``kind`` (``host`` or ``qemu``), brought up to date by ``make``
+    (used as it is where there is no compiler).
 
     Raises
     ------
@@ -37,13 +38,14 @@ def binary(kind: str) -> Path:
     if kind not in _TARGETS:
         raise DeviceError(f"firmware build '{kind}' does not exist; choose host or qemu")
     path = FIRMWARE_DIR / _TARGETS[kind]
-    if path.exists():
-        return path
     tool, package = _TOOLS[kind]
     if shutil.which(tool) is None or shutil.which("make") is None:
+        if path.exists():
+            return path  # built before, on a machine with the compiler
         raise DeviceError(f"the {kind} firmware is not built and {tool} or make is missing: "
                           f"install Debian's {package} and make (`make test` does), then "
                           f"`make -C firmware {_TARGETS[kind]}`")
+    # make rebuilds only what changed, so an edited source never runs as a stale binary
     run = subprocess.run(["make", "-C", str(FIRMWARE_DIR), _TARGETS[kind]],
                          capture_output=True, text=True)
     if run.returncode != 0 or not path.exists():
@@ -52,9 +54,10 @@ def binary(kind: str) -> Path:
     return path
 
 
-def host_command(seed: int = 0) -> list[str]:
-    """The host build's command line; it prints its pty as its first line."""
-    return [str(binary("host")), "--seed", str(int(seed))]
+def host_command(seed: int = 0, speed: float = 1.0) -> list[str]:
+    """The host build's command line, paced at ``speed`` × real time; it prints its pty as
+    its first line."""
+    return [str(binary("host")), "--seed", str(int(seed)), "--speed", repr(float(speed))]
 
 
 def qemu_command() -> list[str]:
@@ -68,14 +71,15 @@ def qemu_command() -> list[str]:
             "-serial", "pty", "-kernel", str(binary("qemu"))]
 
 
-def serve(kind: str, seed: int = 0) -> int:
-    """Run firmware build ``kind`` until SIGINT/SIGTERM, printing its pty first."""
+def serve(kind: str, seed: int = 0, speed: float = 1.0) -> int:
+    """Run firmware build ``kind`` until SIGINT/SIGTERM, printing its pty first (the host
+    build at ``speed`` × real time; QEMU always in real time)."""
     import os
     import signal
     import sys
 
     if kind == "host":
-        cmd = host_command(seed)
+        cmd = host_command(seed, speed)
         sys.stdout.flush()
         os.execv(cmd[0], cmd)  # the binary prints its port and handles the signals itself
     proc = subprocess.Popen(qemu_command(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

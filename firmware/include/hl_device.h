@@ -51,6 +51,9 @@ enum { HL_FLAG_CONTACT = 1, HL_FLAG_SATURATED = 2, HL_FLAG_TRANSIENT = 4, HL_FLA
 void hl_device_init(const char *serial_number);
 void hl_servo_tick(void);
 void hl_device_poll(void);
+/* host build only: the device runs at `speed` x real time, so the watchdog (a limit on
+ * the host's wall-clock silence) counts `speed` x as many ticks */
+void hl_device_pace(float speed);
 
 /* for tests and the host build's statistics */
 typedef struct {

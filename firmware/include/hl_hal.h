@@ -31,7 +31,12 @@ void hal_unlock(void);
 
 /* ---- the simulated plant's hooks: no-ops on hardware, where a person places and moves the
  * stylus and the real sample is a real object ---- */
-void hal_plant_scene(float surface_m, int real_sample, float stiffness, float damping);
+typedef struct {           /* a real sample as SCENE_BEGIN and SCENE_SUPPORT describe it */
+    float stiffness, damping; /* the contact [N/m], [N*s/m] */
+    float block_mass;         /* [kg]; 0: the sample does not move */
+    float support_k, support_b; /* what the block rests on [N/m], [N*s/m]; 0, 0: not given */
+} hal_sample;
+void hal_plant_scene(float surface_m, int real_sample, const hal_sample *sample);
 void hal_plant_home(float height_m);
 enum { HAL_TASK_REST = 0, HAL_TASK_TAP = 1, HAL_TASK_HOLD = 2 };
 void hal_plant_task(int task);

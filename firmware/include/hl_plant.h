@@ -8,9 +8,12 @@
  * (device/sim/tapper.py); the taps follow the same stroke: raised-cosine speed-up, cruise
  * at the tap's speed (normal, 0.11 +- 0.033 m/s, within 0.02-0.40 m/s) to 4 mm below the
  * surface, dwell, half-cosine rise, pause. A real sample is a unilateral Kelvin-Voigt
- * contact (it pushes, never pulls): passive, so the plant creates no energy. HOME and a
- * playback's start place the stylus at rest (the person puts it there). Block
- * ringing (Table 1) is not modelled here: the Python emulator does that.
+ * contact (it pushes, never pulls): passive, so the plant creates no energy. A sample given
+ * with a block mass and a support (SCENE_SUPPORT: wood on foam) is a block on that support,
+ * pushed by the contact; without a support the block rests on something rigid. HOME and a
+ * playback's start place the stylus at rest (the person puts it there). A block's ringing
+ * (Table 1) and a support derived from it are not modelled here: the Python emulator does
+ * that.
  */
 #ifndef HL_PLANT_H
 #define HL_PLANT_H
@@ -22,7 +25,13 @@ void plant_step(float current_a); /* one servo tick with this amplifier current 
 int32_t plant_encoder(void);      /* counts */
 float plant_accel(void);          /* [m/s^2], with the sensor's noise */
 void plant_scene(float surface_m, int real_sample, float stiffness, float damping);
+/* after plant_scene: the real sample is a block of `mass` [kg] on a support of
+ * `support_k` [N/m] and `support_b` [N*s/m] (mass 0 or no support: it does not move) */
+void plant_block(float mass, float support_k, float support_b);
 void plant_home(float height_m);
 void plant_task(int task);        /* HAL_TASK_REST / TAP / HOLD */
+/* for tests: the mechanical energy stored [J] (stylus and block kinetic, the hand's,
+ * contact's and support's springs), with the hand at rest */
+float plant_energy(void);
 
 #endif

@@ -42,7 +42,8 @@ typedef struct {
     uint16_t scene_id;
     uint8_t begun, kind, blend, rows, committed, have_v;
     int32_t surface_um;
-    float spring, attenuation, stiffness, damping;
+    float spring, attenuation;
+    hal_sample sample; /* a real sample (kind 0), for a simulated plant */
     uint16_t row_len;
     float v[HL_MAX_ROWS];
 } scene_t;
@@ -55,6 +56,7 @@ static struct {
     uint32_t ramp;
     uint64_t ticks;
     volatile uint64_t last_rx_tick;
+    uint32_t wd_ticks;          /* watchdog period [ticks]: WATCHDOG_TICKS x the pace */
     float limit;           /* current clamp [A] */
     int32_t enc[VEL_TICKS];
     uint32_t enc_n;
@@ -305,7 +307,7 @@ void hl_servo_tick(void)
         D.req_estop = 0;
         latch_fault(HL_FAULT_ESTOP);
     }
-    if (D.enabled && D.ticks - D.last_rx_tick > WATCHDOG_TICKS) {
+    if (D.enabled && D.ticks - D.last_rx_tick > D.wd_ticks) {
         latch_fault(HL_FAULT_WATCHDOG); /* armed while output is enabled */
     }
     if (D.req_zero) {
@@ -581,8 +583,9 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         S.begun = 1;
         S.surface_um = (int32_t)get_u32(b + 3);
         S.spring = get_f32(b + 7);
-        S.stiffness = get_f32(b + 11);
-        S.damping = get_f32(b + 15);
+        S.sample.stiffness = get_f32(b + 11);
+        S.sample.damping = get_f32(b + 15);
+        S.sample.block_mass = get_f32(b + 31);
         S.rows = rows;
         S.row_len = row_len;
         S.blend = blend;
@@ -625,8 +628,13 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
             }
             return HL_OK;
         }
-        if (type == 0x14) { /* SCENE_SUPPORT: the firmware renders nothing for a block */
-            return (S.kind == 0 && finite_all(b + 2, 2)) ? HL_OK : HL_BAD_MESSAGE;
+        if (type == 0x14) { /* SCENE_SUPPORT: nothing to render; a simulated plant uses it */
+            if (S.kind != 0 || !finite_all(b + 2, 2)) {
+                return HL_BAD_MESSAGE;
+            }
+            S.sample.support_k = get_f32(b + 2);
+            S.sample.support_b = get_f32(b + 6);
+            return HL_OK;
         }
         /* SCENE_COMMIT */
         uint32_t items = (uint32_t)S.rows * S.row_len;
@@ -638,7 +646,7 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
             return HL_TABLE_CRC;
         }
         S.committed = 1;
-        hal_plant_scene((float)S.surface_um * 1e-6f, S.kind == 0, S.stiffness, S.damping);
+        hal_plant_scene((float)S.surface_um * 1e-6f, S.kind == 0, &S.sample);
         return HL_OK;
     }
     case 0x20: { /* HOME */
@@ -939,7 +947,15 @@ void hl_device_init(const char *serial_number)
     D.decim = 1;
     D.nch = HL_N_CHANNELS;
     D.proto = 2;
+    D.wd_ticks = WATCHDOG_TICKS;
     copy_str((uint8_t *)D.serial, serial_number, sizeof D.serial - 1);
+}
+
+void hl_device_pace(float speed)
+{
+    /* the watchdog guards against a host silent for T_wd of wall-clock time: a device run
+     * at `speed` x real time lets `speed` x as many ticks pass in that time */
+    D.wd_ticks = (uint32_t)((float)WATCHDOG_TICKS * speed + 0.5f);
 }
 
 void hl_device_poll(void)

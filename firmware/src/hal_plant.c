@@ -4,9 +4,10 @@
 #include "hl_hal.h"
 #include "hl_plant.h"
 
-void hal_plant_scene(float surface_m, int real_sample, float stiffness, float damping)
+void hal_plant_scene(float surface_m, int real_sample, const hal_sample *sample)
 {
-    plant_scene(surface_m, real_sample, stiffness, damping);
+    plant_scene(surface_m, real_sample, sample->stiffness, sample->damping);
+    plant_block(sample->block_mass, sample->support_k, sample->support_b);
 }
 void hal_plant_home(float height_m) { plant_home(height_m); }
 void hal_plant_task(int task) { plant_task(task); }

@@ -1,9 +1,13 @@
 /* The host build: the firmware and its simulated plant on a pseudo-terminal.
  *
- *   build/hlfw-host [--seed N]
+ *   build/hlfw-host [--seed N] [--speed S]
  *
  * Prints the pty's path as its first line (as `hapticlab device emulate` does), then
- * runs the servo at HL_SERVO_HZ paced to the monotonic clock until SIGINT/SIGTERM.
+ * runs the servo at HL_SERVO_HZ paced to the monotonic clock until SIGINT/SIGTERM; with
+ * --speed S (0 < S <= 20) at S x real time, for dry runs: the device clock, the servo and
+ * the plant keep their rates in device time and the watchdog is stretched by S (it guards
+ * against wall-clock silence). A Python host keeps up with the full-rate stream at x20
+ * (8-s windows, 0 records lost), so the link is not throttled.
  * Ticks are computed as they fall due; input is read the moment it arrives (ppoll), so an
  * ESTOP acts at the next tick computed after its last byte. Statistics go to stderr at
  * exit.
@@ -40,11 +44,20 @@ static uint64_t now_ns(void)
 int main(int argc, char **argv)
 {
     unsigned long long seed = 0;
+    double speed = 1.0;
     for (int i = 1; i < argc; i++) {
+        char *end = NULL;
         if (strcmp(argv[i], "--seed") == 0 && i + 1 < argc) {
-            seed = strtoull(argv[++i], NULL, 10);
-        } else {
-            fprintf(stderr, "usage: %s [--seed N]\n", argv[0]);
+            seed = strtoull(argv[++i], &end, 10);
+        } else if (strcmp(argv[i], "--speed") == 0 && i + 1 < argc) {
+            speed = strtod(argv[++i], &end);
+            if (!(speed > 0.0 && speed <= 20.0)) {
+                fprintf(stderr, "%s: --speed must be in (0, 20], got %s\n", argv[0], argv[i]);
+                return 2;
+            }
+        }
+        if (end == NULL || *end != '\0' || end == argv[i]) {
+            fprintf(stderr, "usage: %s [--seed N] [--speed S]\n", argv[0]);
             return 2;
         }
     }
@@ -74,17 +87,20 @@ int main(int argc, char **argv)
     snprintf(serial, sizeof serial, "HOST-%llu", seed);
     sim_hal_init(seed);
     hl_device_init(serial);
+    if (speed != 1.0) {
+        hl_device_pace((float)speed);
+    }
     printf("%s\n", path);
     fflush(stdout);
     fprintf(stderr, "reference firmware (host build, simulated plant, seed %llu) at %u Hz "
-            "on %s; stop with Ctrl-C\n", seed, HL_SERVO_HZ, path);
+            "x%g on %s; stop with Ctrl-C\n", seed, HL_SERVO_HZ, speed, path);
 
-    const uint64_t period = 1000000000ull / HL_SERVO_HZ;
+    const double period = 1e9 / (HL_SERVO_HZ * speed); /* [wall ns per tick] */
     uint64_t start = now_ns(), done = 0, late = 0;
     static uint8_t out[65536], in[4096];
     size_t out_len = 0;
     while (!stop_flag) {
-        uint64_t due = (now_ns() - start) / period;
+        uint64_t due = (uint64_t)((double)(now_ns() - start) / period);
         if (due > done + HL_SERVO_HZ) { /* suspended (a debugger, a stopped process) */
             late += due - done - HL_SERVO_HZ;
             done = due - HL_SERVO_HZ;
@@ -111,7 +127,7 @@ int main(int argc, char **argv)
         if (done < due) {
             continue;
         }
-        uint64_t next = start + (done + 1) * period, now = now_ns();
+        uint64_t next = start + (uint64_t)((double)(done + 1) * period), now = now_ns();
         if (next > now) { /* sleep to the next tick, or until input (or room to write) */
             struct timespec ts = {0, (long)(next - now)};
             struct pollfd p = {master, (short)(POLLIN | (out_len ? POLLOUT : 0)), 0};

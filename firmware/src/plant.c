@@ -26,6 +26,8 @@ typedef struct {
     float zr, vr, ar;          /* intended motion */
     float surface, k, b;
     int real;
+    float mb, ks, bs;          /* a block on a support: mass, support stiffness, damping */
+    float xb, vb;              /* the block's displacement from rest (up +) and velocity */
     int task, phase;
     float t_phase, v_tap, z_from, hold;
     int32_t enc;
@@ -72,6 +74,8 @@ void plant_init(uint64_t seed, float rate_hz, float encoder_m, float force_const
     P.task = HAL_TASK_REST;
 }
 
+static void substeps(void);
+
 void plant_scene(float surface_m, int real_sample, float stiffness, float damping)
 {
     P.surface = surface_m;
@@ -80,15 +84,36 @@ void plant_scene(float surface_m, int real_sample, float stiffness, float dampin
     /* a sample given without damping gets 10 % of critical on the held stylus, so that it
      * does not chatter forever (wood's derived contact damping is of that size) */
     P.b = damping > 0 ? damping : 0.2f * sqrtf(P.k * MASS);
-    /* semi-implicit Euler is stable for w*h < 2; keep w*h <= 0.25 on the contact */
-    float wh = sqrtf(P.k / MASS) * P.dt;
+    P.mb = P.ks = P.bs = P.xb = P.vb = 0.0f;
+    substeps();
+}
+
+/* semi-implicit Euler is stable for w*h < 2; keep w*h <= 0.25 on the contact, whose
+ * frequency is set by the reduced mass of stylus and block */
+static void substeps(void)
+{
+    float inv_m = 1.0f / MASS + (P.mb > 0.0f ? 1.0f / P.mb : 0.0f);
+    float wh = sqrtf(P.k * inv_m) * P.dt;
     P.sub = P.real ? 1 + (int)(wh / 0.25f) : 1;
+}
+
+void plant_block(float mass, float support_k, float support_b)
+{
+    /* a block moves only on a support the scene gives (SCENE_SUPPORT); without one it is
+     * modelled resting on something rigid */
+    int moves = P.real && mass > 0.0f && support_k > 0.0f;
+    P.mb = moves ? mass : 0.0f;
+    P.ks = moves ? support_k : 0.0f;
+    P.bs = moves ? fmaxf(support_b, 0.0f) : 0.0f;
+    P.xb = P.vb = 0.0f;
+    substeps();
 }
 
 void plant_home(float height_m)
 {
     P.z = P.zr = height_m;
     P.v = P.vr = P.ar = 0.0f;
+    P.xb = P.vb = 0.0f;
 }
 
 static void new_tap(void)
@@ -185,9 +210,15 @@ void plant_step(float current_a)
     for (int i = 0; i < sub; i++) {
         float f = motor + K_HAND * (P.zr - P.z) + B_HAND * (P.vr - P.v) + MASS * P.ar -
                   B_MOTOR * P.v;
-        if (P.real && P.z < P.surface) {
-            float fc = P.k * (P.surface - P.z) - P.b * P.v;
-            f += fc > 0.0f ? fc : 0.0f; /* a sample pushes, never pulls */
+        float fc = 0.0f; /* the contact's force on the stylus (up) */
+        if (P.real && P.z < P.surface + P.xb) {
+            fc = P.k * (P.surface + P.xb - P.z) + P.b * (P.vb - P.v);
+            fc = fc > 0.0f ? fc : 0.0f; /* a sample pushes, never pulls */
+        }
+        f += fc;
+        if (P.mb > 0.0f) { /* the block: pushed down by the contact, held by its support */
+            P.vb += (-fc - P.ks * P.xb - P.bs * P.vb) / P.mb * h;
+            P.xb += P.vb * h;
         }
         P.v += f / MASS * h;
         P.z += P.v * h;
@@ -198,6 +229,16 @@ void plant_step(float current_a)
 }
 
 int32_t plant_encoder(void) { return P.enc; }
+
+float plant_energy(void)
+{
+    float e = 0.5f * MASS * P.v * P.v + 0.5f * K_HAND * (P.zr - P.z) * (P.zr - P.z);
+    float d = P.surface + P.xb - P.z;
+    if (P.real && d > 0.0f) {
+        e += 0.5f * P.k * d * d;
+    }
+    return e + 0.5f * P.mb * P.vb * P.vb + 0.5f * P.ks * P.xb * P.xb;
+}
 
 float plant_accel(void)
 {

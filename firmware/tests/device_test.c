@@ -6,6 +6,8 @@
 #include <string.h>
 
 #include "hl_device.h"
+#include "hl_hal.h"
+#include "hl_plant.h"
 #include "hl_sim.h"
 #include "hl_wire.h"
 
@@ -394,8 +396,37 @@ static void test_stream(void)
     EXPECT(hl_device_peek().tx_dropped == 0); /* control frames kept their room */
 }
 
+/* The plant creates no energy: a stylus released 1 mm into a sample, the hand at rest and
+ * the motor off, never holds more energy than it started with (semi-implicit Euler's
+ * modified energy may wobble by a tiny relative amount), rigid or a block on foam. */
+static void test_plant_is_passive(void)
+{
+    const hal_sample rigid = {70000.0f, 20.0f, 0.0f, 0.0f, 0.0f};
+    const hal_sample on_foam = {70000.0f, 20.0f, 0.006f, 350.0f, 3.0f};
+    const hal_sample *cases[] = {&rigid, &on_foam};
+    for (int c = 0; c < 2; c++) {
+        plant_init(1, (float)HL_SERVO_HZ, HL_ENCODER_NM * 1e-9f, HL_FORCE_CONSTANT_MN_A * 1e-3f);
+        plant_task(HAL_TASK_REST);
+        hal_plant_scene(0.0f, 1, cases[c]);
+        plant_home(-0.001f);
+        float e0 = plant_energy(), e_max = e0, moved = 0.0f;
+        for (int k = 0; k < 5000; k++) { /* 0.5 s */
+            plant_step(0.0f);
+            float e = plant_energy();
+            e_max = e > e_max ? e : e_max;
+            float z = (float)plant_encoder() * HL_ENCODER_NM * 1e-9f + 0.001f;
+            moved = fabsf(z) > moved ? fabsf(z) : moved;
+        }
+        EXPECT(e0 > 0.03f);                 /* 0.5 x 70 kN/m x (1 mm)^2 = 35 mJ */
+        EXPECT(e_max <= e0 * (1.0f + 1e-3f));
+        EXPECT(plant_energy() < 0.5f * e0); /* damped: most of it is gone after 0.5 s */
+        EXPECT(moved > 0.0005f);            /* the stylus was pushed out */
+    }
+}
+
 int device_tests(void)
 {
+    test_plant_is_passive();
     test_state_table();
     test_ranges_and_nan();
     test_ramp_clamp_estop();

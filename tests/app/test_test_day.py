@@ -203,13 +203,15 @@ def test_a_person_without_a_terminal_is_refused_before_anything_opens(xdisplay, 
     assert nodisplay.returncode == 2 and "no display" in nodisplay.stderr
 
 
+@pytest.mark.parametrize("firmware", ["python", "host"])
 def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulator_factory,
-                                                                           tmp_path):
+                                                                           tmp_path, firmware):
     """On a real device (the emulator) realism used to stop at its first matched sample
     although validate and device check passed. The preflight names what is missing and the
     command; after that command, preflight passes and a realism session completes over the
-    serial link with matched samples."""
-    emu = emulator_factory(11, "--speed", "10")
+    serial link with matched samples: on the Python emulator and on the reference firmware
+    built for this machine (protocol 2, traces streamed), both at ×10."""
+    emu = emulator_factory(11, "--firmware", firmware, "--speed", "10")
     spec = f"serial:{emu.port}"
     common = ["--device", spec, "--responder", "scripted", "--no-audio", "--data",
               str(tmp_path / "d")]

@@ -150,3 +150,44 @@ def test_the_servo_tick_fits_its_budget_on_the_cortex_m4():
     assert window["ticks"] > 10_000
     assert window["median"] <= window["p99"] <= window["max"]
     assert 3 * max(s["max"] for s in res["states"].values()) < 16_800
+
+
+def test_emulate_refuses_a_pace_the_firmware_cannot_keep():
+    """--speed paces the host build only; QEMU runs in real time, --rate is the Python
+    emulator's; a speed outside (0, 20] is refused before anything starts."""
+    cases = {("--firmware", "qemu", "--speed", "2"): "runs in real time",
+             ("--firmware", "host", "--rate", "5000"): "--rate applies to --firmware python",
+             ("--firmware", "host", "--speed", "0"): "--speed must be in (0, 20]",
+             ("--firmware", "host", "--speed", "30"): "--speed must be in (0, 20]"}
+    for args, message in cases.items():
+        run = subprocess.run([sys.executable, "-m", "app", "device", "emulate", *args],
+                             capture_output=True, text=True, timeout=60)
+        assert run.returncode == 2 and message in run.stderr, (args, run.stderr)
+
+
+def test_the_host_build_keeps_device_time_at_its_pace():
+    """At --speed 10 the device clock (STATUS.time) advances ten device seconds per wall
+    second, and a window of 2 device seconds streams all its 20,000 records."""
+    import time
+
+    emu = start_emulator("--firmware", "host", "--seed", "3", "--speed", "10")
+    try:
+        with SerialDevice(emu.port) as dev:
+            wall0, dev0 = dev.last_status  # (when it arrived [s, perf_counter], its time [s])
+            dev.load_scene(_spring())
+            dev.home()
+            res = dev.run_window(2.0, from_first_contact=False)
+            time.sleep(0.2)
+            wall1, dev1 = dev.last_status
+        assert len(res.traces["t"]) == 20_000 and res.rate_hz == 10_000
+        pace = (dev1 - dev0) / (wall1 - wall0)
+        # ±5 %: each STATUS's arrival may lag its tick by a few ms of a ~2.5-s span
+        assert 9.5 < pace < 10.5, pace
+    finally:
+        stop_emulator(emu)
+
+
+def _spring():
+    from device import Scene
+
+    return Scene("spring", spring=680.0)
