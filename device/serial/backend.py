@@ -155,13 +155,22 @@ class SerialDevice(HapticDevice):
                           accel_range=h.accel_range / 1000)
 
     def _configure_traces(self) -> tuple[str, ...]:
-        """Version 2: stream every base channel the device records (the channels
-        :class:`~device.events.WindowResult` carries), one record per tick unless the
-        device's link is too narrow for that (:func:`stream_decimation`). Returns the
-        streamed channel names in order; () for a version-1 device, whose traces are read
-        after each window with TRACE_REQUEST."""
+        """Stream every base channel the device records (the channels
+        :class:`~device.events.WindowResult` carries) and the optional ones it has, one
+        record per tick unless the device's link is too narrow for that
+        (:func:`stream_decimation`). Returns the streamed channel names in order.
+
+        Raises
+        ------
+        ProtocolMismatchError
+            The device speaks version 1 (traces read after each window, retired: both the
+            emulator and the reference firmware speak 2), or sent no LIMITS.
+        """
         if self.link.version < 2:
-            return ()
+            raise ProtocolMismatchError(
+                f"{self.port}: the device speaks wire protocol {self.link.version}; hapticlab "
+                "needs version 2 (traces streamed during the window): update its firmware "
+                "(docs/wire-protocol.md)")
         lim = self.link.limits
         if lim is None:
             raise ProtocolMismatchError(f"{self.port}: a version-2 device sent no LIMITS "
@@ -309,7 +318,7 @@ class SerialDevice(HapticDevice):
         height: float | None = None  # the stylus above the surface [m], from POSITION frames
         done: M.WindowDone | None = None
         faults: list[FaultEvent] = []
-        chunks: list[M.TraceChunk] = []  # version 2: the trace, streamed during the window
+        chunks: list[M.TraceChunk] = []  # the trace, streamed during the window
         lost: list[M.TraceLost] = []
         self.link.pause_heartbeats(not heartbeats)
         start = time.monotonic()
@@ -355,10 +364,9 @@ class SerialDevice(HapticDevice):
         finally:
             self.link.pause_heartbeats(False)
         t0 = done.t0_us * 1e-6
-        d = self._decimation if self._stream else 1
+        d = self._decimation
         n_rec = -(-done.n_ticks // d)  # record i is the window's tick i·d
-        traces = (self._assemble(wid, n_rec, chunks, lost) if self._stream else
-                  self._fetch_traces(wid, done.n_ticks))
+        traces = self._assemble(wid, n_rec, chunks, lost)
         traces["t"] = t0 + np.arange(n_rec) * d / rate
         first = None if done.first_contact < 0 else t0 + done.first_contact / rate
         res = WindowResult(rate / d, first,
@@ -383,7 +391,7 @@ class SerialDevice(HapticDevice):
             pass
 
     def _assemble(self, wid: int, n: int, chunks: list, lost: list) -> dict[str, np.ndarray]:
-        """Version 2: the window's traces from the chunks streamed during it. Every record
+        """The window's traces from the chunks streamed during it. Every record
         must be covered exactly once; a gap the device reported (TRACE_LOST) or one it did
         not is a DeviceError naming the records, never a silent hole."""
         names = self._stream
@@ -410,45 +418,6 @@ class SerialDevice(HapticDevice):
                               f"({bad.size} of {n} records not covered exactly once)")
         out = {name: data[:, k].astype(float) for k, name in enumerate(names)}
         out["flags"] = out["flags"].astype(np.uint16)
-        return out
-
-    def _fetch_traces(self, wid: int, n: int) -> dict[str, np.ndarray]:
-        out: dict[str, np.ndarray] = {}
-        for ch, name in enumerate(M.Channel.NAMES):
-            if n == 0:
-                out[name] = np.zeros(0)
-                continue
-            buf = np.full(n, np.nan)
-            status = self.link.request(M.TraceRequest(wid, ch, 0, n))
-            if status != M.Status.OK:
-                if name in _OPTIONAL:
-                    continue
-                raise DeviceError(f"{self.port}: device has no trace '{name}' for window {wid}")
-            covered = np.zeros(n, bool)  # coverage, not a count: a duplicated block
-            deadline = time.monotonic() + 2.0 + n * 1e-5  # must not hide a missing one
-            others: list = []  # other events (a FAULT, a late CONTACT) keep their place
-            while not covered.all():
-                items, gone = self.link.take_events()
-                for e in items:
-                    if isinstance(e, M.TraceBlock) and e.window_id == wid and e.channel == ch:
-                        if not 0 <= e.start <= e.start + e.n <= n:
-                            raise DeviceError(
-                                f"{self.port}: trace '{name}' block of samples {e.start}–"
-                                f"{e.start + e.n - 1} lies outside the window's {n} samples "
-                                "(a device or link fault; the window's traces are not used)")
-                        buf[e.start: e.start + e.n] = e.items
-                        covered[e.start: e.start + e.n] = True
-                    elif not isinstance(e, M.TraceBlock):
-                        others.append(e)
-                if gone is not None:
-                    raise DeviceGoneError(f"{gone} while reading traces")
-                if time.monotonic() > deadline:
-                    missing = np.flatnonzero(~covered)
-                    raise DeviceTimeoutError(
-                        f"{self.port}: trace '{name}' incomplete: {missing.size} of {n} "
-                        f"samples never arrived (first missing: {missing[0]})")
-            self.link.put_back(others)
-            out[name] = buf if name != "flags" else buf.astype(np.uint16)
         return out
 
     # ------------------------------------------------------------------ exits

@@ -8,7 +8,7 @@ fixed-point encodings are stated per field.
 from __future__ import annotations
 
 import struct
-from dataclasses import astuple, dataclass
+from dataclasses import astuple, dataclass, fields
 from typing import ClassVar
 
 from .framing import Frame, FramingError, encode_frame
@@ -62,7 +62,7 @@ class Message:
     ARRAY: ClassVar[str | None] = None  # struct code of a trailing array field "items"
 
     def body(self) -> bytes:
-        vals = astuple(self)
+        vals = tuple(getattr(self, f.name) for f in fields(self))  # astuple deep-copies
         if self.ARRAY is None:
             return struct.pack("<" + self.FMT, *vals)
         head, items = vals[:-1], vals[-1]

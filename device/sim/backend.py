@@ -25,6 +25,7 @@ __all__ = ["SimDevice", "CompiledScene", "compile_scene"]
 
 _CHUNK_S = 0.1  # device time between progress callbacks / heartbeats in virtual time
 _LIVE_CHUNK_S = 0.001  # pacing granularity in live mode
+_SPIN_S = 0.0002  # live mode: the end of each wait is spun, not slept [s]
 
 
 class CompiledScene:
@@ -165,6 +166,10 @@ class SimDevice(HapticDevice):
         self._fault: FaultEvent | None = None
         self._estop_requested = False
         self._output_force = 0.0
+        #: live mode: called with (first tick, traces) for each run of new ticks of a
+        #: window or playback as it is simulated (a device streaming its traces); the
+        #: pieces joined are the result's traces
+        self.trace_sink: Callable[[int, dict[str, np.ndarray]], None] | None = None
 
     def _device_args(self) -> tuple:
         """What the servo loop needs of the device (:func:`device.sim.kernel.run_ticks`)."""
@@ -329,6 +334,16 @@ class SimDevice(HapticDevice):
     def heartbeat(self) -> None:
         self._t_heartbeat = self.time
 
+    def idle_until(self, t: float) -> None:
+        """Let device time pass to ``t`` [s] with no window running (a live device's
+        clock runs between windows too); an earlier ``t`` changes nothing."""
+        self._tick = max(self._tick, int(t / self.params.dt))
+
+    @property
+    def watchdog_span(self) -> float:
+        """Device time [s] without a heartbeat after which the watchdog trips."""
+        return self._watchdog_device_s
+
     @property
     def last_heartbeat(self) -> float:
         """Device time [s] of the last heartbeat."""
@@ -426,6 +441,7 @@ class SimDevice(HapticDevice):
         ev_vel = np.zeros(4096)
         chunk = max(1, int(round((_LIVE_CHUNK_S if self.live else _CHUNK_S) / dt)))
         state = (self._x, self._ist, self._fst, self._rb)
+        pieces = _TracePieces(self, buf) if self.live and self.trace_sink is not None else None
         wall0 = time.perf_counter()
         late: list[float] = []
         n = 0
@@ -444,21 +460,33 @@ class SimDevice(HapticDevice):
                                  ev_vel)
             self._tick = tick0 + n_done
             n = n_done
+            if self.live and n:
+                self._output_force = float(buf.cur[n - 1] * dev.force_constant)
             ft = int(self._ist[K.IST_FAULT_TICK])
             if ft >= 0:  # latch now, so callers see it mid-window, timed at the zeroing tick
                 self._latch((tick0 + ft) * dt)
             if self.live:
                 target = wall0 + n * dt / self.speed
                 late.append(time.perf_counter() - target)
-                while time.perf_counter() < target:  # busy-wait: sleep is too coarse
+                # sleep most of the wait (releasing the interpreter to the threads serving
+                # the link), then spin the last fraction of a millisecond: sleep alone is
+                # too coarse
+                ahead = target - time.perf_counter() - _SPIN_S
+                if ahead > 0:
+                    time.sleep(ahead)
+                while time.perf_counter() < target:
                     pass
             if n_done < n1:
                 break  # window complete
             if timeout is not None and self._ist[K.IST_FIRST] < 0 and n * dt >= timeout:
                 break  # nobody tapped
+            if pieces is not None and n - pieces.done >= _STREAM_TICKS:
+                self.trace_sink(pieces.done, pieces.take(n))
             if on_progress is not None:
                 on_progress(n * dt, self._result(buf, n, tick0, ev_tick, ev_vel))
-        res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True)
+        if pieces is not None and n > pieces.done:
+            self.trace_sink(pieces.done, pieces.take(n))
+        res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True, pieces=pieces)
         res.energy = {"in": float(self._fst[K.FST_EIN]), "out": float(self._fst[K.FST_EOUT])}
         if self.live:
             wall = time.perf_counter() - wall0
@@ -493,7 +521,7 @@ class SimDevice(HapticDevice):
                                      f"{self.params.watchdog_s:g} s: output zeroed")
 
     def _result(self, buf: _Buffers, n: int, tick0: int, ev_tick, ev_vel,
-                final: bool = False) -> WindowResult:
+                final: bool = False, pieces: _TracePieces | None = None) -> WindowResult:
         dev = self.params
         dt = dev.dt
         nev = min(int(self._ist[K.IST_NEV]), len(ev_tick))
@@ -517,35 +545,68 @@ class SimDevice(HapticDevice):
         if ft >= 0:  # the kernel zeroed output at tick ft
             self._latch((tick0 + ft) * dt)
             res.faults = [self._fault]
-        acc = buf.acc[:n].copy()
+        res.traces = (pieces or _TracePieces(self, buf)).joined(n)
+        res.traces["t"] = (tick0 + np.arange(n)) * dt
+        return res
+
+    def _traces(self, buf: _Buffers, a: int, b: int) -> dict[str, np.ndarray]:
+        """The recorded traces of ticks [a, b) of a window: sensor noise, clipping and
+        quantization applied, velocity from the encoder. Pieces taken in order join into the
+        traces taken at once (the noise stream is drawn in order)."""
+        dev = self.params
+        acc = buf.acc[a:b].copy()
         if self.noise and dev.accel_noise_rms > 0:
-            acc += self.rng_noise.normal(0.0, dev.accel_noise_rms, n)
+            acc += self.rng_noise.normal(0.0, dev.accel_noise_rms, b - a)
         clipped = np.abs(acc) >= dev.accel_range
         acc = np.clip(acc, -dev.accel_range, dev.accel_range)
         lsb = 2 * dev.accel_range / 2**dev.accel_bits
         acc = np.round(acc / lsb) * lsb
+        flags = buf.flags[a:b].astype(np.uint16)
         flags[clipped] |= np.uint16(Flags.ACCEL_CLIPPED)
-        pos = buf.pos[:n]
         w = self._vel_w
-        padded = np.concatenate([np.full(len(w) - 1, pos[0] if n else 0.0), pos])
-        vel = np.convolve(padded, w[::-1], mode="valid")
-        res.traces = {
-            "t": (tick0 + np.arange(n)) * dt,
-            "position": pos,
-            "velocity": vel,
-            "force_cmd": fcmd,
-            "force_out": buf.fout[:n],
-            "current": buf.cur[:n],
+        lo = a - (len(w) - 1)  # velocity at tick i is a filter over ticks i-len(w)+1 … i
+        pos0 = buf.pos[0] if b else 0.0
+        seg = (np.concatenate([np.full(-lo, pos0), buf.pos[:b]]) if lo < 0 else buf.pos[lo:b])
+        return {
+            "position": buf.pos[a:b].copy(),
+            "velocity": np.convolve(seg, w[::-1], mode="valid"),
+            "force_cmd": buf.fcmd[a:b].copy(),
+            "force_out": buf.fout[a:b].copy(),
+            "current": buf.cur[a:b].copy(),
             "accel": acc,
             "flags": flags,
-            "true_position": buf.z2[:n],
-            "true_velocity": buf.v2[:n],
-            "true_accel": buf.a2[:n],
+            "true_position": buf.z2[a:b].copy(),
+            "true_velocity": buf.v2[a:b].copy(),
+            "true_accel": buf.a2[a:b].copy(),
         }
-        return res
 
 
 _EMPTY = np.zeros(0)
+#: live mode with a trace sink: new ticks are handed over once this many have accumulated
+_STREAM_TICKS = 200
+
+
+class _TracePieces:
+    """A window's traces taken in order, piece by piece, as a streaming device sends them;
+    :meth:`joined` gives the whole (taking what is left)."""
+
+    def __init__(self, dev: SimDevice, buf: _Buffers):
+        self.dev, self.buf = dev, buf
+        self.done = 0
+        self.pieces: list[dict[str, np.ndarray]] = []
+
+    def take(self, n: int) -> dict[str, np.ndarray]:
+        piece = self.dev._traces(self.buf, self.done, n)
+        self.pieces.append(piece)
+        self.done = n
+        return piece
+
+    def joined(self, n: int) -> dict[str, np.ndarray]:
+        if n > self.done or not self.pieces:
+            self.take(n)
+        if len(self.pieces) == 1:
+            return dict(self.pieces[0])
+        return {k: np.concatenate([p[k] for p in self.pieces]) for k in self.pieces[0]}
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:

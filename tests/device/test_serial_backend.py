@@ -5,6 +5,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections import deque
 
 import numpy as np
 import pytest
@@ -245,9 +246,10 @@ def test_a_crc_storm_declares_the_link_unusable():
 
 class _RawHost:
     """A host written against the document: raw frames over pyserial to an in-process
-    emulator on a pty (no driver in between)."""
+    emulator on a pty (no driver in between). HELLO travels in a version-1 frame, every
+    other command in version 2 unless ``version`` says otherwise."""
 
-    def __init__(self):
+    def __init__(self, emulator=None, **options):
         import os
         import threading
 
@@ -259,37 +261,41 @@ class _RawHost:
 
         self._os = os
         self.master, self.slave, path = open_pty()
-        self.emu = Emulator(SimDevice(seed=1), self.master)
+        self.emu = (emulator or Emulator)(SimDevice(seed=1), self.master, **options)
         self.server = threading.Thread(target=self.emu.serve_forever, daemon=True)
         self.server.start()
         self.port = serial.Serial(path, timeout=0.05)
         self.dec = FrameDecoder()
         self.seq = 0
-        self.seen = []  # every device message, in arrival order
+        self.seen = []  # every device message looked at, in arrival order
+        self.pending = deque()
 
-    def send(self, msg):
+    def send(self, msg, version=None):
         from device.serial import messages as M
 
         self.seq += 1
-        self.port.write(M.encode(msg, self.seq))
+        v = version or (1 if isinstance(msg, M.Hello) else 2)
+        self.port.write(M.encode(msg, self.seq, v))
         return self.seq
 
     def read_until(self, pred, limit=10.0):
         from device.serial import messages as M
 
         end = time.monotonic() + limit
-        while time.monotonic() < end:
-            for f in self.dec.feed(self.port.read(4096)):
-                m = M.decode(f)
+        while True:
+            while self.pending:  # frames read but not yet looked at, in order
+                m = self.pending.popleft()
                 self.seen.append(m)
                 if pred(m):
                     return m
-        raise AssertionError("the device did not answer")
+            if time.monotonic() >= end:
+                raise AssertionError("the device did not answer")
+            self.pending.extend(M.decode(f) for f in self.dec.feed(self.port.read(4096)))
 
-    def ask(self, msg):
+    def ask(self, msg, version=None):
         from device.serial import messages as M
 
-        seq = self.send(msg)
+        seq = self.send(msg, version)
         if isinstance(msg, M.Hello):
             return self.read_until(lambda m: isinstance(m, M.HelloAck)) and "hello"
         if isinstance(msg, M.Ping):
@@ -309,7 +315,9 @@ def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
     the pty: HOME with clearance 0 and START_WINDOW with duration 0 (killed it), a duration
     of 2³²−1 ms (busy forever), a NaN attenuation (reached the amplifier). Each gets
     BAD_MESSAGE; PING still answers afterwards. (PLAY_START before HOME is allowed: it
-    enables output for the playback only, as docs §3 now says.)"""
+    enables output for the playback only, as docs §3 now says.) After HELLO_ACK (version
+    2), a command in a version-1 frame is BAD_MESSAGE too, and TRACE_REQUEST (version 1's
+    trace read) is no command any more."""
     import math
 
     from device.serial import messages as M
@@ -317,8 +325,12 @@ def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
     S = M.Status
     host = _RawHost()
     try:
-        assert host.ask(M.Hello(1)) == "hello"
+        assert host.ask(M.Hello(2)) == "hello"
+        ack = next(m for m in host.seen if isinstance(m, M.HelloAck))
+        assert ack.protocol == 2
         good = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
+        assert host.ask(good, version=1) == S.BAD_MESSAGE
+        assert host.ask(M.TraceRequest(1, 0, 0, 10)) == S.BAD_MESSAGE
         assert host.ask(M.Home(0)) == S.BAD_MESSAGE
         assert host.ask(M.StartWindow(1, 0, 1000, 1)) == S.BAD_MESSAGE
         assert host.ask(M.StartWindow(1, 2**32 - 1, 1000, 1)) == S.BAD_MESSAGE
@@ -330,82 +342,88 @@ def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
         host.close()
 
 
-def test_an_estop_is_served_between_the_blocks_of_a_trace_upload():
-    """ESTOP sent right after a TRACE_REQUEST for a whole window's channel used to wait
-    until the whole upload was written (~550 ms on a loaded machine); now
-    the emulator writes a few blocks per turn of its loop and reads commands between
-    them: the ESTOP's ACK (sent once output is zero and latched) arrives before the
-    upload's last block, not after it."""
+def test_an_estop_is_served_while_the_trace_streams():
+    """ESTOP once waited ~550 ms behind a trace upload. Now traces stream during the window
+    and the emulator feeds the link from its ring a few frames per turn of its loop,
+    reading commands between them: an ESTOP sent mid-window, after 20 chunks, is
+    acknowledged before the window's end, the window ends on it (WINDOW_DONE says fault,
+    far short of its 3 s), and every record up to then came as a chunk."""
     from device.serial import messages as M
 
     S = M.Status
     host = _RawHost()
     try:
-        assert host.ask(M.Hello(1)) == "hello"
+        assert host.ask(M.Hello(2)) == "hello"
         assert host.ask(M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)) == S.OK
         assert host.ask(M.SceneCommit(1, 0)) == S.OK
         assert host.ask(M.Home(20_000)) == S.OK
         assert host.ask(M.StartWindow(1, 3000, 5000, 0)) == S.OK
-        done, end = None, time.monotonic() + 20
-        while done is None and time.monotonic() < end:
-            host.send(M.Heartbeat())  # the window runs its 3 s, not just until the watchdog
+        chunks, end = 0, time.monotonic() + 20
+        while chunks < 20 and time.monotonic() < end:
+            host.send(M.Heartbeat())
             try:
-                done = host.read_until(lambda m: isinstance(m, M.WindowDone), limit=0.02)
+                host.read_until(lambda m: isinstance(m, M.TraceChunk), limit=0.02)
             except AssertionError:
                 pass
-        # a long upload (≥ 20 blocks), even if a starved machine let the watchdog end it
-        assert done is not None and done.n_ticks >= 5_000, done
-        n = done.n_ticks
-        req = host.send(M.TraceRequest(1, 0, 0, n))
+            chunks = sum(isinstance(m, M.TraceChunk) for m in host.seen)
         stop = host.send(M.EStop())
-        blocks = -(-n // M.TRACE_ITEMS)
-        host.read_until(lambda m: isinstance(m, M.TraceBlock) and m.start + m.n == n, 30)
+        done = host.read_until(lambda m: isinstance(m, M.WindowDone), 10)
         kinds = [(type(m).__name__, getattr(m, "ack_seq", None)) for m in host.seen]
-        at_req = kinds.index(("Ack", req))
-        at_stop = kinds.index(("Ack", stop))
-        n_blocks_before = sum(1 for k, _ in kinds[at_req:at_stop] if k == "TraceBlock")
-        assert blocks >= 4 and n_blocks_before < blocks - 1, (n_blocks_before, blocks)
+        assert kinds.index(("Ack", stop)) < kinds.index(("WindowDone", None))
+        assert done.fault == 1 and done.n_ticks < 3000 * 10, done
+        got = [m for m in host.seen if isinstance(m, M.TraceChunk)]
+        assert sum(m.n for m in got) == done.n_ticks  # decimation 1: one record per tick
+        assert [m.start for m in got] == list(np.cumsum([0] + [m.n for m in got[:-1]]))
     finally:
         host.close()
 
 
-@pytest.mark.parametrize("fault", ["duplicate", "outside"])
-def test_trace_blocks_are_checked_for_coverage_not_counted(fault):
-    """An emulator that sends one block twice instead of the next (the driver used to count
-    samples and return 250 NaN without a word), or a block past the window's end (a raw
-    numpy error): each is a named DeviceError, and no trace with holes is returned."""
+@pytest.mark.parametrize("fault", ["duplicate", "outside", "overflow"])
+def test_streamed_records_are_checked_for_coverage_not_counted(fault):
+    """An emulator that sends one chunk twice instead of the next, a chunk past the
+    window's end, or a ring too small for a host that reads late (records dropped, said
+    with TRACE_LOST): each is a DeviceError naming the records, and no trace with holes is
+    returned (the driver once counted samples and returned 250 NaN without a word)."""
     import os
     import threading
+    from dataclasses import replace
 
     from device import DeviceError
-    from device.serial import messages as M
-    from device.serial.emulator import Emulator
+    from device.serial.emulator import LIMITS, Emulator
     from device.sim.backend import SimDevice
 
     class Faulty(Emulator):
-        def _send_trace(self, req):
-            super()._send_trace(req)
-            blocks = list(self._outbox)
-            if len(blocks) >= 2 and fault == "duplicate":
-                blocks[1] = blocks[0]  # the second block never comes; the first comes twice
-            elif fault == "outside":
-                b = blocks[-1]
-                blocks[-1] = M.TraceBlock(b.window_id, b.channel, b.start + 10_000, b.n,
-                                          b.items)
-            self._outbox.clear()
-            self._outbox.extend(blocks)
+        def _link_has_room(self):
+            # "overflow": a host that reads nothing until the window ends
+            return super()._link_has_room() and not (fault == "overflow" and self._busy())
 
+        emitted: list = []
+
+        def _emit(self, n):
+            super()._emit(n)
+            with self._olock:
+                c = self._outbox[-1]  # the chunk just queued
+                self.emitted.append(c)
+                if fault == "duplicate" and len(self.emitted) == 3:
+                    self._outbox[-1] = self.emitted[1]  # chunk 1 again; chunk 2 never comes
+                elif fault == "outside" and len(self.emitted) == 3:
+                    self._outbox[-1] = replace(c, start=c.start + 100_000)
+
+    limits = replace(LIMITS, ring_records=500) if fault == "overflow" else LIMITS
     master, slave, path = open_pty()
-    emu = Faulty(SimDevice(seed=1), master)
+    emu = Faulty(SimDevice(seed=1), master, limits=limits)
     server = threading.Thread(target=emu.serve_forever, daemon=True)
     server.start()
     try:
         with open_device(f"serial:{path}") as dev:
             dev.load_scene(FIRM)
             dev.home()
-            with pytest.raises(DeviceError, match="never arrived|lies outside") as err:
+            match = {"duplicate": "sent twice", "outside": "lie outside",
+                     "overflow": r"dropped trace records 500–1999 of window"}[fault]
+            with pytest.raises(DeviceError, match=match):
                 dev.run_window(0.2, from_first_contact=False)
-            assert "trace 'position'" in str(err.value)
+        if fault == "overflow":
+            assert emu.records_lost == 1500
     finally:
         emu.stop()
         server.join(timeout=5)

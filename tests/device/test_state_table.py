@@ -1,0 +1,170 @@
+"""The state × command table of docs/wire-protocol.md §4, read from the document and
+checked pair by pair, over raw frames on the pty, against every device that speaks
+version 2: the Python emulator and the reference firmware built for this machine.
+
+For each state (IDLE, HOMED, WINDOW, PLAYING, FAULT) the device is brought there from a
+reset, sent one valid command, and its ACK status (HELLO_ACK, PONG) and the state its next
+STATUS reports are compared with the table's cell.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+
+import pytest
+import serial
+
+from device.serial import messages as M
+from device.serial.framing import FrameDecoder
+
+from ..conftest import start_emulator, stop_emulator
+
+DOC = Path(__file__).resolve().parents[2] / "docs" / "wire-protocol.md"
+STATES = ("IDLE", "HOMED", "WINDOW", "PLAYING", "FAULT")
+ANSWERS = {name: getattr(M.Status, name) for name in ("OK", "BAD_MESSAGE", "BAD_STATE",
+                                                       "FAULT_LATCHED", "BUSY")}
+ANSWERS |= {"HELLO_ACK": "hello", "PONG": "pong"}
+SPRING = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
+
+#: one valid instance of the command each row names (the first name of a row that names
+#: several: the others share its column of statuses)
+COMMANDS = {
+    "HELLO": M.Hello(2),
+    "HEARTBEAT, PING": M.Ping(7),
+    "SCENE_BEGIN, _VELOCITIES, _CHUNK, _SUPPORT, _COMMIT": SPRING,
+    "HOME": M.Home(20_000),
+    "START_WINDOW": M.StartWindow(5, 60_000, 1_000, 0),
+    "STOP_WINDOW": M.StopWindow(),
+    "PLAY_CHUNK": M.PlayChunk(0, 3, (0, 0, 0)),
+    "PLAY_START": M.PlayStart(6, 200_000),
+    "SET_LIMIT, TRACE_CONFIG": M.SetLimit(1000),
+    "ESTOP": M.EStop(),
+    "CLEAR_FAULT": M.ClearFault(),
+    "ZERO": M.Zero(),
+    "a device → host type, TRACE_REQUEST (v2)": M.TraceRequest(5, 0, 0, 10),
+}
+
+
+def table() -> dict[str, dict[str, tuple[object, str | None]]]:
+    """{row: {state: (expected answer, state after or None for unchanged)}} from the doc."""
+    text = DOC.read_text()
+    body = text[text.index("| command | IDLE | HOMED | WINDOW | PLAYING | FAULT |"):]
+    rows: dict[str, dict] = {}
+    for line in body.splitlines()[2:]:
+        if not line.startswith("|"):
+            break
+        name, *cells = [c.strip() for c in line.strip("|").split("|")]
+        row, prev = {}, None
+        for state, cell in zip(STATES, cells, strict=True):
+            if cell == "same":
+                row[state] = prev
+                continue
+            if cell.startswith("— / PONG"):
+                row[state] = prev = ("pong", None)
+                continue
+            cell = re.sub(r"\(BAD_STATE without a committed scene\)", "", cell)
+            answer = next(w for w in re.findall(r"[A-Z_]+", cell) if w in ANSWERS)
+            after = re.search(r"→ (\w+)", cell)
+            row[state] = prev = (ANSWERS[answer], after.group(1) if after else None)
+        rows[name] = row
+    return rows
+
+
+class Host:
+    """Raw frames over pyserial, written against the document."""
+
+    def __init__(self, port: str):
+        self.port = serial.Serial(port, timeout=0.01)
+        self.dec = FrameDecoder()
+        self.seq = 0
+        self.state: int | None = None  # the last STATUS
+        self.status_count = 0
+
+    def _pump(self, pred, limit: float):
+        end = time.monotonic() + limit
+        while time.monotonic() < end:
+            for f in self.dec.feed(self.port.read(4096)):
+                m = M.decode(f)
+                if isinstance(m, M.StatusReport):
+                    self.state, self.status_count = m.state, self.status_count + 1
+                if pred(m):
+                    return m
+        raise AssertionError("the device did not answer")
+
+    def ask(self, msg: M.Message):
+        self.seq = (self.seq + 1) & 0xFFFF
+        hello = isinstance(msg, M.Hello)
+        self.port.write(M.encode(msg, self.seq, 1 if hello else 2))
+        if hello:
+            self._pump(lambda m: isinstance(m, M.Limits), 2.0)
+            return "hello"
+        if isinstance(msg, M.Ping):
+            self._pump(lambda m: isinstance(m, M.Pong), 2.0)
+            return "pong"
+        seq = self.seq
+        return self._pump(lambda m: isinstance(m, M.Ack) and m.ack_seq == seq, 2.0).status
+
+    def settled_state(self) -> str:
+        """The state a STATUS sent after now reports (two reports on: one may be in flight)."""
+        n = self.status_count
+        self._pump(lambda m: isinstance(m, M.StatusReport) and self.status_count >= n + 2, 2.0)
+        return STATES[self.state]
+
+    def reset(self) -> None:
+        """To IDLE with a committed spring, whatever ran before."""
+        self.ask(M.ClearFault())
+        self.ask(M.Zero())
+        end = time.monotonic() + 5
+        while self.settled_state() != "IDLE" and time.monotonic() < end:
+            pass
+        assert self.ask(SPRING) == M.Status.OK
+        assert self.ask(M.SceneCommit(1, 0)) == M.Status.OK
+
+    def enter(self, state: str) -> None:
+        self.reset()
+        if state in ("HOMED", "WINDOW"):
+            assert self.ask(M.Home(20_000)) == M.Status.OK
+        if state == "WINDOW":
+            assert self.ask(M.StartWindow(4, 60_000, 1_000, 0)) == M.Status.OK
+        if state == "PLAYING":
+            assert self.ask(M.PlayChunk(0, 3, (0, 0, 0))) == M.Status.OK
+            assert self.ask(M.PlayStart(3, 200_000)) == M.Status.OK
+        if state == "FAULT":
+            assert self.ask(M.EStop()) == M.Status.OK
+        assert self.settled_state() == state
+
+    def close(self) -> None:
+        self.ask(M.Zero())
+        self.port.close()
+
+
+def test_the_document_table_is_read_whole():
+    rows = table()
+    assert set(rows) == set(COMMANDS)
+    assert rows["PLAY_START"]["IDLE"] == (M.Status.OK, "PLAYING")
+    assert rows["HELLO"]["FAULT"] == ("hello", None)
+    assert rows["ZERO"]["PLAYING"] == (M.Status.OK, "IDLE")
+
+
+@pytest.mark.parametrize("firmware", ["python", "host"])
+def test_every_state_answers_every_command_as_the_document_says(firmware):
+    emu = start_emulator("--firmware", firmware, "--seed", "2")
+    host = Host(emu.port)
+    wrong = []
+    try:
+        assert host.ask(M.Hello(2)) == "hello"
+        for row, cells in table().items():
+            for state, (answer, after) in cells.items():
+                host.enter(state)
+                got = host.ask(COMMANDS[row])
+                now = host.settled_state()
+                expect_after = {"previous": "IDLE"}.get(after, after) or state
+                if (got, now) != (answer, expect_after):
+                    wrong.append(f"{row} in {state}: {got}, then {now}; the document says "
+                                 f"{answer}, then {expect_after}")
+    finally:
+        host.close()
+        stop_emulator(emu)
+    assert not wrong, "\n".join(wrong)
