@@ -211,8 +211,9 @@ def _window_figures(port: str, n_windows: int) -> dict:
         version = dev.link.version
     ms = lambda a, q: float(np.percentile(a, q) * 1e3)  # noqa: E731
     if zero and min(zero) < 0:
-        # a zeroing before its ESTOP was sent: the device's FAULT time and STATUS time are
-        # not one clock (the Python emulator's), so the figure cannot be formed
+        # a zeroing before its ESTOP was sent: the device's clock runs ahead of its frames
+        # (the Python emulator computes its servo 1 ms ahead of the wall clock and sends
+        # STATUS from there), so this upper bound cannot be formed
         zero = []
     return {"protocol": version,
             "rtt_ms": {"p50": ms(rtt, 50), "p99": ms(rtt, 99), "n": int(rtt.size)},
@@ -227,12 +228,12 @@ def _window_figures(port: str, n_windows: int) -> dict:
 
 def firmware_main(args) -> int:
     """``hapticlab bench link --firmware host``: the figures over the host-built firmware
-    (protocol 2, traces streamed), with the Python emulator (protocol 1, traces fetched
-    after the window) measured the same way in the same process as the baseline."""
+    (protocol 2, traces streamed), with the Python emulator (protocol 2 too, its servo in
+    Python) measured the same way in the same process as the baseline."""
     rows = {}
     for label, emu_args in (("firmware (host build, v2)", ("--firmware", args.firmware,
                                                               "--seed", "3")),
-                            ("Python emulator (v1), baseline", ("--seed", "3"))):
+                            ("Python emulator (v2), baseline", ("--seed", "3"))):
         proc, port = _start(*emu_args)
         try:
             rows[label] = _window_figures(port, max(5, args.repeats))
@@ -252,7 +253,7 @@ def firmware_main(args) -> int:
         z = r["estop_to_zero_ms"]
         w = r["window_end_to_traces_ms"]
         table.append((label, f"{r['rtt_ms']['p50']:.3f} / {r['rtt_ms']['p99']:.3f}",
-                      f"{z['p50']:.2f} / {z['max']:.2f}" if z else "not one clock",
+                      f"{z['p50']:.2f} / {z['max']:.2f}" if z else "not formed",
                       f"{r['stream_records_per_s']:.0f} ({r['stream_kB_per_s']:.0f} kB/s)",
                       f"{w['p50']:.1f} / {w['max']:.1f}"))
     print_table("link over the firmware vs the Python emulator (medians / worst)",
