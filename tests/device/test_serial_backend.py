@@ -429,3 +429,38 @@ def test_streamed_records_are_checked_for_coverage_not_counted(fault):
         server.join(timeout=5)
         os.close(master)
         os.close(slave)
+
+
+def test_status_reports_a_playback_its_force_and_one_clock():
+    """STATUS once read output 0 while 0.4–1.7 N were delivered, never said PLAYING, and
+    FAULT and STATUS used different clocks. A 0.5-N playback (2 s) now reports PLAYING with
+    ~500 mN once its 50-ms ramp is done; an ESTOP's FAULT time lies between the STATUS
+    times around it, on the one device clock."""
+    from device.serial import messages as M
+    from device.serial.emulator import warm_up
+
+    warm_up(10_000)  # as the emulator's main does: the servo loop's machine code loaded
+    S = M.Status
+    host = _RawHost()
+    try:
+        assert host.ask(M.Hello(2)) == "hello"
+        for a in range(0, 20_000, 480):
+            assert host.ask(M.PlayChunk(a, 480, (500,) * 480)) == S.OK
+        assert host.ask(M.PlayStart(1, 20_000)) == S.OK
+        t0 = time.monotonic()
+        playing = []
+        while time.monotonic() - t0 < 1.0:
+            host.send(M.Heartbeat())  # the watchdog is armed while the playback drives
+            m = host.read_until(lambda m: isinstance(m, M.StatusReport))
+            if m.state == M.State.PLAYING and time.monotonic() - t0 > 0.2:
+                playing.append(m.output_mn)
+        assert len(playing) >= 10
+        # the hand holds the stylus in free air: what the amplifier delivers is the command
+        assert all(abs(x - 500) <= 25 for x in playing), playing
+        before = host.read_until(lambda m: isinstance(m, M.StatusReport)).time_us
+        assert host.ask(M.EStop()) == S.OK
+        fault = host.read_until(lambda m: isinstance(m, M.Fault))
+        after = host.read_until(lambda m: isinstance(m, M.StatusReport)).time_us
+        assert before <= fault.time_us <= after, (before, fault.time_us, after)
+    finally:
+        host.close()
