@@ -118,8 +118,9 @@ class Emulator:
 
     # ------------------------------------------------------------------ clock, io
     def _sync(self) -> None:
-        """Between windows the device clock runs on: bring the simulator's up to it."""
-        if not self._busy():
+        """Between windows the device clock runs on: bring the simulator's up to it (a
+        window or playback advances it itself; a scene being prepared does not)."""
+        if not (self._busy() and self._running in ("window", "play")):
             self.sim.idle_until((time.monotonic() - self._clock0) * self.sim.speed)
 
     def _now_us(self) -> int:

@@ -249,7 +249,7 @@ class _RawHost:
     emulator on a pty (no driver in between). HELLO travels in a version-1 frame, every
     other command in version 2 unless ``version`` says otherwise."""
 
-    def __init__(self, emulator=None, **options):
+    def __init__(self, emulator=None, sim=None, **options):
         import os
         import threading
 
@@ -261,7 +261,7 @@ class _RawHost:
 
         self._os = os
         self.master, self.slave, path = open_pty()
-        self.emu = (emulator or Emulator)(SimDevice(seed=1), self.master, **options)
+        self.emu = (emulator or Emulator)(sim or SimDevice(seed=1), self.master, **options)
         self.server = threading.Thread(target=self.emu.serve_forever, daemon=True)
         self.server.start()
         self.port = serial.Serial(path, timeout=0.05)
@@ -462,5 +462,32 @@ def test_status_reports_a_playback_its_force_and_one_clock():
         fault = host.read_until(lambda m: isinstance(m, M.Fault))
         after = host.read_until(lambda m: isinstance(m, M.StatusReport)).time_us
         assert before <= fault.time_us <= after, (before, fault.time_us, after)
+    finally:
+        host.close()
+
+
+def test_status_keeps_coming_while_a_scene_is_prepared():
+    """A stiff real block takes the simulator up to ~1.5 s to prepare; the emulator's clock
+    used to stand still meanwhile, so it sent no STATUS and a host declared it gone after
+    100 ms (a simulated study over the link stopped so). Preparing for 0.5 s now leaves the
+    STATUS frames coming at their rate, with the device time advancing."""
+    from device.serial import messages as M
+    from device.sim.backend import SimDevice
+
+    class SlowToPrepare(SimDevice):
+        def load_scene(self, scene):
+            time.sleep(0.5)
+            super().load_scene(scene)
+
+    S = M.Status
+    host = _RawHost(sim=SlowToPrepare(seed=1))
+    try:
+        assert host.ask(M.Hello(2)) == "hello"
+        assert host.ask(M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)) == S.OK
+        n0 = len(host.seen)
+        assert host.ask(M.SceneCommit(1, 0)) == S.OK
+        times = [m.time_us for m in host.seen[n0:] if isinstance(m, M.StatusReport)]
+        assert len(times) >= 15  # 40 Hz over 0.5 s is 20
+        assert times == sorted(times) and times[-1] - times[0] >= 400_000
     finally:
         host.close()
