@@ -62,6 +62,7 @@ def start_emulator(*extra: str) -> Emulated:
 
 def stop_emulator(emu: Emulated) -> None:
     if emu.proc.poll() is None:
+        emu.proc.send_signal(signal.SIGCONT)  # a test may have frozen it
         emu.proc.send_signal(signal.SIGTERM)
         try:
             emu.proc.wait(timeout=10)

@@ -24,10 +24,11 @@ from . import messages as M
 from .framing import PROTOCOL_VERSION, FrameDecoder
 
 __all__ = ["Link", "DeviceGoneError", "DeviceTimeoutError", "PortBusyError",
-           "ProtocolMismatchError", "CRCStormError", "SILENCE_PERIODS"]
+           "ProtocolMismatchError", "CRCStormError", "SILENCE_MIN_S"]
 
-#: heartbeat periods of silence after which the device counts as gone (docs §3)
-SILENCE_PERIODS = 2
+#: the device counts as gone after T_wd without a frame, and never sooner than this [s]:
+#: two of the slowest STATUS intervals a device may keep (20 Hz; docs §3)
+SILENCE_MIN_S = 0.1
 
 
 class DeviceGoneError(DeviceError):
@@ -329,24 +330,42 @@ class Link:
 
     # ------------------------------------------------------------------ heartbeats
     def start_heartbeats(self, watchdog_s: float) -> None:
-        """Heartbeat every T_wd/4; silence for two periods marks the device gone."""
+        """Heartbeat every T_wd/4; silence for T_wd (at least ``SILENCE_MIN_S``), timed
+        while this host was listening, marks the device gone."""
         period = max(0.005, watchdog_s / 4)
+        limit = max(watchdog_s, SILENCE_MIN_S)
 
         def loop() -> None:
+            slept = time.monotonic() - period  # when the last sleep began
             while not self.closed and self._gone is None:
                 if not self._hb_pause.is_set():
                     try:
                         self.write(M.encode(M.Heartbeat(), 0, self.version))
                     except DeviceError:
                         return
-                silent = time.monotonic() - self._last_rx
-                if silent > SILENCE_PERIODS * period + 0.05:
+                now = time.monotonic()
+                silent = now - self._last_rx
+                # a host that was itself stalled (a garbage collection, a loaded machine)
+                # was not listening: what the device sent meanwhile waits unread. Silence
+                # is judged only on a turn that came on time, after the reader had its
+                # turn, and never while bytes wait in the port
+                on_time = now - slept < 2 * period
+                if (silent > limit and (on_time or silent > 4 * limit)
+                        and not self._bytes_waiting()):
                     self.mark_gone(f"{self.port}: device silent for {silent:.2f} s")
                     return
+                slept = time.monotonic()
                 time.sleep(period)
 
         self._hb = threading.Thread(target=loop, name="serial-heartbeat", daemon=True)
         self._hb.start()
+
+    def _bytes_waiting(self) -> bool:
+        """Whether received bytes wait unread in the port (the reader is behind)."""
+        try:
+            return bool(self._ser.in_waiting)
+        except Exception:  # noqa: BLE001 - a port that cannot say: judge by the clock alone
+            return False
 
     def pause_heartbeats(self, paused: bool) -> None:
         """Stop (True) or restart (False) the heartbeats: the watchdog test."""
