@@ -170,7 +170,8 @@ def _drive(runner, files, meta, console) -> SessionResult:
     if runner.timing:  # live pacing (the simulator in live mode): achieved servo rate
         rates = [t["achieved_rate_hz"] for t in runner.timing]
         meta["timing"] = {"achieved_rate_hz_median": float(np.median(rates)),
-                          "lateness_p99_s_max": max(t["lateness_p99_s"] for t in runner.timing)}
+                          "lateness_p99_s_max": max(t["lateness_p99_s"] for t in runner.timing),
+                          "slipped_s_total": sum(t.get("slipped_s", 0.0) for t in runner.timing)}
     meta["participant"]["debrief"] = runner.participant_ui.debrief()
     files.write_meta(meta)
     return SessionResult(files.folder, "complete", len(runner.log),

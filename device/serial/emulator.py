@@ -121,7 +121,8 @@ class Emulator:
         """Between windows the device clock runs on: bring the simulator's up to it (a
         window or playback advances it itself; a scene being prepared does not)."""
         if not (self._busy() and self._running in ("window", "play")):
-            self.sim.idle_until((time.monotonic() - self._clock0) * self.sim.speed)
+            wall = time.monotonic() - self._clock0 - self.sim.slipped_s
+            self.sim.idle_until(wall * self.sim.speed)
 
     def _now_us(self) -> int:
         self._sync()

@@ -26,6 +26,11 @@ __all__ = ["SimDevice", "CompiledScene", "compile_scene"]
 _CHUNK_S = 0.1  # device time between progress callbacks / heartbeats in virtual time
 _LIVE_CHUNK_S = 0.001  # pacing granularity in live mode
 _SPIN_S = 0.0002  # live mode: the end of each wait is spun, not slept [s]
+#: live mode: a servo loop that finds itself this far behind the wall clock (its process
+#: was stopped: a garbage collection, a loaded machine) lets its clock slip instead of
+#: racing to catch up [wall s]. Racing would run device time past heartbeats the link has
+#: received but not yet read, and trip the watchdog for a stall that was not the host's.
+_SLIP_S = 0.02
 
 
 class CompiledScene:
@@ -136,6 +141,8 @@ class SimDevice(HapticDevice):
         if not (speed > 0 and math.isfinite(speed)):
             raise DeviceSpecError(f"live speed must be finite and > 0, got {speed!r}")
         self.speed = float(speed)
+        #: wall seconds the live clock has slipped behind the wall clock (see ``_SLIP_S``)
+        self.slipped_s = 0.0
         self._stop_requested = False
         self.noise = bool(noise)
         # the serial number names the configuration, so a transient library built for
@@ -442,7 +449,8 @@ class SimDevice(HapticDevice):
         chunk = max(1, int(round((_LIVE_CHUNK_S if self.live else _CHUNK_S) / dt)))
         state = (self._x, self._ist, self._fst, self._rb)
         pieces = _TracePieces(self, buf) if self.live and self.trace_sink is not None else None
-        wall0 = time.perf_counter()
+        wall0 = start = time.perf_counter()
+        slipped = 0.0
         late: list[float] = []
         n = 0
         self._stop_requested = False
@@ -467,7 +475,12 @@ class SimDevice(HapticDevice):
                 self._latch((tick0 + ft) * dt)
             if self.live:
                 target = wall0 + n * dt / self.speed
-                late.append(time.perf_counter() - target)
+                lag = time.perf_counter() - target
+                late.append(lag)
+                if lag > _SLIP_S:  # the process was stopped: slip, do not race
+                    wall0 += lag
+                    target += lag
+                    slipped += lag
                 # sleep most of the wait (releasing the interpreter to the threads serving
                 # the link), then spin the last fraction of a millisecond: sleep alone is
                 # too coarse
@@ -489,9 +502,11 @@ class SimDevice(HapticDevice):
         res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True, pieces=pieces)
         res.energy = {"in": float(self._fst[K.FST_EIN]), "out": float(self._fst[K.FST_EOUT])}
         if self.live:
-            wall = time.perf_counter() - wall0
+            wall = time.perf_counter() - start
+            self.slipped_s += slipped
             lat = np.asarray(late)
             res.timing = {"achieved_rate_hz": n / wall if wall > 0 else float("nan"),
+                          "slipped_s": slipped,
                           "lateness_p50_s": float(np.median(lat)) if lat.size else 0.0,
                           "lateness_p99_s": float(np.quantile(lat, 0.99)) if lat.size else 0.0,
                           "jitter_sd_s": float(np.std(np.diff(lat))) if lat.size > 1 else 0.0}

@@ -1,6 +1,7 @@
 """Physics and behaviour of the sim backend beyond the backend-independent suite."""
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -173,10 +174,49 @@ def test_live_mode_reports_rate_and_jitter():
     dev.load_scene(FIRM)
     dev.home()
     res = dev.run_window(0.05, from_first_contact=False)
-    assert set(res.timing) == {"achieved_rate_hz", "lateness_p50_s", "lateness_p99_s",
-                               "jitter_sd_s"}
+    assert set(res.timing) == {"achieved_rate_hz", "slipped_s", "lateness_p50_s",
+                               "lateness_p99_s", "jitter_sd_s"}
     assert res.timing["achieved_rate_hz"] > 0
     assert len(res.traces["t"]) == 500
+
+
+def test_a_stopped_live_device_slips_its_clock_instead_of_racing():
+    """The live servo loop's process stopped for 0.4 s (as by a long garbage collection)
+    while a thread heartbeats every 10 ms, as an emulator's link does. Racing to catch up
+    would run device time past heartbeats not yet received and trip the watchdog; the clock
+    slips by the stall instead, and the window ends with no fault."""
+    import os
+    import subprocess
+    import threading
+
+    dev = SimDevice(live=True)
+    dev.load_scene(FIRM)
+    dev.home()
+    done = threading.Event()
+
+    def beat():
+        while not done.is_set():
+            dev.heartbeat()
+            time.sleep(0.01)
+
+    def stall(t, _partial):
+        if t > 0.2 and not stalled:
+            stalled.append(t)
+            pid = os.getpid()
+            subprocess.Popen(["sh", "-c", f"kill -STOP {pid}; sleep 0.4; kill -CONT {pid}"])
+            time.sleep(0.05)  # stopped in here
+
+    stalled: list[float] = []
+    beater = threading.Thread(target=beat, daemon=True)
+    beater.start()
+    try:
+        res = dev.run_window(1.0, from_first_contact=False, on_progress=stall, heartbeats=False)
+    finally:
+        done.set()
+        beater.join()
+    assert stalled and not res.faults and dev.fault is None
+    assert len(res.traces["t"]) == 10_000
+    assert res.timing["slipped_s"] > 0.3  # the stall, given up rather than raced
 
 
 def test_per_tick_work_follows_the_scene():
