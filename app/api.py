@@ -463,19 +463,23 @@ def session_seed(study_seed: int, k: int) -> int:
 
 
 @contextmanager
-def _device_spec(spec: str, speed: float = 1.0) -> Iterator[str]:
+def _device_spec(spec: str, speed: float = 1.0, log: Path | None = None) -> Iterator[str]:
     """``serial:emulator`` starts a device emulator on a pty for the run, paced at ``speed``
-    × real time."""
+    × real time; what it says (faults, the watchdog's timing) goes to ``log``."""
     if spec != "serial:emulator":
         yield spec
         return
-    proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", "--speed",
-                             repr(float(speed))],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    if log is not None:
+        log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log if log is not None else "/dev/null", "w") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", "--speed",
+                                 repr(float(speed))],
+                                stdout=subprocess.PIPE, stderr=err, text=True)
     try:
         port = proc.stdout.readline().strip()
         if not port:
-            raise UsageError("the device emulator did not start")
+            raise UsageError("the device emulator did not start"
+                             + (f" (its log: {log})" if log is not None else ""))
         yield f"serial:{port}"
     finally:
         proc.terminate()
@@ -529,7 +533,7 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
     rows = len(SessionEngine(proto, 0, "x", 0).williams_rows(williams[0])) if williams else 0
     t0 = time.perf_counter()
     out: list[SessionResult] = []
-    with _device_spec(device, speed) as spec:
+    with _device_spec(device, speed, Path(data) / "emulator.log") as spec:
         for k in range(1, participants + 1):
             # a Williams-counterbalanced protocol: participant k takes row (k − 1) mod rows
             r = run_session(protocol, f"{prefix}{k:02d}", device=spec, data=data,

@@ -352,6 +352,8 @@ def test_simulate_over_the_serial_link_to_the_emulator(tmp_path):
     d = load_sessions(tmp_path)
     assert (d["status"] == "valid").sum() == 24 and set(d["device_backend"]) == {"serial"}
     assert (d["status"] == "reference").sum() == 3  # each material's real block, tapped once
+    log = (tmp_path / "emulator.log").read_text()  # what the device said, kept for people
+    assert "emulating a 10000-Hz device" in log and "FAULT" not in log
     rated = d[d["status"] == "valid"]
     assert rated["rating"].between(1, 10).all() and rated["rating"].nunique() > 2
     bad = subprocess.run([*CLI, "simulate", "factorial", "--speed", "0"], capture_output=True,
