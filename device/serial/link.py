@@ -26,6 +26,11 @@ from .framing import PROTOCOL_VERSION, FrameDecoder
 __all__ = ["Link", "DeviceGoneError", "DeviceTimeoutError", "PortBusyError",
            "ProtocolMismatchError", "CRCStormError", "SILENCE_MIN_S"]
 
+#: how long a host offers HELLO before it gives up [s]. A device may not listen at once
+#: when its port opens: a board that resets on DTR boots first, and QEMU's pty serial
+#: notices a reopened port only at its next once-a-second poll (HELLO_ACK came 0.81 s
+#: after the open, measured), which a 1-s wait missed under load
+HELLO_WAIT_S = 3.0
 #: the device counts as gone after T_wd without a frame, and never sooner than this [s]:
 #: two of the slowest STATUS intervals a device may keep (20 Hz; docs §3)
 SILENCE_MIN_S = 0.1
@@ -284,7 +289,7 @@ class Link:
         frame, which every device reads; the device answers in the version it chose, and
         the link speaks that from then on. A version-2 device follows with LIMITS
         (:attr:`limits`)."""
-        deadline = time.monotonic() + max(1.0, 4 * self.timeout)
+        deadline = time.monotonic() + max(HELLO_WAIT_S, 4 * self.timeout)
         seq = self.next_seq()
         while time.monotonic() < deadline:
             self.write(M.encode(M.Hello(protocol), seq, 1))
