@@ -563,6 +563,8 @@ class Emulator:
                                              tuple(take.ravel().tolist())))
 
     def _finish(self, window_id: int, res, t0_us: int) -> None:
+        if self._stop.is_set():
+            return  # switched off mid-window: a device losing power reports nothing more
         rate = self.sim.info.servo_rate_hz
         t0 = t0_us * 1e-6
         for s in res.saturations:
