@@ -19,14 +19,19 @@ from ..errors import DeviceError
 __all__ = ["FIRMWARE_DIR", "binary", "host_command", "qemu_command", "serve", "QEMU_PTY"]
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
-_TARGETS = {"host": "build/hlfw-host", "qemu": "build/hlfw-stm32.elf"}
-_TOOLS = {"host": ("cc", "build-essential"), "qemu": ("arm-none-eabi-gcc", "gcc-arm-none-eabi")}
+#: builds by kind; ``board-qemu`` is the papers' board I/O built for QEMU (its peripheral
+#: traffic is what the tests check; it has no plant, so it serves no session)
+_TARGETS = {"host": "build/hlfw-host", "qemu": "build/hlfw-stm32.elf",
+            "board-qemu": "build/hlfw-board-qemu.elf"}
+_ARM = ("arm-none-eabi-gcc", "gcc-arm-none-eabi")
+_TOOLS = {"host": ("cc", "build-essential"), "qemu": _ARM, "board-qemu": _ARM}
 #: what qemu-system-arm prints when it puts a serial port on a pty
 QEMU_PTY = re.compile(r"char device redirected to (/dev/pts/\d+)")
 
 
 def binary(kind: str) -> Path:
-    """The firmware build ``kind`` (``host`` or ``qemu``), brought up to date by ``make``
+    """The firmware build ``kind`` (``host``, ``qemu`` or ``board-qemu``), brought up to date
+    by ``make``
     (used as it is where there is no compiler).
 
     Raises
@@ -36,7 +41,8 @@ def binary(kind: str) -> Path:
         failed (with the compiler's last lines).
     """
     if kind not in _TARGETS:
-        raise DeviceError(f"firmware build '{kind}' does not exist; choose host or qemu")
+        raise DeviceError(f"firmware build '{kind}' does not exist; choose "
+                          f"{', '.join(_TARGETS)}")
     path = FIRMWARE_DIR / _TARGETS[kind]
     tool, package = _TOOLS[kind]
     if shutil.which(tool) is None or shutil.which("make") is None:
@@ -60,15 +66,15 @@ def host_command(seed: int = 0, speed: float = 1.0) -> list[str]:
     return [str(binary("host")), "--seed", str(int(seed)), "--speed", repr(float(speed))]
 
 
-def qemu_command() -> list[str]:
-    """qemu-system-arm running the Cortex-M build with its USART1 on a new pty (QEMU
-    prints the pty's path: :data:`QEMU_PTY`)."""
+def qemu_command(kind: str = "qemu", *extra: str) -> list[str]:
+    """qemu-system-arm running Cortex-M build ``kind`` with its USART1 on a new pty (QEMU
+    prints the pty's path: :data:`QEMU_PTY`); ``extra`` options go before the kernel."""
     if shutil.which("qemu-system-arm") is None:
         raise DeviceError("qemu-system-arm is missing: install Debian's qemu-system-arm "
                           "(`make test` does)")
+    monitor = () if "-monitor" in extra else ("-monitor", "none")
     return ["qemu-system-arm", "-M", "netduinoplus2", "-accel", "tcg,thread=single",
-            "-nographic", "-monitor", "none",
-            "-serial", "pty", "-kernel", str(binary("qemu"))]
+            "-nographic", *monitor, "-serial", "pty", *extra, "-kernel", str(binary(kind))]
 
 
 def serve(kind: str, seed: int = 0, speed: float = 1.0) -> int:

@@ -1,10 +1,13 @@
 /* The hardware layer: one interface, three implementations.
  *
- *   src/hal_sim.c    simulated plant (src/plant.c) behind in-memory byte queues: the host
- *                    build on a pseudo-terminal (src/main_host.c) and the unit tests
+ *   src/hal_sim.c    the link as in-memory byte queues: the host build on a
+ *                    pseudo-terminal (src/main_host.c) and the unit tests
  *   src/hal_stm32.c  STM32F405 (netduinoplus2 under QEMU, or the papers' device board):
- *                    USART, SysTick at the servo rate, IWDG; its encoder, current and
- *                    accelerometer come from the simulated plant unless HL_BOARD_IO is set
+ *                    clocks, USART1, SysTick at the servo rate, IWDG, the main loop
+ * and, for the servo side's I/O (encoder, amplifier, accelerometer), one of
+ *   src/io_plant.c   the simulated plant (src/plant.c): host build, tests, QEMU build
+ *   src/io_board.c   the papers' device: TIM2 quadrature encoder, DAC1 to the current
+ *                    amplifier and its enable line, ADC1 on the analog accelerometer
  *
  * Conventions: height and velocity are positive upwards (away from the surface), force is
  * positive upwards, SI units unless a name says otherwise. The servo side is called from
@@ -20,7 +23,11 @@
 int32_t hal_encoder_counts(void);  /* stylus height [encoder counts of HL_ENCODER_NM] */
 void hal_current_set(float amps);  /* amplifier command [A], already clamped by the caller */
 float hal_accel_read(void);        /* stylus acceleration [m/s^2], up positive */
+void hal_amp_enable(int on);       /* the amplifier's enable line: on only while output is
+                                      enabled and no fault is latched (every tick) */
 void hal_watchdog_kick(void);      /* the hardware watchdog (the servo tick proves liveness) */
+void hal_io_init(uint64_t seed);   /* the servo side's I/O, before the first tick: the plant
+                                      (seeded) or the board's peripherals (seed unused) */
 
 /* ---- link side ---- */
 size_t hal_uart_read(uint8_t *buf, size_t cap);     /* non-blocking; bytes read */

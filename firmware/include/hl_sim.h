@@ -1,5 +1,5 @@
-/* The simulated-plant HAL's link side: in-memory byte queues that a program (the host
- * build's pty loop, the unit tests) fills and drains. */
+/* The simulated HAL: in-memory byte queues that a program (the host build's pty loop, the
+ * unit tests) fills and drains (src/hal_sim.c), and the plant's amplifier (src/io_plant.c). */
 #ifndef HL_SIM_H
 #define HL_SIM_H
 
@@ -11,7 +11,9 @@ void sim_hal_init(uint64_t seed);
 size_t sim_uart_to_device(const uint8_t *buf, size_t n);
 /* bytes the device sent; returns how many were copied */
 size_t sim_uart_from_device(uint8_t *buf, size_t cap);
-/* the last amplifier current the servo commanded [A] */
+/* the current the amplifier passed at the last tick [A] (0 while it is disabled) */
 float sim_current(void);
+/* whether the amplifier's enable line is on */
+int sim_amp_enabled(void);
 
 #endif

@@ -377,6 +377,8 @@ void hl_servo_tick(void)
         cur = want > 0 ? D.limit : -D.limit;
         flags |= HL_FLAG_SATURATED;
     }
+    /* the amplifier is enabled only while output is: a second way to zero it on a fault */
+    hal_amp_enable(D.enabled && !D.fault);
     hal_current_set(cur);
     D.current = cur;
     float acc = hal_accel_read();

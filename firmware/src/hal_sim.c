@@ -1,11 +1,10 @@
-/* The simulated-plant HAL (hl_hal.h): the servo drives src/plant.c, and the UART is a
- * pair of byte queues (hl_sim.h). Single-threaded: the program calls hl_servo_tick() and
- * hl_device_poll() in turn, so hal_lock() has nothing to keep out. */
+/* The simulated HAL's link side (hl_hal.h): the UART is a pair of byte queues (hl_sim.h);
+ * the servo's I/O is the plant (src/io_plant.c). Single-threaded: the program calls
+ * hl_servo_tick() and hl_device_poll() in turn, so hal_lock() has nothing to keep out. */
 #include <string.h>
 
 #include "hl_device.h"
 #include "hl_hal.h"
-#include "hl_plant.h"
 #include "hl_sim.h"
 
 #ifndef SIM_TX_BYTES
@@ -20,7 +19,6 @@ typedef struct {
 
 static uint8_t tx_buf[SIM_TX_BYTES], rx_buf[SIM_RX_BYTES];
 static queue TX = {tx_buf, SIM_TX_BYTES, 0, 0}, RX = {rx_buf, SIM_RX_BYTES, 0, 0};
-static float last_current;
 
 static size_t q_put(queue *q, const uint8_t *b, size_t n)
 {
@@ -44,22 +42,12 @@ static size_t q_get(queue *q, uint8_t *b, size_t cap)
 void sim_hal_init(uint64_t seed)
 {
     TX.head = TX.len = RX.head = RX.len = 0;
-    last_current = 0.0f;
-    plant_init(seed, (float)HL_SERVO_HZ, (float)HL_ENCODER_NM * 1e-9f,
-               (float)HL_FORCE_CONSTANT_MN_A * 1e-3f);
+    hal_io_init(seed);
 }
 
 size_t sim_uart_to_device(const uint8_t *buf, size_t n) { return q_put(&RX, buf, n); }
 size_t sim_uart_from_device(uint8_t *buf, size_t cap) { return q_get(&TX, buf, cap); }
-float sim_current(void) { return last_current; }
 
-int32_t hal_encoder_counts(void) { return plant_encoder(); }
-void hal_current_set(float amps)
-{
-    last_current = amps;
-    plant_step(amps);
-}
-float hal_accel_read(void) { return plant_accel(); }
 void hal_watchdog_kick(void) {}
 size_t hal_uart_read(uint8_t *buf, size_t cap) { return q_get(&RX, buf, cap); }
 size_t hal_uart_space(void) { return TX.cap - TX.len; }

@@ -1,25 +1,37 @@
-/* The STM32F405 HAL (hl_hal.h): USART1 (PA9 TX, PA10 RX) for the link, SysTick at the
- * servo rate, the independent watchdog, DWT cycle counter. Under QEMU (netduinoplus2)
- * the encoder, amplifier and accelerometer are the simulated plant (src/plant.c); on the
- * papers' board they are TIM2's encoder mode, the DAC to the amplifier and the SPI
- * accelerometer (firmware/README.md, pin map), which this build does not drive yet.
+/* The STM32F405 HAL's MCU side (hl_hal.h): clocks (8-MHz crystal, PLL to 168 MHz),
+ * USART1 (PA9 TX, PA10 RX) for the link, SysTick at the servo rate, the independent
+ * watchdog, the DWT cycle counter, and the main loop. The servo's I/O is linked beside it:
+ * src/io_plant.c (the simulated plant: the QEMU build) or src/io_board.c (the papers'
+ * device: encoder, amplifier, accelerometer; pin map in firmware/README.md).
  *
  * Main loop: hl_device_poll(), then sleep (WFI) until an interrupt. SysTick (highest
  * priority): hl_servo_tick(). USART1 interrupt: bytes in and out of two rings.
+ *
+ * HL_QEMU=1 builds for QEMU's netduinoplus2, which models neither the RCC (its PLL never
+ * locks; the emulated clock needs no setting) nor the chip's unique ID, and whose USART
+ * keeps TXE set.
  */
 #include <stdint.h>
 
 #include "hl_device.h"
 #include "hl_hal.h"
-#include "hl_plant.h"
 
 #define REG(addr) (*(volatile uint32_t *)(addr))
 #define USART1_SR REG(0x40011000u)
 #define USART1_DR REG(0x40011004u)
 #define USART1_BRR REG(0x40011008u)
 #define USART1_CR1 REG(0x4001100Cu)
+#define RCC_CR REG(0x40023800u)
+#define RCC_PLLCFGR REG(0x40023804u)
+#define RCC_CFGR REG(0x40023808u)
 #define RCC_AHB1ENR REG(0x40023830u)
+#define RCC_APB1ENR REG(0x40023840u)
 #define RCC_APB2ENR REG(0x40023844u)
+#define FLASH_ACR REG(0x40023C00u)
+#define PWR_CR REG(0x40007000u)
+#define GPIOA_MODER REG(0x40020000u)
+#define GPIOA_AFRH REG(0x40020024u)
+#define CHIP_UID(k) REG(0x1FFF7A10u + 4u * (k))
 #define SYST_CSR REG(0xE000E010u)
 #define SYST_RVR REG(0xE000E014u)
 #define SYST_CVR REG(0xE000E018u)
@@ -27,11 +39,16 @@
 #define DWT_CTRL REG(0xE0001000u)
 #define DWT_CYCCNT REG(0xE0001004u)
 #define IWDG_KR REG(0x40003000u)
+#define IWDG_PR REG(0x40003004u)
+#define IWDG_RLR REG(0x40003008u)
 #define SR_RXNE (1u << 5)
 #define SR_TXE (1u << 7)
 #define CPU_HZ 168000000u
-#ifndef HL_EMULATED_USART
-#define HL_EMULATED_USART 0 /* 1: the QEMU build (Makefile) */
+#ifndef HL_QEMU
+#define HL_QEMU 0 /* 1: the builds for QEMU's netduinoplus2 (Makefile) */
+#endif
+#ifndef HL_HSE_HZ
+#define HL_HSE_HZ 8000000u /* the board's crystal */
 #endif
 
 #define TX_BYTES 8192u /* powers of two */
@@ -51,16 +68,14 @@ static uint8_t rx_ring[RX_BYTES];
 static volatile uint32_t rx_head, rx_tail;
 static volatile uint32_t lock_depth;
 
-static float last_current;
-
-int32_t hal_encoder_counts(void) { return plant_encoder(); }
-void hal_current_set(float amps)
+void hal_watchdog_kick(void)
 {
-    last_current = amps;
-    plant_step(amps);
+    /* every 16th tick (1.6 ms) is often enough for a 10-ms watchdog */
+    static uint32_t n;
+    if ((++n & 15u) == 0) {
+        IWDG_KR = 0xAAAAu;
+    }
 }
-float hal_accel_read(void) { return plant_accel(); }
-void hal_watchdog_kick(void) { IWDG_KR = 0xAAAAu; }
 
 /* USART1: every received byte into rx_ring (a byte that finds it full is lost, and the
  * frame it belonged to fails its CRC: the host resends); TX empties tx_ring while the
@@ -76,7 +91,7 @@ void usart1_handler(void)
             rx_head++;
         }
     }
-#if HL_EMULATED_USART
+#if HL_QEMU
     /* QEMU's USART sends each byte synchronously and keeps TXE set; reading SR costs a
      * wake-up of QEMU's I/O thread per byte, which halves the emulated board's speed */
     while (tx_tail != tx_head) {
@@ -134,11 +149,74 @@ uint32_t hal_cycles(void) { return DWT_CYCCNT; }
 void systick_handler(void);
 void systick_handler(void) { hl_servo_tick(); }
 
+#if !HL_QEMU
+/* HSE -> PLL: 168 MHz core, APB1 42 MHz (its timers 84 MHz), APB2 84 MHz, 48 MHz for
+ * USB; 5 flash wait states at 3.3 V */
+static void clock_init(void)
+{
+    RCC_CR |= 1u << 16; /* HSEON */
+    while (!(RCC_CR & (1u << 17))) {
+    }
+    RCC_APB1ENR |= 1u << 28; /* PWR: voltage scale 1 for 168 MHz */
+    PWR_CR |= 1u << 14;
+    FLASH_ACR = 5u | (1u << 8) | (1u << 9) | (1u << 10); /* latency, prefetch, I & D cache */
+    RCC_PLLCFGR = (HL_HSE_HZ / 1000000u) | (336u << 6) | (0u << 16) | (1u << 22) | (7u << 24);
+    RCC_CFGR = (5u << 10) | (4u << 13); /* AHB /1, APB1 /4, APB2 /2 */
+    RCC_CR |= 1u << 24;                 /* PLLON */
+    while (!(RCC_CR & (1u << 25))) {
+    }
+    RCC_CFGR |= 2u; /* system clock from the PLL */
+    while ((RCC_CFGR & (3u << 2)) != (2u << 2)) {
+    }
+}
+#endif
+
+/* the independent watchdog: 10 ms (LSI 32 kHz / 4, reload 80; 6.8 ms at the LSI's fastest
+ * 47 kHz); the servo tick kicks it every 1.6 ms, so it resets the chip, amplifier enable
+ * low, only when the servo has stopped */
+static void iwdg_start(void)
+{
+    IWDG_KR = 0x5555u;
+    IWDG_PR = 0u;
+    IWDG_RLR = 80u;
+    IWDG_KR = 0xAAAAu;
+    IWDG_KR = 0xCCCCu;
+}
+
+/* the device's serial number: the chip's 96-bit unique ID, folded to 32 bits (a host keeps
+ * its transient libraries per serial number) */
+static void serial_number(char *out)
+{
+#if HL_QEMU
+    const char *name = "F405-QEMU";
+    while ((*out++ = *name++) != 0) {
+    }
+#else
+    uint32_t h = 2166136261u;
+    for (uint32_t k = 0; k < 3; k++) {
+        h = (h ^ CHIP_UID(k)) * 16777619u;
+    }
+    const char *pre = "F405-"; /* the serial field holds 15 characters */
+    while (*pre) {
+        *out++ = *pre++;
+    }
+    for (int k = 7; k >= 0; k--) {
+        *out++ = "0123456789ABCDEF"[(h >> (4 * k)) & 0xFu];
+    }
+    *out = 0;
+#endif
+}
+
 int main(void);
 int main(void)
 {
+#if !HL_QEMU
+    clock_init();
+#endif
     RCC_AHB1ENR |= 1u;        /* GPIOA */
     RCC_APB2ENR |= 1u << 4;   /* USART1 */
+    GPIOA_MODER = (GPIOA_MODER & ~(0xFu << 18)) | (0xAu << 18); /* PA9, PA10: alternate */
+    GPIOA_AFRH = (GPIOA_AFRH & ~0xFF0u) | 0x770u;               /* AF7: USART1 */
     USART1_BRR = 84000000u / 1000000u; /* 1 Mbaud from the 84-MHz APB2 clock */
     USART1_CR1 = CR1_BASE;
     SHPR3 = (SHPR3 & 0x00FFFFFFu);      /* SysTick (the servo) at the highest priority */
@@ -147,9 +225,11 @@ int main(void)
     DEMCR |= 1u << 24;        /* trace enable, for the cycle counter */
     DWT_CYCCNT = 0;
     DWT_CTRL |= 1u;
-    plant_init(20261123u, (float)HL_SERVO_HZ, (float)HL_ENCODER_NM * 1e-9f,
-               (float)HL_FORCE_CONSTANT_MN_A * 1e-3f);
-    hl_device_init("STM32F405-SIM");
+    hal_io_init(20261123u);
+    static char serial[16];
+    serial_number(serial);
+    hl_device_init(serial);
+    iwdg_start();
     SYST_RVR = CPU_HZ / HL_SERVO_HZ - 1u;
     SYST_CVR = 0;
     SYST_CSR = 7u; /* processor clock, interrupt, enable */

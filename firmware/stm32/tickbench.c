@@ -44,6 +44,7 @@ static size_t rx_len, rx_pos;
 int32_t hal_encoder_counts(void) { return enc_now; }
 void hal_current_set(float amps) { cur_now = amps; }
 float hal_accel_read(void) { return acc_now; }
+void hal_amp_enable(int on) { (void)on; }
 void hal_watchdog_kick(void) {}
 size_t hal_uart_read(uint8_t *buf, size_t cap)
 {

@@ -298,7 +298,9 @@ static void test_ramp_clamp_estop(void)
         f[i] = 430; /* 0.43 N = 0.2 A */
     }
     EXPECT(play(f, 480) == HL_OK);
+    EXPECT(!sim_amp_enabled()); /* the amplifier's enable line is off until output is on */
     ticks(1, 0, 0);
+    EXPECT(sim_amp_enabled());
     float i1 = hl_device_peek().current;
     ticks(249, 0, 0);
     float i250 = hl_device_peek().current;
@@ -307,7 +309,7 @@ static void test_ramp_clamp_estop(void)
     EXPECT(fabsf(i1 - 0.2f / 500.0f) < 1e-6f);      /* first ramp step: 1/500 */
     EXPECT(fabsf(i250 - 0.2f * 0.5f) < 1e-5f);      /* halfway at 25 ms */
     EXPECT(hl_device_peek().state == HL_IDLE);      /* a playback enables output for itself */
-    EXPECT(fabsf(i_end) < 1e-12f);
+    EXPECT(fabsf(i_end) < 1e-12f && !sim_amp_enabled());
     EXPECT(seen[0x94] == 1);
     for (int i = 0; i < 480; i++) {
         f[i] = 10000; /* 10 N: 4.65 A, clamped at 0.5 */
@@ -328,7 +330,7 @@ static void test_ramp_clamp_estop(void)
     EXPECT(cmd(0x30, none, 0) == HL_OK);
     ticks(1, 0, 0);
     EXPECT(hl_device_peek().fault == HL_FAULT_ESTOP);
-    EXPECT(sim_current() == 0.0f);
+    EXPECT(sim_current() == 0.0f && !sim_amp_enabled());
     ticks(5, 1, 1);
     EXPECT(seen[0x92] == 1 && seen[0x94] == 1);
     EXPECT(last_body[0x94][23] == 1); /* WINDOW_DONE says a fault ended it */

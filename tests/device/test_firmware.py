@@ -15,6 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from device import Scene
 from device.errors import DeviceError
 from device.serial import messages as M
 from device.serial.backend import SerialDevice, stream_decimation
@@ -128,6 +129,89 @@ def test_selftest_passes_against_the_cortex_m_build_under_qemu():
             assert np.allclose(np.diff(res.traces["t"]), 4e-4, rtol=0, atol=1e-9)
     finally:
         stop_emulator(emu)
+
+
+def _qemu_monitor(path: str, command: str) -> str:
+    """One command on QEMU's human monitor (a unix socket); its answer."""
+    import socket
+    import time
+
+    with socket.socket(socket.AF_UNIX) as sock:
+        sock.connect(path)
+        sock.settimeout(5)
+        out = b""
+        while b"(qemu)" not in out:
+            out += sock.recv(4096)
+        sock.sendall(command.encode() + b"\n")
+        out = b""
+        end = time.monotonic() + 5
+        while out.count(b"(qemu)") < 1 and time.monotonic() < end:
+            out += sock.recv(4096)
+    return out.decode(errors="replace")
+
+
+def _xp(path: str, addr: int) -> int:
+    """A 32-bit word of the emulated board's physical memory, read through the monitor."""
+    import re
+
+    answer = _qemu_monitor(path, f"xp /1wx {addr:#x}")
+    return int(re.search(rf"{addr:016x}: (0x[0-9a-f]+)", answer).group(1), 16)
+
+
+@pytest.mark.skipif(shutil.which("qemu-system-arm") is None,
+                    reason="qemu-system-arm missing: `make test` installs it")
+def test_the_board_build_drives_the_papers_device_peripherals_under_qemu(tmp_path):
+    """The build for the papers' device (src/io_board.c) under QEMU, which logs every access
+    to the peripherals it does not model (-d unimp): the DAC, the GPIO ports, the watchdog.
+    A 0.1-N playback must put 0.1 N / 2.15 N/A = 46.5 mA on the DAC (mid-scale 2048 + 46.5 /
+    1400 × 2047 = 2116, computed by hand), the amplifier's enable line must be off at reset,
+    on at HOME and off again at ZERO, and the watchdog must be started. QEMU does model
+    TIM2 (read back through its monitor: encoder mode 3 on TI1/TI2) and ADC1, whose fake
+    conversions step by 7 counts each: the accelerometer channel must step by 7 counts ×
+    ticks per record × 50 g / 2048 (wrapping at 4096), which holds only if every tick reads
+    one conversion and starts the next. QEMU's TIM2 counts time, not encoder edges, so the
+    position it gives means nothing here."""
+    from device.serial.firmware import QEMU_PTY, qemu_command
+
+    log, mon = tmp_path / "unimp.log", str(tmp_path / "monitor.sock")
+    cmd = qemu_command("board-qemu", "-d", "unimp", "-D", str(log),
+                       "-monitor", f"unix:{mon},server,nowait")
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            stdin=subprocess.DEVNULL, text=True)
+    try:
+        port = next(m.group(1) for line in proc.stdout if (m := QEMU_PTY.search(line)))
+        with SerialDevice(port) as dev:
+            assert dev.info.firmware == "hlfw-2.0 board"
+            assert dev.info.serial_number == "F405-QEMU"
+            dev.load_scene(Scene("firm", spring=680.0))
+            dev.home()
+            res = dev.play_force(np.full(480, 0.1))
+            tim2 = {name: _xp(mon, 0x40000000 + off) for name, off in
+                    (("CR1", 0x00), ("SMCR", 0x08), ("CCMR1", 0x18), ("ARR", 0x2C))}
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+    writes = [line.split(":")[0] + " " + line.split("offset ")[1].split(",")[0] + " "
+              + line.split("value ")[1].rstrip(")\n")
+              for line in log.read_text().splitlines() if "device write" in line]
+    def values(periph: str, offset: int) -> list[int]:
+        return [int(w.split()[2], 16) for w in writes
+                if w.split()[0] == periph and int(w.split()[1], 16) == offset]
+
+    dac = values("DAC", 0x08)
+    assert dac[0] == 2048  # mid-scale (0 A) is set before the DAC is enabled
+    assert writes.index("DAC 0x008 0x00000800") < writes.index("DAC 0x000 0x00000001")
+    assert max(dac) == 2116 and min(dac) == 2048 and dac[-1] == 2048
+    assert values("GPIOB", 0x18) == [0x3 << 16, 0x3, 0x3 << 16]  # off, HOME: on, ZERO: off
+    kr = values("IWDG", 0x00) + values("I2S2ext", 0x00)  # QEMU names the address either way
+    assert 0x5555 in kr and 0xCCCC in kr and 0xAAAA in kr  # configured, started, kicked
+    assert tim2 == {"CR1": 1, "SMCR": 3, "CCMR1": 0x3131, "ARR": 0xFFFFFFFF}
+
+    ticks = round((res.traces["t"][1] - res.traces["t"][0]) * 10_000)  # per record
+    per_count = 490.333 / 2048  # ±50 g over 12 bits [m/s² per count]
+    steps = np.round(np.diff(res.traces["accel"]) / per_count).astype(int)
+    assert len(steps) > 50 and set(steps) <= {7 * ticks, 7 * ticks - 4096}, set(steps)
 
 
 @pytest.mark.skipif(shutil.which("qemu-system-arm") is None,
