@@ -17,6 +17,7 @@ Examples
 from __future__ import annotations
 
 import math
+import os
 import re
 import subprocess
 import sys
@@ -471,7 +472,7 @@ def _device_spec(spec: str, speed: float = 1.0, log: Path | None = None) -> Iter
         return
     if log is not None:
         log.parent.mkdir(parents=True, exist_ok=True)
-    with open(log if log is not None else "/dev/null", "w") as err:
+    with open(log if log is not None else os.devnull, "w") as err:
         proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", "--speed",
                                  repr(float(speed))],
                                 stdout=subprocess.PIPE, stderr=err, text=True)

@@ -7,6 +7,7 @@ installs the cross compiler and QEMU from Debian's packages when missing.
 """
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -152,8 +153,6 @@ def _qemu_monitor(path: str, command: str) -> str:
 
 def _xp(path: str, addr: int) -> int:
     """A 32-bit word of the emulated board's physical memory, read through the monitor."""
-    import re
-
     answer = _qemu_monitor(path, f"xp /1wx {addr:#x}")
     return int(re.search(rf"{addr:016x}: (0x[0-9a-f]+)", answer).group(1), 16)
 
@@ -192,16 +191,17 @@ def test_the_board_build_drives_the_papers_device_peripherals_under_qemu(tmp_pat
         proc.terminate()
         proc.wait(timeout=10)
 
-    writes = [line.split(":")[0] + " " + line.split("offset ")[1].split(",")[0] + " "
-              + line.split("value ")[1].rstrip(")\n")
-              for line in log.read_text().splitlines() if "device write" in line]
+    # QEMU's line: "DAC: unimplemented device write (size 4, offset 0x008, value 0x00000844)"
+    writes = [(m[1], int(m[2], 16), int(m[3], 16)) for m in re.finditer(
+        r"^(\S+): unimplemented device write \(size \d+, offset (0x[0-9a-f]+), value "
+        r"(0x[0-9a-f]+)\)", log.read_text(), re.M)]
+
     def values(periph: str, offset: int) -> list[int]:
-        return [int(w.split()[2], 16) for w in writes
-                if w.split()[0] == periph and int(w.split()[1], 16) == offset]
+        return [v for p, off, v in writes if p == periph and off == offset]
 
     dac = values("DAC", 0x08)
     assert dac[0] == 2048  # mid-scale (0 A) is set before the DAC is enabled
-    assert writes.index("DAC 0x008 0x00000800") < writes.index("DAC 0x000 0x00000001")
+    assert writes.index(("DAC", 0x08, 2048)) < writes.index(("DAC", 0x00, 1))
     assert max(dac) == 2116 and min(dac) == 2048 and dac[-1] == 2048
     assert values("GPIOB", 0x18) == [0x3 << 16, 0x3, 0x3 << 16]  # off, HOME: on, ZERO: off
     kr = values("IWDG", 0x00) + values("I2S2ext", 0x00)  # QEMU names the address either way
