@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..base import DeviceInfo, HapticDevice
-from ..codes import SceneKind
+from ..codes import Blend, SceneKind
 from ..errors import DeviceError, DeviceFaultError
 from ..events import ContactEvent, FaultEvent, SaturationEvent, WindowResult
 from ..scene import Scene, TransientTable
@@ -75,6 +75,43 @@ def stream_decimation(lim: M.Limits, n_channels: int, servo_rate_hz: float,
     raise DeviceError(f"the device's link carries {lim.link_bytes_s} B/s: too little for "
                       f"{n_channels} trace channels even at its largest decimation "
                       f"({lim.max_decimation})")
+
+
+#: the largest force a table item carries [N] (``i16``, 1 mN per LSB)
+TABLE_FORCE_MAX = 32.767
+
+
+def _wire_table(table: TransientTable, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``table`` as the wire carries them: reference speeds [m/s] and forces
+    [mN, ``int16``, shape (rows, row_len)].
+
+    A ``scale`` table plays row 0 × v/v₀ and nothing else, so only row 0 is sent, and at
+    the reference speed that makes its largest force fill the item range: the product is
+    unchanged, and a row that would not fit (a 200 N·s/m pulse tabulated per 1 m/s is
+    200 N) fits, with the finest steps the items allow. In ``nearest`` and ``linear``
+    tables the speeds choose the rows, so they go as they are, and a force out of range is
+    refused, never clipped.
+
+    Raises
+    ------
+    DeviceError
+        A ``nearest`` or ``linear`` table with a force beyond ±32.767 N.
+    """
+    v = np.asarray(table.velocities, dtype=float)
+    f = np.asarray(table.forces, dtype=float)
+    if table.blend == Blend.SCALE:
+        peak = float(np.max(np.abs(f[0])))
+        k = TABLE_FORCE_MAX / peak if peak > 0 else 1.0
+        v, f = v[:1] * k, f[:1] * k
+    else:
+        peak = float(np.max(np.abs(f)))
+        if peak > TABLE_FORCE_MAX:
+            row, tick = np.unravel_index(int(np.argmax(np.abs(f))), f.shape)
+            raise DeviceError(f"{where}: its transient table has {peak:.6g} N (row {row}, tick "
+                              f"{tick}); a {table.blend.label} table carries at most "
+                              f"±{TABLE_FORCE_MAX} N per item")
+    q = np.round(f * 1000.0)
+    return v, np.clip(q, -32767, 32767).astype("<i2")
 
 
 class SerialDevice(HapticDevice):
@@ -232,7 +269,9 @@ class SerialDevice(HapticDevice):
         ring = m.ringing if m is not None else None
         kind = (SceneKind.REAL if m is not None else
                 SceneKind.TABLE if table is not None else SceneKind.SPRING)
-        rows, row_len = (table.forces.shape if table is not None else (0, 0))
+        if table is not None:
+            velocities, q = _wire_table(table, f"{self.port}: scene '{scene.name}'")
+        rows, row_len = (q.shape if table is not None else (0, 0))
         lim = self.link.limits
         if lim is not None and rows * row_len > lim.table_items:
             raise DeviceError(f"{self.port}: scene '{scene.name}' has a transient table of "
@@ -248,8 +287,8 @@ class SerialDevice(HapticDevice):
             self._command(M.SceneSupport(sid, m.support.stiffness, m.support.damping))
         crc = 0
         if table is not None:  # only what the scene requires: springs upload no table
-            self._command(M.SceneVelocities(sid, tuple(float(v) for v in table.velocities)))
-            q = np.clip(np.round(table.forces.reshape(-1) * 1000), -32768, 32767).astype("<i2")
+            self._command(M.SceneVelocities(sid, tuple(float(v) for v in velocities)))
+            q = q.reshape(-1)
             for a in range(0, q.size, M.CHUNK_ITEMS):
                 part = q[a: a + M.CHUNK_ITEMS]
                 self._command(M.SceneChunk(sid, a, part.size, tuple(int(x) for x in part)))

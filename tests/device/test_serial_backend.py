@@ -513,3 +513,34 @@ def test_a_stalled_host_does_not_call_the_device_gone(emulator):
         dev.home()
         res = dev.run_window(0.3, from_first_contact=False)
         assert len(res.traces["t"]) == 3000
+
+
+def test_a_table_goes_on_the_wire_in_range_and_plays_the_same():
+    """Table items are i16 mN (±32.767 N). A 200 N·s/m pulse tabulated per 1 m/s is 200 N:
+    it used to be clipped to 32.767 N, so the device played a sixth of the pulse (the
+    suite's saturation check then failed now and then). A ``scale`` table now goes at the
+    reference speed that fits it, playing row × v/v₀ exactly as the scene says."""
+    from device.scene import ForceSinusoid, Pulse, TransientTable
+    from device.serial.backend import DeviceError, _wire_table
+
+    v, q = _wire_table(Pulse(200.0, 0.010).table(10_000.0, 0.03), "here")
+    assert q.shape == (1, 100) and int(q.max()) == 32767
+    v0 = float(np.float32(v[0]))  # SCENE_VELOCITIES carries f32
+    for speed in (0.02, 0.11, 0.6):
+        played = q[0] / 1000.0 * speed / v0  # what the device plays: row 0 × v/v0 [N]
+        np.testing.assert_allclose(played, 200.0 * speed, rtol=1e-6)
+
+    # a weak transient fills the range too: steps of peak/32767, not of 1 mN
+    table = ForceSinusoid(0.3, 0.02, 300.0).table(10_000.0, 0.03)
+    v, q = _wire_table(table, "here")
+    exact = table.forces[0] * 0.1 / table.velocities[0]
+    played = q[0] / 1000.0 * 0.1 / float(np.float32(v[0]))
+    assert np.max(np.abs(played - exact)) <= 0.51 * np.max(np.abs(exact)) / 32767
+
+    # rows chosen by speed cannot be rescaled one by one: out of range is refused, not clipped
+    forces = np.zeros((2, 5))
+    forces[1, 3] = -40.0
+    with pytest.raises(DeviceError, match=r"scene 's'.* 40 N \(row 1, tick 3\); a linear "
+                                          r"table carries at most ±32.767 N"):
+        _wire_table(TransientTable([0.1, 0.2], forces, "linear"), "port: scene 's'")
+
