@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
-import gc
 import platform
 import subprocess
 import sys
@@ -159,12 +158,6 @@ class SessionRunner:
     def run(self) -> str:
         """Run to the end; returns "complete". Raises SessionInterrupted to stop early —
         also when the data folder fails (full, read-only): what was recorded is kept."""
-        # what exists now (the libraries, the protocol, the device's tables) lives for the
-        # session: leave it out of the collector's full passes, which otherwise take ~0.1 s
-        # on a loaded machine, long enough to miss a device's heartbeats. It stays frozen
-        # (refcounting still frees it; only cycles among it are kept): unfreezing would
-        # bring one long pass back between sessions, with the device still homed
-        gc.freeze()
         try:
             return self._run()
         except DataFolderError as exc:

@@ -4,13 +4,19 @@
 exclusively, decodes frames in a background thread, numbers commands and waits for their
 acknowledgements (retrying at most three times), sends heartbeats every T_wd/4, counts
 what the link does (:meth:`Link.stats`), and declares the device gone when the port fails,
-the device falls silent for two heartbeat periods, or corrupt frames arrive in a storm.
+the device falls silent for a watchdog period, or corrupt frames arrive in a storm.
 Messages that are not acknowledgements go to a handler (the device layer's view of state)
 and into an event queue the device layer takes from.
+
+While heartbeats run, the process's automatic full garbage collections are held off, and
+the held pass runs when the last link closes (:func:`hold_full_collections`): a full pass
+over a host that has imported scipy and statsmodels stops every thread for 90–110 ms on a
+loaded 2-core machine (measured), long enough to starve the device's 100-ms watchdog.
 """
 
 from __future__ import annotations
 
+import gc
 import threading
 import time
 from collections import deque
@@ -24,7 +30,7 @@ from . import messages as M
 from .framing import PROTOCOL_VERSION, FrameDecoder
 
 __all__ = ["Link", "DeviceGoneError", "DeviceTimeoutError", "PortBusyError",
-           "ProtocolMismatchError", "CRCStormError", "SILENCE_MIN_S"]
+           "ProtocolMismatchError", "CRCStormError", "SILENCE_MIN_S", "hold_full_collections"]
 
 #: how long a host offers HELLO before it gives up [s]. A device may not listen at once
 #: when its port opens: a board that resets on DTR boots first, and QEMU's pty serial
@@ -34,6 +40,37 @@ HELLO_WAIT_S = 3.0
 #: the device counts as gone after T_wd without a frame, and never sooner than this [s]:
 #: two of the slowest STATUS intervals a device may keep (20 Hz; docs §3)
 SILENCE_MIN_S = 0.1
+
+
+_gc_lock = threading.Lock()
+_gc_holds = 0
+_gc_threshold: tuple[int, int, int] | None = None
+
+
+def hold_full_collections(hold: bool) -> None:
+    """Hold off (``True``) or give back (``False``) the interpreter's automatic full
+    (generation-2) garbage collections, counted across callers.
+
+    A held process still frees everything by reference counting and still collects young
+    objects (passes over only what was allocated lately, well under a millisecond); only
+    cycles that outlived two young passes wait. The last release runs the held full pass
+    at once, when no device is being fed.
+    """
+    global _gc_holds, _gc_threshold
+    with _gc_lock:
+        if hold:
+            _gc_holds += 1
+            if _gc_holds == 1:
+                _gc_threshold = gc.get_threshold()
+                gc.set_threshold(_gc_threshold[0], _gc_threshold[1], 2**31 - 1)
+            return
+        if _gc_holds == 0:
+            return
+        _gc_holds -= 1
+        if _gc_holds or _gc_threshold is None:
+            return
+        gc.set_threshold(*_gc_threshold)
+    gc.collect()
 
 
 class DeviceGoneError(DeviceError):
@@ -102,6 +139,7 @@ class Link:
         self._dev_seq: int | None = None
         self._hb_pause = threading.Event()
         self._hb: threading.Thread | None = None
+        self._gc_held = False  # this link holds full collections off (see module docs)
         self.contact_rx: list[tuple[float, int]] = []  # (host perf time, tick) per CONTACT
         self.stats = {"frames_sent": 0, "frames_ok": 0, "crc_errors": 0, "other_errors": 0,
                       "timeouts": 0, "retries": 0, "lost": 0, "duplicates": 0,
@@ -339,6 +377,9 @@ class Link:
         while this host was listening, marks the device gone."""
         period = max(0.005, watchdog_s / 4)
         limit = max(watchdog_s, SILENCE_MIN_S)
+        if not self._gc_held:
+            self._gc_held = True
+            hold_full_collections(True)
 
         def loop() -> None:
             slept = time.monotonic() - period  # when the last sleep began
@@ -414,3 +455,6 @@ class Link:
             self._ser.close()
         except Exception:  # closing a port that is already gone
             pass
+        if self._gc_held:
+            self._gc_held = False
+            hold_full_collections(False)
