@@ -24,7 +24,9 @@ from .tapper import HoldPlan, Tapper
 __all__ = ["SimDevice", "CompiledScene", "compile_scene"]
 
 _CHUNK_S = 0.1  # device time between progress callbacks / heartbeats in virtual time
-_LIVE_CHUNK_S = 0.001  # pacing granularity in live mode
+#: live mode: pacing granularity [wall s]. In wall time, so that a faster-than-real-time
+#: device (``speed`` > 1) still sleeps most of each chunk instead of spinning through it
+_LIVE_CHUNK_S = 0.001
 _SPIN_S = 0.0002  # live mode: the end of each wait is spun, not slept [s]
 #: live mode: a servo loop that finds itself this far behind the wall clock (its process
 #: was stopped: a garbage collection, a loaded machine) lets its clock slip instead of
@@ -446,7 +448,8 @@ class SimDevice(HapticDevice):
         buf = _Buffers(min(n_max, int(round(initial_s / dt))), plan, self._pull_gains, dt)
         ev_tick = np.zeros(4096, dtype=np.int64)
         ev_vel = np.zeros(4096)
-        chunk = max(1, int(round((_LIVE_CHUNK_S if self.live else _CHUNK_S) / dt)))
+        chunk_s = _LIVE_CHUNK_S * self.speed if self.live else _CHUNK_S  # [device s]
+        chunk = max(1, int(round(chunk_s / dt)))
         state = (self._x, self._ist, self._fst, self._rb)
         pieces = _TracePieces(self, buf) if self.live and self.trace_sink is not None else None
         wall0 = start = time.perf_counter()
