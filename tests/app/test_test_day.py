@@ -217,7 +217,7 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
               str(tmp_path / "d")]
     pre = subprocess.run([*PY, "preflight", "realism", *common], capture_output=True,
                          text=True, timeout=120)
-    assert pre.returncode == 1, pre.stdout
+    assert pre.returncode == 1, pre.stdout + "\nemulator:\n" + emu.stderr()
     line = next(ln for ln in pre.stdout.splitlines() if ln.startswith("FAIL libraries"))
     assert "matched_firm, matched_soft need(s) a library reproducing 'wood_on_foam'" in line
     command = line.split("build it with: ")[1].split(";")[0].strip()
@@ -225,10 +225,10 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
                        "--source wood_on_foam")
     build = subprocess.run([*PY, *command.split()[1:], "--windows", "4"], capture_output=True,
                            text=True, timeout=600)
-    assert build.returncode == 0, build.stderr
+    assert build.returncode == 0, build.stderr + "\nemulator:\n" + emu.stderr()
     pre = subprocess.run([*PY, "preflight", "realism", *common], capture_output=True,
                          text=True, timeout=120)
-    assert pre.returncode == 0, pre.stdout
+    assert pre.returncode == 0, pre.stdout + "\nemulator:\n" + emu.stderr()
     assert "ok   libraries: built on this device: matched_firm" in pre.stdout
     proto = tmp_path / "short.toml"  # realism with one repetition, to keep the test short
     proto.write_text((ROOT / "protocols" / "realism.toml").read_text()
@@ -236,7 +236,7 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
     run = subprocess.run([*PY, "run", str(proto), "--participant", "P04", *common, "--seed",
                           "2", "--traces", "none", "--quiet"], capture_output=True, text=True,
                          timeout=900)
-    assert run.returncode == 0, run.stderr
+    assert run.returncode == 0, run.stderr + "\nemulator:\n" + emu.stderr()
     rows = rows_of(tmp_path / "d" / "sub-P04" / "ses-1")
     matched = [r for r in rows if r["sample"].startswith("matched") and r["status"] == "valid"]
     assert len(matched) == 4
