@@ -579,3 +579,32 @@ def test_full_collections_wait_while_the_device_is_fed(own_emulator):
     finally:
         gc.callbacks.remove(count)
     assert gc.get_threshold()[2] < 1000  # the interpreter's own setting is given back
+
+
+def test_a_failed_check_does_not_fail_the_checks_after_it(own_emulator, monkeypatch):
+    """A device keeps a latched fault across connections, so one failed check used to fail
+    every later one with "clear it first". The self-test names the fault the failed check
+    left, clears it, and the next check tests what it says."""
+    from device import suite
+
+    def stops_and_fails(opener):
+        with opener() as dev:
+            dev.load_scene(FIRM)
+            dev.home()
+            dev.estop()
+            raise suite.CheckFailed("gave up after an e-stop")
+
+    def runs_a_window(opener):
+        with opener() as dev:
+            dev.load_scene(FIRM)
+            dev.home()
+            return f"{len(dev.run_window(0.2, from_first_contact=False).traces['t'])} records"
+
+    monkeypatch.setattr(suite, "CHECKS", {"first": stops_and_fails, "second": runs_a_window})
+    spec = f"serial:{own_emulator.port}"
+    report = suite.run_selftest(spec, lambda: open_device(spec))
+    first, second = report["checks"]
+    assert not first["ok"] and first["detail"] == (
+        "CheckFailed: gave up after an e-stop (it left a latched estop fault: cleared for the "
+        "next checks)")
+    assert second["ok"] and second["detail"] == "2000 records", second
