@@ -82,16 +82,59 @@ def _rated(d: pd.DataFrame, dv: str) -> pd.DataFrame:
     return d.copy()
 
 
+def letter_groups(levels: list, pw: pd.DataFrame, alpha: float = 0.05,
+                  p: str = "p_corr") -> list[list]:
+    """The groups of a compact letter display, in letter order (see :func:`compact_letters`).
+
+    Returns
+    -------
+    list of list
+        One list of levels (in ``levels`` order) per letter; levels in one list are not
+        significantly different, and every level is in at least one.
+    """
+    sig = [(r.A, r.B) for r in pw.itertuples() if getattr(r, p) < alpha]
+    sig += [(a, b) for a, b, why in pw.attrs.get("constant_pairs", [])
+            if not why.startswith("difference 0 ") and why != "fewer than 2 subjects"]
+    groups = [set(levels)]
+    for a, b in sig:  # insert, then absorb
+        new = []
+        for g in groups:
+            if a in g and b in g:
+                new += [g - {a}, g - {b}]
+            else:
+                new.append(g)
+        groups = [g for g in new if g and not any(g < h for h in new)]
+        groups = [g for i, g in enumerate(groups) if g not in groups[:i]]
+    rank = {lv: i for i, lv in enumerate(levels)}
+    groups.sort(key=lambda g: sorted(rank[x] for x in g))
+    # sweep: a level leaves a letter when another letter still joins it to every level it
+    # met there and it keeps a letter; a letter left empty goes
+    for i, g in enumerate(groups):
+        for x in sorted(g, key=rank.__getitem__):
+            rest = [h for j, h in enumerate(groups) if j != i and x in h]
+            if rest and all(any(y in h for h in rest) for y in g - {x}):
+                g.discard(x)
+    groups = [g for g in groups if g]
+    groups.sort(key=lambda g: sorted(rank[x] for x in g))
+    return [sorted(g, key=rank.__getitem__) for g in groups]
+
+
+#: one character per letter, so that a level's letters read unambiguously: a–z, A–Z, α–ω
+LETTERS = ("abcdefghijklmnopqrstuvwxyz" "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+           "αβγδεζηθικλμνξοπρστυφχψω")
+
+
 def compact_letters(levels: list, pw: pd.DataFrame, alpha: float = 0.05,
                     p: str = "p_corr") -> dict:
     """Compact letter display: levels sharing a letter are not significantly different.
 
-    Insert-and-absorb (Piepho 2004): start with one group of all levels; for each
+    Piepho's (2004) insert-absorb-sweep: start with one group of all levels; for each
     significant pair, split every group holding both into one without each; drop groups
-    contained in another. Every pair within a group is non-significant (unlike chains of
-    non-significant pairs, which are not transitive); a level may carry several letters.
-    A pair missing from ``pw`` (its difference constant, not tested) counts as different
-    when its difference is not 0.
+    contained in another; then take each level out of each letter that other letters make
+    redundant. Two levels share a letter exactly when their pair is not significant
+    (unlike chains of non-significant pairs, which are not transitive); a level may carry
+    several letters. A pair missing from ``pw`` (its difference constant, not tested)
+    counts as different when its difference is not 0.
 
     Parameters
     ----------
@@ -105,7 +148,13 @@ def compact_letters(levels: list, pw: pd.DataFrame, alpha: float = 0.05,
     Returns
     -------
     dict
-        level → letters (e.g. ``"ab"``).
+        level → letters (e.g. ``"ab"``), one character each (:data:`LETTERS`).
+
+    Raises
+    ------
+    ValueError
+        The pattern needs more letters than :data:`LETTERS` holds (76; many levels with
+        an irregular pattern of differences): read the pairwise table instead.
 
     Examples
     --------
@@ -115,30 +164,16 @@ def compact_letters(levels: list, pw: pd.DataFrame, alpha: float = 0.05,
     >>> compact_letters(["x", "y", "z"], pw)
     {'x': 'a', 'y': 'ab', 'z': 'b'}
     """
-    sig = [(r.A, r.B) for r in pw.itertuples() if getattr(r, p) < alpha]
-    sig += [(a, b) for a, b, why in pw.attrs.get("constant_pairs", [])
-            if not why.startswith("difference 0 ") and why != "fewer than 2 subjects"]
-    groups = [set(levels)]
-    for a, b in sig:
-        new = []
-        for g in groups:
-            if a in g and b in g:
-                new += [g - {a}, g - {b}]
-            else:
-                new.append(g)
-        groups = [g for g in new if g and not any(g < h for h in new)]
-        groups = [g for i, g in enumerate(groups) if g not in groups[:i]]
-    rank = {lv: i for i, lv in enumerate(levels)}
-    groups.sort(key=lambda g: sorted(rank[x] for x in g))
+    groups = letter_groups(levels, pw, alpha, p)
+    if len(groups) > len(LETTERS):
+        raise ValueError(f"these {len(levels)} levels need {len(groups)} letters, more than "
+                         f"the {len(LETTERS)} a compact letter display has: read the pairwise "
+                         "table instead")
     letters = {lv: "" for lv in levels}
-    for i, g in enumerate(groups):
+    for ch, g in zip(LETTERS, groups, strict=False):  # checked above: enough letters
         for lv in g:
-            letters[lv] += _letter(i)
+            letters[lv] += ch
     return letters
-
-
-def _letter(i: int) -> str:
-    return chr(ord("a") + i) if i < 26 else f"{chr(ord('a') + i // 26 - 1)}{chr(ord('a') + i % 26)}"
 
 
 def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample",
@@ -215,11 +250,14 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
                                        comparisons=k * (k - 1) // 2, seed=0, **vc)}
     except ValueError as exc:
         length = f"not computed: {exc}"
-    letters = compact_letters(order, holm, alpha)
+    try:
+        letters = compact_letters(order, holm, alpha)
+        groups: list | str = letter_groups(order, holm, alpha)
+    except ValueError as exc:  # a display beyond 76 letters: said, not drawn
+        letters = {lv: "see the pairwise table" for lv in order}
+        groups = f"not shown: {exc}"
     for r in samples:
         r["letters"] = letters[r["sample"]]
-    groups = [[lv for lv in order if ch in letters[lv]]
-              for ch in sorted({c for v in letters.values() for c in v})]
     return {"samples": samples, "pairwise": pw, "anova": anova, "session_length": length,
             "groups": groups, "letters": letters, "missing": missing, "ordinal": ordinal,
             "models": models,
