@@ -315,7 +315,12 @@ class SessionRunner:
             self._save_notes()
             a = self.console.poll(0.03)
             if a == "clear":
-                self.device.clear_fault()
+                try:
+                    self.device.clear_fault()
+                except DeviceFaultError as exc:  # the device keeps it (its button is held)
+                    self.console.say(f"c: not cleared: {exc}. Press c again once it is "
+                                     "safe, or q to stop and save")
+                    continue
                 self.console.say("c: fault cleared by the operator; the trial runs again")
                 return
             if a == "abort":

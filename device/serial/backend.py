@@ -134,6 +134,7 @@ class SerialDevice(HapticDevice):
         super().__init__()
         self.port = port
         self._fault: FaultEvent | None = None
+        self._estop_sent = False  # this host's ESTOP since the last clear (else: the device's)
         self._output = 0.0
         self._scene_id = 0
         self._window_id = 0
@@ -172,10 +173,10 @@ class SerialDevice(HapticDevice):
             self._status_seen.set()
         elif isinstance(msg, M.Fault):
             code = M.FaultCode.NAMES.get(msg.code, f"fault {msg.code}")
-            self._fault = FaultEvent(msg.time_us * 1e-6, code,
-                                     "emergency stop (latched): output zeroed"
-                                     if code == "estop" else
-                                     "no heartbeat: output zeroed by the device")
+            why = ("no heartbeat: output zeroed by the device" if code != "estop" else
+                   "emergency stop (latched): output zeroed" if self._estop_sent else
+                   "the device's own e-stop button was pressed: output zeroed")
+            self._fault = FaultEvent(msg.time_us * 1e-6, code, why)
             self._output = 0.0
 
     @staticmethod
@@ -309,14 +310,21 @@ class SerialDevice(HapticDevice):
 
     def _estop(self) -> None:
         self._output = 0.0
+        self._estop_sent = True
         if not self.link.gone and not self.closed:
             self._command(M.EStop())
         if self._fault is None:
             self._fault = FaultEvent(time.monotonic(), "estop", "emergency stop (latched)")
 
     def _clear_fault(self) -> None:
-        self._command(M.ClearFault())
+        try:
+            self._command(M.ClearFault())
+        except DeviceFaultError:
+            raise DeviceFaultError(f"{self.port}: the device keeps its fault: its e-stop "
+                                   "button is still pressed (or its wire is cut); release it, "
+                                   "then clear the fault") from None
         self._fault = None
+        self._estop_sent = False
 
     def _zero(self) -> None:
         self._output = 0.0

@@ -15,5 +15,7 @@ size_t sim_uart_from_device(uint8_t *buf, size_t cap);
 float sim_current(void);
 /* whether the amplifier's enable line is on */
 int sim_amp_enabled(void);
+/* press (1) or release (0) the operator's e-stop button */
+void sim_estop_button(int pressed);
 
 #endif

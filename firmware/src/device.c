@@ -307,6 +307,9 @@ void hl_servo_tick(void)
         D.req_estop = 0;
         latch_fault(HL_FAULT_ESTOP);
     }
+    if (hal_estop_pressed()) {
+        latch_fault(HL_FAULT_ESTOP); /* the operator's button */
+    }
     if (D.enabled && D.ticks - D.last_rx_tick > D.wd_ticks) {
         latch_fault(HL_FAULT_WATCHDOG); /* armed while output is enabled */
     }
@@ -747,6 +750,9 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         D.req_estop = 1;
         return HL_OK;
     case 0x31: /* CLEAR_FAULT */
+        if (hal_estop_pressed()) {
+            return HL_FAULT_LATCHED; /* the button is still held */
+        }
         if (D.state == HL_FAULT) {
             hal_lock();
             D.fault = HL_FAULT_NONE;

@@ -10,6 +10,8 @@
  *   accelerometer  analog (+-50 g, 1 kHz RC low-pass, as in the papers) on PC0 = ADC1
  *                  channel 10; each tick reads the conversion the previous tick started
  *                  (100 us old) and starts the next, so the tick never waits for the ADC
+ *   e-stop button  PC13, a normally-closed contact to ground with the pin pulled up: the
+ *                  pin reads high when the button is pressed, and when its wire is cut
  *
  * A real sample is a real object and a person holds the stylus: the simulated plant's
  * hooks do nothing here.
@@ -26,6 +28,7 @@
 #define RCC_APB2ENR REG(0x40023844u)
 #define GPIO_MODER(port) REG(0x40020000u + 0x400u * (port) + 0x00u)
 #define GPIO_PUPDR(port) REG(0x40020000u + 0x400u * (port) + 0x0Cu)
+#define GPIO_IDR(port) REG(0x40020000u + 0x400u * (port) + 0x10u)
 #define GPIO_BSRR(port) REG(0x40020000u + 0x400u * (port) + 0x18u)
 #define GPIO_AFRL(port) REG(0x40020000u + 0x400u * (port) + 0x20u)
 #define PORT_A 0u
@@ -100,6 +103,8 @@ void hal_io_init(uint64_t seed)
     /* ADC1: PC0 analog, channel 10 alone, 56 sampling cycles at 21 MHz (PCLK2 / 4: the
      * ADC clock must stay below 36 MHz), 12 bits; the first conversion starts now */
     GPIO_MODER(PORT_C) |= 0x3u;
+    /* PC13 the e-stop: an input (its reset mode), pulled up */
+    GPIO_PUPDR(PORT_C) = (GPIO_PUPDR(PORT_C) & ~(0x3u << 26)) | (0x1u << 26);
     ADC_CCR = (ADC_CCR & ~(3u << 16)) | (1u << 16);
     ADC1_SMPR1 = (ADC1_SMPR1 & ~0x7u) | 0x3u;
     ADC1_SQR3 = 10u;
@@ -137,6 +142,8 @@ void hal_amp_enable(int on)
         amp_on = on;
     }
 }
+
+int hal_estop_pressed(void) { return (int)((GPIO_IDR(PORT_C) >> 13) & 1u); }
 
 /* the simulated plant's hooks: nothing to simulate on the real device */
 void hal_plant_scene(float surface_m, int real_sample, const hal_sample *sample)

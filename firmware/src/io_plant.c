@@ -8,11 +8,13 @@
 
 static float last_current;
 static int amp_on;
+static int estop_button;
 
 void hal_io_init(uint64_t seed)
 {
     last_current = 0.0f;
     amp_on = 0;
+    estop_button = 0;
     plant_init(seed, (float)HL_SERVO_HZ, (float)HL_ENCODER_NM * 1e-9f,
                (float)HL_FORCE_CONSTANT_MN_A * 1e-3f);
 }
@@ -28,6 +30,8 @@ void hal_current_set(float amps)
 
 float hal_accel_read(void) { return plant_accel(); }
 void hal_amp_enable(int on) { amp_on = on != 0; }
+int hal_estop_pressed(void) { return estop_button; }
 
 float sim_current(void) { return last_current; }
 int sim_amp_enabled(void) { return amp_on; }
+void sim_estop_button(int pressed) { estop_button = pressed != 0; }

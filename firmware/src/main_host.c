@@ -9,7 +9,8 @@
  * against wall-clock silence). A Python host keeps up with the full-rate stream at x20
  * (8-s windows, 0 records lost), so the link is not throttled.
  * Ticks are computed as they fall due; input is read the moment it arrives (ppoll), so an
- * ESTOP acts at the next tick computed after its last byte. Statistics go to stderr at
+ * ESTOP acts at the next tick computed after its last byte. SIGUSR1 presses the simulated
+ * e-stop button and SIGUSR2 releases it (`kill -USR1 PID`). Statistics go to stderr at
  * exit.
  */
 #define _GNU_SOURCE
@@ -33,6 +34,9 @@ static void on_signal(int sig)
     (void)sig;
     stop_flag = 1;
 }
+
+static volatile sig_atomic_t button; /* the e-stop button, pressed by SIGUSR1 */
+static void on_button(int sig) { button = sig == SIGUSR1; }
 
 static uint64_t now_ns(void)
 {
@@ -82,6 +86,8 @@ int main(int argc, char **argv)
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
     signal(SIGPIPE, SIG_IGN);
+    signal(SIGUSR1, on_button);
+    signal(SIGUSR2, on_button);
 
     char serial[16];
     snprintf(serial, sizeof serial, "HOST-%llu", seed);
@@ -105,6 +111,7 @@ int main(int argc, char **argv)
             late += due - done - HL_SERVO_HZ;
             done = due - HL_SERVO_HZ;
         }
+        sim_estop_button(button);
         for (int k = 0; k < 20 && done < due; k++, done++) {
             hl_servo_tick();
             hl_device_poll(); /* between ticks, as the Cortex-M main loop runs */

@@ -45,6 +45,8 @@ int32_t hal_encoder_counts(void) { return enc_now; }
 void hal_current_set(float amps) { cur_now = amps; }
 float hal_accel_read(void) { return acc_now; }
 void hal_amp_enable(int on) { (void)on; }
+/* the e-stop button as the board reads it (GPIOC IDR bit 13; QEMU reads 0: released) */
+int hal_estop_pressed(void) { return (int)((REG(0x40020810u) >> 13) & 1u); }
 void hal_watchdog_kick(void) {}
 size_t hal_uart_read(uint8_t *buf, size_t cap)
 {

@@ -359,6 +359,35 @@ static void test_watchdog(void)
     EXPECT(seen[0x92] == 1);
 }
 
+static void test_estop_button(void)
+{
+    /* the operator's button: output off at the tick that reads it, latched as ESTOP, the
+     * window ended; CLEAR_FAULT is refused until the button is released */
+    fresh(6);
+    uint8_t none[1] = {0};
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(window(2, 2000, 0) == HL_OK);
+    ticks(700, 1, 1);
+    EXPECT(sim_amp_enabled() && hl_device_peek().fault == HL_FAULT_NONE);
+    memset(seen, 0, sizeof seen);
+    sim_estop_button(1);
+    ticks(1, 0, 0);
+    EXPECT(hl_device_peek().fault == HL_FAULT_ESTOP);
+    EXPECT(sim_current() == 0.0f && !sim_amp_enabled());
+    ticks(5, 1, 1);
+    EXPECT(seen[0x92] == 1 && seen[0x94] == 1); /* FAULT, then WINDOW_DONE */
+    EXPECT(cmd(0x31, none, 0) == HL_FAULT_LATCHED);
+    EXPECT(hl_device_peek().state == HL_FAULT);
+    EXPECT(home(20000) == HL_FAULT_LATCHED);
+    sim_estop_button(0);
+    EXPECT(cmd(0x31, none, 0) == HL_OK);
+    EXPECT(hl_device_peek().state == HL_IDLE);
+    EXPECT(home(20000) == HL_OK);
+    ticks(100, 1, 1);
+    EXPECT(hl_device_peek().fault == HL_FAULT_NONE && sim_amp_enabled());
+}
+
 static void test_stream(void)
 {
     /* a window streamed while the host reads: every record once, in order */
@@ -433,6 +462,7 @@ int device_tests(void)
     test_ranges_and_nan();
     test_ramp_clamp_estop();
     test_watchdog();
+    test_estop_button();
     test_stream();
     printf("device: %d failure(s)\n", fails);
     return fails;

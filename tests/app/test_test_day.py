@@ -187,6 +187,49 @@ def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp
     assert [r["status"] for r in retried] == ["estop", "valid"]
 
 
+def test_the_devices_estop_button_pauses_and_holds_until_released(emulator_factory, terminal,
+                                                                    tmp_path, shots):
+    """The e-stop button on the device itself (the host-built firmware presses it on SIGUSR1
+    and releases it on SIGUSR2), pressed in the middle of a window: the session pauses and
+    says it was the device's button; the operator's c while the button is still held is
+    refused in words and the session waits on (it used to stop with a traceback); released,
+    c clears it and the trial runs again."""
+    import os
+    import signal
+
+    emu = emulator_factory(12, "--firmware", "host")
+    proto = tmp_path / "six.toml"
+    proto.write_text((ROOT / "tests" / "data" / "protocols" / "six_on_nine.toml").read_text()
+                     .replace("duration = 3.0", "duration = 1.5"))
+    data = tmp_path / "data"
+    t = terminal("button", [*PY, "run", str(proto), "--participant", "P06", "--device",
+                            f"serial:{emu.port}", "--dry-run", "--operator-keys", "--no-audio",
+                            "--seed", "4", "--traces", "none", "--data", str(data)], env(),
+                 cwd=tmp_path)
+    t.wait("placing: r ready")
+    t.keys("r")  # familiarization
+    t.wait("#2 (attempt 1)")
+    t.keys("r")
+    time.sleep(0.6)
+    os.kill(emu.proc.pid, signal.SIGUSR1)  # the button, during trial 2's window
+    screen = t.wait("press c to clear it")
+    assert "the device's own e-stop button was pressed" in screen
+    t.keys("c")  # still held
+    screen = t.wait("c: not cleared")
+    assert "e-stop button is still pressed" in screen and "Traceback" not in screen
+    t.save_png(shots / "estop-button-held.png", "operator terminal — the device's e-stop held")
+    os.kill(emu.proc.pid, signal.SIGUSR2)  # released
+    t.keys("c")
+    t.wait("fault cleared by the operator; the trial runs again")
+    t.wait("(attempt 2)")
+    t.keys("q")
+    t.wait("q: stopped before trial")
+    assert t.exit_code(30) == 3
+    rows = rows_of(data / "sub-P06" / "ses-1")
+    assert [r["status"] for r in rows] == ["valid", "estop"]
+    assert "own e-stop button" in rows[1]["reason"]
+
+
 def test_a_person_without_a_terminal_is_refused_before_anything_opens(xdisplay, tmp_path):
     out = subprocess.run([*PY, "run", str(TEST_DAY), "--participant", "P03", "--device", "sim",
                           "--no-audio", "--data", str(tmp_path / "d")], capture_output=True,

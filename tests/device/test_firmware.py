@@ -74,6 +74,38 @@ def test_window_end_to_traces_is_immediate_over_the_stream(firmware_host):
         assert dev.link_stats()["lost"] == 0
 
 
+def test_the_estop_button_stops_a_window_and_holds_its_fault_until_released(firmware_host):
+    """The operator's e-stop button on the device (the host build presses it on SIGUSR1 and
+    releases it on SIGUSR2): output is zero from the tick that read it, the fault is an
+    e-stop, and clearing it is refused, in words, until the button is released."""
+    import os
+    import signal
+
+    from device.errors import DeviceFaultError
+
+    with SerialDevice(firmware_host.port) as dev:
+        dev.load_scene(Scene("firm", spring=680.0))
+        dev.home()
+
+        def press(t, _partial):
+            if t >= 0.2:
+                os.kill(firmware_host.proc.pid, signal.SIGUSR1)
+
+        res = dev.run_window(1.0, from_first_contact=False, on_progress=press)
+        assert [f.code for f in res.faults] == ["estop"]
+        assert "own e-stop button" in res.faults[0].message  # not this host's ESTOP
+        after = res.traces["t"] >= res.faults[0].t
+        assert after.any() and np.all(res.traces["current"][after] == 0)
+        assert res.traces["t"][-1] < 0.9  # the press ended the window
+        with pytest.raises(DeviceFaultError, match="e-stop button is still pressed"):
+            dev.clear_fault()
+        os.kill(firmware_host.proc.pid, signal.SIGUSR2)
+        dev.clear_fault()
+        dev.home()
+        again = dev.run_window(0.3, from_first_contact=False)
+        assert not again.faults and len(again.traces["t"]) > 0
+
+
 def test_a_lost_or_doubled_record_is_an_error_never_a_gap():
     fake = SimpleNamespace(port="/dev/ttyX", _stream=NAMES)
     mask = 0x7F
@@ -164,7 +196,8 @@ def test_the_board_build_drives_the_papers_device_peripherals_under_qemu(tmp_pat
     to the peripherals it does not model (-d unimp): the DAC, the GPIO ports, the watchdog.
     A 0.1-N playback must put 0.1 N / 2.15 N/A = 46.5 mA on the DAC (mid-scale 2048 + 46.5 /
     1400 × 2047 = 2116, computed by hand), the amplifier's enable line must be off at reset,
-    on at HOME and off again at ZERO, and the watchdog must be started. QEMU does model
+    on at HOME and off again at ZERO, the watchdog must be started, and the e-stop input
+    must be pulled up and read at every tick. QEMU does model
     TIM2 (read back through its monitor: encoder mode 3 on TI1/TI2) and ADC1, whose fake
     conversions step by 7 counts each: the accelerometer channel must step by 7 counts ×
     ticks per record × 50 g / 2048 (wrapping at 4096), which holds only if every tick reads
@@ -192,9 +225,14 @@ def test_the_board_build_drives_the_papers_device_peripherals_under_qemu(tmp_pat
         proc.wait(timeout=10)
 
     # QEMU's line: "DAC: unimplemented device write (size 4, offset 0x008, value 0x00000844)"
+    text = log.read_text()
     writes = [(m[1], int(m[2], 16), int(m[3], 16)) for m in re.finditer(
         r"^(\S+): unimplemented device write \(size \d+, offset (0x[0-9a-f]+), value "
-        r"(0x[0-9a-f]+)\)", log.read_text(), re.M)]
+        r"(0x[0-9a-f]+)\)", text, re.M)]
+    # the e-stop button: PC13 pulled up, its input register read at every tick (QEMU reads
+    # 0 there: a closed contact, the button released)
+    idr_reads = len(re.findall(r"^GPIOC: unimplemented device read +\(size \d+, offset "
+                               r"0x010\)", text, re.M))
 
     def values(periph: str, offset: int) -> list[int]:
         return [v for p, off, v in writes if p == periph and off == offset]
@@ -204,6 +242,8 @@ def test_the_board_build_drives_the_papers_device_peripherals_under_qemu(tmp_pat
     assert writes.index(("DAC", 0x08, 2048)) < writes.index(("DAC", 0x00, 1))
     assert max(dac) == 2116 and min(dac) == 2048 and dac[-1] == 2048
     assert values("GPIOB", 0x18) == [0x3 << 16, 0x3, 0x3 << 16]  # off, HOME: on, ZERO: off
+    assert [(v >> 26) & 3 for v in values("GPIOC", 0x0C)] == [1]
+    assert idr_reads >= 480  # at least every tick of the playback
     kr = values("IWDG", 0x00) + values("I2S2ext", 0x00)  # QEMU names the address either way
     assert 0x5555 in kr and 0xCCCC in kr and 0xAAAA in kr  # configured, started, kicked
     assert tim2 == {"CR1": 1, "SMCR": 3, "CCMR1": 0x3131, "ARR": 0xFFFFFFFF}
