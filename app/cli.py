@@ -139,7 +139,7 @@ def _device_emulate(args: argparse.Namespace) -> int:
                              "--firmware python only")
         if args.firmware == "qemu" and args.speed != 1.0:
             raise UsageError("the firmware under QEMU runs in real time: --speed applies to "
-                             "--firmware python and host")
+                             "--firmware python, host and host-board")
         return serve(args.firmware, args.seed, args.speed)
     from device.serial.emulator import main as emulate
 
@@ -509,10 +509,12 @@ def build_parser() -> argparse.ArgumentParser:
     em.add_argument("--rate", type=float, default=10_000.0, help="servo rate [Hz]")
     em.add_argument("--seed", type=int, default=0)
     em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
-    em.add_argument("--firmware", choices=("python", "host", "qemu"), default="python",
-                    help="what serves the port: the Python emulator (protocol 1), or the C "
-                    "reference firmware (protocol 2) built for this machine or run on an "
-                    "emulated STM32F405 under QEMU")
+    em.add_argument("--firmware", choices=("python", "host", "host-board", "qemu"),
+                    default="python",
+                    help="what serves the port (protocol 2): the Python emulator, or the C "
+                    "reference firmware built for this machine (host-board: with the "
+                    "STM32F405's buffers and 1-Mbaud link) or run on an emulated STM32F405 "
+                    "under QEMU")
     em.set_defaults(func=_device_emulate)
     from app.matching_cli import add_parsers
 

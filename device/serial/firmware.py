@@ -1,8 +1,10 @@
 """The reference firmware (``firmware/``) as a device on a pseudo-terminal.
 
-Two builds serve the protocol with the firmware's simulated plant: ``host`` (the C code
-compiled for this machine, paced to its clock) and ``qemu`` (the Cortex-M build on an
-emulated STM32F405, netduinoplus2, its USART on a pty). :func:`command` says how to start
+Three builds serve the protocol with the firmware's simulated plant: ``host`` (the C code
+compiled for this machine, paced to its clock), ``host-board`` (the same with the
+STM32F405's resources and its 1-Mbaud link as LIMITS: what a lab's board offers a host, at
+any speed) and ``qemu`` (the Cortex-M build on an emulated STM32F405, netduinoplus2, its
+USART on a pty). :func:`command` says how to start
 either, building it with ``make -C firmware`` when the binary is missing; the caller
 (``hapticlab device emulate --firmware``) prints the port as its first line.
 """
@@ -16,23 +18,26 @@ from pathlib import Path
 
 from ..errors import DeviceError
 
-__all__ = ["FIRMWARE_DIR", "binary", "host_command", "qemu_command", "serve", "QEMU_PTY"]
+__all__ = ["FIRMWARE_DIR", "HOST_KINDS", "binary", "host_command", "qemu_command", "serve",
+           "QEMU_PTY"]
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 #: builds by kind; ``board-qemu`` is the papers' board I/O built for QEMU (its peripheral
 #: traffic is what the tests check; it has no plant, so it serves no session)
-_TARGETS = {"host": "build/hlfw-host", "qemu": "build/hlfw-stm32.elf",
-            "board-qemu": "build/hlfw-board-qemu.elf"}
+_TARGETS = {"host": "build/hlfw-host", "host-board": "build/hlfw-host-board",
+            "qemu": "build/hlfw-stm32.elf", "board-qemu": "build/hlfw-board-qemu.elf"}
 _ARM = ("arm-none-eabi-gcc", "gcc-arm-none-eabi")
-_TOOLS = {"host": ("cc", "build-essential"), "qemu": _ARM, "board-qemu": _ARM}
+_CC = ("cc", "build-essential")
+_TOOLS = {"host": _CC, "host-board": _CC, "qemu": _ARM, "board-qemu": _ARM}
+#: the builds that run on this machine (paced to its clock, at any speed)
+HOST_KINDS = ("host", "host-board")
 #: what qemu-system-arm prints when it puts a serial port on a pty
 QEMU_PTY = re.compile(r"char device redirected to (/dev/pts/\d+)")
 
 
 def binary(kind: str) -> Path:
-    """The firmware build ``kind`` (``host``, ``qemu`` or ``board-qemu``), brought up to date
-    by ``make``
-    (used as it is where there is no compiler).
+    """The firmware build ``kind`` (``host``, ``host-board``, ``qemu`` or ``board-qemu``),
+    brought up to date by ``make`` (used as it is where there is no compiler).
 
     Raises
     ------
@@ -60,10 +65,11 @@ def binary(kind: str) -> Path:
     return path
 
 
-def host_command(seed: int = 0, speed: float = 1.0) -> list[str]:
-    """The host build's command line, paced at ``speed`` × real time; it prints its pty as
-    its first line."""
-    return [str(binary("host")), "--seed", str(int(seed)), "--speed", repr(float(speed))]
+def host_command(seed: int = 0, speed: float = 1.0, kind: str = "host") -> list[str]:
+    """The command line of host build ``kind`` (``host``, or ``host-board`` with the
+    STM32F405's resources and link width), paced at ``speed`` × real time; it prints its pty
+    as its first line."""
+    return [str(binary(kind)), "--seed", str(int(seed)), "--speed", repr(float(speed))]
 
 
 def qemu_command(kind: str = "qemu", *extra: str) -> list[str]:
@@ -84,8 +90,8 @@ def serve(kind: str, seed: int = 0, speed: float = 1.0) -> int:
     import signal
     import sys
 
-    if kind == "host":
-        cmd = host_command(seed, speed)
+    if kind in HOST_KINDS:
+        cmd = host_command(seed, speed, kind)
         sys.stdout.flush()
         os.execv(cmd[0], cmd)  # the binary prints its port and handles the signals itself
     proc = subprocess.Popen(qemu_command(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

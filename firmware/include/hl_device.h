@@ -34,6 +34,13 @@
 #ifndef HL_LINK_BYTES_S
 #define HL_LINK_BYTES_S 0u       /* link towards the host [B/s]; 0: no limit (USB, a pty) */
 #endif
+/* where the device's state lives: the STM32 builds put it in the F405's 64-KB core-coupled
+ * RAM (CPU only; the firmware uses no DMA), leaving the 128-KB SRAM to the buffers */
+#ifdef HL_CCM_STATE
+#define HL_STATE_SECTION __attribute__((section(".bss.ccm")))
+#else
+#define HL_STATE_SECTION
+#endif
 #define HL_MAX_ROWS 255u
 #define HL_N_CHANNELS 7u         /* position velocity force_cmd force_out current accel flags */
 #define HL_CHANNEL_MASK 0x7Fu

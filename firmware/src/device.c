@@ -110,7 +110,7 @@ static struct {
     uint32_t next_record, done_records;
     uint16_t trace_window;
     char serial[16];
-} D;
+} D HL_STATE_SECTION;
 
 static scene_t S;
 static int16_t TABLE[HL_TABLE_ITEMS];

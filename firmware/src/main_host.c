@@ -14,6 +14,11 @@
  * exit.
  */
 #define _GNU_SOURCE
+/* the serial number's prefix: builds with other resources are other devices (hosts keep
+ * transient libraries per serial number) */
+#ifndef HL_SERIAL_PREFIX
+#define HL_SERIAL_PREFIX "HOST"
+#endif
 #include <errno.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -90,7 +95,7 @@ int main(int argc, char **argv)
     signal(SIGUSR2, on_button);
 
     char serial[16];
-    snprintf(serial, sizeof serial, "HOST-%llu", seed);
+    snprintf(serial, sizeof serial, "%s-%llu", HL_SERIAL_PREFIX, seed);
     sim_hal_init(seed);
     hl_device_init(serial);
     if (speed != 1.0) {

@@ -1,7 +1,8 @@
-/* Cortex-M4 start-up for the STM32F405: vector table, .data/.bss, FPU on, main(). */
+/* Cortex-M4 start-up for the STM32F405: vector table, .data/.bss/CCM, FPU on, main(). */
 #include <stdint.h>
 
-extern uint32_t _data_load, _data_start, _data_end, _bss_start, _bss_end, _stack_top;
+extern uint32_t _data_load, _data_start, _data_end, _bss_start, _bss_end, _ccm_start, _ccm_end,
+    _stack_top;
 int main(void);
 void systick_handler(void);
 void usart1_handler(void);
@@ -22,6 +23,9 @@ void reset_handler(void)
         *dst++ = *src++;
     }
     for (uint32_t *dst = &_bss_start; dst < &_bss_end;) {
+        *dst++ = 0;
+    }
+    for (uint32_t *dst = &_ccm_start; dst < &_ccm_end;) { /* the device's state */
         *dst++ = 0;
     }
     /* CP10 and CP11 full access: the servo computes in binary32 on the FPU */
