@@ -184,8 +184,10 @@ def check_limit(protocol, dev) -> Check:
 
 
 def check_libraries(protocol, dev, spec: str, ref: str, say=None) -> Check:
+    from device import SceneError
+
     from .errors import MissingLibraryError
-    from .libraries import prepare_libraries
+    from .libraries import prepare_libraries, with_libraries
 
     sim = dev.info.backend == "sim"
     try:
@@ -198,6 +200,13 @@ def check_libraries(protocol, dev, spec: str, ref: str, say=None) -> Check:
         return Check("libraries", False, str(exc))
     if not found:
         return Check("libraries", True, "no matched sample")
+    bound = with_libraries(protocol, found)
+    for sid in sorted(found):  # the tables as this device would take them (its LIMITS)
+        try:
+            dev.check_scene(bound.samples[sid].scene)
+        except SceneError as exc:
+            return Check("libraries", False, f"sample '{sid}': {exc}", "build the library "
+                         "again with fewer --entries")
     return Check("libraries", True, "built on this device: " + ", ".join(
         f"{sid} ({Path(v['path']).name})" for sid, v in sorted(found.items())))
 

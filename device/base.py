@@ -11,14 +11,14 @@ from __future__ import annotations
 import importlib
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .errors import DeviceError, DeviceFaultError, DeviceSpecError, UnknownBackendError
-from .events import FaultEvent, WindowResult
+from .events import TRACE_CHANNELS, FaultEvent, WindowResult
 from .info import DeviceInfo
 from .scene import Scene, Transient, TransientTable
 
@@ -195,6 +195,41 @@ class HapticDevice(ABC):
         self._homed = False
         return self._play_force(f, bool(heartbeats))
 
+    def set_trace_channels(self, channels: Sequence[str] | None = None) -> float:
+        """Choose the trace channels the following windows and playbacks record.
+
+        A device whose link is too narrow to stream every channel at every servo tick (a
+        1-Mbaud UART) thins its traces out; asking only for what a measurement needs
+        (identification needs ``accel`` alone) lets it stream those at every tick.
+
+        Parameters
+        ----------
+        channels : sequence of str, optional
+            Names of :data:`~device.events.TRACE_CHANNELS` (``t`` always comes); None, the
+            default, asks for all of them.
+
+        Returns
+        -------
+        float [Hz]
+            The rate they will come at: the servo rate, or less when the link cannot carry
+            them at every tick. A backend may record more channels than asked (the
+            simulator records all of them at every tick).
+
+        Raises
+        ------
+        ValueError
+            A name that is not a trace channel, or none at all.
+        """
+        self._check_open()
+        if channels is not None:
+            channels = tuple(dict.fromkeys(c for c in channels if c != "t"))
+            unknown = [c for c in channels if c not in TRACE_CHANNELS]
+            if unknown or not channels:
+                raise ValueError(f"trace channels must be some of "
+                                 f"{', '.join(c for c in TRACE_CHANNELS if c != 't')}; got "
+                                 f"{', '.join(map(repr, unknown)) or 'none'}")
+        return self._set_trace_channels(channels)
+
     def estop(self) -> None:
         """Latched emergency stop: output to zero now and until :meth:`clear_fault`."""
         self._homed = False
@@ -265,6 +300,12 @@ class HapticDevice(ABC):
         it). Takes effect from the next window."""
         return False
 
+    @property
+    def table_capacity(self) -> int | None:
+        """The most transient-table items (rows × servo ticks) this device holds, or None
+        when it sets no limit (the simulator). :meth:`check_scene` refuses a larger table."""
+        return None
+
     def link_stats(self) -> dict:
         """Statistics of the link to the device (frames, errors, round trips); empty for a
         device without one."""
@@ -293,6 +334,11 @@ class HapticDevice(ABC):
     @abstractmethod
     def _play_force(self, force: np.ndarray, heartbeats: bool) -> WindowResult:
         """Play a checked force array [N per tick] open loop in free air."""
+
+    def _set_trace_channels(self, channels: tuple[str, ...] | None) -> float:
+        """Record ``channels`` (checked; None: all) in the following windows; return their
+        rate [Hz]. A backend that records every channel at every tick does nothing."""
+        return float(self.info.servo_rate_hz)
 
     @abstractmethod
     def _estop(self) -> None:

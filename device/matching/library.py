@@ -38,7 +38,7 @@ from ..fileio import atomic_write
 from ..info import DeviceInfo
 from ..scene import LibraryTransient, Scene, TransientTable
 from .inversion import METHODS, discretize, invert
-from .sysid import TFModel, identify
+from .sysid import TFModel, accel_at_every_tick, identify
 
 __all__ = ["TransientLibrary", "LibraryError", "build_library", "usable_band", "record_taps",
            "segment_taps", "even_spread", "library_dir", "library_path", "find_library",
@@ -167,16 +167,22 @@ def usable_band(rate_hz: float, band: tuple[float, float] = (10.0, 500.0)) -> tu
 
 
 def record_taps(device, scene: Scene, windows: int = 8, duration: float = 5.0) -> list:
-    """Tap windows on ``scene``: list of WindowResult (traces and contact events)."""
+    """Tap windows on ``scene``: list of WindowResult (contact events, and the
+    accelerometer at every servo tick)."""
     device.load_scene(scene)
     out = []
-    for _ in range(windows):
-        device.home()
-        out.append(device.run_window(duration))
+    with accel_at_every_tick(device):
+        for _ in range(windows):
+            device.home()
+            out.append(device.run_window(duration))
     return out
 
 
-def segment_taps(results, window: float = 0.100, baseline: float = 0.005) -> list[Tap]:
+#: the acceleration recorded after each contact, and so one library entry's length [s]
+TAP_WINDOW_S = 0.100
+
+
+def segment_taps(results, window: float = TAP_WINDOW_S, baseline: float = 0.005) -> list[Tap]:
     """Acceleration windows from each contact, keeping taps with no other contact inside.
 
     The contact instant is the device's position-threshold crossing (its contact event);
@@ -240,6 +246,12 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     if method not in METHODS:
         raise ValueError(f"inversion method must be one of {', '.join(METHODS)}")
     info = device.info
+    ticks = int(round(TAP_WINDOW_S * info.servo_rate_hz))  # one entry's row
+    cap = device.table_capacity
+    if cap is not None and entries * ticks > cap:  # refused before any tapping
+        raise LibraryError(f"a library of {entries} entries of {ticks} ticks is "
+                           f"{entries * ticks} table items; this device's transient table "
+                           f"holds {cap}: at most {cap // ticks} entries")
     band = usable_band(info.servo_rate_hz)
     if model is None:
         model = identify(device, order=order, relative_degree=relative_degree, band=band).model
@@ -256,7 +268,7 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         "servo_rate_hz": float(info.servo_rate_hz),
         "model": model.to_dict(),
         "inversion": {"method": method, "lambda": lam, "band_hz": list(band),
-                      "taper_s": [0.001, 0.01], "window_s": 0.1,
+                      "taper_s": [0.001, 0.01], "window_s": TAP_WINDOW_S,
                       "in_window_error": [v.in_window_error for v in invs],
                       "energy_outside": [v.energy_outside for v in invs]},
         "source": {"sample": source.name, "scene": source.to_dict(), "windows": windows,

@@ -16,12 +16,46 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import DeviceError
+
 __all__ = ["Sweep", "swept_sine", "ETFE", "etfe", "TFModel", "fit_transfer_function",
-           "identify", "Identification"]
+           "identify", "Identification", "accel_at_every_tick"]
+
+
+@contextmanager
+def accel_at_every_tick(device) -> Iterator[float]:
+    """Record the accelerometer alone, at every servo tick, while the block runs (then
+    every channel again). Matching divides spectra sample by sample at the servo rate, so
+    a device that can only thin its traces out (a narrow link) is refused here rather than
+    fitted wrongly.
+
+    Yields
+    ------
+    float [Hz]
+        The servo rate.
+
+    Raises
+    ------
+    DeviceError
+        The device cannot stream its accelerometer at every tick.
+    """
+    rate = float(device.info.servo_rate_hz)
+    got = device.set_trace_channels(("accel",))
+    try:
+        if got < rate * (1 - 1e-9):
+            raise DeviceError(f"{device.info.model}: its link carries the accelerometer at "
+                              f"{got:g} Hz, not at every servo tick ({rate:g} Hz); "
+                              "identification and matching need every tick (a faster link: "
+                              "USB, or a UART at a higher baud rate)")
+        yield rate
+    finally:
+        device.set_trace_channels(None)
 
 
 @dataclass(frozen=True)
@@ -327,15 +361,15 @@ def identify(device, levels: tuple[float, ...] = (0.5, 1.0, 1.5), repeats: int =
     estimates the ETFE per level by synchronous averaging, averages the levels in the
     complex domain, and fits a model.
     """
-    rate = device.info.servo_rate_hz
     per_level = {}
-    for level in levels:
-        sweep = swept_sine(rate, band, duration, level)
-        ys = []
-        for _ in range(repeats):
-            res = device.play_force(sweep.force)
-            ys.append(res.traces["accel"] - np.mean(res.traces["accel"][:10]))
-        per_level[level] = etfe(sweep.force, np.array(ys), rate, smooth_hz)
+    with accel_at_every_tick(device) as rate:
+        for level in levels:
+            sweep = swept_sine(rate, band, duration, level)
+            ys = []
+            for _ in range(repeats):
+                res = device.play_force(sweep.force)
+                ys.append(res.traces["accel"] - np.mean(res.traces["accel"][:10]))
+            per_level[level] = etfe(sweep.force, np.array(ys), rate, smooth_hz)
     freq = next(iter(per_level.values())).freq
     H = np.mean([e.H for e in per_level.values()], axis=0)
     coh = np.mean([e.coherence for e in per_level.values()], axis=0)

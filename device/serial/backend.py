@@ -22,7 +22,7 @@ import numpy as np
 
 from ..base import DeviceInfo, HapticDevice
 from ..codes import Blend, SceneKind
-from ..errors import DeviceError, DeviceFaultError
+from ..errors import DeviceError, DeviceFaultError, SceneError
 from ..events import ContactEvent, FaultEvent, SaturationEvent, WindowResult
 from ..scene import Scene, TransientTable
 from . import messages as M
@@ -94,7 +94,7 @@ def _wire_table(table: TransientTable, where: str) -> tuple[np.ndarray, np.ndarr
 
     Raises
     ------
-    DeviceError
+    SceneError
         A ``nearest`` or ``linear`` table with a force beyond ±32.767 N.
     """
     v = np.asarray(table.velocities, dtype=float)
@@ -107,9 +107,9 @@ def _wire_table(table: TransientTable, where: str) -> tuple[np.ndarray, np.ndarr
         peak = float(np.max(np.abs(f)))
         if peak > TABLE_FORCE_MAX:
             row, tick = np.unravel_index(int(np.argmax(np.abs(f))), f.shape)
-            raise DeviceError(f"{where}: its transient table has {peak:.6g} N (row {row}, tick "
-                              f"{tick}); a {table.blend.label} table carries at most "
-                              f"±{TABLE_FORCE_MAX} N per item")
+            raise SceneError(f"its transient table has {peak:.6g} N (row {row}, tick {tick}); a "
+                             f"{table.blend.label} table carries at most ±{TABLE_FORCE_MAX} N "
+                             "per item", "transient", ("transient",), where=where)
     q = np.round(f * 1000.0)
     return v, np.clip(q, -32767, 32767).astype("<i2")
 
@@ -192,9 +192,9 @@ class SerialDevice(HapticDevice):
                           watchdog_s=h.watchdog_ms / 1000, encoder_resolution=h.encoder_nm * 1e-9,
                           accel_range=h.accel_range / 1000)
 
-    def _configure_traces(self) -> tuple[str, ...]:
-        """Stream every base channel the device records (the channels
-        :class:`~device.events.WindowResult` carries) and the optional ones it has, one
+    def _configure_traces(self, names: tuple[str, ...] | None = None) -> tuple[str, ...]:
+        """Stream ``names`` (None: every base channel the device records, the channels
+        :class:`~device.events.WindowResult` carries, and the optional ones it has), one
         record per tick unless the device's link is too narrow for that
         (:func:`stream_decimation`). Returns the streamed channel names in order.
 
@@ -213,13 +213,16 @@ class SerialDevice(HapticDevice):
         if lim is None:
             raise ProtocolMismatchError(f"{self.port}: a version-2 device sent no LIMITS "
                                         "after HELLO_ACK")
-        base = [ch for ch, name in enumerate(M.Channel.NAMES) if name not in _OPTIONAL]
+        base = [ch for ch, name in enumerate(M.Channel.NAMES)
+                if (name not in _OPTIONAL if names is None else name in names)]
         missing = [M.Channel.NAMES[ch] for ch in base if not lim.channels >> ch & 1]
         if missing:
             raise DeviceError(f"{self.port}: the device records no {', '.join(missing)} "
                               "trace")
         known = (1 << len(M.Channel.NAMES)) - 1  # a bit beyond them names no channel
-        mask = sum(1 << ch for ch in base) | (lim.channels & known & ~0x7F)
+        mask = sum(1 << ch for ch in base)
+        if names is None:
+            mask |= lim.channels & known & ~0x7F
         self._decimation = stream_decimation(lim, bin(mask).count("1"),
                                              self._info.servo_rate_hz)
         self._command(M.TraceConfig(mask, self._decimation))
@@ -263,20 +266,45 @@ class SerialDevice(HapticDevice):
         super()._check_open()
         self.link.check()
 
+    @property
+    def table_capacity(self) -> int | None:
+        lim = self.link.limits
+        return None if lim is None else lim.table_items
+
+    def _wire_scene(self, scene: Scene, table: TransientTable | None
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``table`` as this device's wire carries it (:func:`_wire_table`), or None.
+
+        Raises
+        ------
+        SceneError
+            An item out of range, or more items than the device's table holds (its
+            ``LIMITS.table_items``).
+        """
+        if table is None:
+            return None
+        where = f"{self.port}: scene '{scene.name}'"
+        velocities, q = _wire_table(table, where)
+        cap = self.table_capacity
+        if cap is not None and q.size > cap:
+            raise SceneError(f"its transient table has {q.size} items ({q.shape[0]} rows × "
+                             f"{q.shape[1]} ticks); this device's table holds {cap} "
+                             "(LIMITS.table_items)", "transient", ("transient",), where=where)
+        return velocities, q
+
+    def _check_scene(self, scene: Scene, table: TransientTable | None) -> None:
+        self._wire_scene(scene, table)
+
     def _load_scene(self, scene: Scene, table: TransientTable | None) -> None:
+        wire = self._wire_scene(scene, table)
         self._scene_id = (self._scene_id + 1) & 0xFFFF
         sid = self._scene_id
         m = scene.material
         ring = m.ringing if m is not None else None
         kind = (SceneKind.REAL if m is not None else
                 SceneKind.TABLE if table is not None else SceneKind.SPRING)
-        if table is not None:
-            velocities, q = _wire_table(table, f"{self.port}: scene '{scene.name}'")
-        rows, row_len = (q.shape if table is not None else (0, 0))
-        lim = self.link.limits
-        if lim is not None and rows * row_len > lim.table_items:
-            raise DeviceError(f"{self.port}: scene '{scene.name}' has a transient table of "
-                              f"{rows * row_len} items; this device holds {lim.table_items}")
+        velocities, q = wire if wire is not None else (None, np.zeros((0, 0), "<i2"))
+        rows, row_len = q.shape
         self._command(M.SceneBegin(
             sid, int(kind), int(round(scene.surface_height * 1e6)), float(scene.spring or 0.0),
             m.stiffness if m else 0.0, m.damping if m else 0.0, ring.slope if ring else 0.0,
@@ -287,7 +315,7 @@ class SerialDevice(HapticDevice):
         if m is not None and m.support is not None:
             self._command(M.SceneSupport(sid, m.support.stiffness, m.support.damping))
         crc = 0
-        if table is not None:  # only what the scene requires: springs upload no table
+        if velocities is not None:  # only what the scene requires: springs upload no table
             self._command(M.SceneVelocities(sid, tuple(float(v) for v in velocities)))
             q = q.reshape(-1)
             for a in range(0, q.size, M.CHUNK_ITEMS):
@@ -307,6 +335,10 @@ class SerialDevice(HapticDevice):
     def heartbeat(self) -> None:
         self._check_open()
         self.link.heartbeat()
+
+    def _set_trace_channels(self, channels: tuple[str, ...] | None) -> float:
+        self._stream = self._configure_traces(channels)
+        return self._info.servo_rate_hz / self._decimation
 
     def _estop(self) -> None:
         self._output = 0.0
@@ -464,7 +496,8 @@ class SerialDevice(HapticDevice):
             raise DeviceError(f"{self.port}: window {wid}'s trace record {bad[0]} is {what} "
                               f"({bad.size} of {n} records not covered exactly once)")
         out = {name: data[:, k].astype(float) for k, name in enumerate(names)}
-        out["flags"] = out["flags"].astype(np.uint16)
+        if "flags" in out:
+            out["flags"] = out["flags"].astype(np.uint16)
         return out
 
     # ------------------------------------------------------------------ exits

@@ -246,14 +246,16 @@ def test_a_person_without_a_terminal_is_refused_before_anything_opens(xdisplay, 
     assert nodisplay.returncode == 2 and "no display" in nodisplay.stderr
 
 
-@pytest.mark.parametrize("firmware", ["python", "host"])
+@pytest.mark.parametrize("firmware", ["python", "host", "host-board"])
 def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulator_factory,
                                                                            tmp_path, firmware):
     """On a real device (the emulator) realism used to stop at its first matched sample
     although validate and device check passed. The preflight names what is missing and the
     command; after that command, preflight passes and a realism session completes over the
-    serial link with matched samples: on the Python emulator and on the reference firmware
-    built for this machine (protocol 2, traces streamed), both at ×10."""
+    serial link with matched samples: on the Python emulator, on the reference firmware
+    built for this machine (protocol 2, traces streamed), and on that firmware with the
+    board's buffers and 1-Mbaud link (traces every 4th tick; matching asks for the
+    accelerometer alone, at every tick), all at ×10."""
     emu = emulator_factory(11, "--firmware", firmware, "--speed", "10")
     spec = f"serial:{emu.port}"
     common = ["--device", spec, "--responder", "scripted", "--no-audio", "--data",
@@ -285,6 +287,12 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
     assert len(matched) == 4
     meta = json.loads((tmp_path / "d" / "sub-P04" / "ses-1" / "session.json").read_text())
     assert meta["libraries"]["matched_firm"]["path"].endswith(".npz")
+    # built from the accelerometer at every servo tick, on the board's 1-Mbaud link too:
+    # each entry is 100 ms of 10-kHz ticks
+    from device.matching.library import TransientLibrary
+
+    lib = TransientLibrary.load(meta["libraries"]["matched_firm"]["path"])
+    assert lib.rate_hz == 10_000.0 and lib.forces.shape[1] == 1000
 
 
 def test_clear_fault_over_serial_clears_a_fault_latched_before(emulator, tmp_path):

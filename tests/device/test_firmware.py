@@ -138,12 +138,97 @@ def test_the_stream_fits_the_link_the_device_advertises():
         stream_decimation(M.Limits(1, 1, 1, 0x7F, 100, 1000), 7, 10_000.0)
 
 
+def test_the_link_carries_one_channel_at_every_tick_where_seven_need_every_fourth():
+    """By hand, for the 1-Mbaud UART (80 % of 100,000 B/s for the stream): a full chunk of
+    accel alone holds 245 records in a 990-byte body plus ~12 bytes of frame, 4.1 B a
+    record, 41 kB/s at 10 kHz: every tick. Two channels are 122 records a chunk, 8.2 B a
+    record, 82 kB/s: every 2nd tick."""
+    lim = M.Limits(16384, 37888, 1024, 0x7F, 100, 100_000)
+    assert stream_decimation(lim, 1, 10_000.0) == 1
+    assert stream_decimation(lim, 2, 10_000.0) == 2
+
+
+@pytest.fixture
+def firmware_board():
+    """The host build with the STM32F405's buffers and 1-Mbaud link (``host-board``)."""
+    emu = start_emulator("--firmware", "host-board", "--seed", "12")
+    yield emu
+    stop_emulator(emu)
+
+
+def test_a_narrow_link_streams_what_a_measurement_asks_at_every_tick(firmware_board):
+    """On the board's link the traces a session keeps come every 4th tick; a measurement
+    that needs the accelerometer alone (identification, matching) gets it at every tick,
+    and asking for every channel again thins them out again."""
+    with SerialDevice(firmware_board.port) as dev:
+        assert dev.info.firmware == "hlfw-2.0 host-F4"
+        assert dev.link.limits.link_bytes_s == 100_000
+        dev.load_scene(Scene("firm", spring=680.0))
+        dev.home()
+        assert dev.run_window(0.1, from_first_contact=False).rate_hz == 2500.0
+        assert dev.set_trace_channels(["accel"]) == 10_000.0
+        dev.home()
+        res = dev.run_window(0.1, from_first_contact=False)
+        assert set(res.traces) == {"t", "accel"} and len(res.traces["t"]) == 1000
+        assert dev.set_trace_channels(["position", "accel"]) == 5000.0
+        with pytest.raises(ValueError, match="trace channels must be some of position, "
+                                             "velocity.*got 'acceleration'"):
+            dev.set_trace_channels(["accel", "acceleration"])
+        assert dev.set_trace_channels(None) == 2500.0
+        dev.home()
+        res = dev.run_window(0.1, from_first_contact=False)
+        assert set(NAMES) <= set(res.traces) and len(res.traces["t"]) == 250
+
+
+def test_a_library_the_board_cannot_hold_is_refused_before_tapping_and_at_preflight(
+        firmware_board, tmp_path):
+    """The board's transient table holds 16,384 items: 16 entries of 100 ms at 10 kHz.
+    `library build --entries 17` is refused before any tapping, in words; a 17-entry
+    library made elsewhere for this device fails the preflight naming the sample, where it
+    used to pass and stop the session at its first matched trial."""
+    from device.matching.library import (
+        FORMAT_VERSION,
+        LibraryError,
+        TransientLibrary,
+        build_library,
+        library_path,
+    )
+    from protocols import load_protocol
+
+    source = load_protocol("realism").samples["wood_on_foam"].scene
+    with SerialDevice(firmware_board.port) as dev:
+        assert dev.table_capacity == 16384
+        sent = dev.link_stats()["frames_sent"]
+        with pytest.raises(LibraryError, match="17 entries of 1000 ticks is 17000 table "
+                                               "items; this device's transient table holds "
+                                               "16384: at most 16 entries"):
+            build_library(dev, source, entries=17)
+        assert dev.link_stats()["frames_sent"] == sent  # nothing played, nothing tapped
+        info = dev.info
+    t = np.arange(1000) / 10_000.0
+    forces = np.array([0.5 * v * np.sin(2 * np.pi * 120 * t) * np.exp(-40 * t)
+                       for v in np.linspace(0.05, 0.2, 17)])
+    meta = {"format_version": FORMAT_VERSION, "device": info.to_dict(),
+            "servo_rate_hz": 10_000.0, "source": {"sample": "wood_on_foam"}}
+    TransientLibrary(np.linspace(0.05, 0.2, 17), forces, meta).save(library_path(info, source))
+    pre = subprocess.run([sys.executable, "-m", "app", "preflight", "realism", "--device",
+                          f"serial:{firmware_board.port}", "--responder", "scripted",
+                          "--no-audio", "--data", str(tmp_path / "d")],
+                         capture_output=True, text=True, timeout=120)
+    assert pre.returncode == 1, pre.stdout + pre.stderr
+    line = next(ln for ln in pre.stdout.splitlines() if ln.startswith("FAIL libraries"))
+    assert "sample 'matched_firm'" in line and "17000 items (17 rows × 1000 ticks); this " \
+        "device's table holds 16384" in line and "fewer --entries" in line
+
+
 @pytest.mark.skipif(shutil.which("qemu-system-arm") is None,
                     reason="qemu-system-arm missing: `make test` installs it")
 def test_selftest_passes_against_the_cortex_m_build_under_qemu():
     """The STM32F405 build boots on QEMU's netduinoplus2, speaks protocol 2 over its
-    USART (1 Mbaud: LIMITS says 100,000 B/s, so the host streams every 4th tick) and passes
-    the same device suite as every backend."""
+    USART (1 Mbaud: LIMITS says 100,000 B/s, so the host streams every 4th tick), passes
+    the same device suite as every backend, and plays an identification sweep with its
+    accelerometer at every tick."""
+    from device.matching.sysid import etfe, swept_sine
     from device.suite import SUITE_SCENES
 
     emu = start_emulator("--firmware", "qemu")
@@ -160,6 +245,25 @@ def test_selftest_passes_against_the_cortex_m_build_under_qemu():
             assert res.rate_hz == 2500.0
             assert len(res.traces["t"]) == 500  # 2,000 ticks, every 4th recorded
             assert np.allclose(np.diff(res.traces["t"]), 4e-4, rtol=0, atol=1e-9)
+            # identification, as `library build` runs it on the board: the paper's 2.5-s
+            # sweep (3.52 s with its fades and silence) fits the playback buffer (the
+            # device's state lives in the CCM), and the accelerometer alone streams at
+            # every tick over the 1-Mbaud link
+            sweep = swept_sine(10_000.0, amplitude=1.0)
+            assert sweep.force.size <= lim.play_items
+            assert dev.set_trace_channels(["accel"]) == 10_000.0
+            res = dev.play_force(sweep.force)
+            assert set(res.traces) == {"t", "accel"} and res.rate_hz == 10_000.0
+            a = res.traces["accel"]
+            assert a.size == sweep.force.size
+            # in free air above the hand's 7-Hz resonance the stylus (55 g) and the hand
+            # (100 g) move as one mass: |a/F| = 1 / 0.155 kg = 6.45 (m/s²)/N, by hand
+            est = etfe(sweep.force, a[None, :] - a[:10].mean(), 10_000.0)
+            band = (est.freq >= 50) & (est.freq <= 400)
+            gain = np.abs(est.H[band])  # one sweep, with the accelerometer's noise
+            assert np.median(gain) == pytest.approx(1 / 0.155, rel=0.03)
+            np.testing.assert_allclose(gain, 1 / 0.155, rtol=0.10)
+            assert dev.set_trace_channels(None) == 2500.0
     finally:
         stop_emulator(emu)
 

@@ -370,3 +370,31 @@ def test_library_dir_follows_the_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("HAPTICLAB_LIBRARIES", str(tmp_path))
     assert library_dir() == tmp_path
     assert os.environ["HAPTICLAB_LIBRARIES"] == str(tmp_path)
+
+
+def test_identification_refuses_a_device_that_thins_its_accelerometer_out():
+    """A device whose link can carry the accelerometer only every 4th tick is refused in
+    words before anything is played (the ETFE divides spectra tick by tick), and its
+    channels are given back."""
+    from types import SimpleNamespace
+
+    from device import DeviceError, open_device
+    from device.matching.sysid import identify
+
+    with open_device("sim") as sim:
+        info = sim.info
+    asked = []
+
+    def set_trace_channels(channels=None):
+        asked.append(channels)
+        return info.servo_rate_hz / 4
+
+    def play_force(force):
+        raise AssertionError("nothing may be played")
+
+    narrow = SimpleNamespace(info=info, set_trace_channels=set_trace_channels,
+                             play_force=play_force)
+    with pytest.raises(DeviceError, match="carries the accelerometer at 2500 Hz, not at every "
+                                          "servo tick \\(10000 Hz\\)"):
+        identify(narrow)
+    assert asked == [("accel",), None]
