@@ -53,6 +53,11 @@ TX_ROOM = 8192
 #: bytes of control frames kept for a host that does not read (a dead one); beyond, the
 #: oldest are dropped and counted
 TX_MAX = 1 << 20
+#: the servo's device time runs on only while the serve loop has looked at the port
+#: within this long [wall s]: the loop turns every 2 ms when idle, so a longer wait means
+#: the emulator's own process was held up (its other thread, a loaded machine), and the
+#: host's frames wait unread in the port
+INPUT_TURN_S = 0.005
 
 
 def _log(text: str) -> None:
@@ -87,6 +92,7 @@ class Emulator:
         self.limits = limits
         sim.live = True
         sim.trace_sink = self._stream
+        sim.input_gate = self._input_read
         self.sim = sim
         self.fd = fd
         os.set_blocking(fd, False)
@@ -108,7 +114,9 @@ class Emulator:
         self._stop = threading.Event()
         self._fault_sent = False
         self._clock0 = time.monotonic()  # power-up: the device clock counts from here
+        self._turn = self._clock0  # when the serve loop last read the port [wall s]
         self.frames_in = 0
+        self._link_reset(None)
         self._trace_config(limits.channels, 1)
         #: the trace ring: chunks (and the WINDOW_DONE behind them) waiting for the link,
         #: a few per loop turn, so a command arriving meanwhile (ESTOP) is served between
@@ -163,7 +171,15 @@ class Emulator:
     def serve_forever(self) -> None:
         next_status = 0.0  # device time [s]
         while not self._stop.is_set():
-            r, _, _ = select.select([self.fd], [], [], 0.0 if self._outbox else 0.002)
+            wait = 0.0 if self._outbox else 0.002
+            r, _, _ = select.select([self.fd], [], [], wait)
+            held = time.monotonic() - self._turn - wait
+            if held > INPUT_TURN_S and not (self._busy() and self._running in ("window",
+                                                                                "play")):
+                # this process was held up (a loaded machine, its other thread): a device
+                # is not, so its clock did not run meanwhile (in a window the servo worker
+                # lets it slip itself)
+                self.sim.slipped_s += held
             if r:
                 try:
                     data = os.read(self.fd, 65536)
@@ -173,6 +189,7 @@ class Emulator:
                     for frame in self.decoder.feed(data):
                         self.frames_in += 1
                         self._handle(frame)
+            self._turn = time.monotonic()
             self._commit_done()
             for _ in range(OUTBOX_PER_TURN):
                 with self._olock:
@@ -202,6 +219,13 @@ class Emulator:
         self._stop.set()
         self.sim.request_stop()
 
+    def _input_read(self) -> None:
+        """From the servo worker before each block: wait until the serve loop has read the
+        port lately (:data:`INPUT_TURN_S`), so device time never runs past frames that
+        arrived but were not read (the worker's clock slips meanwhile)."""
+        while time.monotonic() - self._turn > INPUT_TURN_S and not self._stop.is_set():
+            time.sleep(0.0005)
+
     def _state(self) -> int:
         if self.sim.fault is not None:
             return M.State.FAULT
@@ -228,8 +252,36 @@ class Emulator:
                  "last heartbeat")
 
     # ------------------------------------------------------------------ commands
+    # ------------------------------------------------------------------ LINK_REPORT
+    def _link_reset(self, now: float | None) -> None:
+        """Count the host's frames afresh; a frame at ``now`` [s, device time] (None: no
+        frame yet) is the first of the next gap."""
+        self._gaps = [0] * M.LINK_GAP_BINS
+        self._gap_max = 0.0
+        self._gap_prev = now
+        self._gap_frames = 0 if now is None else 1
+        self._gap_bad0 = sum(self.decoder.errors.values())
+        self._gap_since = 0.0 if now is None else now
+
+    def _link_note(self, now: float) -> None:
+        """An intact host frame at device time ``now`` [s]: the gap since the last one."""
+        if self._gap_prev is not None:
+            gap = now - self._gap_prev
+            k = min(int(gap * 1e6) // M.LINK_GAP_BIN_US, M.LINK_GAP_BINS - 1)
+            self._gaps[k] = min(self._gaps[k] + 1, 0xFFFF)
+            self._gap_max = max(self._gap_max, gap)
+        self._gap_prev = now
+        self._gap_frames += 1
+
+    def _link_report(self) -> M.LinkReport:
+        bad = sum(self.decoder.errors.values()) - self._gap_bad0
+        return M.LinkReport(int(round(self._gap_since * 1e6)), self._gap_frames, bad,
+                            min(int(round(self._gap_max * 1e6)), 0xFFFFFFFF), tuple(self._gaps))
+
+    # ------------------------------------------------------------------ commands
     def _handle(self, frame) -> None:
         self._sync()
+        self._link_note(self.sim.time)
         self.sim.heartbeat()  # every intact frame feeds the watchdog
         try:
             msg = M.decode(frame)
@@ -242,6 +294,7 @@ class Emulator:
             self.send(M.Pong(msg.stamp))
             return
         if isinstance(msg, M.Hello):
+            self._link_reset(self.sim.time)  # a new host session
             self._hello()
             return
         if frame.version != 2:  # this device speaks version 2 only, from HELLO_ACK on
@@ -258,6 +311,10 @@ class Emulator:
         status = self._execute(msg)
         self._last = (frame.seq, frame.type, frame.body, status)
         self.send(M.Ack(frame.seq, status))
+        if isinstance(msg, M.LinkQuery) and status == M.Status.OK:  # the report follows
+            self.send(self._link_report())
+            if msg.reset:
+                self._link_reset(self.sim.time)
 
     def _hello(self) -> None:
         """HELLO, from a frame of any version: a new host session. A window or playback left
@@ -377,6 +434,8 @@ class Emulator:
             return msg.offset + msg.n <= self.limits.play_items
         if isinstance(msg, M.PlayStart):
             return 0 < msg.n_samples <= self.limits.play_items
+        if isinstance(msg, M.LinkQuery):
+            return msg.reset in (0, 1)
         if isinstance(msg, M.TraceConfig):
             lim = self.limits
             return (msg.channels != 0 and not msg.channels & ~lim.channels
@@ -390,7 +449,7 @@ class Emulator:
         device_bound = isinstance(msg, (M.Ack, M.HelloAck, M.Limits, M.Pong, M.Contact,
                                         M.Saturation, M.Fault, M.StatusReport, M.WindowDone,
                                         M.TraceBlock, M.Position, M.TraceChunk, M.TraceLost,
-                                        M.TraceRequest))
+                                        M.TraceRequest, M.LinkReport))
         if device_bound or not self._fields_fit(msg):
             return S.BAD_MESSAGE
         running = self._busy() and self._running in ("window", "play")
@@ -418,6 +477,8 @@ class Emulator:
             if running:
                 sim.request_stop()
             return S.OK
+        if isinstance(msg, M.LinkQuery):
+            return S.OK  # in every state; the report follows the ACK
         if self._busy():
             return S.BUSY  # running, or a scene being prepared
         if isinstance(msg, (M.SceneBegin, M.SceneVelocities, M.SceneChunk, M.SceneSupport)):

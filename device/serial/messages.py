@@ -60,6 +60,7 @@ class Message:
     TYPE: ClassVar[int] = -1
     FMT: ClassVar[str] = ""
     ARRAY: ClassVar[str | None] = None  # struct code of a trailing array field "items"
+    ITEMS: ClassVar[int | None] = None  # the array's fixed length, when it has one
 
     def body(self) -> bytes:
         vals = tuple(getattr(self, f.name) for f in fields(self))  # astuple deep-copies
@@ -303,6 +304,16 @@ class TraceConfig(Message):
     decimation: int = 1
 
 
+@dataclass(frozen=True)
+class LinkQuery(Message):
+    """Version 2: ask for LINK_REPORT, the device's view of the host's frames since HELLO
+    or the last reset; ``reset`` 1 starts counting afresh after the report."""
+
+    TYPE = 0x42
+    FMT = "B"
+    reset: int = 0
+
+
 # ---------------------------------------------------------------- device → host
 @dataclass(frozen=True)
 class Ack(Message):
@@ -506,6 +517,35 @@ class TraceLost(Message):
     n: int = 0
 
 
+#: LINK_REPORT's gap histogram: bins of this many µs of device time, the last one open
+LINK_GAP_BIN_US = 2000
+LINK_GAP_BINS = 64  # LinkReport.ITEMS
+
+
+@dataclass(frozen=True)
+class LinkReport(Message):
+    """Version 2, answering LINK_QUERY: what the device saw of the host since ``since_us``
+    [µs, device clock] — intact frames, frames that failed a check, the longest gap between
+    two intact frames [µs of device time] and the gaps' histogram (``items``: 64 u16
+    counts, bin k for gaps in [2k, 2k + 2) ms, the last bin ≥ 126 ms; a count saturates at
+    65,535). The gaps are what the device's watchdog judges."""
+
+    TYPE = 0x99
+    FMT = "QIII"
+    ARRAY = "H"
+    ITEMS = 64
+    since_us: int = 0
+    frames: int = 0
+    bad_frames: int = 0
+    max_gap_us: int = 0
+    items: tuple = (0,) * LINK_GAP_BINS
+
+    def check_count(self) -> None:
+        if len(self.items) != LINK_GAP_BINS:
+            raise MessageError(f"LinkReport: {len(self.items)} gap bins, expected "
+                               f"{LINK_GAP_BINS}")
+
+
 MESSAGES: dict[int, type[Message]] = {
     m.TYPE: m for m in (Hello, Heartbeat, Ping, SceneBegin, SceneVelocities, SceneChunk,
                         SceneSupport,
@@ -513,7 +553,7 @@ MESSAGES: dict[int, type[Message]] = {
                         EStop,
                         ClearFault, Zero, TraceRequest, Ack, HelloAck, Pong, Contact, Saturation,
                         Fault, StatusReport, WindowDone, TraceBlock, Position, TraceConfig,
-                        Limits, TraceChunk, TraceLost)}
+                        Limits, TraceChunk, TraceLost, LinkQuery, LinkReport)}
 
 CHUNK_ITEMS = 480  # i16 items per SceneChunk / PlayChunk (960 bytes of data)
 TRACE_ITEMS = 250  # f32 items per TraceBlock, and at most per TraceChunk (n × k)

@@ -70,11 +70,15 @@ def _examples() -> list[tuple[str, M.Message]]:
         ("limits", M.Limits(16384, 16384, 1024, 0x7F, 100, 100_000)),
         ("trace_chunk", M.TraceChunk(9, 0x05, 40, 2, (0.25, -1.0, 0.5, 2.0))),
         ("trace_lost", M.TraceLost(9, 1024, 35)),
+        ("link_query", M.LinkQuery(1)),
+        ("link_report", M.LinkReport(2_500_000, 1234, 2, 131_500,
+                                     (0,) * 12 + (40, 900, 55) + (0,) * 48 + (1,))),
     ]
 
 
 #: the examples sent in version-2 frames (the rest travel in version 1, as HELLO must)
-_V2 = {"trace_config", "limits", "trace_chunk", "trace_lost", "estop"}
+_V2 = {"trace_config", "limits", "trace_chunk", "trace_lost", "estop", "link_query",
+       "link_report"}
 
 
 def _frame_hex(frame: bytes) -> str:

@@ -179,6 +179,11 @@ class SimDevice(HapticDevice):
         #: window or playback as it is simulated (a device streaming its traces); the
         #: pieces joined are the result's traces
         self.trace_sink: Callable[[int, dict[str, np.ndarray]], None] | None = None
+        #: live mode: called before each block of ticks; it may wait (the device's clock
+        #: then slips). An emulator waits there until it has read its input: a device reads
+        #: what arrived between ticks, so its watchdog never judges the host on time in
+        #: which the device itself was not listening
+        self.input_gate: Callable[[], None] | None = None
 
     def _device_args(self) -> tuple:
         """What the servo loop needs of the device (:func:`device.sim.kernel.run_ticks`)."""
@@ -369,11 +374,14 @@ class SimDevice(HapticDevice):
         self._stop_requested = True
 
     def trip_watchdog(self) -> None:
-        """Latch a watchdog fault now (used by an emulator when the host falls silent
-        between windows; inside a window the servo loop trips it itself)."""
+        """Latch a watchdog fault (used by an emulator when the host falls silent between
+        windows; inside a window the servo loop trips it itself), timed at the tick the
+        watchdog period ran out, as a device's servo zeroes its output then (the emulator
+        notices between windows at its next turn)."""
         self._output_force = 0.0
         if self._fault is None:
-            self._fault = FaultEvent(self.time, "watchdog",
+            t = min(self.time, self._t_heartbeat + self._watchdog_device_s)
+            self._fault = FaultEvent(t, "watchdog",
                                      f"no heartbeat for {self.params.watchdog_s:g} s: output "
                                      "zeroed")
 
@@ -458,6 +466,8 @@ class SimDevice(HapticDevice):
         n = 0
         self._stop_requested = False
         while n < n_max and not self._stop_requested:
+            if self.live and self.input_gate is not None:
+                self.input_gate()
             if heartbeats:
                 self.heartbeat()
             n1 = min(n + chunk, n_max)

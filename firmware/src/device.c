@@ -22,6 +22,8 @@
 #define MAX_WINDOW_MS 600000u
 #define MAX_CLEARANCE_UM 500000u
 #define TX_RESERVE 2200u /* UART room kept for control frames while traces stream */
+#define GAP_BINS 64u      /* LINK_REPORT: gaps between host frames in 2-ms bins */
+#define GAP_BIN_US 2000u
 
 static const float ENC_M = (float)HL_ENCODER_NM * 1e-9f;
 static const float KF = (float)HL_FORCE_CONSTANT_MN_A * 1e-3f;
@@ -103,6 +105,10 @@ static struct {
     uint32_t last_crc;
     size_t last_len;
     uint32_t frames_in, tx_dropped;
+    /* what the watchdog saw of the host since HELLO or a LINK_QUERY reset (LINK_REPORT) */
+    uint16_t gap_hist[GAP_BINS];
+    uint32_t gap_frames, gap_bad0, gap_max_ticks;
+    uint64_t gap_since;
     uint64_t next_status;
     /* the window whose traces and WINDOW_DONE are being sent */
     uint8_t done_pending;
@@ -767,6 +773,8 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
             D.req_stop = 1;
         }
         return HL_OK;
+    case 0x42: /* LINK_QUERY: answered in every state (handle() sends the report) */
+        return b[0] <= 1 ? HL_OK : HL_BAD_MESSAGE;
     case 0x41: { /* TRACE_CONFIG */
         uint16_t mask = get_u16(b), dec = get_u16(b + 2);
         if (mask == 0 || (mask & ~HL_CHANNEL_MASK) || dec == 0 || dec > HL_MAX_DECIMATION) {
@@ -785,14 +793,67 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
     }
 }
 
+static uint32_t rx_errors(void)
+{
+    uint32_t n = 0;
+    for (size_t i = 0; i < sizeof D.rx.errors / sizeof D.rx.errors[0]; i++) {
+        n += D.rx.errors[i];
+    }
+    return n;
+}
+
+/* counting starts afresh: this frame is the first of the next gap */
+static void link_reset(void)
+{
+    memset(D.gap_hist, 0, sizeof D.gap_hist);
+    D.gap_frames = 1;
+    D.gap_max_ticks = 0;
+    D.gap_bad0 = rx_errors();
+    D.gap_since = D.ticks;
+}
+
+/* an intact host frame at this tick: the gap since the one before (what the watchdog
+ * judges), before it feeds the watchdog */
+static void link_note(void)
+{
+    if (D.gap_frames > 0) {
+        uint64_t gap = D.ticks - D.last_rx_tick;
+        uint64_t us = ticks_to_us(gap);
+        uint64_t bin = us / GAP_BIN_US;
+        bin = bin < GAP_BINS ? bin : GAP_BINS - 1u;
+        if (D.gap_hist[bin] < UINT16_MAX) {
+            D.gap_hist[bin]++;
+        }
+        if (gap > D.gap_max_ticks) {
+            D.gap_max_ticks = gap > UINT32_MAX ? UINT32_MAX : (uint32_t)gap;
+        }
+    }
+    D.gap_frames++;
+}
+
+static void send_link_report(void)
+{
+    uint8_t b[20 + 2 * GAP_BINS], *p = put_u64(b, ticks_to_us(D.gap_since));
+    p = put_u32(p, D.gap_frames);
+    p = put_u32(p, rx_errors() - D.gap_bad0);
+    uint64_t max_us = ticks_to_us(D.gap_max_ticks);
+    p = put_u32(p, max_us > UINT32_MAX ? UINT32_MAX : (uint32_t)max_us);
+    for (uint32_t k = 0; k < GAP_BINS; k++) {
+        p = put_u16(p, D.gap_hist[k]);
+    }
+    send(0x99, b, sizeof b, 1);
+}
+
 static void handle(const hl_frame *f, uint8_t version)
 {
+    link_note();
     D.frames_in++;
     D.last_rx_tick = D.ticks; /* every intact frame feeds the watchdog */
     if (f->type == 0x01) { /* HELLO: any header version */
         if (f->body_len != 1) {
             return;
         }
+        link_reset(); /* a new host session */
         D.proto = 2; /* the only version this firmware speaks; a v1 host closes the link */
         D.have_last = 0;
         hal_lock();
@@ -841,6 +902,12 @@ static void handle(const hl_frame *f, uint8_t version)
     D.last_len = f->body_len;
     D.last_status = st;
     send_ack(f->seq, st);
+    if (f->type == 0x42 && st == HL_OK) { /* LINK_QUERY: the report follows its ACK */
+        send_link_report();
+        if (f->body[0]) {
+            link_reset();
+        }
+    }
 }
 
 static void send_events(void)

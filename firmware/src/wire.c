@@ -168,6 +168,7 @@ static const layout LAYOUTS[] = {
     {0x93, 14, 0, 0}, {0x94, 24, 0, 0}, {0x95, 9, 4, 1},  {0x96, 10, 0, 0},
     /* version 2 */
     {0x41, 4, 0, 0},  {0x82, 20, 0, 0}, {0x97, 10, 4, 0}, {0x98, 10, 0, 0},
+    {0x42, 1, 0, 0},  {0x99, 148, 0, 0},
 };
 
 static unsigned channels_in(uint16_t mask)

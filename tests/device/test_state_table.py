@@ -43,6 +43,7 @@ COMMANDS = {
     "ESTOP": M.EStop(),
     "CLEAR_FAULT": M.ClearFault(),
     "ZERO": M.Zero(),
+    "LINK_QUERY": M.LinkQuery(0),
     "a device → host type, TRACE_REQUEST (v2)": M.TraceRequest(5, 0, 0, 10),
 }
 
@@ -79,14 +80,17 @@ class Host:
         self.port = serial.Serial(port, timeout=0.01)
         self.dec = FrameDecoder()
         self.seq = 0
+        self.pending: list[M.Message] = []  # decoded, not yet looked at
         self.state: int | None = None  # the last STATUS
         self.status_count = 0
 
     def _pump(self, pred, limit: float):
         end = time.monotonic() + limit
         while time.monotonic() < end:
-            for f in self.dec.feed(self.port.read(4096)):
-                m = M.decode(f)
+            if not self.pending:
+                self.pending = [M.decode(f) for f in self.dec.feed(self.port.read(4096))]
+            while self.pending:  # frames read with the one awaited wait for the next ask
+                m = self.pending.pop(0)
                 if isinstance(m, M.StatusReport):
                     self.state, self.status_count = m.state, self.status_count + 1
                 if pred(m):
@@ -104,7 +108,11 @@ class Host:
             self._pump(lambda m: isinstance(m, M.Pong), 2.0)
             return "pong"
         seq = self.seq
-        return self._pump(lambda m: isinstance(m, M.Ack) and m.ack_seq == seq, 2.0).status
+        status = self._pump(lambda m: isinstance(m, M.Ack) and m.ack_seq == seq, 2.0).status
+        if isinstance(msg, M.LinkQuery) and status == M.Status.OK:  # the report follows
+            report = self._pump(lambda m: isinstance(m, M.LinkReport), 2.0)
+            assert report.frames >= 1 and len(report.items) == M.LINK_GAP_BINS
+        return status
 
     def settled_state(self) -> str:
         """The state a STATUS sent after now reports (two reports on: one may be in flight)."""

@@ -106,6 +106,8 @@ def _strategy(cls):
             h[names.index("channels")] = 0b101
             it = it[: len(it) // 2 * 2]
             h[names.index("n")] = len(it) // 2
+        elif cls.ITEMS is not None:  # an array of fixed length
+            it = (tuple(it) + (0,) * cls.ITEMS)[: cls.ITEMS]
         elif "n" in names:  # the count field must match the items
             h[names.index("n")] = len(it)
         return cls(*h, it)

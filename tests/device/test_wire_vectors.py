@@ -34,7 +34,7 @@ def test_python_decodes_every_vector_as_the_file_says():
     from device.serial.messages import MESSAGES
 
     assert types == set(MESSAGES)
-    assert len(MESSAGES) == 32
+    assert len(MESSAGES) == 34
     long = [bytes.fromhex(ln.split()[1]) for ln in _lines() if ln.startswith("cobs_")]
     assert max(map(len, long)) > 1000 and all(0 not in b for b in long)
     # and the streaming decoder finds exactly the valid frames among them all
