@@ -10,7 +10,8 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 
-$(STAMP): pyproject.toml | $(PY)
+# setup.py builds the link's native threads (firmware/src/hostlink.c) with the package
+$(STAMP): pyproject.toml setup.py firmware/src/hostlink.c firmware/include/hl_hostlink.h | $(PY)
 	$(PY) -m pip install --quiet -e '.[test,ui]'
 	touch $(STAMP)
 

@@ -19,6 +19,19 @@ settings.load_profile("ci")
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def wait_for(pred, limit: float = 30.0, what: str = "condition") -> None:
+    """Wait until ``pred()`` holds, polling; fail after ``limit`` [s], a bound generous
+    enough for a loaded machine (the wait ends as soon as it holds)."""
+    import time
+
+    end = time.monotonic() + limit
+    while time.monotonic() < end:
+        if pred():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
 def pytest_configure(config):
     """Build transient libraries into a fresh library store per run (subprocesses inherit
     it)."""

@@ -127,10 +127,13 @@ class SerialDevice(HapticDevice):
         Re-sends of an unacknowledged command (at most 3).
     transport : object, optional
         A pyserial-like object (``read``, ``write``, ``close``) instead of opening ``port``.
+    native : bool
+        Read the port and heartbeat in a native thread where available (:mod:`.native`);
+        False runs them in Python threads.
     """
 
     def __init__(self, port: str, timeout: float = 0.2, retries: int = 3, transport: Any = None,
-                 baudrate: int = 1_000_000):
+                 baudrate: int = 1_000_000, native: bool = True):
         super().__init__()
         self.port = port
         self._fault: FaultEvent | None = None
@@ -141,7 +144,8 @@ class SerialDevice(HapticDevice):
         self._decimation = 1  # servo ticks per trace record
         self._status_seen = threading.Event()
         self.last_status: tuple[float, float] | None = None  # (host perf time, device time)
-        self.link = Link(port, timeout, retries, transport, baudrate, handler=self._on_message)
+        self.link = Link(port, timeout, retries, transport, baudrate, handler=self._on_message,
+                         native=native)
         try:
             self._info = self._identify(self.link.hello())
             self._stream = self._configure_traces()
@@ -255,7 +259,20 @@ class SerialDevice(HapticDevice):
         return self.link.ping(timeout)
 
     def link_stats(self) -> dict:
-        return self.link.link_stats()
+        """The link's figures (:meth:`Link.link_stats`) and, when the device reports them
+        (LINK_REPORT), the gaps between this host's frames as its watchdog saw them."""
+        out = self.link.link_stats()
+        if not self.closed and self.link.gone is None:
+            try:
+                out["device_saw"] = self.link.device_report()
+            except DeviceError:
+                out["device_saw"] = None
+        return out
+
+    def device_link_report(self, reset: bool = False) -> dict | None:
+        """The device's view of this host's frames (:meth:`Link.device_report`)."""
+        self._check_open()
+        return self.link.device_report(reset)
 
     @property
     def contact_rx(self) -> list[tuple[float, int]]:
@@ -514,4 +531,5 @@ class SerialDevice(HapticDevice):
     def reconnect(self) -> None:
         """Reopen the port after the device was gone (explicit, never automatic)."""
         self.link.shutdown()
-        self.__init__(self.port, self.link.timeout, self.link.retries, None, self.link.baudrate)
+        self.__init__(self.port, self.link.timeout, self.link.retries, None, self.link.baudrate,
+                      self.link.native)

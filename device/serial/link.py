@@ -2,16 +2,21 @@
 
 :class:`Link` knows frames and messages but nothing of scenes or windows. It opens the port
 exclusively, decodes frames in a background thread, numbers commands and waits for their
-acknowledgements (retrying at most three times), sends heartbeats every T_wd/4, counts
+acknowledgements (retrying at most three times), keeps the device's watchdog fed, counts
 what the link does (:meth:`Link.stats`), and declares the device gone when the port fails,
 the device falls silent for a watchdog period, or corrupt frames arrive in a storm.
 Messages that are not acknowledgements go to a handler (the device layer's view of state)
 and into an event queue the device layer takes from.
 
-While heartbeats run, the process's automatic full garbage collections are held off, and
-the held pass runs when the last link closes (:func:`hold_full_collections`): a full pass
-over a host that has imported scipy and statsmodels stops every thread for 90–110 ms on a
-loaded 2-core machine (measured), long enough to starve the device's 100-ms watchdog.
+**What a busy host cannot hold up.** On a port it opened itself, the link hands reading
+and heartbeats to a native thread (:mod:`device.serial.native`): bytes leave the port as
+they arrive and a HEARTBEAT goes out whenever no frame went for T_wd/4, whatever the
+interpreter is doing, for as long as this process renews its lease (``LEASE_S``; the
+reader renews it at every turn). Where the native library is missing, both run in Python
+threads, and while heartbeats run the process's automatic full garbage collections are held
+off (:func:`hold_full_collections`): a full pass over a host that has imported scipy and
+statsmodels stops every thread for 90–110 ms on a loaded 2-core machine (measured), long
+enough to starve the device's 100-ms watchdog.
 """
 
 from __future__ import annotations
@@ -28,18 +33,30 @@ import numpy as np
 from ..errors import DeviceError
 from . import messages as M
 from .framing import PROTOCOL_VERSION, FrameDecoder
+from .native import NativeLink
 
-__all__ = ["Link", "DeviceGoneError", "DeviceTimeoutError", "PortBusyError",
-           "ProtocolMismatchError", "CRCStormError", "SILENCE_MIN_S", "hold_full_collections"]
+__all__ = ["Link", "gap_percentiles", "DeviceGoneError", "DeviceTimeoutError", "PortBusyError",
+           "ProtocolMismatchError", "CRCStormError", "SILENCE_S", "hold_full_collections"]
 
 #: how long a host offers HELLO before it gives up [s]. A device may not listen at once
 #: when its port opens: a board that resets on DTR boots first, and QEMU's pty serial
 #: notices a reopened port only at its next once-a-second poll (HELLO_ACK came 0.81 s
 #: after the open, measured), which a 1-s wait missed under load
 HELLO_WAIT_S = 3.0
-#: the device counts as gone after T_wd without a frame, and never sooner than this [s]:
-#: two of the slowest STATUS intervals a device may keep (20 Hz; docs §3)
-SILENCE_MIN_S = 0.1
+#: the device counts as gone after this long without a byte, timed while this host was
+#: listening [s]: twenty of the slowest STATUS intervals a device may keep (20 Hz; docs
+#: §3). A device's silence is not a safety matter (its own watchdog and its hardware
+#: watchdog are), so the host waits long enough for a device simulated on the same busy
+#: computer (an emulator, QEMU) that the operating system held up for a moment
+SILENCE_S = 1.0
+#: how long the native thread heartbeats for a host that stopped calling it [s]: a host
+#: whose interpreter hangs (a deadlock, a call that never returns while holding the
+#: interpreter lock, a stopped process) stops feeding the device this long after its last
+#: call, and the device's watchdog trips T_wd later. Ten times the longest stall of a
+#: Python thread measured under load (`hapticlab bench link --load 4`: README)
+LEASE_S = 1.0
+#: a write the port does not take within this long marks the device gone [s]
+WRITE_TIMEOUT_S = 0.5
 
 
 _gc_lock = threading.Lock()
@@ -71,6 +88,19 @@ def hold_full_collections(hold: bool) -> None:
             return
         gc.set_threshold(*_gc_threshold)
     gc.collect()
+
+
+def gap_percentiles(counts, bin_ms: float) -> dict:
+    """p50, p99 and p99.9 [ms] of gaps counted in bins of ``bin_ms`` (the last bin open):
+    each the upper edge of the bin it falls in (an upper bound), None with no gaps."""
+    c = np.asarray(counts, float)
+    total = c.sum()
+    out = {}
+    for name, q in (("p50", 0.5), ("p99", 0.99), ("p999", 0.999)):
+        k = int(np.searchsorted(np.cumsum(c), q * total)) if total else None
+        out[f"gap_{name}_ms"] = None if k is None else (k + 1) * bin_ms
+    out["gaps"] = int(total)
+    return out
 
 
 class DeviceGoneError(DeviceError):
@@ -111,10 +141,14 @@ class Link:
     handler : callable, optional
         Called with every decoded device message that is not an ACK, in the reader thread
         and under the link's lock, before the message is queued as an event.
+    native : bool
+        Serve the port with the native thread when it is available (False: Python threads,
+        as a baseline to measure it against).
     """
 
     def __init__(self, port: str, timeout: float = 0.2, retries: int = 3, transport: Any = None,
-                 baudrate: int = 1_000_000, handler: Callable[[M.Message], None] | None = None):
+                 baudrate: int = 1_000_000, handler: Callable[[M.Message], None] | None = None,
+                 native: bool = True):
         if not 0 <= retries <= 3:
             raise ValueError(f"retries must be 0–3, got {retries!r}")
         self.port = port
@@ -127,6 +161,17 @@ class Link:
         self.limits: M.Limits | None = None
         self._handler = handler
         self._ser = transport if transport is not None else self._open(port)
+        #: the native thread serving the port, or None (then :attr:`native_why` says why)
+        self._native: NativeLink | None = None
+        self.native_why: str | None = ("a transport object was given" if transport is not None
+                                       else "Python threads were asked for (native=False)")
+        if transport is None and native:
+            self._native, self.native_why = self._start_native()
+        #: host perf time [s] at which the last frame of each message type was written
+        self.last_sent: dict[int, float] = {}
+        self._watch: threading.Thread | None = None
+        self._final_report: dict | None = None  # the native thread's figures at shutdown
+        self._stalls: deque[float] = deque(maxlen=65536)  # the watcher's own lateness [s]
         self._decoder = FrameDecoder()
         self._wlock = threading.Lock()
         self.cv = threading.Condition()
@@ -164,6 +209,21 @@ class Link:
         except OSError as exc:
             raise DeviceGoneError(f"{port}: cannot open ({exc})") from None
 
+    def _start_native(self) -> tuple[NativeLink | None, str | None]:
+        try:
+            fd = self._ser.fileno()
+        except Exception as exc:  # noqa: BLE001 - a URL transport (loop://, socket://)
+            return None, f"the port has no file descriptor ({exc})"
+        try:
+            return NativeLink(fd), None
+        except OSError as exc:
+            return None, exc.strerror or str(exc)
+
+    @property
+    def native(self) -> bool:
+        """Whether a native thread reads the port and heartbeats (see module docs)."""
+        return self._native is not None
+
     @property
     def gone(self) -> DeviceGoneError | None:
         """Why the device is gone (an error to raise), or None while it talks."""
@@ -186,26 +246,36 @@ class Link:
         """Send encoded bytes; a failing port marks the device gone and raises."""
         self.check()
         try:
-            with self._wlock:
-                self._ser.write(data)
+            if self._native is not None:
+                self._native.write(data, WRITE_TIMEOUT_S)
+            else:
+                with self._wlock:
+                    self._ser.write(data)
             self.stats["frames_sent"] += 1
         except Exception as exc:  # SerialException, SerialTimeoutException or OSError
             self.mark_gone(f"{self.port}: write failed ({exc})")
             raise DeviceGoneError(str(self._gone)) from None
 
     # ------------------------------------------------------------------ reader
+    def _read(self) -> bytes:
+        if self._native is not None:
+            return self._native.read(0.05)  # renews the lease at every turn
+        # pyserial's read(n) waits for n bytes or its timeout: ask for one byte (returns as
+        # soon as it arrives), then for whatever else is already waiting
+        data = self._ser.read(1)
+        if data:
+            waiting = getattr(self._ser, "in_waiting", 0)
+            if waiting:
+                data += self._ser.read(waiting)
+        return data
+
     def _read_loop(self) -> None:
         while not self.closed and self._gone is None:
             try:
-                # pyserial's read(n) waits for n bytes or its timeout: ask for one byte (returns
-                # as soon as it arrives), then for whatever else is already waiting
-                data = self._ser.read(1)
-                if data:
-                    waiting = getattr(self._ser, "in_waiting", 0)
-                    if waiting:
-                        data += self._ser.read(waiting)
+                data = self._read()
             except Exception as exc:  # SerialException or OSError: unplugged
-                self.mark_gone(f"{self.port}: device gone ({type(exc).__name__}: {exc})")
+                if not self.closed:
+                    self.mark_gone(f"{self.port}: device gone ({type(exc).__name__}: {exc})")
                 return
             if not data:
                 continue
@@ -305,6 +375,7 @@ class Link:
                 self.stats["retries"] += 1
             t0 = time.perf_counter()
             self.write(data)
+            self.last_sent[msg.TYPE] = time.perf_counter()
             deadline = time.monotonic() + timeout
             with self.cv:
                 while seq not in self._acks and self._gone is None:
@@ -373,10 +444,18 @@ class Link:
 
     # ------------------------------------------------------------------ heartbeats
     def start_heartbeats(self, watchdog_s: float) -> None:
-        """Heartbeat every T_wd/4; silence for T_wd (at least ``SILENCE_MIN_S``), timed
-        while this host was listening, marks the device gone."""
+        """Keep the device's watchdog fed: a HEARTBEAT after T_wd/4 without a frame.
+        Silence for ``SILENCE_S`` (or T_wd, if longer), timed while this host was
+        listening, marks the device gone."""
         period = max(0.005, watchdog_s / 4)
-        limit = max(watchdog_s, SILENCE_MIN_S)
+        limit = max(watchdog_s, SILENCE_S)
+        if self._native is not None:
+            self._native.heartbeat(M.encode(M.Heartbeat(), 0, self.version), period, LEASE_S,
+                                   limit)
+            self._watch = threading.Thread(target=self._watch_native, args=(period,),
+                                           name="serial-watch", daemon=True)
+            self._watch.start()
+            return
         if not self._gc_held:
             self._gc_held = True
             hold_full_collections(True)
@@ -396,6 +475,7 @@ class Link:
                 # is judged only on a turn that came on time, after the reader had its
                 # turn, and never while bytes wait in the port
                 on_time = now - slept < 2 * period
+                self._stalls.append(max(0.0, now - slept - period))
                 if (silent > limit and (on_time or silent > 4 * limit)
                         and not self._bytes_waiting()):
                     self.mark_gone(f"{self.port}: device silent for {silent:.2f} s")
@@ -406,6 +486,22 @@ class Link:
         self._hb = threading.Thread(target=loop, name="serial-heartbeat", daemon=True)
         self._hb.start()
 
+    def _watch_native(self, period: float) -> None:
+        """The native thread judges the device's silence on time; this thread passes its
+        verdict on (and notes how late the interpreter let it run: the host's stalls)."""
+        slept = time.monotonic()
+        while not self.closed and self._gone is None:
+            time.sleep(period)
+            now = time.monotonic()
+            self._stalls.append(max(0.0, now - slept - period))
+            slept = now
+            if self.closed or self._native is None:
+                return
+            st = self._native.stats()
+            if st["silent_ms"] > 0:
+                self.mark_gone(f"{self.port}: device silent for {st['silent_ms'] / 1000:.2f} s")
+                return
+
     def _bytes_waiting(self) -> bool:
         """Whether received bytes wait unread in the port (the reader is behind)."""
         try:
@@ -415,7 +511,9 @@ class Link:
 
     def pause_heartbeats(self, paused: bool) -> None:
         """Stop (True) or restart (False) the heartbeats: the watchdog test."""
-        if paused:
+        if self._native is not None:
+            self._native.pause(paused)
+        elif paused:
             self._hb_pause.set()
         else:
             self._hb_pause.clear()
@@ -431,6 +529,51 @@ class Link:
         out = dict(self.stats)
         for q in (50, 95, 99):
             out[f"rtt_p{q}_ms"] = float(np.percentile(rtt, q)) if rtt.size else None
+        stalls = np.array(self._stalls) * 1e3
+        out["host_stall_max_ms"] = float(stalls.max()) if stalls.size else None
+        out["heartbeats"] = self.heartbeat_report()
+        return out
+
+    def heartbeat_report(self, reset: bool = False) -> dict:
+        """Who feeds the device's watchdog and how evenly: ``native`` (a native thread) or
+        why not, what it was granted (real-time priority, locked memory), and the gaps
+        between frames written while heartbeating (p50, p99, p99.9, max [ms], from 1-ms
+        bins: a percentile is its bin's upper edge), lease lapses and ring waits."""
+        if self._native is None:
+            return {"native": False, "why_not": self.native_why}
+        if self._native.closed:
+            return dict(self._final_report or {"native": True})
+        st = self._native.stats(reset)
+        out = {"native": True, "rt_priority": st["rt_priority"], "rt_refused": st["rt_refused"],
+               "memory_locked": st["memory_locked"], "gap_max_ms": st["gap_max_ms"],
+               "lease_lapses": st["lease_lapses"], "ring_waits": st["rx_waits"],
+               "wake_late_max_ms": st["wake_late_max_ms"], "tx_timeouts": st["tx_timeouts"],
+               "write_max_ms": st["write_max_ms"]}
+        out.update(gap_percentiles(st["gap_hist"], 1.0))
+        return out
+
+    def device_report(self, reset: bool = False, timeout: float = 0.5) -> dict | None:
+        """What the device saw of this host (LINK_QUERY → LINK_REPORT): intact frames and
+        frames that failed a check since ``since_s`` [s, device clock], and the gaps between
+        intact frames its watchdog judged (p50, p99, p99.9 from 2-ms bins, and the exact
+        max [ms of device time]); ``reset`` starts counting afresh. None when the device
+        does not know LINK_QUERY (it answers BAD_MESSAGE).
+
+        Raises
+        ------
+        DeviceTimeoutError
+            The ACK came but the report did not within ``timeout`` [s].
+        """
+        self.remove(lambda e: isinstance(e, M.LinkReport))
+        if self.request(M.LinkQuery(int(bool(reset)))) != M.Status.OK:
+            return None
+        if not self.wait_for(lambda ev: any(isinstance(e, M.LinkReport) for e in ev), timeout):
+            raise DeviceTimeoutError(f"{self.port}: LINK_QUERY acknowledged but no LINK_REPORT "
+                                     f"within {timeout * 1e3:.0f} ms")
+        r = self.remove(lambda e: isinstance(e, M.LinkReport))[-1]
+        out = {"since_s": r.since_us * 1e-6, "frames": r.frames, "bad_frames": r.bad_frames,
+               "gap_max_ms": r.max_gap_us * 1e-3, "gap_hist_2ms": list(r.items)}
+        out.update(gap_percentiles(r.items, M.LINK_GAP_BIN_US * 1e-3))
         return out
 
     # ------------------------------------------------------------------ shutdown
@@ -441,6 +584,9 @@ class Link:
         the port's file open (and its exclusive lock held) after close() returns.
         """
         self.closed = True
+        if self._native is not None and not self._native.closed:
+            self._final_report = self.heartbeat_report()
+            self._native.close()  # a read waiting in the reader returns at once
         cancel = getattr(self._ser, "cancel_read", None)
         if cancel is not None:
             try:
@@ -448,7 +594,7 @@ class Link:
             except Exception:  # the port may already be gone
                 pass
         me = threading.current_thread()
-        for t in (self._reader, self._hb):
+        for t in (self._reader, self._hb, self._watch):
             if t is not None and t is not me and t.is_alive():
                 t.join(timeout=1.0)
         try:

@@ -1,0 +1,114 @@
+"""The link on a busy host: heartbeats that the interpreter cannot hold up, a watchdog that
+still catches a host that died or hung, and what the device saw (LINK_REPORT).
+
+Everything runs over pyserial on a real pseudo-terminal to the Python emulator. No test
+waits on the host keeping a deadline: a host "busy" here holds the interpreter lock on
+purpose (a ctypes call that keeps it), which stops every Python thread deterministically;
+the checks are what the device then did, read from its own report and log.
+"""
+
+import ctypes
+import re
+import subprocess
+import sys
+
+import pytest
+
+from device import Scene, open_device
+from device.serial.native import load
+
+from ..conftest import wait_for as _wait_for
+
+FIRM = Scene("firm", spring=680.0)
+
+pytestmark = pytest.mark.skipif(load()[0] is None, reason=f"no native link: {load()[1]}")
+
+
+def _hold_the_interpreter(seconds: float) -> None:
+    """Keep the interpreter lock for ``seconds``: no Python thread of this process runs (a
+    hung main loop, a long C call, a stop-the-world collection)."""
+    ctypes.PyDLL(None).usleep(int(seconds * 1e6))  # PyDLL: the call keeps the lock
+
+
+def test_a_host_whose_interpreter_is_held_keeps_the_device_fed(own_emulator):
+    """0.5 s with the interpreter lock held (five watchdog periods): the Python-thread
+    heartbeat could not run, the native thread does, and the device's watchdog stays
+    quiet. The device's own report shows the frames kept coming through the stall."""
+    with open_device(f"serial:{own_emulator.port}") as dev:
+        assert dev.link.native
+        dev.load_scene(FIRM)
+        dev.home()
+        dev.device_link_report(reset=True)
+        for _ in range(3):
+            _hold_the_interpreter(0.5)
+        seen = dev.device_link_report()
+        assert dev.fault is None, dev.fault
+        res = dev.run_window(0.2, from_first_contact=False)
+        assert not res.faults
+        assert seen["frames"] >= 10  # heartbeats came while the interpreter was held
+    assert "FAULT watchdog" not in own_emulator.stderr()
+
+
+def test_the_python_thread_link_is_starved_by_the_same_hold(own_emulator):
+    """The control: with reading and heartbeats in Python threads, the same hold stops the
+    heartbeats and the device zeroes its output — the failure the native thread removes."""
+    with open_device(f"serial:{own_emulator.port}", native=False) as dev:
+        assert not dev.link.native and dev.link_stats()["heartbeats"]["why_not"]
+        dev.load_scene(FIRM)
+        dev.home()
+        _hold_the_interpreter(0.5)
+        _wait_for(lambda: dev.fault is not None, what="the watchdog fault")
+        assert dev.fault.code == "watchdog"
+        dev.clear_fault()
+
+
+HUNG = r"""
+import ctypes, sys
+from device import Scene, open_device
+with open_device("serial:" + sys.argv[1]) as dev:
+    dev.load_scene(Scene("firm", spring=680.0))
+    dev.home()
+    print("homed", flush=True)
+    ctypes.PyDLL(None).sleep(30)   # the interpreter hangs, holding its lock
+"""
+
+
+def test_a_hung_interpreter_still_trips_the_watchdog(own_emulator):
+    """A host whose interpreter hangs stops renewing the native thread's lease (1 s); the
+    heartbeats stop and the device zeroes its output T_wd after the last of them."""
+    host = subprocess.Popen([sys.executable, "-c", HUNG, own_emulator.port],
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert host.stdout.readline().strip() == "homed"
+        _wait_for(lambda: "FAULT watchdog" in own_emulator.stderr(), what="the watchdog")
+        assert host.poll() is None  # the host is still there, hung
+    finally:
+        host.kill()
+        host.wait()
+    line = re.search(r"FAULT watchdog .* ([\d.]+) ms after the last heartbeat",
+                     own_emulator.stderr())
+    assert float(line.group(1)) <= 100.0 + 0.1  # T_wd of device time after the last frame
+
+
+def test_the_device_reports_what_it_saw_of_the_host(own_emulator):
+    """LINK_REPORT: frames and the gaps between them in device time; a reset starts afresh
+    and HELLO does too."""
+    with open_device(f"serial:{own_emulator.port}") as dev:
+        first = dev.device_link_report(reset=True)
+        assert first["frames"] >= 2 and first["bad_frames"] == 0
+        assert first["gaps"] == first["frames"] - 1 == sum(first["gap_hist_2ms"])
+        top = max(k for k, c in enumerate(first["gap_hist_2ms"]) if c)  # the longest's bin
+        assert 2 * top <= first["gap_max_ms"] < (2 * top + 2 if top < 63 else float("inf"))
+        dev.load_scene(FIRM)
+        dev.home()
+        dev.run_window(0.3, from_first_contact=False)
+        again = dev.device_link_report()
+        assert again["since_s"] >= first["since_s"]
+        assert again["frames"] > 2  # counted from the reset, not from HELLO
+        report = dev.link_stats()
+        assert report["device_saw"]["frames"] >= again["frames"]
+        hb = report["heartbeats"]
+        assert hb["native"] and hb["gaps"] > 0 and hb["gap_max_ms"] > 0
+        assert hb["memory_locked"] in ("ring, stack and state", "stack and state", "no")
+        # real-time scheduling is granted or said to be refused, never silently absent
+        assert hb["rt_priority"] > 0 or hb["rt_refused"]
