@@ -210,7 +210,8 @@ def _r_script(long: pd.DataFrame, parts) -> str:
             if f in rows and f != "sample":
                 levels.setdefault(f, ["low", "high"] if set(rows[f].dropna()) <= {"low", "high"}
                                   else sorted(set(rows[f].dropna()), key=str))
-    lines = ["# Reads long.csv (hapticlab export --format r); see codebook.csv for units.",
+    lines = ["# Reads long.csv, written by: hapticlab export DATA --out DIR --format r",
+             "# (codebook.csv gives the units).",
              'd <- read.csv("long.csv", stringsAsFactors = FALSE, na.strings = "")',
              "d$participant <- factor(d$participant)"]
     for f, lv in levels.items():

@@ -283,7 +283,9 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
         if clear_fault and dev.fault is not None:
             say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
             dev.clear_fault()
-        checks = [check_device(dev, device), check_protocol_on(text, source, dev)]
+        again = (f"hapticlab run {protocol} --participant {participant} --device {device} "
+                 "--clear-fault (with the session's other options)")
+        checks = [check_device(dev, device, again), check_protocol_on(text, source, dev)]
         if failed(checks):
             raise PreflightError(failed(checks))
         limits = _apply_limit(proto, dev)
@@ -490,6 +492,7 @@ def _device_spec(spec: str, speed: float = 1.0, log: Path | None = None) -> Iter
 def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
                    data: str | Path = DEFAULT_SIM_DATA, device: str = "sim", speed: float = 1.0,
                    traces: str = "contacts", prefix: str = "sim", group: str = "",
+                   clear_fault: bool = False,
                    progress: Callable[[str], None] | None = _err) -> StudyResult:
     """Simulated participants' sessions, headless, through the same path as a real session.
 
@@ -512,6 +515,8 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
         ``serial:emulator`` only: device seconds per wall second (≤ 20).
     traces, prefix, group
         As :func:`run_session` (ids are PREFIX01, PREFIX02, …).
+    clear_fault : bool
+        Clear a fault the device latched before the first session (the operator's decision).
     progress : callable, optional
         Called with a line after each participant.
 
@@ -540,7 +545,8 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
             r = run_session(protocol, f"{prefix}{k:02d}", device=spec, data=data,
                             responder="simulated", seed=session_seed(seed, k), group=group,
                             traces=traces, audio=False, quiet=True, operator_keys=False,
-                            row=(k - 1) % rows if rows else None)
+                            row=(k - 1) % rows if rows else None,
+                            clear_fault=clear_fault and k == 1)
             out.append(r)
             if r.status != "complete":
                 break

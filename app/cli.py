@@ -23,7 +23,7 @@ def _device_selftest(args: argparse.Namespace) -> int:
     from device import open_device
     from device.suite import run_selftest
 
-    open_device(args.spec).close()  # a bad spec or an absent device: one line, exit 2
+    _opener(args)(args.spec).close()  # a bad spec or an absent device: one line, exit 2
     report = run_selftest(args.spec, lambda: open_device(args.spec))
     if args.json:
         print(json.dumps(report, indent=2))
@@ -43,27 +43,25 @@ def _device_selftest(args: argparse.Namespace) -> int:
     return 0 if report["failed"] == 0 else 1
 
 
-def _load_protocol(path: str, device_spec: str | None = None):
-    from device import open_device
+def _load_protocol(path: str, device_spec: str | None = None, args=None):
     from protocols import load_protocol
 
     info = None
     if device_spec:
-        with open_device(device_spec) as dev:
+        with _opener(args)(device_spec) as dev:
             info = dev.info
     return load_protocol(path, device=info)
 
 
 def _protocol_validate(args: argparse.Namespace) -> int:
-    p = _load_protocol(args.file, args.device)
+    p = _load_protocol(args.file, args.device, args)
     n_items = sum(len(ph.samples) * ph.repetitions if ph.kind != "identification"
                   else ph.repetitions for ph in p.phases)
     libs = ""
     if args.device:  # the libraries its matched samples need, built on this device
         from app.libraries import prepare_libraries
-        from device import open_device
 
-        with open_device(args.device) as dev:
+        with _opener(args)(args.device) as dev:
             sim = dev.info.backend == "sim"
             found = prepare_libraries(p, dev, args.device, build=False, ref=args.file) \
                 if not sim else {}
@@ -109,22 +107,42 @@ def _protocol_show(args: argparse.Namespace) -> int:
     return 0
 
 
-def _open_spec(spec: str):
-    from device import open_device
+def _opener(args: argparse.Namespace) -> Callable:
+    """``open(spec)`` for a command: the device opened, and a fault it latched before (an
+    e-stop, a watchdog) cleared when the operator said so with ``--clear-fault``."""
+    def open_spec(spec: str):
+        from device import open_device
 
-    return open_device(spec)
+        dev = open_device(spec)
+        if getattr(args, "clear_fault", False) and dev.fault is not None:
+            print(f"hapticlab: clearing the latched {dev.fault.code} fault of {spec} "
+                  "(--clear-fault)", file=sys.stderr)
+            try:
+                dev.clear_fault()
+            except HapticlabError:
+                dev.close()
+                raise
+        return dev
+
+    return open_spec
+
+
+def _add_clear_fault(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--clear-fault", action="store_true",
+                   help="clear a fault the device latched before (an e-stop, the watchdog), "
+                   "once it is safe")
 
 
 def _matching(args: argparse.Namespace) -> int:
     from app import matching_cli as mc
 
     if args.action == "sysid":
-        return mc.device_sysid(args, _open_spec)
+        return mc.device_sysid(args, _opener(args))
     if args.action == "fit-grasp":
         return mc.device_fit_grasp(args)
     if args.action == "library-build":
-        return mc.library_build(args, _open_spec, _load_protocol)
-    return mc.library_show(args, _open_spec)
+        return mc.library_build(args, _opener(args), _load_protocol)
+    return mc.library_show(args, _opener(args))
 
 
 def _device_emulate(args: argparse.Namespace) -> int:
@@ -152,7 +170,7 @@ def _device_check(args: argparse.Namespace) -> int:
     from app.check import saturation_check
 
     protocol = _load_protocol(args.protocol)
-    with _open_spec(args.device) as dev:
+    with _opener(args)(args.device) as dev:
         info = dev.info
     rows = saturation_check(protocol, info, windows=args.windows, warn=args.warn,
                             say=lambda m: print(m, file=sys.stderr))
@@ -203,7 +221,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
     study = simulate_study(args.protocol, args.participants, seed=args.seed, data=args.data,
                            device=args.device, speed=args.speed, traces=args.traces,
-                           prefix=args.prefix, group=args.group)
+                           prefix=args.prefix, group=args.group, clear_fault=args.clear_fault)
     if not study.complete:
         last = study.sessions[-1]
         print(last.message, file=sys.stderr)
@@ -228,7 +246,7 @@ def _preflight(args: argparse.Namespace) -> int:
         check_terminal,
         expected_session_bytes,
     )
-    from device import DeviceError, open_device
+    from device import DeviceError
     from protocols import parse_protocol, protocol_text
 
     source, text = protocol_text(args.protocol)
@@ -239,8 +257,11 @@ def _preflight(args: argparse.Namespace) -> int:
     if args.responder == "person":
         checks += [check_terminal(), check_display()]
     try:
-        with open_device(args.device) as dev:
-            checks += [check_device(dev, args.device), check_protocol_on(text, source, dev),
+        with _opener(args)(args.device) as dev:
+            again = (f"hapticlab preflight {args.protocol} --device {args.device} --data "
+                     f"{args.data} --clear-fault")
+            checks += [check_device(dev, args.device, again),
+                       check_protocol_on(text, source, dev),
                        check_limit(proto, dev), check_libraries(proto, dev, args.device,
                                                                 args.protocol)]
     except DeviceError as exc:
@@ -458,6 +479,7 @@ def _add_session_parsers(sub) -> None:
                     default="person")
     pf.add_argument("--traces", choices=("full", "contacts", "none"), default="full")
     pf.add_argument("--no-audio", action="store_true")
+    _add_clear_fault(pf)
     pf.set_defaults(func=_preflight)
     rs = sub.add_parser("resume", help="continue an interrupted session exactly where it stopped")
     rs.add_argument("session_dir")
@@ -481,6 +503,7 @@ def _add_session_parsers(sub) -> None:
     s.add_argument("--traces", choices=("full", "contacts", "none"), default="contacts")
     s.add_argument("--prefix", default="sim", help="participant ids are PREFIX01, PREFIX02, …")
     s.add_argument("--group", default="", help="group label of these participants")
+    _add_clear_fault(s)
     s.set_defaults(func=_simulate)
 
 
@@ -496,6 +519,7 @@ def build_parser() -> argparse.ArgumentParser:
     st = dsub.add_parser("selftest", help="run the backend-independent checks against a device")
     st.add_argument("spec", help="device spec, e.g. sim or serial:/dev/ttyACM0")
     st.add_argument("--json", action="store_true", help="print a JSON summary")
+    _add_clear_fault(st)
     st.set_defaults(func=_device_selftest)
     ck = dsub.add_parser("check", help="predict how often each virtual sample saturates")
     ck.add_argument("protocol")
@@ -503,6 +527,7 @@ def build_parser() -> argparse.ArgumentParser:
     ck.add_argument("--windows", type=int, default=12, help="5-s windows per sample")
     ck.add_argument("--warn", type=float, default=0.2, help="warn above this share of trials")
     ck.add_argument("--json", action="store_true")
+    _add_clear_fault(ck)
     ck.set_defaults(func=_device_check)
     em = dsub.add_parser("emulate", help="serve the wire protocol on a pseudo-terminal "
                          "(simulated plant); prints the port first")
@@ -518,7 +543,7 @@ def build_parser() -> argparse.ArgumentParser:
     em.set_defaults(func=_device_emulate)
     from app.matching_cli import add_parsers
 
-    add_parsers(dsub, sub, _matching)
+    add_parsers(dsub, sub, _matching, _add_clear_fault)
 
     pw = sub.add_parser("power", help="Monte-Carlo power and precision for session length")
     pw.add_argument("protocol")
@@ -559,6 +584,7 @@ def build_parser() -> argparse.ArgumentParser:
     pv = psub.add_parser("validate", help="check a protocol file; exit 0 when valid")
     pv.add_argument("file", help="built-in name (realism, factorial, identification) or a path")
     pv.add_argument("--device", help="also check forces and currents against this device")
+    _add_clear_fault(pv)
     pv.set_defaults(func=_protocol_validate)
     ps = psub.add_parser("show", help="print the resolved trial plan for a seed")
     ps.add_argument("file", help="built-in name or a path")
@@ -582,6 +608,17 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--seeds", default=None, help="orderings: study seeds (default 1,2,3,4,5)")
     b.add_argument("--firmware", choices=("host", "qemu"), default=None,
                    help="link: measure the reference firmware (against the Python emulator)")
+    b.add_argument("--load", default=None, help="link: competing CPU-bound processes, e.g. "
+                   "0,1,2,4: heartbeat gaps the device saw, faults per hour and e-stop "
+                   "latency per target under that load")
+    b.add_argument("--targets", default=None, help="link --load: python, host, host-board, "
+                   "qemu (default all four)")
+    b.add_argument("--seconds", type=float, default=60.0,
+                   help="link --load: session traffic per target and load [s]")
+    b.add_argument("--baseline", action="store_true", help="link --load: also run each cell "
+                   "with reading and heartbeats in Python threads")
+    b.add_argument("--no-window", action="store_true",
+                   help="link --load: no PsychoPy window (drawn otherwise, under Xvfb if needed)")
     b.set_defaults(func=_bench)
 
     d = sub.add_parser("demo", help="what `make demo` runs: a whole simulated study and its "
@@ -593,14 +630,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from device.errors import DeviceFaultError
+
     from .guards import Terminated, install_signal_guards
 
     parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     install_signal_guards()
     try:
         return func(args)
+    except DeviceFaultError as exc:  # a fault latched before: say how to go on
+        print(f"hapticlab: error: {exc}", file=sys.stderr)
+        if hasattr(args, "clear_fault") and not args.clear_fault:
+            import shlex
+
+            print("hapticlab: once it is safe, clear the fault and go on: hapticlab "
+                  f"{shlex.join([*argv, '--clear-fault'])}", file=sys.stderr)
+        return 2
     except HapticlabError as exc:
         print(f"hapticlab: error: {exc}", file=sys.stderr)
         return 2

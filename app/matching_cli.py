@@ -4,9 +4,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import shlex
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+
+from device.errors import DeviceError, DeviceFaultError, HapticlabError
 
 from .errors import UsageError
 
@@ -24,13 +30,23 @@ def _agg():
 
 def device_sysid(args: argparse.Namespace, open_spec) -> int:
     from device.matching.library import usable_band
-    from device.matching.sysid import identify
+    from device.matching.measure import MeasurementFault, Pace
+    from device.matching.sysid import identify, sweep_seconds
 
     with open_spec(args.device) as dev:
         band = usable_band(dev.info.servo_rate_hz)
-        idn = identify(dev, levels=tuple(args.levels), repeats=args.repeats, band=band,
-                       order=args.order, relative_degree=args.relative_degree,
-                       delay=None if args.delay is None else args.delay * 1e-3)
+        n = len(args.levels) * args.repeats
+        pace = Pace([sweep_seconds(dev.info.servo_rate_hz, band)] * n, 0, _step_line)
+        try:
+            idn = identify(dev, levels=tuple(args.levels), repeats=args.repeats, band=band,
+                           order=args.order, relative_degree=args.relative_degree,
+                           delay=None if args.delay is None else args.delay * 1e-3,
+                           on_fault=fault_prompt(dev, lambda: f"{pace.done} of {n} sweeps "
+                                                 "done"), pace=pace)
+        except MeasurementFault as exc:
+            raise DeviceError(f"{exc}; {pace.done} of {n} sweeps were done. Once it is safe, "
+                              f"run it again: hapticlab device sysid --device {args.device} "
+                              "--clear-fault") from None
     m = idn.model
     e = idn.etfe.in_band(band)
     report = {"device": args.device, "rate_hz": idn.rate_hz, "levels_n": list(idn.levels),
@@ -95,8 +111,78 @@ def device_fit_grasp(args: argparse.Namespace) -> int:
     return 0
 
 
+def _clock(seconds: float | None) -> str:
+    if seconds is None:
+        return "time left: after the first measurement"
+    m, sec = divmod(int(round(seconds)), 60)
+    return f"~{m}:{sec:02d} left"
+
+
+def _step_line(step) -> None:
+    """Progress of a long device job, one line per measurement (stderr)."""
+    print(f"  [{step.done:2d}/{step.total}] {step.what}; {_clock(step.seconds_left)}",
+          file=sys.stderr, flush=True)
+
+
+def fault_prompt(device, kept: Callable[[], str]) -> Callable:
+    """``on_fault`` for a person at the terminal: one line on what happened and what to do,
+    then ``c`` clears the fault and measures again, ``q`` stops (what was measured is kept).
+    Without a terminal there is nobody to confirm: the job stops at once."""
+    if not sys.stdin.isatty():
+        return None
+
+    def on_fault(fault, what: str) -> bool:
+        code = fault.code if fault is not None else "latched"
+        cause = {"watchdog": "the device heard nothing from this computer for its watchdog "
+                             "period and zeroed its output (the computer was too busy, or "
+                             "the cable is loose)",
+                 "estop": "an e-stop zeroed the output"}.get(code, "the device zeroed its "
+                                                             "output")
+        print(f"hapticlab: {code.upper()} during {what}: {cause}. {kept()}. Make it safe, "
+              "then c + ENTER clears the fault and measures it again; q + ENTER stops "
+              "(the same command continues later)", file=sys.stderr, flush=True)
+        while True:
+            try:
+                answer = input("c / q: ").strip().lower()
+            except EOFError:
+                return False
+            if answer == "q":
+                return False
+            if answer == "c":
+                try:
+                    device.clear_fault()
+                except DeviceFaultError as exc:
+                    print(f"hapticlab: not cleared: {exc}", file=sys.stderr, flush=True)
+                    continue
+                print("hapticlab: fault cleared; measuring again", file=sys.stderr, flush=True)
+                return True
+
+    return on_fault
+
+
+#: how well a library's transients reproduce their taps: the in-window error is
+#: ‖a_model(F) − a_tap‖ / ‖a_tap‖ over the 100-ms window (0 = exact). Its floor on a device
+#: the model fits is the regularization and tapers (≈ 0.1–0.2 on the simulated device);
+#: above 0.5, half of the tap's acceleration is not reproduced
+QUALITY = ((0.3, "good"), (0.5, "fair: usable, worth rebuilding with more --windows"),
+           (math.inf, "poor: the identified model does not invert well; check the "
+                      "identification (hapticlab device sysid --png sysid.png) and rebuild"))
+
+
+def quality(error: float) -> str:
+    """The words for a library's median in-window error (:data:`QUALITY`)."""
+    return next(words for limit, words in QUALITY if error <= limit)
+
+
 def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
-    from device.matching.library import build_library, library_path
+    from device.matching.library import (
+        BuildRecord,
+        MeasurementFault,
+        build_key,
+        build_library,
+        library_path,
+        record_path,
+    )
 
     protocol = load_protocol(args.protocol)
     if args.source not in protocol.samples or not protocol.samples[args.source].is_real:
@@ -106,15 +192,51 @@ def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
     if args.entries < 2 or args.windows < 1:
         raise UsageError("--entries must be >= 2 and --windows >= 1")
     source = protocol.samples[args.source].scene
+    again = "hapticlab " + shlex.join(["library", "build", "--device", args.device,
+                                       "--protocol", args.protocol, "--source", args.source,
+                                       "--entries", str(args.entries), "--windows",
+                                       str(args.windows), "--method", args.method,
+                                       *(["--out", str(args.out)] if args.out else []),
+                                       "--clear-fault"])
     with open_spec(args.device) as dev:
-        lib = build_library(dev, source, entries=args.entries, method=args.method,
-                            windows=args.windows)
         out = args.out or library_path(dev.info, source)
+        key = build_key(dev.info, source, entries=args.entries, windows=args.windows)
+        record = BuildRecord.open(record_path(out), key, restart=args.restart)
+        if record.set_aside:
+            print(f"hapticlab: not resuming from {record.path} ({record.set_aside}): "
+                  "measuring afresh", file=sys.stderr)
+        elif record.resumed:
+            print(f"hapticlab: resuming: {record.resumed} measurements kept from an earlier "
+                  f"run of this build ({record.path}; --restart measures everything again)",
+                  file=sys.stderr)
+
+        def kept() -> str:
+            return f"{record.count} finished measurements are kept in {record.path}"
+
+        print(f"building the {args.source} library on {args.device}: 12 sweeps (~40 s), "
+              f"{args.windows} tapping windows of 5 s; hold the stylus during the sweeps, "
+              "tap the real sample during the windows", file=sys.stderr, flush=True)
+        try:
+            lib = build_library(dev, source, entries=args.entries, method=args.method,
+                                windows=args.windows, record=record,
+                                on_fault=fault_prompt(dev, kept), on_step=_step_line)
+        except MeasurementFault as exc:
+            raise DeviceError(f"{exc}. {kept()}; once it is safe, continue with: {again}"
+                              ) from None
+        except HapticlabError as exc:
+            if record.count:
+                raise type(exc)(f"{exc}. {kept()}; continue with: {again}") from None
+            raise
     path = lib.save(out)
+    record.discard()
     errs = lib.meta["inversion"]["in_window_error"]
+    med = float(np.median(errs))
     print(f"wrote {path}: {len(lib.velocities)} transients for {args.source} on {args.device} "
           f"({lib.velocities.min():.3f}–{lib.velocities.max():.3f} m/s), {args.method} "
-          f"inversion, in-window error median {np.median(errs):.2f}; sha256 {lib.sha256[:16]}…")
+          f"inversion; sha256 {lib.sha256[:16]}…")
+    print(f"in-window error median {med:.2f} (worst {max(errs):.2f}): {quality(med)} — the "
+          "share of each tap's acceleration the transient does not reproduce over its 100-ms "
+          "window (≤ 0.3 good, ≤ 0.5 fair, above: poor)")
     return 0
 
 
@@ -159,10 +281,11 @@ def library_show(args: argparse.Namespace, open_spec) -> int:
     return 0
 
 
-def add_parsers(device_sub, sub, func) -> None:
+def add_parsers(device_sub, sub, func, clear_fault) -> None:
     """Register the matching commands on the ``device`` sub-parser and a ``library`` command.
 
-    ``func(args)`` runs them (it dispatches on ``args.action``).
+    ``func(args)`` runs them (it dispatches on ``args.action``); ``clear_fault(parser)``
+    adds ``--clear-fault`` to those that open a device.
     """
     di = device_sub.add_parser("sysid", help="system identification: force → acceleration "
                                "on a device, with the hand holding the stylus")
@@ -175,6 +298,7 @@ def add_parsers(device_sub, sub, func) -> None:
     di.add_argument("--repeats", type=int, default=4)
     di.add_argument("--png", type=Path)
     di.add_argument("--json", action="store_true")
+    clear_fault(di)
     di.set_defaults(action="sysid", func=func)
 
     dg = device_sub.add_parser("fit-grasp", help="fit the grasp-force model to impacts (SPEC §3)")
@@ -198,9 +322,14 @@ def add_parsers(device_sub, sub, func) -> None:
     lb.add_argument("--out", type=Path, default=None,
                     help="write here instead of the library store (a protocol's sample then "
                     "names it in 'path')")
+    lb.add_argument("--restart", action="store_true",
+                    help="measure everything again (a build that stopped resumes by default "
+                    "from the measurements it kept)")
+    clear_fault(lb)
     lb.set_defaults(action="library-build", func=func)
     ls = lsub.add_parser("show", help="describe a library file and plot it")
     ls.add_argument("file", type=Path)
     ls.add_argument("--png", type=Path)
     ls.add_argument("--device", help="also check the library belongs to this device")
+    clear_fault(ls)
     ls.set_defaults(action="library-show", func=func)

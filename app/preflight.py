@@ -134,11 +134,14 @@ def check_display() -> Check:
     return Check("participant screen", True, os.environ.get("DISPLAY", "the system's display"))
 
 
-def check_device(dev, spec: str) -> Check:
+def check_device(dev, spec: str, again: str = "") -> Check:
+    """The device answers and has no latched fault; ``again`` is the command line that
+    repeats this one with ``--clear-fault`` (named in the failure)."""
     i = dev.info
     if dev.fault is not None:
         return Check("device", False, f"{i.model} ({spec}) has a latched {dev.fault.code} "
-                     "fault", "make it safe, then run again with --clear-fault")
+                     "fault", "make it safe (the stylus held or at rest, the button released), "
+                     f"then: {again or 'the same command with --clear-fault'}")
     return Check("device", True, f"{i.model}, serial {i.serial_number}, firmware {i.firmware}, "
                  f"{i.servo_rate_hz:g} Hz, {i.current_limit:g} A × {i.force_constant:g} N/A")
 

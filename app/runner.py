@@ -327,6 +327,10 @@ class SessionRunner:
                 raise SessionInterrupted(f"stopped by the operator after a {fault.code}; "
                                          "everything so far is saved")
 
+    def _resume_line(self) -> str:
+        """The command that continues this session after a fault, once it is safe."""
+        return f"hapticlab resume {self.files.folder} --clear-fault"
+
     def _save_notes(self) -> None:
         notes = self.console.take_notes()
         if notes and self.meta is not None:
@@ -397,8 +401,8 @@ class SessionRunner:
                              result=res)
                 if not self.console.interactive:
                     raise SessionInterrupted(f"{f.code} while tapping the real block {ref_id}: "
-                                             "output is off and latched; resume with "
-                                             "--clear-fault once it is safe")
+                                             "output is off and latched; once it is safe: "
+                                             f"{self._resume_line()}")
                 self._fault_pause(f)
                 continue
             self._record(rtrial, "reference", t_start=t_start, result=res, reason=reason)
@@ -449,8 +453,8 @@ class SessionRunner:
         except DeviceFaultError as exc:  # latched before the window (an e-stop between trials)
             fault = self.device.fault
             if not self.console.interactive or fault is None:
-                raise SessionInterrupted(f"trial {trial.trial_index}: {exc}; resume with "
-                                         "--clear-fault once it is safe") from exc
+                raise SessionInterrupted(f"trial {trial.trial_index}: {exc}; once it is safe: "
+                                         f"{self._resume_line()}") from exc
             raise _FaultStop(fault) from exc
         except DeviceError as exc:
             status = self.engine.failure_status("aborted_device", trial, self.log)
@@ -472,7 +476,7 @@ class SessionRunner:
             self._record(trial, status, reason=f"{f.code}: {f.message}",
                          t_start=t_start, result=res, results=results)
             raise SessionInterrupted(f"{f.code} during trial {trial.trial_index}: output is off "
-                                     "and latched; resume with --clear-fault once it is safe")
+                                     f"and latched; once it is safe: {self._resume_line()}")
         if any(r.timed_out for r in results):
             status = self.engine.failure_status("timed_out", trial, self.log)
             self._record(trial, status, reason="no contact before the timeout",

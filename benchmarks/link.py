@@ -68,6 +68,10 @@ def main(args) -> int:
     from device.serial.fuzz import fuzz
     from protocols import load_protocol
 
+    if getattr(args, "load", None) is not None:
+        from .link_load import main as load_main
+
+        return load_main(args)
     if getattr(args, "firmware", None):
         return firmware_main(args)
     n_ping = 2000

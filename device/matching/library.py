@@ -26,6 +26,7 @@ import hashlib
 import io
 import json
 import os
+import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,16 +35,19 @@ from typing import Any
 import numpy as np
 
 from ..errors import DeviceError
+from ..events import WindowResult
 from ..fileio import atomic_write
 from ..info import DeviceInfo
 from ..scene import LibraryTransient, Scene, TransientTable
 from .inversion import METHODS, discretize, invert
-from .sysid import TFModel, accel_at_every_tick, identify
+from .measure import MeasurementFault, OnFault, OnStep, Pace, measured
+from .record import BuildRecord
+from .sysid import TFModel, accel_at_every_tick, identify, sweep_seconds
 
 __all__ = ["TransientLibrary", "LibraryError", "build_library", "usable_band", "record_taps",
            "segment_taps", "even_spread", "library_dir", "library_path", "find_library",
-           "build_into_store",
-           "FORMAT_VERSION", "Tap"]
+           "build_into_store", "build_key", "BuildRecord", "MeasurementFault", "record_path",
+           "FORMAT_VERSION", "Tap", "SWEEP_LEVELS", "SWEEP_REPEATS"]
 
 FORMAT_VERSION = 1
 PIPELINE_VERSION = "matching-1"
@@ -166,15 +170,35 @@ def usable_band(rate_hz: float, band: tuple[float, float] = (10.0, 500.0)) -> tu
     return (band[0], min(band[1], 0.4 * rate_hz))
 
 
-def record_taps(device, scene: Scene, windows: int = 8, duration: float = 5.0) -> list:
+def record_taps(device, scene: Scene, windows: int = 8, duration: float = 5.0, *,
+                record: BuildRecord | None = None, on_fault: OnFault | None = None,
+                pace: Pace | None = None) -> list:
     """Tap windows on ``scene``: list of WindowResult (contact events, and the
-    accelerometer at every servo tick)."""
+    accelerometer at every servo tick).
+
+    Each window is one measurement (:func:`~device.matching.measure.measured`: a fault
+    during it goes to ``on_fault``, and the window is tapped again once it is cleared);
+    ``record`` keeps every finished window and gives back those of an earlier run.
+    """
+    out = [] if record is None else record.windows[:windows]
+    if len(out) >= windows:
+        return out
     device.load_scene(scene)
-    out = []
     with accel_at_every_tick(device):
-        for _ in range(windows):
-            device.home()
-            out.append(device.run_window(duration))
+        for i in range(len(out), windows):
+            what = f"tapping window {i + 1} of {windows}"
+
+            def tap() -> WindowResult:
+                device.home()
+                return device.run_window(duration)
+
+            t0 = time.perf_counter()
+            res = measured(device, tap, what, on_fault)
+            if record is not None:
+                record.add_window(res)
+            out.append(res)
+            if pace is not None:
+                pace.did(f"{what}: {len(res.contacts)} contacts", time.perf_counter() - t0)
     return out
 
 
@@ -222,9 +246,27 @@ def even_spread(velocities: np.ndarray, n: int) -> np.ndarray:
     return np.array(sorted(chosen, key=lambda i: v[i]))
 
 
+#: the identification a library build runs: sweep force levels [N] and repeats per level
+SWEEP_LEVELS = (0.5, 1.0, 1.5)
+SWEEP_REPEATS = 4
+#: a tapping window's length [s]
+TAP_SECONDS = 5.0
+
+
+def build_key(info: DeviceInfo, source: Scene, *, entries: int = 12, windows: int = 8,
+              levels: tuple[float, ...] = SWEEP_LEVELS, repeats: int = SWEEP_REPEATS) -> dict:
+    """What a build's measurements depend on (a :class:`BuildRecord` is kept per key)."""
+    return {"pipeline": PIPELINE_VERSION, "device": [info.model, info.serial_number,
+                                                      float(info.servo_rate_hz)],
+            "source": source.to_dict(), "windows": windows, "levels": list(levels),
+            "repeats": repeats, "tap_window_s": TAP_WINDOW_S, "entries": entries}
+
+
 def build_library(device, source: Scene, entries: int = 12, method: str = "regularized",
                   lam: float = 1e-4, windows: int = 8, order: int = 7, relative_degree: int = 4,
-                  model: TFModel | None = None) -> TransientLibrary:
+                  model: TFModel | None = None, *, record: BuildRecord | None = None,
+                  on_fault: OnFault | None = None,
+                  on_step: OnStep | None = None) -> TransientLibrary:
     """Run the whole pipeline on ``device`` for the real sample ``source``.
 
     Parameters
@@ -240,6 +282,20 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         Regularization of the ``regularized`` inversion.
     windows : int
         5-s tapping windows recorded on the source.
+    record : BuildRecord, optional
+        Keeps each finished measurement (a sweep, a tapping window) and gives back those
+        of an earlier run of the same build, which are not measured again.
+    on_fault : callable, optional
+        ``on_fault(fault, what) -> bool``: a fault during a measurement; True when it was
+        cleared (the measurement runs again), False to stop (:class:`MeasurementFault`).
+    on_step : callable, optional
+        Called with a :class:`~device.matching.measure.Step` after each measurement.
+
+    Raises
+    ------
+    MeasurementFault
+        A fault during a measurement that was not cleared; every measurement finished
+        before it is in ``record``.
     """
     if not source.is_real:
         raise ValueError(f"a library reproduces a real sample; '{source.name}' is virtual")
@@ -253,10 +309,17 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
                            f"{entries * ticks} table items; this device's transient table "
                            f"holds {cap}: at most {cap // ticks} entries")
     band = usable_band(info.servo_rate_hz)
+    sweeps = 0 if model is not None else len(SWEEP_LEVELS) * SWEEP_REPEATS
+    nominal = ([sweep_seconds(info.servo_rate_hz, band)] * sweeps
+               + [TAP_SECONDS] * windows)
+    pace = Pace(nominal, 0 if record is None else record.count, on_step)
     if model is None:
-        model = identify(device, order=order, relative_degree=relative_degree, band=band).model
+        model = identify(device, SWEEP_LEVELS, SWEEP_REPEATS, order=order,
+                         relative_degree=relative_degree, band=band, record=record,
+                         on_fault=on_fault, pace=pace).model
     dm = discretize(model, info.servo_rate_hz)
-    taps = segment_taps(record_taps(device, source, windows))
+    taps = segment_taps(record_taps(device, source, windows, TAP_SECONDS, record=record,
+                                    on_fault=on_fault, pace=pace))
     if len(taps) < 2:
         raise LibraryError(f"only {len(taps)} clean taps recorded on '{source.name}'")
     pick = even_spread(np.array([t.velocity for t in taps]), entries)
@@ -304,6 +367,12 @@ def library_path(info: DeviceInfo, source: Scene) -> Path:
                                     sort_keys=True).encode()).hexdigest()[:12]
     device = f"{_slug(info.model)}-{_slug(info.serial_number)}-{info.servo_rate_hz:g}Hz"
     return library_dir() / device / f"{_slug(source.name)}-{key}.npz"
+
+
+def record_path(library: Path) -> Path:
+    """Where a build keeps its finished measurements until ``library`` is written."""
+    library = Path(library)
+    return library.with_name(library.stem + ".partial.npz")
 
 
 def build_into_store(device, source: Scene, **options: Any) -> Path:

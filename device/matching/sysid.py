@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -23,9 +24,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import DeviceError
+from .measure import OnFault, Pace, measured
+from .record import BuildRecord
 
 __all__ = ["Sweep", "swept_sine", "ETFE", "etfe", "TFModel", "fit_transfer_function",
-           "identify", "Identification", "accel_at_every_tick"]
+           "identify", "Identification", "accel_at_every_tick", "sweep_seconds"]
 
 
 @contextmanager
@@ -354,21 +357,43 @@ class Identification:
 def identify(device, levels: tuple[float, ...] = (0.5, 1.0, 1.5), repeats: int = 4,
              band: tuple[float, float] = (10.0, 500.0), duration: float = 2.5,
              order: int = 7, relative_degree: int = 4, delay: float | None = None,
-             smooth_hz: float = 2.0, zeros_at_origin: int = 0) -> Identification:
+             smooth_hz: float = 2.0, zeros_at_origin: int = 0, *,
+             record: BuildRecord | None = None, on_fault: OnFault | None = None,
+             pace: Pace | None = None) -> Identification:
     """Identify force → acceleration on ``device`` while the hand holds the stylus.
 
     Plays :func:`swept_sine` at each force level ``repeats`` times (device.play_force),
     estimates the ETFE per level by synchronous averaging, averages the levels in the
     complex domain, and fits a model.
+
+    Each sweep is one measurement (:func:`~device.matching.measure.measured`): a fault
+    during it goes to ``on_fault`` and the sweep is played again once it is cleared;
+    ``record`` keeps every finished sweep and gives back those of an earlier run; ``pace``
+    counts them (progress and time left).
+
+    Raises
+    ------
+    MeasurementFault
+        A fault that was not cleared (the sweeps finished before it are in ``record``).
     """
     per_level = {}
     with accel_at_every_tick(device) as rate:
         for level in levels:
             sweep = swept_sine(rate, band, duration, level)
             ys = []
-            for _ in range(repeats):
-                res = device.play_force(sweep.force)
-                ys.append(res.traces["accel"] - np.mean(res.traces["accel"][:10]))
+            for k in range(repeats):
+                y = None if record is None else record.sweep(level, k)
+                if y is None:
+                    what = f"sweep at {level:g} N, repeat {k + 1} of {repeats}"
+                    t0 = time.perf_counter()
+                    res = measured(device, lambda f=sweep.force: device.play_force(f), what,
+                                   on_fault)
+                    y = res.traces["accel"] - np.mean(res.traces["accel"][:10])
+                    if record is not None:
+                        record.add_sweep(level, k, y)
+                    if pace is not None:
+                        pace.did(what, time.perf_counter() - t0)
+                ys.append(y)
             per_level[level] = etfe(sweep.force, np.array(ys), rate, smooth_hz)
     freq = next(iter(per_level.values())).freq
     H = np.mean([e.H for e in per_level.values()], axis=0)
@@ -379,6 +404,12 @@ def identify(device, levels: tuple[float, ...] = (0.5, 1.0, 1.5), repeats: int =
     return Identification(est, per_level, model, rate, tuple(levels), repeats,
                           {"device": device.info.to_dict(), "duration_s": duration,
                            "band_hz": list(band)})
+
+
+def sweep_seconds(rate_hz: float, band: tuple[float, float] = (10.0, 500.0),
+                  duration: float = 2.5) -> float:
+    """How long one identification sweep plays [s of device time]."""
+    return len(swept_sine(rate_hz, band, duration).force) / rate_hz
 
 
 def true_response(plant_A: np.ndarray, plant_B: np.ndarray, output_row: np.ndarray,

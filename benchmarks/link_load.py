@@ -1,0 +1,273 @@
+"""``hapticlab bench link --load 0,1,2,4``: the link on a busy computer.
+
+For each device target (the Python emulator, the host-built firmware, the host build with
+the board's resources, the STM32F405 build under QEMU) and each number N of competing
+CPU-bound processes of normal priority, a session's traffic runs for ``--seconds``: windows
+streaming every trace channel, each drawn on a PsychoPy window as the runner draws it (the
+tap screen during the window, the rating screen between windows), an e-stop from another
+thread (as the operator's key reader sends it) every fifth window, alternating between a
+window and a playback. Measured:
+
+* the gaps between the host's frames **as the device saw them** (LINK_REPORT: p50, p99,
+  p99.9 from 2-ms bins, and the exact maximum, in device time), and as the host wrote
+  them;
+* watchdog faults that were not asked for, per hour;
+* e-stop latency: from the call (``estop()``) to the ESTOP frame written, and from the
+  frame written to the servo tick that zeroed output (the device's time put on the host's
+  clock with the fastest STATUS frame of that window: an upper bound that includes the
+  fastest frame's one-way delay);
+* the longest stall of a Python thread in the host (how long the interpreter kept a
+  thread from running: what a heartbeat in Python would have waited).
+
+Each cell runs twice in the same process: with the native link thread and, as the
+baseline, with reading and heartbeats in Python threads (``native=False``).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import numpy as np
+
+from ._common import emit, print_table
+
+TARGETS = {"python": (), "host": ("--firmware", "host"),
+           "host-board": ("--firmware", "host-board"), "qemu": ("--firmware", "qemu")}
+_HOG = "while True: pass"
+
+
+def _hogs(n: int) -> list[subprocess.Popen]:
+    return [subprocess.Popen([sys.executable, "-c", _HOG]) for _ in range(n)]
+
+
+def _start_target(name: str, log) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", "--seed", "3",
+                             *TARGETS[name]], stdout=subprocess.PIPE, stderr=log, text=True)
+    port = proc.stdout.readline().strip()
+    if not port.startswith("/dev/"):
+        proc.kill()
+        raise RuntimeError(f"target {name} did not announce a port")
+    return proc, port
+
+
+class _Screen:
+    """The participant's window as a session draws it, or nothing without a display."""
+
+    def __init__(self, window: bool):
+        self.screen = None
+        self.xvfb = None
+        self.why = ""
+        if not window:
+            self.why = "--no-window"
+            return
+        if not os.environ.get("DISPLAY"):
+            if shutil.which("Xvfb") is None:
+                self.why = "no display and no Xvfb"
+                return
+            n = 140 + os.getpid() % 50
+            self.xvfb = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1280x1024x24",
+                                          "-nolisten", "tcp"], stdout=subprocess.DEVNULL,
+                                         stderr=subprocess.DEVNULL)
+            for _ in range(100):
+                if os.path.exists(f"/tmp/.X11-unix/X{n}"):
+                    break
+                time.sleep(0.05)
+            os.environ["DISPLAY"] = f":{n}"
+        from app.screen import PsychoPyScreen
+        from protocols import load_protocol
+
+        self.screen = PsychoPyScreen(load_protocol("factorial"), keys=lambda: [])
+
+    def tap(self, t: float, partial, duration: float) -> None:
+        if self.screen is not None:
+            self.screen.progress(t, partial, duration)
+
+    def rating(self, seconds: float) -> None:
+        """The rating question on screen for ``seconds``, redrawn every frame (60 Hz)."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            if self.screen is not None:
+                self.screen._frame("How realistic was this?", "1 … 10, then ENTER")
+            time.sleep(1 / 60)
+
+    def close(self) -> None:
+        if self.screen is not None:
+            self.screen.close()
+        if self.xvfb is not None:
+            self.xvfb.terminate()
+            self.xvfb.wait(timeout=5)
+
+
+def _cell(port: str, seconds: float, screen: _Screen, native: bool) -> dict:
+    """One run of session traffic on ``port`` for ``seconds``."""
+    from device import open_device
+    from device.errors import DeviceFaultError
+    from device.serial import messages as M
+    from device.suite import SUITE_SCENES
+
+    faults: list[str] = []
+    call_to_frame, frame_to_zero = [], []
+    windows = 0
+    with open_device(f"serial:{port}", native=native) as dev:
+        if dev.fault is not None:
+            dev.clear_fault()
+        dev.device_link_report(reset=True)
+        dev.link.heartbeat_report(reset=True)
+        offsets: list[float] = []
+
+        def note(*_):
+            if dev.last_status is not None:
+                offsets.append(dev.last_status[0] - dev.last_status[1])
+
+        def draw(t, partial):
+            note()
+            screen.tap(t, partial, 2.0)
+
+        end = time.monotonic() + seconds
+        k = 0
+        while time.monotonic() < end:
+            k += 1
+            estop_now = k % 5 == 0
+            playback = estop_now and (k // 5) % 2 == 0
+            if dev.fault is not None:  # latched between windows (while the rating was shown)
+                faults.append(f"{dev.fault.code} between windows")
+                dev.clear_fault()
+            dev.load_scene(SUITE_SCENES["pulse_firm"])
+            try:
+                dev.home()
+            except DeviceFaultError:
+                faults.append(f"{dev.fault.code if dev.fault else '?'} before a window")
+                dev.clear_fault()
+                continue
+            offsets.clear()
+            called: list[float] = []
+            timer = None
+            if estop_now:
+                def stop(called=called):
+                    called.append(time.perf_counter())
+                    dev.estop()
+
+                timer = threading.Timer(0.3, stop)
+                timer.start()
+            try:
+                if playback:
+                    res = dev.play_force(np.zeros(int(dev.info.servo_rate_hz)))
+                    note()
+                else:
+                    res = dev.run_window(2.0, from_first_contact=False, on_progress=draw)
+                    note()
+            finally:
+                if timer is not None:
+                    timer.join()
+            windows += 1
+            if res.faults:
+                f = res.faults[0]
+                if estop_now and f.code == "estop" and called:
+                    sent = dev.link.last_sent.get(M.EStop.TYPE)
+                    if sent is not None and offsets:
+                        call_to_frame.append(sent - called[0])
+                        frame_to_zero.append(min(offsets) + f.t - sent)
+                else:
+                    faults.append(f.code)
+            elif estop_now:
+                faults.append("e-stop not reported")
+            if dev.fault is not None:
+                dev.clear_fault()
+            screen.rating(0.5)
+        seen = dev.device_link_report()
+        host = dev.link.heartbeat_report()
+        stall = dev.link.link_stats()["host_stall_max_ms"]
+        rate = dev.info.servo_rate_hz
+    ms = lambda a, q: float(np.percentile(a, q) * 1e3) if len(a) else None  # noqa: E731
+    return {"native": native, "seconds": seconds, "windows": windows,
+            "spurious_faults": len(faults), "fault_codes": faults,
+            "faults_per_hour": len(faults) * 3600 / seconds,
+            "device_saw": {k: seen[k] for k in ("frames", "bad_frames", "gaps", "gap_p50_ms",
+                                                "gap_p99_ms", "gap_p999_ms", "gap_max_ms")}
+            if seen else None,
+            "host_wrote": host, "host_stall_max_ms": stall,
+            "estop": {"n": len(frame_to_zero),
+                      "call_to_frame_ms": {"p50": ms(call_to_frame, 50),
+                                           "max": ms(call_to_frame, 100)},
+                      "frame_to_zero_ms": {"p50": ms(frame_to_zero, 50),
+                                           "max": ms(frame_to_zero, 100)},
+                      "servo_tick_ms": 1e3 / rate}}
+
+
+def main(args) -> int:
+    loads = [int(x) for x in str(args.load).split(",")]
+    targets = (args.targets or "python,host,host-board,qemu").split(",")
+    unknown = [t for t in targets if t not in TARGETS]
+    if unknown:
+        from app.errors import UsageError
+
+        raise UsageError(f"--targets: unknown {', '.join(unknown)}; choose from "
+                         f"{', '.join(TARGETS)}")
+    modes = (True, False) if args.baseline else (True,)
+    screen = _Screen(not args.no_window)
+    rows = []
+    try:
+        for target in targets:
+            for n in loads:
+                for native in modes:
+                    log = tempfile.TemporaryFile("w+")
+                    proc, port = _start_target(target, log)
+                    hogs = _hogs(n)
+                    try:
+                        time.sleep(0.5)  # the hogs are running
+                        r = _cell(port, args.seconds, screen, native)
+                    finally:
+                        for h in hogs:
+                            h.kill()
+                            h.wait()
+                        proc.terminate()
+                        proc.wait(timeout=20)
+                        log.seek(0)
+                        said = [ln.strip() for ln in log if "FAULT" in ln]
+                        log.close()
+                    r.update(target=target, load=n, device_log=said)
+                    rows.append(r)
+                    if not args.json:
+                        print(_line(r), flush=True)
+    finally:
+        screen.close()
+    payload = {"cores": os.cpu_count(), "window": screen.why or "PsychoPy window drawn",
+               "rows": rows}
+    if args.json:
+        emit(payload, True)
+        return 0
+    table = []
+    for r in rows:
+        d = r["device_saw"] or {}
+        e = r["estop"]
+        table.append((r["target"], r["load"], "native" if r["native"] else "Python",
+                      _f(d.get("gap_p50_ms")), _f(d.get("gap_p99_ms")), _f(d.get("gap_p999_ms")),
+                      _f(d.get("gap_max_ms")), f"{r['faults_per_hour']:.0f}",
+                      f"{_f(e['call_to_frame_ms']['p50'])} / {_f(e['call_to_frame_ms']['max'])}",
+                      f"{_f(e['frame_to_zero_ms']['p50'])} / {_f(e['frame_to_zero_ms']['max'])}",
+                      _f(r["host_stall_max_ms"])))
+    print_table(f"heartbeat gaps the device saw, faults and e-stop latency under load "
+                f"({os.cpu_count()} cores; {payload['window']}; {args.seconds:g} s per row)",
+                ["target", "load", "link", "gap p50", "p99", "p99.9", "max [ms]", "faults/h",
+                 "e-stop call→frame p50/max [ms]", "frame→zero p50/max [ms]",
+                 "host stall max [ms]"], table)
+    return 0
+
+
+def _f(x) -> str:
+    return "—" if x is None else f"{x:.2f}"
+
+
+def _line(r: dict) -> str:
+    d = r["device_saw"] or {}
+    return (f"{r['target']:>10} load {r['load']} {'native' if r['native'] else 'Python':6}: "
+            f"device saw gaps p99.9 {_f(d.get('gap_p999_ms'))} ms, max "
+            f"{_f(d.get('gap_max_ms'))} ms; {r['spurious_faults']} spurious fault(s) in "
+            f"{r['windows']} windows; e-stop frame→zero max "
+            f"{_f(r['estop']['frame_to_zero_ms']['max'])} ms")

@@ -1,0 +1,177 @@
+"""A fault costs one measurement, never a job's work: library builds keep every finished
+measurement and resume; a person at the terminal clears a fault and the build measures
+again; every command the program suggests exists.
+
+The device is the reference firmware built for this machine (at ×10), over pyserial on its
+pty; its e-stop button is pressed with SIGUSR1 and released with SIGUSR2. Waits end as soon
+as what they wait for happens; nothing depends on the host keeping a deadline.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import shlex
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from app.cli import build_parser
+
+from ..conftest import ROOT, start_emulator, stop_emulator, wait_for
+
+
+def _lines(stream, into: list[str]) -> threading.Thread:
+    def pump():
+        for line in stream:
+            into.append(line)
+
+    t = threading.Thread(target=pump, daemon=True)
+    t.start()
+    return t
+
+
+def _cli(command_line: str) -> list[str]:
+    """A suggested `hapticlab …` line as this interpreter runs it."""
+    words = shlex.split(command_line)
+    assert words[0] == "hapticlab"
+    return [sys.executable, "-m", "app", *words[1:]]
+
+
+@pytest.fixture
+def firmware():
+    emu = start_emulator("--firmware", "host", "--seed", "4", "--speed", "10")
+    yield emu
+    stop_emulator(emu)
+
+
+def test_a_library_build_stopped_by_a_fault_keeps_its_work_and_resumes(firmware, tmp_path):
+    out = tmp_path / "wood.npz"
+    cmd = [sys.executable, "-m", "app", "library", "build", "--device",
+           f"serial:{firmware.port}", "--windows", "2", "--out", str(out)]
+    err: list[str] = []
+    build = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    pump = _lines(build.stderr, err)
+    wait_for(lambda: any("[ 5/14]" in ln for ln in err), 120, "five measurements")
+    firmware.proc.send_signal(signal.SIGUSR1)  # the device's e-stop button
+    assert build.wait(timeout=120) == 2
+    pump.join(timeout=10)
+    text = "".join(err)
+    done = max(int(m) for m in re.findall(r"\[\s*(\d+)/14\]", text))
+    m = re.search(r"estop fault during (.+?) \(.*?\)\. (\d+) finished measurements are kept "
+                  r"in (\S+); once it is safe, continue with: (hapticlab library build .+)$",
+                  text, re.M)
+    assert m, text
+    assert int(m.group(2)) == done and Path(m.group(3)).exists() and not out.exists()
+    firmware.proc.send_signal(signal.SIGUSR2)  # released
+
+    # the command it names runs as it is, resumes from what was kept and finishes
+    again = subprocess.run(_cli(m.group(4)), capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert f"resuming: {done} measurements kept" in again.stderr
+    steps = [int(x) for x in re.findall(r"\[\s*(\d+)/14\]", again.stderr)]
+    assert steps == list(range(done + 1, 15))  # nothing measured twice
+    assert out.exists() and not Path(m.group(3)).exists()
+    assert re.search(r"in-window error median [\d.]+ \(worst [\d.]+\): (good|fair|poor)",
+                     again.stdout)
+
+
+def test_a_person_clears_a_fault_and_the_build_measures_again(firmware, terminal, tmp_path,
+                                                             artifacts):
+    out = tmp_path / "wood.npz"
+    t = terminal("build", ["hapticlab", "library", "build", "--device",
+                           f"serial:{firmware.port}", "--windows", "2", "--out", str(out)],
+                 env={"PATH": str(Path(sys.executable).parent) + ":/usr/bin:/bin"})
+    t.wait("[ 3/14]", 120)
+    firmware.proc.send_signal(signal.SIGUSR1)  # pressed, and held
+    screen = t.wait("c + ENTER clears the fault", 120)
+    assert re.search(r"ESTOP during (sweep|tapping)", screen), screen
+    t.keys("c\n")  # still held: refused in words, the build waits on
+    t.wait("not cleared", 60)
+    (artifacts / "screens").mkdir(exist_ok=True)
+    t.save_png(artifacts / "screens" / "library-build-fault.png", "library build: a fault")
+    firmware.proc.send_signal(signal.SIGUSR2)
+    t.keys("c\n")
+    t.wait("fault cleared; measuring again", 60)
+    assert t.exit_code(300) == 0, t.screen()
+    assert out.exists()
+    assert "[14/14]" in t.screen()
+
+
+# ------------------------------------------------------------------ suggested commands
+SOURCES = [p for pkg in ("app", "device", "protocols", "analysis") for p in
+           (ROOT / pkg).rglob("*.py")]
+#: a command line suggested in a message ends where the sentence does
+_END = re.compile(r"\s*(?:[;)\n]|\. |\.$| \(|$)")
+
+
+def _strings(path: Path):
+    """Every string constant and f-string of a module, f-string fields as 'X'."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    parts = {id(v) for n in ast.walk(tree) if isinstance(n, ast.JoinedStr) for v in n.values}
+    docs = {id(n.value) for n in ast.walk(tree) if isinstance(n, ast.Expr)}  # documentation
+    for node in ast.walk(tree):
+        if id(node) in parts or id(node) in docs:
+            continue  # a piece of an f-string (seen whole below), or a docstring
+        if isinstance(node, ast.JoinedStr):
+            yield node.lineno, "".join(v.value if isinstance(v, ast.Constant) else "X"
+                                       for v in node.values)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            yield node.lineno, node.value
+
+
+def suggested_commands(sources=SOURCES, root: Path = ROOT) -> list[tuple[str, str]]:
+    found = []
+    for path in sources:
+        for line, text in _strings(path):
+            for m in re.finditer(r"hapticlab ((?:library|device|protocol|run|resume|preflight|"
+                                 r"simulate|analyze|export|power|bench|demo)\b.*)", text):
+                cmd = _END.split(m.group(1), maxsplit=1)[0]
+                found.append((f"{path.relative_to(root)}:{line}", cmd))
+    return found
+
+
+def unparsable(cmds: list[tuple[str, str]]) -> list[str]:
+    """The suggested command lines the command line's own parser refuses."""
+    parser = build_parser()
+    bad = []
+    for where, cmd in cmds:
+        try:
+            parser.parse_args(shlex.split(cmd.replace("…", "")))
+        except (SystemExit, ValueError):
+            bad.append(f"{where}: hapticlab {cmd}")
+    return bad
+
+
+def test_every_suggested_command_line_parses():
+    """Messages name commands the operator can type: each one the program suggests parses
+    with the command line's own parser (an option that does not exist fails)."""
+    cmds = suggested_commands()
+    assert len(cmds) >= 6  # the scan finds them (resume, library build, preflight, …)
+    bad = unparsable(cmds)
+    assert not bad, "suggested commands that do not parse:\n" + "\n".join(bad)
+
+
+def test_the_scan_would_see_a_command_that_does_not_exist(tmp_path, capsys):
+    bad = tmp_path / "m.py"
+    bad.write_text('MSG = f"continue with: hapticlab library build --device {x} --resume"\n'
+                   'OK = "resume with: hapticlab resume data/sub-P1/ses-1 --clear-fault"\n')
+    cmds = suggested_commands([bad], tmp_path)
+    assert [c for _, c in cmds] == ["library build --device X --resume",
+                                    "resume data/sub-P1/ses-1 --clear-fault"]
+    assert unparsable(cmds) == ["m.py:1: hapticlab library build --device X --resume"]
+
+
+def test_every_command_that_opens_a_device_can_clear_its_fault():
+    parser = build_parser()
+    for line in ("preflight realism --device sim", "device selftest sim",
+                 "device check realism", "device sysid", "library build",
+                 "library show f.npz --device sim", "protocol validate realism --device sim",
+                 "run realism --participant P1 --dry-run", "resume d", "simulate realism"):
+        args = parser.parse_args([*line.split(), "--clear-fault"])
+        assert args.clear_fault is True, line
