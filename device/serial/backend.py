@@ -15,6 +15,7 @@ from __future__ import annotations
 import threading
 import time
 import zlib
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -36,7 +37,7 @@ from .link import (
 )
 
 __all__ = ["SerialDevice", "DeviceGoneError", "DeviceTimeoutError", "PortBusyError",
-           "ProtocolMismatchError", "CRCStormError"]
+           "ProtocolMismatchError", "CRCStormError", "device_clock_on_host"]
 
 _OPTIONAL = ("true_position", "true_velocity", "true_accel")
 
@@ -75,6 +76,23 @@ def stream_decimation(lim: M.Limits, n_channels: int, servo_rate_hz: float,
     raise DeviceError(f"the device's link carries {lim.link_bytes_s} B/s: too little for "
                       f"{n_channels} trace channels even at its largest decimation "
                       f"({lim.max_decimation})")
+
+
+def device_clock_on_host(pairs) -> Callable[[float], float]:
+    """Device time → host perf time, from STATUS frames' (host receipt, device time) pairs.
+
+    The device's clock may run at another rate than the host's (a device simulated on a
+    busy computer slips; QEMU's ran at 0.71×), so the rate is fitted (least squares) and
+    the line is then lowered to the fastest frame (every frame reaches the host after it
+    was stamped): a time mapped with it is an upper bound by that frame's one-way delay.
+    """
+    p = np.asarray(list(pairs), float)
+    if len(p) < 2:
+        raise ValueError("need two STATUS frames or more to put the device's clock on the "
+                         "host's")
+    rate = np.polyfit(p[:, 1], p[:, 0], 1)[0] if np.ptp(p[:, 1]) > 0 else 1.0
+    offset = float(np.min(p[:, 0] - rate * p[:, 1]))
+    return lambda t: offset + rate * t
 
 
 #: the largest force a table item carries [N] (``i16``, 1 mN per LSB)
@@ -144,6 +162,9 @@ class SerialDevice(HapticDevice):
         self._decimation = 1  # servo ticks per trace record
         self._status_seen = threading.Event()
         self.last_status: tuple[float, float] | None = None  # (host perf time, device time)
+        #: the last STATUS frames (host perf time [s] at receipt, device time [s]): the
+        #: device's clock against the host's (:func:`device_clock_on_host`)
+        self.status_log: deque[tuple[float, float]] = deque(maxlen=400)
         self.link = Link(port, timeout, retries, transport, baudrate, handler=self._on_message,
                          native=native)
         try:
@@ -169,6 +190,7 @@ class SerialDevice(HapticDevice):
         if isinstance(msg, M.StatusReport):
             self._output = msg.output_mn / 1000.0
             self.last_status = (time.perf_counter(), msg.time_us * 1e-6)
+            self.status_log.append(self.last_status)
             if msg.state == M.State.FAULT and self._fault is None:
                 # e.g. latched before this host connected: a real device keeps it
                 code = M.FaultCode.NAMES.get(msg.fault, "latched")
@@ -420,6 +442,9 @@ class SerialDevice(HapticDevice):
         start = time.monotonic()
         deadline = start + limit
         next_progress = start + 0.1
+        # the device's clock when the window began: a device simulated on a busy computer
+        # (QEMU) runs slower than this one's, so the limit is judged in its time
+        dev_start = self.last_status[1] if self.last_status is not None else None
         try:
             while done is None:
                 items, gone = self.link.take_events()
@@ -445,9 +470,11 @@ class SerialDevice(HapticDevice):
                     err.partial = WindowResult(rate, None, list(contacts), list(sats),
                                                [f for f in faults if f is not None][:1])
                     raise err
-                if time.monotonic() > deadline:
+                now = time.monotonic()
+                if now > deadline and self._overdue(dev_start, limit, now - start):
                     self._stop_window()
-                    raise DeviceTimeoutError(f"{self.port}: window {wid} did not end in time")
+                    raise DeviceTimeoutError(f"{self.port}: window {wid} did not end in time "
+                                             f"({limit:g} s of the device's time)")
                 if on_progress is not None and time.monotonic() >= next_progress:
                     next_progress = time.monotonic() + 0.1
                     partial = WindowResult(rate, None, list(contacts))
@@ -478,6 +505,14 @@ class SerialDevice(HapticDevice):
             res.faults = [FaultEvent(max(t0, min(f.t, t_last)), f.code, f.message)]
             self._fault = res.faults[0]
         return res
+
+    def _overdue(self, dev_start: float | None, limit: float, wall: float) -> bool:
+        """Past a window's ``limit`` [s]: in the device's own time (its STATUS frames), or,
+        for a device whose clock has not moved that far, after ten times the limit of
+        this computer's (a device that reports but whose clock stands still)."""
+        if self.last_status is None or dev_start is None:
+            return True
+        return self.last_status[1] - dev_start >= limit or wall >= 10 * limit
 
     def _stop_window(self) -> None:
         """Best effort: end a window the host gave up on, so the device is free again."""

@@ -115,6 +115,7 @@ class Emulator:
         self._fault_sent = False
         self._clock0 = time.monotonic()  # power-up: the device clock counts from here
         self._turn = self._clock0  # when the serve loop last read the port [wall s]
+        self._estop_rx: float | None = None  # device time the pending ESTOP was read at
         self.frames_in = 0
         self._link_reset(None)
         self._trace_config(limits.channels, 1)
@@ -245,6 +246,10 @@ class Emulator:
         f = self.sim.fault
         if f is not None and not self._fault_sent:
             self._fault_sent = True
+            if f.code == "estop" and self._estop_rx is not None:
+                lat = max(0.0, f.t - self._estop_rx)
+                self._estop_max = lat if self._estop_max is None else max(self._estop_max, lat)
+                self._estop_rx = None
             self.send(M.Fault(_FAULT.get(f.code, 0), int(round(f.t * 1e6))))
             # for people and tests: how long after the host's last frame output went off
             since = f.t - self.sim.last_heartbeat
@@ -262,6 +267,7 @@ class Emulator:
         self._gap_frames = 0 if now is None else 1
         self._gap_bad0 = sum(self.decoder.errors.values())
         self._gap_since = 0.0 if now is None else now
+        self._estop_max: float | None = None  # ESTOP read → zeroing tick [s of device time]
 
     def _link_note(self, now: float) -> None:
         """An intact host frame at device time ``now`` [s]: the gap since the last one."""
@@ -275,8 +281,11 @@ class Emulator:
 
     def _link_report(self) -> M.LinkReport:
         bad = sum(self.decoder.errors.values()) - self._gap_bad0
+        estop = (0xFFFFFFFF if self._estop_max is None
+                 else min(int(round(self._estop_max * 1e6)), 0xFFFFFFFE))
         return M.LinkReport(int(round(self._gap_since * 1e6)), self._gap_frames, bad,
-                            min(int(round(self._gap_max * 1e6)), 0xFFFFFFFF), tuple(self._gaps))
+                            min(int(round(self._gap_max * 1e6)), 0xFFFFFFFF), estop,
+                            tuple(self._gaps))
 
     # ------------------------------------------------------------------ commands
     def _handle(self, frame) -> None:
@@ -454,6 +463,8 @@ class Emulator:
             return S.BAD_MESSAGE
         running = self._busy() and self._running in ("window", "play")
         if isinstance(msg, M.EStop):
+            if sim.fault is None:
+                self._estop_rx = sim.time  # read now: the latency runs to the zeroing tick
             sim.estop()  # the servo loop zeroes output at its next tick
             self._rehome = False
             if not running:  # in a window the loop reports it, timed at the zeroing tick

@@ -554,10 +554,11 @@ class Link:
 
     def device_report(self, reset: bool = False, timeout: float = 0.5) -> dict | None:
         """What the device saw of this host (LINK_QUERY → LINK_REPORT): intact frames and
-        frames that failed a check since ``since_s`` [s, device clock], and the gaps between
+        frames that failed a check since ``since_s`` [s, device clock], the gaps between
         intact frames its watchdog judged (p50, p99, p99.9 from 2-ms bins, and the exact
-        max [ms of device time]); ``reset`` starts counting afresh. None when the device
-        does not know LINK_QUERY (it answers BAD_MESSAGE).
+        max [ms of device time]) and the longest an ESTOP took from the frame read to the
+        zeroing tick (``estop_max_ms``, None: none since); ``reset`` starts afresh. None
+        when the device does not know LINK_QUERY (it answers BAD_MESSAGE).
 
         Raises
         ------
@@ -572,7 +573,8 @@ class Link:
                                      f"within {timeout * 1e3:.0f} ms")
         r = self.remove(lambda e: isinstance(e, M.LinkReport))[-1]
         out = {"since_s": r.since_us * 1e-6, "frames": r.frames, "bad_frames": r.bad_frames,
-               "gap_max_ms": r.max_gap_us * 1e-3, "gap_hist_2ms": list(r.items)}
+               "gap_max_ms": r.max_gap_us * 1e-3, "gap_hist_2ms": list(r.items),
+               "estop_max_ms": None if r.estop_max_us == 0xFFFFFFFF else r.estop_max_us * 1e-3}
         out.update(gap_percentiles(r.items, M.LINK_GAP_BIN_US * 1e-3))
         return out
 

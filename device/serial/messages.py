@@ -526,18 +526,21 @@ LINK_GAP_BINS = 64  # LinkReport.ITEMS
 class LinkReport(Message):
     """Version 2, answering LINK_QUERY: what the device saw of the host since ``since_us``
     [µs, device clock] — intact frames, frames that failed a check, the longest gap between
-    two intact frames [µs of device time] and the gaps' histogram (``items``: 64 u16
-    counts, bin k for gaps in [2k, 2k + 2) ms, the last bin ≥ 126 ms; a count saturates at
-    65,535). The gaps are what the device's watchdog judges."""
+    two intact frames [µs of device time], the longest an ESTOP took from the frame read to
+    the tick that zeroed output [µs of device time; 0xFFFFFFFF: no ESTOP] and the gaps'
+    histogram (``items``: 64 u16 counts, bin k for gaps in [2k, 2k + 2) ms, the last bin
+    ≥ 126 ms; a count saturates at 65,535). The gaps are what the device's watchdog
+    judges."""
 
     TYPE = 0x99
-    FMT = "QIII"
+    FMT = "QIIII"
     ARRAY = "H"
     ITEMS = 64
     since_us: int = 0
     frames: int = 0
     bad_frames: int = 0
     max_gap_us: int = 0
+    estop_max_us: int = 0xFFFFFFFF
     items: tuple = (0,) * LINK_GAP_BINS
 
     def check_count(self) -> None:

@@ -71,7 +71,7 @@ def _examples() -> list[tuple[str, M.Message]]:
         ("trace_chunk", M.TraceChunk(9, 0x05, 40, 2, (0.25, -1.0, 0.5, 2.0))),
         ("trace_lost", M.TraceLost(9, 1024, 35)),
         ("link_query", M.LinkQuery(1)),
-        ("link_report", M.LinkReport(2_500_000, 1234, 2, 131_500,
+        ("link_report", M.LinkReport(2_500_000, 1234, 2, 131_500, 100,
                                      (0,) * 12 + (40, 900, 55) + (0,) * 48 + (1,))),
     ]
 

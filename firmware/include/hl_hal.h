@@ -36,6 +36,9 @@ void hal_io_init(uint64_t seed);   /* the servo side's I/O, before the first tic
 size_t hal_uart_read(uint8_t *buf, size_t cap);     /* non-blocking; bytes read */
 size_t hal_uart_space(void);                        /* bytes hal_uart_write accepts now */
 void hal_uart_write(const uint8_t *buf, size_t len); /* len <= hal_uart_space() */
+uint32_t hal_link_bytes_s(void); /* what the link carries towards the host now [B/s], as
+                                    measured where sending costs the device time; 0: no
+                                    limit (LIMITS.link_bytes_s) */
 void hal_lock(void);   /* keep the servo tick out (mask its interrupt); nests once */
 void hal_unlock(void);
 

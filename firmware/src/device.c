@@ -108,6 +108,9 @@ static struct {
     /* what the watchdog saw of the host since HELLO or a LINK_QUERY reset (LINK_REPORT) */
     uint16_t gap_hist[GAP_BINS];
     uint32_t gap_frames, gap_bad0, gap_max_ticks;
+    volatile uint64_t estop_rx_tick; /* the tick an ESTOP frame was read at */
+    volatile uint32_t estop_max_ticks; /* the longest from such a tick to the zeroing one */
+    volatile uint8_t estop_seen;
     uint64_t gap_since;
     uint64_t next_status;
     /* the window whose traces and WINDOW_DONE are being sent */
@@ -311,6 +314,11 @@ void hl_servo_tick(void)
     /* requests from the link: acted on at this tick, whatever else is in flight */
     if (D.req_estop) {
         D.req_estop = 0;
+        uint64_t lat = D.ticks - D.estop_rx_tick; /* this tick zeroes output */
+        if (!D.estop_seen || lat > D.estop_max_ticks) {
+            D.estop_max_ticks = lat > UINT32_MAX ? UINT32_MAX : (uint32_t)lat;
+        }
+        D.estop_seen = 1;
         latch_fault(HL_FAULT_ESTOP);
     }
     if (hal_estop_pressed()) {
@@ -501,7 +509,7 @@ static void send_hello_ack(void)
     p = put_u32(p, HL_RING_RECORDS);
     p = put_u16(p, HL_CHANNEL_MASK);
     p = put_u16(p, HL_MAX_DECIMATION);
-    put_u32(p, HL_LINK_BYTES_S);
+    put_u32(p, hal_link_bytes_s()); /* measured where it can be (the QEMU build) */
     send(0x82, l, sizeof l, 1);
 }
 
@@ -753,6 +761,7 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         return HL_OK;
     }
     case 0x30: /* ESTOP */
+        D.estop_rx_tick = D.ticks; /* before the request: the tick reads it after */
         D.req_estop = 1;
         return HL_OK;
     case 0x31: /* CLEAR_FAULT */
@@ -810,6 +819,10 @@ static void link_reset(void)
     D.gap_max_ticks = 0;
     D.gap_bad0 = rx_errors();
     D.gap_since = D.ticks;
+    hal_lock();
+    D.estop_seen = 0;
+    D.estop_max_ticks = 0;
+    hal_unlock();
 }
 
 /* an intact host frame at this tick: the gap since the one before (what the watchdog
@@ -833,11 +846,15 @@ static void link_note(void)
 
 static void send_link_report(void)
 {
-    uint8_t b[20 + 2 * GAP_BINS], *p = put_u64(b, ticks_to_us(D.gap_since));
+    uint8_t b[24 + 2 * GAP_BINS], *p = put_u64(b, ticks_to_us(D.gap_since));
     p = put_u32(p, D.gap_frames);
     p = put_u32(p, rx_errors() - D.gap_bad0);
     uint64_t max_us = ticks_to_us(D.gap_max_ticks);
     p = put_u32(p, max_us > UINT32_MAX ? UINT32_MAX : (uint32_t)max_us);
+    hal_lock();
+    uint64_t estop_us = D.estop_seen ? ticks_to_us(D.estop_max_ticks) : UINT32_MAX;
+    hal_unlock();
+    p = put_u32(p, estop_us > UINT32_MAX ? UINT32_MAX : (uint32_t)estop_us);
     for (uint32_t k = 0; k < GAP_BINS; k++) {
         p = put_u16(p, D.gap_hist[k]);
     }

@@ -51,6 +51,8 @@ size_t sim_uart_from_device(uint8_t *buf, size_t cap) { return q_get(&TX, buf, c
 void hal_watchdog_kick(void) {}
 size_t hal_uart_read(uint8_t *buf, size_t cap) { return q_get(&RX, buf, cap); }
 size_t hal_uart_space(void) { return TX.cap - TX.len; }
+
+uint32_t hal_link_bytes_s(void) { return HL_LINK_BYTES_S; } /* the nominal: sending is free */
 void hal_uart_write(const uint8_t *buf, size_t len) { (void)q_put(&TX, buf, len); }
 void hal_lock(void) {}
 void hal_unlock(void) {}

@@ -67,6 +67,21 @@ static volatile uint32_t tx_head, tx_tail;
 static uint8_t rx_ring[RX_BYTES];
 static volatile uint32_t rx_head, rx_tail;
 static volatile uint32_t lock_depth;
+#if HL_QEMU
+/* The link's capacity as measured (the QEMU build). QEMU's USART takes every byte
+ * synchronously: a write to DR is a write to the host's pseudo-terminal, holding QEMU's
+ * lock, so every byte sent costs the emulated board several microseconds of its time
+ * (measured: 3-10 us, more on a loaded computer), and a stream that keeps it sending most
+ * of the time starves QEMU's delivery of the host's bytes (heartbeats reached the board
+ * 100-270 ms late at 72 kB/s). A board's UART sends at its line rate at no cost. So the
+ * QEMU build times its sending and offers the host, in LIMITS, the rate it can send while
+ * spending at most TX_SHARE of its time on it (never more than the line's). */
+#define TX_SHARE_DIV 4u           /* a quarter of the device's time */
+#define TX_CHUNK 128u
+static volatile uint32_t hal_ticks; /* servo ticks, for timing */
+static volatile uint8_t tx_measure; /* time the next drain of the ring */
+static volatile uint32_t tx_cost;   /* device cycles per byte it took, 0: unknown */
+#endif
 
 void hal_watchdog_kick(void)
 {
@@ -81,6 +96,57 @@ void hal_watchdog_kick(void)
  * frame it belonged to fails its CRC: the host resends); TX empties tx_ring while the
  * data register takes bytes, then turns its own interrupt off. Only this handler moves
  * tx_tail and rx_head, only the main loop tx_head and rx_tail. */
+#if HL_QEMU
+/* the USART interrupt sends the next chunk (QEMU: it sends at most TX_CHUNK bytes per
+ * interrupt, so QEMU's I/O thread gets its lock between chunks and the host's bytes in) */
+static void tx_kick(void)
+{
+    USART1_CR1 = CR1_BASE | CR1_TXEIE;
+    NVIC_ISPR1 = 1u << (USART1_IRQ - 32u);
+}
+
+/* device time in CPU cycles: servo ticks and the SysTick counter within the tick */
+static uint64_t now_cycles(void)
+{
+    uint32_t t, v;
+    do {
+        t = hal_ticks;
+        v = SYST_CVR;
+    } while (t != hal_ticks);
+    return (uint64_t)t * (CPU_HZ / HL_SERVO_HZ) + (CPU_HZ / HL_SERVO_HZ - 1u - v);
+}
+
+static void note_tx_cost(uint64_t cycles, uint32_t n)
+{
+    if (tx_measure && n > 0) {
+        tx_cost = (uint32_t)(cycles / n) + 1u;
+        tx_measure = 0;
+    }
+}
+#endif
+
+/* Measured when a host opens a session (HELLO): 256 zero bytes sent and timed, which
+ * every receiver takes for empty frames between delimiters. The servo ticks that preempt
+ * the sending count too: they share the device's time with it. */
+uint32_t hal_link_bytes_s(void)
+{
+#if HL_QEMU
+    static const uint8_t idle[TX_CHUNK];
+    while (tx_tail != tx_head) { /* what is queued goes first (whole frames) */
+        tx_kick();
+    }
+    tx_measure = 1;
+    hal_uart_write(idle, sizeof idle); /* one chunk: one interrupt sends and times it */
+    while (tx_measure) {
+        tx_kick();
+    }
+    uint32_t measured = CPU_HZ / TX_SHARE_DIV / tx_cost;
+    return measured < HL_LINK_BYTES_S ? (measured ? measured : 1u) : HL_LINK_BYTES_S;
+#else
+    return HL_LINK_BYTES_S;
+#endif
+}
+
 void usart1_handler(void);
 void usart1_handler(void)
 {
@@ -94,15 +160,21 @@ void usart1_handler(void)
 #if HL_QEMU
     /* QEMU's USART sends each byte synchronously and keeps TXE set; reading SR costs a
      * wake-up of QEMU's I/O thread per byte, which halves the emulated board's speed */
-    while (tx_tail != tx_head) {
+    uint64_t c0 = now_cycles();
+    uint32_t n = 0;
+    while (tx_tail != tx_head && n < TX_CHUNK) {
+        n++;
 #else
     while (tx_tail != tx_head && (USART1_SR & SR_TXE)) {
 #endif
         USART1_DR = tx_ring[tx_tail % TX_BYTES];
         tx_tail++;
     }
-    if (tx_tail == tx_head) {
-        USART1_CR1 = CR1_BASE;
+#if HL_QEMU
+    note_tx_cost(now_cycles() - c0, n);
+#endif
+    if (tx_tail == tx_head || HL_QEMU) {
+        USART1_CR1 = CR1_BASE; /* QEMU: the main loop pends the next chunk */
     }
 }
 
@@ -147,7 +219,13 @@ uint32_t hal_cycles(void) { return DWT_CYCCNT; }
 
 
 void systick_handler(void);
-void systick_handler(void) { hl_servo_tick(); }
+void systick_handler(void)
+{
+#if HL_QEMU
+    hal_ticks++;
+#endif
+    hl_servo_tick();
+}
 
 #if !HL_QEMU
 /* HSE -> PLL: 168 MHz core, APB1 42 MHz (its timers 84 MHz), APB2 84 MHz, 48 MHz for
@@ -233,8 +311,14 @@ int main(void)
     SYST_RVR = CPU_HZ / HL_SERVO_HZ - 1u;
     SYST_CVR = 0;
     SYST_CSR = 7u; /* processor clock, interrupt, enable */
+
     for (;;) {
         hl_device_poll();
+#if HL_QEMU
+        if (tx_tail != tx_head) { /* the next chunk, between main-loop turns */
+            tx_kick();
+        }
+#endif
         /* sleep until the next interrupt (the servo tick at the latest) unless a byte came
          * in meanwhile; with interrupts masked, a pending one still ends the WFI */
         __asm__ volatile("cpsid i" ::: "memory");

@@ -61,6 +61,7 @@ static hl_receiver host;
 static uint8_t host_payload[HL_MAX_PAYLOAD];
 static uint32_t frames_of[256], acks_refused;
 size_t hal_uart_space(void) { return 4096u; }
+uint32_t hal_link_bytes_s(void) { return 0u; }
 void hal_uart_write(const uint8_t *buf, size_t len)
 {
     for (size_t i = 0; i < len; i++) {
