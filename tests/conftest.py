@@ -84,11 +84,23 @@ def stop_emulator(emu: Emulated) -> None:
 
 
 @pytest.fixture(scope="session")
-def emulator():
-    """One emulator for the tests that leave it running."""
+def _shared_emulator():
     emu = start_emulator("--seed", "5")
     yield emu
     stop_emulator(emu)
+
+
+@pytest.fixture
+def emulator(_shared_emulator):
+    """One emulator for the tests that leave it running, handed to each test without a
+    latched fault (a device keeps one across connections: a test that ends with an e-stop
+    or a watchdog fault must not fail the next test's preflight)."""
+    from device import open_device
+
+    with open_device(f"serial:{_shared_emulator.port}") as dev:
+        if dev.fault is not None:
+            dev.clear_fault()
+    return _shared_emulator
 
 
 @pytest.fixture

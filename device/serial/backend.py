@@ -161,6 +161,8 @@ class SerialDevice(HapticDevice):
         self._window_id = 0
         self._decimation = 1  # servo ticks per trace record
         self._status_seen = threading.Event()
+        self._status_after_clear = True  # a FAULT state in STATUS is believed
+        self._cleared_at = 0.0
         self.last_status: tuple[float, float] | None = None  # (host perf time, device time)
         #: the last STATUS frames (host perf time [s] at receipt, device time [s]): the
         #: device's clock against the host's (:func:`device_clock_on_host`)
@@ -191,15 +193,23 @@ class SerialDevice(HapticDevice):
             self._output = msg.output_mn / 1000.0
             self.last_status = (time.perf_counter(), msg.time_us * 1e-6)
             self.status_log.append(self.last_status)
-            if msg.state == M.State.FAULT and self._fault is None:
-                # e.g. latched before this host connected: a real device keeps it
+            if msg.state != M.State.FAULT:
+                self._status_after_clear = True
+            elif self._fault is None and (self._status_after_clear
+                                          or time.monotonic() > self._cleared_at + 0.25):
+                # e.g. latched before this host connected: a real device keeps it (a
+                # report sent before a CLEAR_FAULT took effect is not believed: the device
+                # reports a new fault with FAULT, and it has said it is clear)
                 code = M.FaultCode.NAMES.get(msg.fault, "latched")
                 self._fault = FaultEvent(msg.time_us * 1e-6, code,
                                          f"the device reports a latched {code} fault")
             self._status_seen.set()
         elif isinstance(msg, M.Fault):
             code = M.FaultCode.NAMES.get(msg.code, f"fault {msg.code}")
-            why = ("no heartbeat: output zeroed by the device" if code != "estop" else
+            wd = f"{self._info.watchdog_s * 1e3:g} ms" if hasattr(self, "_info") else "T_wd"
+            why = (f"the device heard nothing from this computer for {wd} and zeroed its "
+                   "output (the computer was held up, or the cable is loose)"
+                   if code == "watchdog" else
                    "emergency stop (latched): output zeroed" if self._estop_sent else
                    "the device's own e-stop button was pressed: output zeroed")
             self._fault = FaultEvent(msg.time_us * 1e-6, code, why)
@@ -396,6 +406,8 @@ class SerialDevice(HapticDevice):
                                    "then clear the fault") from None
         self._fault = None
         self._estop_sent = False
+        self._status_after_clear = False  # until a report says the device is clear (or
+        self._cleared_at = time.monotonic()  # 0.25 s: ten reports at the slowest rate)
 
     def _zero(self) -> None:
         self._output = 0.0

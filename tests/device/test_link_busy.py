@@ -8,7 +8,9 @@ the checks are what the device then did, read from its own report and log.
 """
 
 import ctypes
+import json
 import re
+import shutil
 import subprocess
 import sys
 
@@ -112,3 +114,29 @@ def test_the_device_reports_what_it_saw_of_the_host(own_emulator):
         assert hb["memory_locked"] in ("ring, stack and state", "stack and state", "no")
         # real-time scheduling is granted or said to be refused, never silently absent
         assert hb["rt_priority"] > 0 or hb["rt_refused"]
+
+
+NO_RT = r"""
+import json, sys
+from device import Scene, open_device
+with open_device("serial:" + sys.argv[1]) as dev:
+    dev.load_scene(Scene("firm", spring=680.0))
+    dev.home()
+    res = dev.run_window(0.3, from_first_contact=False)
+    print(json.dumps({"hb": dev.link_stats()["heartbeats"], "faults": len(res.faults),
+                      "records": len(res.traces["t"])}))
+"""
+
+
+@pytest.mark.skipif(shutil.which("setpriv") is None, reason="setpriv (util-linux) missing")
+def test_without_real_time_scheduling_the_link_says_so_and_works(own_emulator):
+    """The fallback where the system grants no real-time priority (a process without
+    CAP_SYS_NICE): the threads run at normal priority, the link says why, and works."""
+    out = subprocess.run(["setpriv", "--bounding-set", "-sys_nice", "--inh-caps", "-sys_nice",
+                          sys.executable, "-c", NO_RT, own_emulator.port],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    assert got["hb"]["native"] and got["hb"]["rt_priority"] == 0
+    assert got["hb"]["rt_refused"] == "Operation not permitted"
+    assert got["faults"] == 0 and got["records"] == 3000
