@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import shlex
 import sys
 from collections.abc import Callable
@@ -160,20 +159,6 @@ def fault_prompt(device, kept: Callable[[], str]) -> Callable:
     return on_fault
 
 
-#: how well a library's transients reproduce their taps: the in-window error is
-#: ‖a_model(F) − a_tap‖ / ‖a_tap‖ over the 100-ms window (0 = exact). Its floor on a device
-#: the model fits is the regularization and tapers (≈ 0.1–0.2 on the simulated device);
-#: above 0.5, half of the tap's acceleration is not reproduced
-QUALITY = ((0.3, "good"), (0.5, "fair: usable, worth rebuilding with more --windows"),
-           (math.inf, "poor: the identified model does not invert well; check the "
-                      "identification (hapticlab device sysid --png sysid.png) and rebuild"))
-
-
-def quality(error: float) -> str:
-    """The words for a library's median in-window error (:data:`QUALITY`)."""
-    return next(words for limit, words in QUALITY if error <= limit)
-
-
 def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
     from device.matching.library import (
         BuildRecord,
@@ -227,17 +212,50 @@ def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
             if record.count:
                 raise type(exc)(f"{exc}. {kept()}; continue with: {again}") from None
             raise
-    path = lib.save(out)
+        path = lib.save(out)
+        errs = lib.meta["inversion"]["in_window_error"]
+        print(f"wrote {path}: {len(lib.velocities)} transients for {args.source} on "
+              f"{args.device} ({lib.velocities.min():.3f}–{lib.velocities.max():.3f} m/s), "
+              f"{args.method} inversion, in-window error median {np.median(errs):.2f} (the "
+              f"inversion's own check through the model); sha256 {lib.sha256[:16]}…")
+        if args.verify:
+            _verify(dev, protocol, args, path, record.windows)
     record.discard()
-    errs = lib.meta["inversion"]["in_window_error"]
-    med = float(np.median(errs))
-    print(f"wrote {path}: {len(lib.velocities)} transients for {args.source} on {args.device} "
-          f"({lib.velocities.min():.3f}–{lib.velocities.max():.3f} m/s), {args.method} "
-          f"inversion; sha256 {lib.sha256[:16]}…")
-    print(f"in-window error median {med:.2f} (worst {max(errs):.2f}): {quality(med)} — the "
-          "share of each tap's acceleration the transient does not reproduce over its 100-ms "
-          "window (≤ 0.3 good, ≤ 0.5 fair, above: poor)")
     return 0
+
+
+def _verify(dev, protocol, args, path: Path, real) -> None:
+    """Tap the protocol's matched sample with the new library and its spring alone, and
+    say how close each comes to the real taps the build recorded."""
+    import dataclasses
+
+    from device.matching.compare import verify_library
+    from device.matching.measure import MeasurementFault, Pace
+
+    matched = next((s.scene for s in protocol.samples.values()
+                    if s.scene.transient is not None and s.scene.transient.kind == "library"
+                    and s.scene.transient.source == args.source), None)
+    if matched is None:
+        print(f"not verified: no sample of {protocol.source} plays the {args.source} library")
+        return
+    play = dataclasses.replace(matched, transient=dataclasses.replace(matched.transient,
+                                                                      path=str(path)))
+    spring = dataclasses.replace(matched, transient=None)
+    print(f"verifying: {args.verify} tapping windows on '{matched.name}' (its spring and the "
+          f"library × {matched.transient.attenuation:g}) and {args.verify} on its spring "
+          "alone; tap as on the real sample", file=sys.stderr, flush=True)
+    pace = Pace([5.0] * (2 * args.verify), 0, _step_line)
+    try:
+        v = verify_library(dev, real, play, spring, args.verify,
+                           on_fault=fault_prompt(dev, lambda: "the library is written"),
+                           pace=pace)
+    except (MeasurementFault, ValueError) as exc:
+        print(f"not verified ({exc}); the library is written")
+        return
+    print(f"spectral distance to the real {args.source} taps (RMS dB over 10–500 Hz; 0 dB: the "
+          f"same spectra, 6 dB: a factor of two): with the library {v.matched_db:.1f} dB — "
+          f"{v.verdict()}; the spring alone, the baseline, {v.spring_db:.1f} dB "
+          f"({v.matched_taps} and {v.spring_taps} taps)")
 
 
 def library_show(args: argparse.Namespace, open_spec) -> int:
@@ -322,6 +340,9 @@ def add_parsers(device_sub, sub, func, clear_fault) -> None:
     lb.add_argument("--out", type=Path, default=None,
                     help="write here instead of the library store (a protocol's sample then "
                     "names it in 'path')")
+    lb.add_argument("--verify", type=int, default=2, metavar="N",
+                    help="then tap the matched sample and its spring alone N windows each and "
+                    "compare both with the real taps (0: do not)")
     lb.add_argument("--restart", action="store_true",
                     help="measure everything again (a build that stopped resumes by default "
                     "from the measurements it kept)")

@@ -17,7 +17,8 @@ import numpy as np
 from ..scene import Scene
 from .library import record_taps, segment_taps
 
-__all__ = ["Signature", "signature", "spectral_distance", "scene_distances"]
+__all__ = ["Signature", "signature", "spectral_distance", "scene_distances", "Verification",
+           "verify_library"]
 
 NFFT = 4096
 BAND = (10.0, 500.0)
@@ -58,3 +59,46 @@ def scene_distances(make_device, scenes: dict[str, Scene], reference: Scene,
     ref = signature(record_taps(make_device(), reference, windows))
     return {name: spectral_distance(signature(record_taps(make_device(), sc, windows)), ref)
             for name, sc in scenes.items()}
+
+
+@dataclass(frozen=True)
+class Verification:
+    """How close a library's playback comes to the real sample it reproduces.
+
+    Attributes
+    ----------
+    matched_db, spring_db : float [dB]
+        Spectral distance to the real taps of taps on the matched scene, and on its spring
+        alone (the same scene without the library: the baseline).
+    matched_taps, spring_taps : int
+        Clean taps each was computed from.
+    """
+
+    matched_db: float
+    spring_db: float
+    matched_taps: int
+    spring_taps: int
+
+    def verdict(self) -> str:
+        """Against the distance scale: ≤ 3 dB is close (within a factor √2 in amplitude on
+        average over 10–500 Hz), ≤ 6 dB fair (within a factor two), far above. The spring
+        alone is the baseline measured the same way (on a sample whose low band the spring
+        already matches, wood on foam, it can be the closer of the two)."""
+        if self.matched_db <= 3.0:
+            return "close (≤ 3 dB: within a factor √2 on average)"
+        if self.matched_db <= 6.0:
+            return "fair (≤ 6 dB: within a factor two on average)"
+        return ("far (> 6 dB): check the identification (hapticlab device sysid --png "
+                "sysid.png) and rebuild with more --windows")
+
+
+def verify_library(device, real_results, matched: Scene, spring: Scene, windows: int = 2,
+                   **measure) -> Verification:
+    """Tap ``matched`` (a scene playing the library) and ``spring`` (the same without it) for
+    ``windows`` windows each and compare both with the real taps ``real_results`` (the
+    build's recordings). ``measure`` goes to :func:`record_taps` (``on_fault``, ``pace``)."""
+    ref = signature(real_results)
+    m = signature(record_taps(device, matched, windows, **measure))
+    s = signature(record_taps(device, spring, windows, **measure))
+    return Verification(spectral_distance(m, ref), spectral_distance(s, ref), m.n_taps,
+                        s.n_taps)

@@ -77,8 +77,9 @@ def test_a_library_build_stopped_by_a_fault_keeps_its_work_and_resumes(firmware,
     steps = [int(x) for x in re.findall(r"\[\s*(\d+)/14\]", again.stderr)]
     assert steps == list(range(done + 1, 15))  # nothing measured twice
     assert out.exists() and not Path(m.group(3)).exists()
-    assert re.search(r"in-window error median [\d.]+ \(worst [\d.]+\): (good|fair|poor)",
-                     again.stdout)
+    # then it taps the matched sample and its spring alone and says how close each came
+    assert re.search(r"with the library [\d.]+ dB — (close|fair|far) .*; the spring alone, the "
+                     r"baseline, [\d.]+ dB \(\d+ and \d+ taps\)", again.stdout), again.stdout
 
 
 def test_a_person_clears_a_fault_and_the_build_measures_again(firmware, terminal, tmp_path,
