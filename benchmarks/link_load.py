@@ -105,6 +105,13 @@ class _Screen:
             self.xvfb.wait(timeout=5)
 
 
+def _unasked(faults: list[str], code: str, where: str) -> None:
+    """A fault the bench did not ask for (its own e-stops are not counted: nothing else
+    presses the device's e-stop here)."""
+    if code != "estop":
+        faults.append(f"{code} {where}")
+
+
 class _Seen:
     """The device's LINK_REPORTs of a run, added up (each read resets the device's)."""
 
@@ -127,7 +134,7 @@ class _Seen:
         if not self.frames:
             return None
         return {"frames": self.frames, "bad_frames": self.bad, "gap_max_ms": self.gap_max,
-                **gap_percentiles(self.hist, 2.0)}
+                **gap_percentiles(self.hist, 2.0, self.gap_max)}
 
 
 def _cell(port: str, seconds: float, screen: _Screen, native: bool) -> dict:
@@ -157,13 +164,13 @@ def _cell(port: str, seconds: float, screen: _Screen, native: bool) -> dict:
             estop_now = k % 5 == 0
             playback = estop_now and (k // 5) % 2 == 0
             if dev.fault is not None:  # latched between windows (while the rating was shown)
-                faults.append(f"{dev.fault.code} between windows")
+                _unasked(faults, dev.fault.code, "between windows")
                 dev.clear_fault()
             dev.load_scene(SUITE_SCENES["pulse_firm"])
             try:
                 dev.home()
             except DeviceFaultError:
-                faults.append(f"{dev.fault.code if dev.fault else '?'} before a window")
+                _unasked(faults, dev.fault.code if dev.fault else "?", "before a window")
                 dev.clear_fault()
                 continue
             timer = None
@@ -178,6 +185,10 @@ def _cell(port: str, seconds: float, screen: _Screen, native: bool) -> dict:
                     res = dev.play_force(np.zeros(int(dev.info.servo_rate_hz)))
                 else:
                     res = dev.run_window(2.0, from_first_contact=False, on_progress=draw)
+            except DeviceFaultError:  # latched between HOME and the start
+                _unasked(faults, dev.fault.code if dev.fault else "?", "before the start")
+                dev.clear_fault()
+                continue
             finally:
                 if timer is not None:
                     timer.join()
@@ -193,7 +204,7 @@ def _cell(port: str, seconds: float, screen: _Screen, native: bool) -> dict:
                     if rep is not None and rep["estop_max_ms"] is not None:
                         reaction.append(rep["estop_max_ms"] * 1e-3)
                 else:
-                    faults.append(f.code)
+                    _unasked(faults, f.code, "in a window")
             elif estop_now:
                 faults.append("e-stop not reported")
             if dev.fault is not None:
@@ -201,6 +212,9 @@ def _cell(port: str, seconds: float, screen: _Screen, native: bool) -> dict:
             rtt.append(dev.ping())
             screen.rating(0.5)
         seen.add(dev.device_link_report())
+        lim = dev.link.limits
+        link = {"link_bytes_s": lim.link_bytes_s if lim else None,
+                "decimation": dev._decimation, "watchdog_ms": dev.info.watchdog_s * 1e3}
         host = dev.link.heartbeat_report()
         stall = dev.link.link_stats()["host_stall_max_ms"]
         rate = dev.info.servo_rate_hz
@@ -209,6 +223,7 @@ def _cell(port: str, seconds: float, screen: _Screen, native: bool) -> dict:
             "spurious_faults": len(faults), "fault_codes": faults,
             "faults_per_hour": len(faults) * 3600 / seconds,
             "device_saw": seen.summary(), "host_wrote": host, "host_stall_max_ms": stall,
+            "link": link,
             "estop": {"n": len(reaction),
                       "call_to_frame_ms": {"p50": ms(call_to_frame, 50),
                                            "max": ms(call_to_frame, 100)},
@@ -250,8 +265,7 @@ def main(args) -> int:
                         log.close()
                     r.update(target=target, load=n, device_log=said)
                     rows.append(r)
-                    if not args.json:
-                        print(_line(r), flush=True)
+                    print(_line(r), file=sys.stderr if args.json else sys.stdout, flush=True)
     finally:
         screen.close()
     payload = {"cores": os.cpu_count(), "window": screen.why or "PsychoPy window drawn",

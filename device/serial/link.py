@@ -90,15 +90,18 @@ def hold_full_collections(hold: bool) -> None:
     gc.collect()
 
 
-def gap_percentiles(counts, bin_ms: float) -> dict:
+def gap_percentiles(counts, bin_ms: float, max_ms: float | None = None) -> dict:
     """p50, p99 and p99.9 [ms] of gaps counted in bins of ``bin_ms`` (the last bin open):
-    each the upper edge of the bin it falls in (an upper bound), None with no gaps."""
+    each the upper edge of the bin it falls in (an upper bound), or the exact largest gap
+    ``max_ms`` where that is smaller (a percentile is never above the maximum); None with
+    no gaps."""
     c = np.asarray(counts, float)
     total = c.sum()
     out = {}
     for name, q in (("p50", 0.5), ("p99", 0.99), ("p999", 0.999)):
         k = int(np.searchsorted(np.cumsum(c), q * total)) if total else None
-        out[f"gap_{name}_ms"] = None if k is None else (k + 1) * bin_ms
+        edge = None if k is None else (k + 1) * bin_ms
+        out[f"gap_{name}_ms"] = edge if edge is None or max_ms is None else min(edge, max_ms)
     out["gaps"] = int(total)
     return out
 
@@ -549,7 +552,7 @@ class Link:
                "lease_lapses": st["lease_lapses"], "ring_waits": st["rx_waits"],
                "wake_late_max_ms": st["wake_late_max_ms"], "tx_timeouts": st["tx_timeouts"],
                "write_max_ms": st["write_max_ms"]}
-        out.update(gap_percentiles(st["gap_hist"], 1.0))
+        out.update(gap_percentiles(st["gap_hist"], 1.0, st["gap_max_ms"]))
         return out
 
     def device_report(self, reset: bool = False, timeout: float = 0.5) -> dict | None:
@@ -575,7 +578,7 @@ class Link:
         out = {"since_s": r.since_us * 1e-6, "frames": r.frames, "bad_frames": r.bad_frames,
                "gap_max_ms": r.max_gap_us * 1e-3, "gap_hist_2ms": list(r.items),
                "estop_max_ms": None if r.estop_max_us == 0xFFFFFFFF else r.estop_max_us * 1e-3}
-        out.update(gap_percentiles(r.items, M.LINK_GAP_BIN_US * 1e-3))
+        out.update(gap_percentiles(r.items, M.LINK_GAP_BIN_US * 1e-3, r.max_gap_us * 1e-3))
         return out
 
     # ------------------------------------------------------------------ shutdown

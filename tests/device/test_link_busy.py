@@ -140,3 +140,15 @@ def test_without_real_time_scheduling_the_link_says_so_and_works(own_emulator):
     assert got["hb"]["native"] and got["hb"]["rt_priority"] == 0
     assert got["hb"]["rt_refused"] == "Operation not permitted"
     assert got["faults"] == 0 and got["records"] == 3000
+
+
+def test_gap_percentiles_are_bin_edges_never_above_the_largest_gap():
+    """By hand: 3 gaps in the 2–4 ms bin and 1 in 6–8 ms; p50 falls in the 2–4 bin (edge
+    4 ms), p99 and p99.9 in the 6–8 bin, whose edge (8 ms) is above the exact largest gap
+    (6.5 ms) and is replaced by it."""
+    from device.serial.link import gap_percentiles
+
+    got = gap_percentiles([0, 3, 0, 1], 2.0, max_ms=6.5)
+    assert got == {"gap_p50_ms": 4.0, "gap_p99_ms": 6.5, "gap_p999_ms": 6.5, "gaps": 4}
+    assert gap_percentiles([0, 3, 0, 1], 2.0)["gap_p999_ms"] == 8.0
+    assert gap_percentiles([0, 0], 2.0, max_ms=None)["gap_p50_ms"] is None
