@@ -24,6 +24,7 @@
 #include <poll.h>
 #include <pthread.h>
 #include <sched.h>
+#include <signal.h>
 #include <stdatomic.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -339,13 +340,21 @@ static void lock_memory(link_t *k)
     k->st.locked = level;
 }
 
+/* The threads start with every signal blocked, so the host's SIGINT or SIGTERM goes to a
+ * thread of its own: one delivered here would set Python's flag without waking the main
+ * thread, which then unwound only when its wait ran out (a test's host took over 20 s to
+ * stop on SIGINT during a 30-s window). */
 static int start(link_t *k, pthread_t *th, void *stack, void *(*fn)(void *))
 {
+    sigset_t all, before;
+    sigfillset(&all);
+    pthread_sigmask(SIG_SETMASK, &all, &before);
     pthread_attr_t a;
     pthread_attr_init(&a);
     pthread_attr_setstack(&a, stack, STACK_BYTES);
     int rc = pthread_create(th, &a, fn, k);
     pthread_attr_destroy(&a);
+    pthread_sigmask(SIG_SETMASK, &before, NULL);
     return rc;
 }
 

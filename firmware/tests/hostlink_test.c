@@ -12,7 +12,9 @@
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
+#include <dirent.h>
 #include <poll.h>
+#include <signal.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -393,9 +395,73 @@ static void test_arguments_and_slots(void)
     close(q.master);
 }
 
+/* this process's threads: ids into `tid` (at most cap), and for each whether it blocks
+ * both SIGINT and SIGTERM (from /proc/self/task/<tid>/status, SigBlk) */
+static int threads(long *tid, int *blocks, int cap)
+{
+    DIR *d = opendir("/proc/self/task");
+    int n = 0;
+    struct dirent *e;
+    while (d && (e = readdir(d)) != NULL && n < cap) {
+        if (e->d_name[0] == '.') {
+            continue;
+        }
+        char path[300], line[128];
+        snprintf(path, sizeof path, "/proc/self/task/%s/status", e->d_name);
+        FILE *f = fopen(path, "r");
+        unsigned long long mask = 0;
+        while (f && fgets(line, sizeof line, f)) {
+            if (strncmp(line, "SigBlk:", 7) == 0) {
+                mask = strtoull(line + 7, NULL, 16);
+            }
+        }
+        if (f) {
+            fclose(f);
+        }
+        tid[n] = strtol(e->d_name, NULL, 10);
+        blocks[n] = (mask >> (SIGINT - 1) & 1u) && (mask >> (SIGTERM - 1) & 1u);
+        n++;
+    }
+    if (d) {
+        closedir(d);
+    }
+    return n;
+}
+
+static void test_the_link_threads_leave_signals_to_the_host(void)
+{
+    long before[64], after[64];
+    int bb[64], ba[64];
+    int nb = threads(before, bb, 64);
+    pty_t p = open_pty();
+    int s = hl_link_open(p.slave, 0);
+    int na = threads(after, ba, 64);
+    int fresh = 0, blocking = 0;
+    for (int i = 0; i < na; i++) {
+        int old = 0;
+        for (int j = 0; j < nb; j++) {
+            old |= before[j] == after[i];
+        }
+        if (!old) {
+            fresh++;
+            blocking += ba[i];
+        }
+    }
+    CHECK(fresh == 2, "%d new threads for one port, not 2", fresh);
+    CHECK(blocking == fresh, "%d of the link's %d threads would take SIGINT or SIGTERM",
+          fresh - blocking, fresh);
+    sigset_t mine;
+    pthread_sigmask(SIG_SETMASK, NULL, &mine);
+    CHECK(!sigismember(&mine, SIGINT), "opening the link left SIGINT blocked in the caller");
+    hl_link_close(s);
+    close(p.slave);
+    close(p.master);
+}
+
 int main(void)
 {
     test_arguments_and_slots();
+    test_the_link_threads_leave_signals_to_the_host();
     test_bytes_arrive_in_order_through_the_ring();
     test_heartbeats_and_host_frames_never_interleave();
     test_heartbeats_come_while_leased_and_stop_when_the_lease_lapses();
