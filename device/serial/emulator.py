@@ -114,6 +114,7 @@ class Emulator:
         self._stop = threading.Event()
         self._fault_sent = False
         self._clock0 = time.monotonic()  # power-up: the device clock counts from here
+        self._ran = False  # a window or playback ran at the last clock sync
         self._turn = self._clock0  # when the serve loop last read the port [wall s]
         self._estop_rx: float | None = None  # device time the pending ESTOP was read at
         self.frames_in = 0
@@ -130,9 +131,19 @@ class Emulator:
     def _sync(self) -> None:
         """Between windows the device clock runs on: bring the simulator's up to it (a
         window or playback advances it itself; a scene being prepared does not)."""
-        if not (self._busy() and self._running in ("window", "play")):
-            wall = time.monotonic() - self._clock0 - self.sim.slipped_s
-            self.sim.idle_until(wall * self.sim.speed)
+        if self._busy() and self._running in ("window", "play"):
+            self._ran = True
+            return
+        if self._ran:
+            # a window or playback just ended: the device clock goes on from its last
+            # tick. The wall time its worker spent behind (packing 200,000 samples of a
+            # 20-s window on a loaded machine) is the emulator held up, not time the host
+            # let pass; jumping over it tripped the watchdog between two heartbeats
+            self._ran = False
+            self.sim.slipped_s = (time.monotonic() - self._clock0
+                                  - self.sim.time / self.sim.speed)
+        wall = time.monotonic() - self._clock0 - self.sim.slipped_s
+        self.sim.idle_until(wall * self.sim.speed)
 
     def _now_us(self) -> int:
         self._sync()
