@@ -90,6 +90,10 @@ def kill_and_resume(kills: int, seed: int = 1, protocol: str = "realism", rng_se
                 killed += 1
             err = proc.stderr.read() if proc.stderr else ""
             torn += "torn last line" in err
+            if not (folder / "session.json").exists():
+                # killed before the session was declared (a loaded machine starts slowly):
+                # nothing was recorded, and the next run takes the next session number
+                folder = _newest(data / "sub-P01", folder)
             if folder.exists():
                 now = _rows(folder)
                 if now[: len(snapshot)] != snapshot:  # a row seen before has gone
@@ -100,6 +104,12 @@ def kill_and_resume(kills: int, seed: int = 1, protocol: str = "realism", rng_se
     return {"kills": killed, "sessions": sessions, "lost_rows_events": lost,
             "torn_lines_set_aside": torn, "reference_rows": len(reference),
             "sequence_matches": not mismatched, "mismatched": mismatched}
+
+
+def _newest(participant: Path, default: Path) -> Path:
+    """The participant's highest-numbered session folder (``default`` when none)."""
+    numbered = [(int(p.name[4:]), p) for p in participant.glob("ses-*") if p.name[4:].isdigit()]
+    return max(numbered)[1] if numbered else default
 
 
 def _incomplete(folder: Path) -> bool:
