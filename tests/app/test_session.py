@@ -187,12 +187,10 @@ def test_resume_uses_the_sessions_protocol_copy_and_refuses_an_edited_one(tmp_pa
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(900)
 def test_kill_harness_loses_nothing_and_resumes_exactly(tmp_path):
-    """≥ 30 kill -9 at random moments (1000 in `hapticlab bench crash`). Two whole dry-run
-    sessions (the reference and the last resume) and 30 interrupted starts: beside two
-    CPU-bound processes on two cores this passed the suite's 300-s limit once (it is CPU
-    work, no deadline inside), so it gets three times that."""
+    """≥ 30 kill -9 at random moments (1000 in `hapticlab bench crash`), some of them, on a
+    loaded machine, before the session is declared (the harness then follows the session
+    the next run makes)."""
     r = kill_and_resume(30, workdir=tmp_path)
     assert r["kills"] == 30
     assert r["lost_rows_events"] == 0
