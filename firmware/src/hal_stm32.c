@@ -109,9 +109,10 @@ static void tx_kick(void)
 
 /* Measured when a host opens a session (HELLO): three times TX_PROBE zero bytes (every
  * receiver takes them for empty frames between delimiters) sent and timed in servo ticks,
- * the slowest kept (a quiet moment would promise what a busy one cannot keep). Whole ticks only, from a counter that only goes forward: the SysTick
- * counter within a tick, read beside the tick count, stepped back often enough under QEMU
- * that CI measured the link at 1 B/s. The servo ticks that preempt the sending count too:
+ * the slowest kept (a quiet moment would promise what a busy one cannot keep). Whole
+ * ticks only, from a counter that only goes forward: the SysTick counter within a tick,
+ * read beside the tick count, stepped back often enough under QEMU that CI measured the
+ * link at 1 B/s. The servo ticks that preempt the sending count too:
  * they share the device's time with it. */
 #if HL_QEMU
 static uint32_t ticks_to_send_probe(void)
