@@ -22,7 +22,10 @@ venv: $(STAMP)
 # the X libraries Qt needs for PsychoPy's participant-information dialog; installed only
 # when missing; chromium renders report.html headless for its screenshot test; gcc builds the
 # firmware's host build, arm-none-eabi-gcc (with newlib) its Cortex-M build, and
-# qemu-system-arm runs that on an emulated STM32F405.
+# qemu-system-arm runs that on an emulated STM32F405; R and its packages recompute the
+# statistics' reference values (tests/r/).
+R_PACKAGES := afex lme4 lmerTest ordinal car effectsize coin multcompView
+R_CHECK := quit(status = !all(sapply(strsplit("$(R_PACKAGES)", " ")[[1]], requireNamespace, quietly = TRUE)))
 system-deps:
 	@if ! command -v Xvfb >/dev/null 2>&1 || ! ldconfig -p | grep -q libportaudio \
 	    || ! command -v xdotool >/dev/null 2>&1 || ! command -v tmux >/dev/null 2>&1 \
@@ -39,6 +42,12 @@ system-deps:
 	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 \
 	    chromium gcc libc6-dev make gcc-arm-none-eabi libnewlib-arm-none-eabi \
 	    qemu-system-arm >/dev/null; \
+	fi
+	@if ! command -v Rscript >/dev/null 2>&1 || ! Rscript -e '$(R_CHECK)' >/dev/null 2>&1; then \
+	  echo "installing R and the reference packages (afex, lme4, lmerTest, ordinal, car, effectsize, coin, multcompView) from Debian's packages"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	    --no-install-recommends r-base-core r-cran-afex r-cran-lme4 r-cran-lmertest \
+	    r-cran-ordinal r-cran-car r-cran-effectsize r-cran-coin r-cran-multcompview >/dev/null; \
 	fi
 
 demo: $(STAMP)

@@ -1,0 +1,117 @@
+# Reference values for hapticlab's statistics, computed with R's standard packages from a
+# study in the columns of hapticlab's long.csv export.
+#
+#   Rscript tests/r/reference.R STUDY.csv STUDY_NAME KIND OUT.csv
+#
+# KIND is "oneway" (one within factor, sample; optional groups) or "factorial" (2x2x2
+# within each block, ratings z-scored per participant and block with divisor n).
+# Each output row carries the R call that produced its value.
+suppressMessages({library(afex); library(lme4); library(car)})
+options(contrasts = c("contr.sum", "contr.poly"), digits = 17)
+a <- commandArgs(trailingOnly = TRUE)
+d <- read.csv(a[1], stringsAsFactors = FALSE, na.strings = "")
+study <- a[2]; kind <- a[3]
+out <- list()
+add <- function(analysis, term, stat, value, call) {
+  out[[length(out) + 1]] <<- data.frame(study = study, analysis = analysis, term = term,
+                                        stat = stat, value = value, call = call)
+}
+d$participant <- factor(d$participant)
+
+if (kind == "oneway") {
+  lv <- sort(unique(d$sample))
+  d$sample <- factor(d$sample, levels = lv)
+  cm <- aggregate(rating ~ participant + sample, data = d, FUN = mean)
+  w <- reshape(cm, idvar = "participant", timevar = "sample", direction = "wide")
+  w <- w[complete.cases(w), ]
+  colnames(w) <- sub("^rating\\.", "", colnames(w))
+  pairs <- combn(lv, 2)
+  tp <- wp <- c(); keys <- c()
+  for (j in seq_len(ncol(pairs))) {
+    x <- w[[pairs[1, j]]]; y <- w[[pairs[2, j]]]; key <- paste(pairs[, j], collapse = "|")
+    tt <- tryCatch(t.test(x, y, paired = TRUE), error = function(e) NULL)
+    if (!is.null(tt)) {
+      call <- "t.test(x, y, paired = TRUE)"
+      add("ttest", key, "t", unname(tt$statistic), call)
+      add("ttest", key, "df", unname(tt$parameter), call)
+      add("ttest", key, "p", tt$p.value, call)
+      add("ttest", key, "mean_diff", unname(tt$estimate), call)
+      add("ttest", key, "ci_low", tt$conf.int[1], call)
+      add("ttest", key, "ci_high", tt$conf.int[2], call)
+      tp <- c(tp, setNames(tt$p.value, key))
+    }
+    if (any(x != y)) {
+      wt <- suppressWarnings(wilcox.test(x, y, paired = TRUE, digits.rank = 7))
+      call <- "wilcox.test(x, y, paired = TRUE, digits.rank = 7)"
+      add("wilcoxon", key, "V", unname(wt$statistic), call)
+      add("wilcoxon", key, "p", wt$p.value, call)
+      wp <- c(wp, setNames(wt$p.value, key))
+    }
+  }
+  for (k in names(tp)) {
+    add("ttest", k, "p_holm", p.adjust(tp, "holm")[[k]], "p.adjust(p, \"holm\") over the t-tests")
+    add("ttest", k, "p_fdr", p.adjust(tp, "BH")[[k]], "p.adjust(p, \"BH\") over the t-tests")
+  }
+  for (k in names(wp))
+    add("wilcoxon", k, "p_holm", p.adjust(wp, "holm")[[k]],
+        "p.adjust(p, \"holm\") over the Wilcoxon tests")
+  fr <- friedman.test(as.matrix(w[, lv]))
+  add("friedman", "sample", "Q", unname(fr$statistic), "friedman.test(as.matrix(wide))")
+  add("friedman", "sample", "p", fr$p.value, "friedman.test(as.matrix(wide))")
+  fit <- suppressWarnings(suppressMessages(
+    aov_ez("participant", "rating", d, within = "sample", fun_aggregate = mean)))
+  s <- summary(fit)
+  call <- "afex::aov_ez(\"participant\", \"rating\", d, within = \"sample\", fun_aggregate = mean)"
+  an <- anova(fit, correction = "none", es = "pes")
+  add("anova", "sample", "F", an$F[1], call)
+  add("anova", "sample", "DF_err", an$`den Df`[1], call)
+  add("anova", "sample", "p_unc", an$`Pr(>F)`[1], call)
+  add("anova", "sample", "np2", an$pes[1], call)
+  add("anova", "sample", "eps_gg", s$pval.adjustments[1, "GG eps"], paste("summary of", call))
+  add("anova", "sample", "p_gg", s$pval.adjustments[1, "Pr(>F[GG])"], paste("summary of", call))
+  add("anova", "sample", "eps_hf", min(1, s$pval.adjustments[1, "HF eps"]),
+      paste("min(1, HF eps), summary of", call))
+  add("anova", "sample", "W_mauchly", s$sphericity.tests[1, "Test statistic"],
+      paste("summary of", call))
+  add("anova", "sample", "p_spher", s$sphericity.tests[1, "p-value"], paste("summary of", call))
+  m <- lmer(rating ~ sample + (1 | participant), data = d, REML = TRUE)
+  call <- "car::Anova(lmer(rating ~ sample + (1 | participant)), type = 3)"
+  ch <- Anova(m, type = 3, test.statistic = "Chisq")
+  add("mixed", "sample", "chi2", ch["sample", "Chisq"], call)
+  add("mixed", "sample", "p", ch["sample", "Pr(>Chisq)"], call)
+  vc <- as.data.frame(VarCorr(m))
+  add("mixed", "sample", "sd_subject", vc$sdcor[vc$grp == "participant"], "VarCorr(lmer(...))")
+  add("mixed", "sample", "sd_resid", vc$sdcor[vc$grp == "Residual"], "VarCorr(lmer(...))")
+  if (length(unique(na.omit(d$group))) >= 2) {
+    d$group <- factor(d$group)
+    m <- lmer(rating ~ sample * group + (1 | participant), data = d, REML = TRUE)
+    call <- "car::Anova(lmer(rating ~ sample * group + (1 | participant)), type = 3), contr.sum"
+    ch <- Anova(m, type = 3, test.statistic = "Chisq")
+    for (t in c("sample", "group", "sample:group")) {
+      add("mixed_group", t, "chi2", ch[t, "Chisq"], call)
+      add("mixed_group", t, "p", ch[t, "Pr(>Chisq)"], call)
+    }
+  }
+} else {
+  f <- c("frequency", "decay", "slope")
+  for (x in f) d[[x]] <- factor(d[[x]], levels = c("low", "high"))
+  for (b in unique(d$block)) {
+    g <- d[d$block == b, ]
+    g$rating_z <- ave(g$rating, g$participant, FUN = function(x) {
+      s <- sqrt(mean((x - mean(x))^2)); if (s > 0) (x - mean(x)) / s else 0 * x })
+    fit <- suppressWarnings(suppressMessages(
+      aov_ez("participant", "rating_z", g, within = f, fun_aggregate = mean)))
+    an <- anova(fit, correction = "none", es = "pes")
+    call <- paste0("afex::aov_ez(\"participant\", \"rating_z\", block ", b,
+                   ", within = c(\"frequency\", \"decay\", \"slope\")); z = (x - mean) / sd with divisor n")
+    for (t in rownames(an)) {
+      key <- paste(b, gsub(":", " * ", t), sep = "|")
+      add("factorial", key, "F", an[t, "F"], call)
+      add("factorial", key, "p_unc", an[t, "Pr(>F)"], call)
+      add("factorial", key, "np2", an[t, "pes"], call)
+    }
+  }
+}
+res <- do.call(rbind, out)
+res$value <- sprintf("%.17g", res$value)  # every digit R computed
+write.csv(res, a[4], row.names = FALSE)
