@@ -35,6 +35,11 @@ def _name(a: dict) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in a["id"].replace("/", "-"))
 
 
+def figure_prefix(a: dict) -> str:
+    """What every figure file of analysis ``a`` starts with."""
+    return _name(a) + "_"
+
+
 def rating_means(a: dict, out: Path) -> list[str]:
     plt = _plt()
     r = a["result"]
@@ -91,8 +96,10 @@ def factorial_interactions(a: dict, out: Path) -> list[str]:
             ax.legend(fontsize=8)
         axes[0][0].set_ylabel("mean rating" + (" (z)" if (a["phase_design"].get("normalize")
                                                           or "none") != "none" else ""))
-        fig.suptitle(f"{a['id']} — {group}: interactions (most significant: "
-                     f"{res['most_significant']})")
+        p = float(res["most_significant_p"])
+        most = (f"most significant: {res['most_significant']}, p = {p:.3g}" if p < 0.05 else
+                f"no factor significant; smallest p = {p:.2g}, {res['most_significant']}")
+        fig.suptitle(f"{a['id']} — {group}: interactions ({most})")
         files += _save(fig, out, f"{_name(a)}_{group}")
     return files
 

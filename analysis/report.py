@@ -44,6 +44,11 @@ DRY_RUN_NOTE = ("These data come from a dry run: a scripted responder answered a
                 "test the machinery. Nothing in this report is a finding.")
 
 
+#: below this a p-value is not resolved by the distribution functions (the smallest
+#: normal double); report.json gives the bound as text instead of a number
+P_FLOOR = 2.3e-308
+
+
 def _clean(v, where: str = "report"):
     """JSON-safe, finite, rounded (12 significant digits) values; a non-finite number is an
     error naming where it is."""
@@ -62,6 +67,18 @@ def _clean(v, where: str = "report"):
         return float(f"{f:.12g}")
     if isinstance(v, np.bool_):
         return bool(v)
+    return v
+
+
+def _p_bounds(v, key: str = ""):
+    """``v`` with every p-value that underflowed (below :data:`P_FLOOR`, 0 included) given
+    as the bound it is, in words: report.json never says p = 0."""
+    if isinstance(v, dict):
+        return {k: _p_bounds(x, k) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_p_bounds(x, key) for x in v]
+    if isinstance(v, float) and (key == "p" or key.startswith("p_")) and 0 <= v < P_FLOOR:
+        return f"< {P_FLOOR:g}"
     return v
 
 
@@ -250,7 +267,8 @@ def _report_entry(a: dict) -> dict:
                                        "dz_ci_high", "n"]],
             "ordinal": r["ordinal"] if isinstance(r["ordinal"], str) else {
                 "friedman": r["ordinal"]["friedman"], "wilcoxon": r["ordinal"]["wilcoxon"],
-                "agreement": _agreement(r["pairwise"], r["ordinal"]["wilcoxon"])},
+                "agreement": _agreement(r["pairwise"], r["ordinal"]["wilcoxon"]),
+                "wilcoxon_floor": r["ordinal"]["wilcoxon_floor"]},
             "models": r["models"],
             "omnibus": _omnibus(r),
             "anova_notes": r["anova"].attrs.get("notes", []),
@@ -357,13 +375,15 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
         r for r in data.attrs.get("invalid_rows", [])
         if str(Path(r["file"]).parent) in keep]
     report["provenance"] = {
-        "packages": {p: _ver(p) for p in ("numpy", "scipy", "pandas", "matplotlib")},
+        "packages": {p: _ver(p) for p in ("numpy", "scipy", "pandas", "statsmodels", "patsy",
+                                          "matplotlib", "markdown-it-py")},
         "python": platform.python_version(), "input_files": files,
         "seeds": sorted({int(s) for s in inc["seed"] if s is not None}),
         "sessions": int(len(inc)), "torn_lines_set_aside": data.attrs["torn"]}
     report = _clean(report)
     if "json" in formats:
-        (out / "report.json").write_text(json.dumps(report, indent=1, sort_keys=True))
+        (out / "report.json").write_text(json.dumps(_p_bounds(report), indent=1,
+                                                    sort_keys=True))
     md = _markdown(report)
     if "md" in formats:
         (out / "report.md").write_text(md)
@@ -394,7 +414,7 @@ def _table(rows: list[dict], cols: list[str] | None = None) -> str:
             return "—"
         if isinstance(v, float):
             if col.startswith("p_") or col in ("p", "p_spher"):
-                return _p(v)[4:] if v >= 0.001 else "< .001"  # APA: no leading zero
+                return _p_digits(v) if v >= 0.001 else "< .001"  # APA: no leading zero
             if v == 0:
                 return "0"
             return f"{v:.3g}" if abs(v) < 1000 else f"{v:.0f}"
@@ -414,7 +434,12 @@ def _oneway_md(a: dict) -> tuple[list[str], list[str]]:
     rows = [{"sample": r["sample"], "letters": r.get("letters", ""), "n": r["n"],
              "mean": r["mean"], "ci_low": r["ci_low"], "ci_high": r["ci_high"],
              "mean_z": r["mean_z"]} for r in a["samples"]]
-    out = [f"{a['n_subjects']} participants.\n\n#### Samples (mean rating, 95 % CI; letters: "
+    n_tests = a["anova"][0]["n"]
+    left = a["n_subjects"] - n_tests
+    out = [f"{a['n_subjects']} participants"
+           + (f"; {n_tests} rated every sample and are the n of the ANOVA, the t-tests and "
+              f"the Wilcoxon tests ({left} left out listwise; the mixed models keep them)"
+              if left else "") + ".\n\n#### Samples (mean rating, 95 % CI; letters: "
            "samples sharing a letter are not significantly different, Holm p ≥ .05 for every "
            "pair; z: per-participant z-scores)\n", _table(rows),
            "\n#### One-way repeated-measures ANOVA\n", _table(a["anova"])]
@@ -433,7 +458,15 @@ def _oneway_md(a: dict) -> tuple[list[str], list[str]]:
                    f"α = .05); the two agree on {g['agree']}"
                    + (f"; only by t: {', '.join(g['only_t'])}" if g["only_t"] else "")
                    + (f"; only by Wilcoxon: {', '.join(g['only_wilcoxon'])}"
-                      if g["only_wilcoxon"] else "") + ".\n")
+                      if g["only_wilcoxon"] else "") + ".")
+        floor = o.get("wilcoxon_floor", 0.0)
+        if floor >= 0.05:
+            out.append(f" With {a['anova'][0]['n']} participants the smallest Holm-adjusted "
+                       f"Wilcoxon p any pair can reach is {_p_digits(min(floor, 1.0))} "
+                       f"({g['pairs']} pairs × 2/2ⁿ): no pair can reach .05 by Wilcoxon "
+                       "whatever the data, so its count of 0 is not evidence against the "
+                       "t-tests.")
+        out.append("\n")
         app += [f"\n### {_md_text(a['id'])}: Wilcoxon signed-rank tests (Holm; rbc: "
                 "rank-biserial r)\n", _table(o["wilcoxon"])]
     for key, title in (("mixed", "Linear mixed model (random intercept per participant)"),
@@ -475,6 +508,10 @@ def _summary(a: dict) -> str:
                                     if isinstance(v, dict)), default=0)
     head = f"**{_md_text(a['id'])}** ({n} participants): "
     if a["type"] == "oneway":
+        n_tests = a["anova"][0]["n"]
+        if n_tests != n:  # every count printed is the n of the test beside it
+            head = (f"**{_md_text(a['id'])}** ({n} participants, {n_tests} with every sample "
+                    "in the ANOVA and paired tests): ")
         aov = a["anova"][0]
         eps = aov.get("eps_gg")
         p = aov.get("p_gg", aov["p_unc"])
@@ -521,11 +558,21 @@ def _most(v: dict, alpha: float = 0.05) -> str:
     return f"none significant (smallest {_p(p)}, {v['most_significant']})"
 
 
+def _p_digits(p: float, alpha: float = 0.05) -> str:
+    """p without ``p =`` and leading zero: 3 decimals below .1, else 2, and more when
+    rounding would carry it across ``alpha`` (.0496 is ".0496", never ".050")."""
+    digits = 3 if p < 0.1 else 2
+    while digits < 15 and (p < alpha) != (round(p, digits) < alpha):
+        digits += 1
+    return f"{p:.{digits}f}".lstrip("0")
+
+
 def _p(p: float) -> str:
-    """APA style: ``p < .001``, else ``p = `` with 2–3 decimals and no leading zero."""
+    """APA style: ``p < .001``, else ``p = `` with 2–3 decimals and no leading zero, with as
+    many more as it takes to show which side of .05 it lies."""
     if p < 0.001:
         return "p < .001"
-    return "p = " + (f"{p:.3f}" if p < 0.01 else f"{p:.2f}").lstrip("0")
+    return "p = " + _p_digits(p)
 
 
 def _factorial_md(a: dict) -> tuple[list[str], list[str]]:
@@ -574,7 +621,10 @@ def _md_text(text: str) -> str:
 
 
 def _figures_of(a: dict, figures: list[str]) -> list[str]:
-    prefix = a["id"].split(" (design")[0].replace("/", "-") + "_"
+    """The PNG figures of analysis ``a``, named as :mod:`analysis.plots` names them."""
+    from .plots import figure_prefix
+
+    prefix = figure_prefix(a)
     return [f for f in figures if f.startswith(prefix) and f.endswith(".png")]
 
 
@@ -582,15 +632,21 @@ def _figures_of(a: dict, figures: list[str]) -> list[str]:
 CAPTIONS = {"means": "Mean rating per sample with its 95 % CI.",
             "pvalues": "Holm-adjusted p of every pair of samples (the letters summarise it).",
             "session_length": "Power and CI half-width against participants and repetitions.",
+            "accel_traces": "Contact acceleration of each sample: the recorded tap nearest "
+                            "0.11 m/s incoming, scaled to that speed.",
             "confusion": "Identification: surfaces presented (rows) against names given."}
 
 
-def _caption(name: str) -> str:
+def _caption(name: str, kind: str) -> str:
+    """The caption of figure file ``name`` of an analysis of type ``kind``."""
     stem = name.rsplit(".", 1)[0]
     for key, text in CAPTIONS.items():
         if stem.endswith(key):
             return text
-    return f"Interaction plots of {stem.split('_', 1)[-1]}: mean z-score per level."
+    if kind == "factorial":
+        return (f"Interaction plots of {stem.rsplit('_', 1)[-1]}: mean z-score per level of "
+                "each pair of factors.")
+    return f"Figure {stem}."
 
 
 def _markdown(rep: dict) -> str:
@@ -630,11 +686,13 @@ def _markdown(rep: dict) -> str:
                        f"{d['velocity_mean']:.3f} ± {d['velocity_sd'] or 0:.3f} m/s (mean ± SD). "
                        f"Saturations per participant: mean {sp['mean']:.2f}, range "
                        f"{sp['min']}–{sp['max']}.\n\n")
-            out.append(_table([{"sample": k, "saturations": v}
-                               for k, v in d["saturations_per_sample"].items()]))
+            if d["saturations_per_sample"]:
+                out.append(_table([{"sample": k, "saturations": v}
+                                   for k, v in d["saturations_per_sample"].items()]))
         for f in _figures_of(a, rep["figures"]):
-            out.append(f"\n![{_caption(f)}]({f})\n")
-            out.append(f"*Figure: {_caption(f)}*\n")
+            cap = _md_text(_caption(f, a["type"]))
+            out.append(f"\n![{cap}](<{f}>)\n")
+            out.append(f"*Figure: {cap}*\n")
     out.append("\n## Appendix\n")
     out.extend(appendix)
     p = rep["provenance"]
@@ -647,75 +705,34 @@ def _markdown(rep: dict) -> str:
     return "\n".join(out)
 
 
-def _inline(text: str) -> str:
-    """Escaped text with the Markdown emphasis the report writes (**bold**, *italic*) as
-    HTML; nothing else is interpreted, so names with underscores stay as they are."""
-    out = html.escape(text)
-    out = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", out)
-    return re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"<em>\1</em>", out)
-
-
 #: tables longer than this are collapsed in the HTML (a click shows them)
 COLLAPSE_ROWS = 12
 
 
-def _html_table(rows: list[list[str]]) -> str:
-    head, *rest = rows
-    table = ("<table><tr>" + "".join(f"<th>{c}</th>" for c in head) + "</tr>"
-             + "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rest)
-             + "</table>")
-    if len(rest) > COLLAPSE_ROWS:
-        return f"<details><summary>{len(rest)} rows (show)</summary>{table}</details>"
-    return table
+def _collapse(match: re.Match) -> str:
+    rows = match.group(0).count("<tr>") - 1  # the header row
+    if rows > COLLAPSE_ROWS:
+        return f"<details><summary>{rows} rows (show)</summary>{match.group(0)}</details>"
+    return match.group(0)
 
 
 def _html(md: str, rep: dict) -> str:
-    """A self-contained page: the Markdown's text, tables, lists and figures as HTML."""
-    body, in_table, rows, in_list = [], False, [], False
-    for line in md.splitlines():
-        if line.startswith("|"):
-            if set(line.replace("|", "").strip()) <= {"-"}:
-                continue
-            cells = [c.strip() for c in line.strip("|").replace("\\|", "\x00").split("|")]
-            rows.append([html.escape(html.unescape(c.replace("\x00", "|"))) for c in cells])
-            in_table = True
-            continue
-        if in_table:
-            body.append(_html_table(rows))
-            rows, in_table = [], False
-        line = html.unescape(line)  # the Markdown escaped it; escape once, for HTML, below
-        if in_list and not line.startswith("- "):
-            body.append("</ul>")
-            in_list = False
-        if line.startswith("#"):
-            n = len(line) - len(line.lstrip("#"))
-            title = line[n:].strip()
-            slug = re.sub(r"[^0-9a-z]+", "-", title.lower()).strip("-")
-            body.append(f'<h{n} id="{slug}">{html.escape(title)}</h{n}>')
-        elif line.startswith("!["):
-            src = line[line.index("(") + 1: line.rindex(")")]
-            alt = line[2: line.index("]")]
-            body.append(f'<figure><img src="{html.escape(src)}" alt="{html.escape(alt)}" '
-                        f'style="max-width:100%">')
-        elif line.startswith("*Figure: "):
-            body.append(f"<figcaption>{_inline(line.strip('*'))}</figcaption></figure>")
-        elif line.startswith("- "):
-            if not in_list:
-                body.append("<ul>")
-                in_list = True
-            body.append(f"<li>{_inline(line[2:])}</li>")
-        elif line.strip():
-            body.append(f"<p>{_inline(line)}</p>")
-    if in_list:
-        body.append("</ul>")
-    if in_table and rows:
-        body.append(_html_table(rows))
+    """A self-contained page: the Markdown rendered by markdown-it-py (CommonMark with
+    tables; raw HTML in the Markdown is shown as text, never interpreted), long tables
+    collapsed."""
+    from markdown_it import MarkdownIt
+
+    body = MarkdownIt("commonmark", {"html": False}).enable("table").render(md)
+    body = re.sub(r"<table>.*?</table>", _collapse, body, flags=re.S)
+    body = re.sub(r"<h(\d)>(.*?)</h\1>", lambda m: '<h{0} id="{1}">{2}</h{0}>'.format(
+        m.group(1), re.sub(r"[^0-9a-z]+", "-", html.unescape(m.group(2)).lower()).strip("-"),
+        m.group(2)), body)  # anchors a reader can link to
     digest = hashlib.sha256(json.dumps(rep, sort_keys=True).encode()).hexdigest()[:16]
     style = ("body{font-family:sans-serif;max-width:1000px;margin:auto;line-height:1.4}"
              "table{border-collapse:collapse;font-size:12px;margin:6px 0}"
              "td,th{border:1px solid #ccc;padding:2px 6px}th{background:#f3f3f3}"
-             "figure{margin:12px 0}figcaption{font-size:13px;color:#444}"
+             "img{max-width:100%}"
              "h2{border-bottom:1px solid #ccc;margin-top:28px}")
     return (f"<!doctype html><html><head><meta charset='utf-8'><title>hapticlab report</title>"
-            f"<style>{style}</style></head><body>{''.join(body)}<p><small>report digest "
+            f"<style>{style}</style></head><body>{body}<p><small>report digest "
             f"{digest}</small></p></body></html>")

@@ -124,6 +124,19 @@ def is_canonical(path: str | Path) -> bool:
     return not raw.startswith(b"\xef\xbb\xbf") and b"\r" not in raw
 
 
+def _kind(path: Path) -> str:
+    """What kind of file ``path`` is, in words (for an error message)."""
+    import stat
+
+    mode = path.stat().st_mode
+    for test, name in ((stat.S_ISFIFO, "a named pipe"), (stat.S_ISDIR, "a directory"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
 def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
     """Rows of trials.tsv (dicts of text), and a torn last line if the writer was killed
     mid-line.
@@ -140,6 +153,9 @@ def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
     path = Path(path)
     if not path.exists():
         return [], None
+    if not path.is_file():  # a FIFO or a device would block the read for ever
+        raise TrialsFileError(f"{path}: not a regular file ({_kind(path)}); a session's "
+                              "trials.tsv is a plain file — copy its contents into one")
     raw = _text(path.read_bytes())
     if not raw:
         return [], None
@@ -198,6 +214,8 @@ def read_meta(path: str | Path) -> dict:
         Naming the file and what is wrong (missing, not JSON, a missing key).
     """
     path = Path(path)
+    if path.exists() and not path.is_file():
+        raise SessionMetaError(f"{path}: not a regular file ({_kind(path)})")
     try:
         meta = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:

@@ -1071,6 +1071,8 @@ def _reml_intercept(y: np.ndarray, X: np.ndarray, g: np.ndarray) -> dict:
     res = optimize.minimize_scalar(crit, bounds=(lo, hi), method="bounded",
                                    options={"xatol": 1e-12 * max(hi, 1.0)})
     theta = float(res.x) if res.fun <= vals[k] else float(grid[k])
+    if vals[0] <= crit(theta) + 1e-12 * abs(vals[0]):
+        theta = 0.0  # the boundary: no participant variance (lme4: a singular fit, SD 0)
     gamma = theta * theta
     A, beta, rss = parts(gamma)
     var_e = rss / (n - p)

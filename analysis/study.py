@@ -220,8 +220,9 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
     pw["dz_ci_high"] = [c[1] for c in cis]
     # the rank-based companions for ordinal ratings (report says where they agree)
     try:
-        ordinal = {"friedman": friedman(d, dv, within, subject),
-                   "wilcoxon": pairwise_wilcoxon(d, dv, within, subject, "holm")}
+        wx = pairwise_wilcoxon(d, dv, within, subject, "holm")
+        ordinal = {"friedman": friedman(d, dv, within, subject), "wilcoxon": wx,
+                   "wilcoxon_floor": wx.attrs["p_floor"]}
     except StatsError as exc:
         ordinal = f"not computed: {exc}"
     models = {}  # trial-level models: keep participants with missing cells

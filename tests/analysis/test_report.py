@@ -179,9 +179,9 @@ def _chromium_shot(page, png, height=1200):
 
 def test_report_html_is_valid_and_reads_in_a_browser(study, tmp_path, artifacts):
     """report.html parsed strictly (every tag closed, no Markdown syntax leaking into the
-    text), the same sections as report.md, and rendered by headless chromium: the first
-    screen and the realism section are saved to tests/artifacts/screens/ (docs/screens/
-    via `make screens`) and are not blank."""
+    text, every figure shown and found), the same sections as report.md, and rendered
+    by headless chromium: the first screen and the realism section are saved to
+    tests/artifacts/screens/ (docs/screens/ via `make screens`) and are not blank."""
     import re
     from html.parser import HTMLParser
 
@@ -197,11 +197,17 @@ def test_report_html_is_valid_and_reads_in_a_browser(study, tmp_path, artifacts)
 
         def __init__(self):
             super().__init__()
-            self.stack, self.words, self.h2 = [], [], []
+            self.stack, self.words, self.h2, self.images = [], [], [], []
 
         def handle_starttag(self, tag, attrs):
+            if tag == "img":
+                self.images.append(dict(attrs)["src"])
             if tag not in self.VOID:
                 self.stack.append(tag)
+
+        def handle_startendtag(self, tag, attrs):  # <img … />: a void element, closed
+            assert tag in self.VOID, tag
+            self.handle_starttag(tag, attrs)
 
         def handle_endtag(self, tag):
             assert self.stack and self.stack[-1] == tag, (tag, self.stack[-5:])
@@ -216,6 +222,10 @@ def test_report_html_is_valid_and_reads_in_a_browser(study, tmp_path, artifacts)
     p.feed(text)
     p.close()
     assert p.stack == []
+    # every figure the report made is shown, and every image shown is a file beside it
+    # (a caption with parentheses once cut the path of two of eight)
+    pngs = sorted(f.name for f in (tmp_path / "r").glob("*.png"))
+    assert len(pngs) >= 8 and sorted(p.images) == pngs
     body = " ".join(p.words)
     for leak in ("**", "| ---", "_none_", "![", "\\|"):
         assert leak not in body, leak

@@ -1,0 +1,103 @@
+"""Numbers that say what is true at the edges: p on the right side of α, bounds instead of
+an underflowed 0, statistics that do not move when every rating is shifted or scaled,
+files that cannot hang the loader."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import analysis as A
+from analysis.report import _p, _p_bounds, _p_digits
+from analysis.session_format import TrialsFileError, read_trials
+from analysis.stats import mixed_oneway
+
+
+@pytest.mark.parametrize("p, text", [
+    (0.0496, "p = .0496"),   # rounds to .050 at 3 decimals: one more shows the side
+    (0.0537, "p = .054"),    # not ".05"
+    (0.045, "p = .045"),
+    (0.05, "p = .050"),
+    (0.0499999, "p = .0499999"),
+    (0.12, "p = .12"),
+    (0.0004, "p < .001"),
+    (0.0, "p < .001")])
+def test_a_p_value_shows_which_side_of_alpha_it_lies(p, text):
+    assert _p(p) == text
+    assert (float("0" + _p_digits(p)) < 0.05) == (p < 0.05) or p < 0.001
+
+
+def test_an_underflowed_p_is_a_bound_in_report_json():
+    rep = {"mixed": [{"chi2": 2000.0, "p_unc": 0.0}, {"chi2": 3.0, "p_unc": 0.08}],
+           "anova": {"p": 1e-320, "F": 0.0}}
+    out = _p_bounds(rep)
+    assert out["mixed"][0]["p_unc"] == "< 2.3e-308" and out["mixed"][1]["p_unc"] == 0.08
+    assert out["anova"] == {"p": "< 2.3e-308", "F": 0.0}  # only p-values become bounds
+
+
+def test_a_fifo_for_trials_tsv_is_refused_by_name(tmp_path):
+    fifo = tmp_path / "trials.tsv"
+    os.mkfifo(fifo)
+    with pytest.raises(TrialsFileError, match="trials.tsv: not a regular file .a named pipe"):
+        read_trials(fifo)  # before: blocked for ever waiting for a writer
+
+
+def _study(seed: int, n: int = 8, k: int = 4, reps: int = 3) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    rows = [(f"P{p}", f"s{s}", int(rng.integers(1, 8)))
+            for p in range(n) for s in range(k) for _ in range(reps)]
+    return pd.DataFrame(rows, columns=["participant", "sample", "rating"])
+
+
+def _stats(d: pd.DataFrame) -> dict[str, np.ndarray]:
+    args = (d, "rating", "sample", "participant")
+    out = {}
+    pw = A.pairwise_ttests(*args)
+    out["t"], out["p_t"] = pw["t"].to_numpy(), pw["p_unc"].to_numpy()
+    try:
+        wx = A.pairwise_wilcoxon(*args)
+        out["V"], out["p_w"] = wx["V"].to_numpy(), wx["p_unc"].to_numpy()
+        out["Q"] = A.friedman(*args)["Q"].to_numpy()
+    except A.StatsError:
+        pass
+    aov = A.rm_anova(*args)
+    out["F"], out["eps"] = aov["F"].to_numpy(), aov["eps_gg"].to_numpy()
+    mx = mixed_oneway(*args)
+    out["chi2"] = mx["chi2"].to_numpy()
+    out["z"] = A.zscore_by_subject(d, "rating", "participant").to_numpy()
+    return out
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1),
+       shift=st.sampled_from([1e12, -1e6, 3.0, 2.0 ** 40]),
+       scale=st.sampled_from([1e-6, 7.0, 1e9, 0.1]))
+def test_every_statistic_ignores_a_shift_and_a_scale_of_the_ratings(seed, shift, scale):
+    """Ratings shifted by a constant (exactly, as integers are) or multiplied by a positive
+    one give the same statistics, to 1e-9 (the REML fit: 1e-6, its search's precision).
+    A shift of 1e12 once made every rating 'the same' (the tolerance followed the
+    magnitude) and left 1e-4 of rounding in the cell means."""
+    d = _study(seed)
+    base = _stats(d)
+    for moved in (d.assign(rating=d["rating"] + shift), d.assign(rating=d["rating"] * scale)):
+        got = _stats(moved)
+        assert got.keys() == base.keys()
+        for key, ref in base.items():
+            rel = 1e-6 if key == "chi2" else 1e-9
+            np.testing.assert_allclose(got[key], ref, rtol=rel, atol=1e-12, err_msg=key)
+
+
+def test_no_participant_variance_is_an_sd_of_zero():
+    """Participants who agree exactly (no offsets): REML's optimum is on the boundary, and
+    the SD is 0, as lme4 reports it (a singular fit), not 5e-08."""
+    rng = np.random.default_rng(4)
+    rows = [(f"P{p}", s, float(s == "b") + rng.normal(0, 1))
+            for p in range(6) for s in "abc" for _ in range(4)]
+    d = pd.DataFrame(rows, columns=["participant", "sample", "rating"])
+    d["rating"] -= d.groupby("participant")["rating"].transform("mean")  # no offsets at all
+    assert mixed_oneway(d, "rating", "sample", "participant")["sd_subject"].iloc[0] == 0.0
