@@ -16,7 +16,7 @@ tidy DataFrame out::
 ``analysis.datasets`` holds a small committed example (the docstrings' examples run on it).
 """
 
-from . import datasets
+from . import datasets, ordinal
 from .load import LoadError, load_sessions, select_sessions, tap_velocities
 from .stats import (
     StatsError,
@@ -33,7 +33,8 @@ from .stats import (
     zscore_by_subject,
 )
 
-__all__ = ["LoadError", "StatsError", "datasets", "dz_ci", "friedman", "identification_scores",
+__all__ = ["LoadError", "StatsError", "datasets", "dz_ci", "ordinal", "friedman",
+           "identification_scores",
            "load_sessions", "np2_ci", "p_adjust", "pairwise_ttests", "pairwise_wilcoxon",
            "participant_identification_test", "preflight", "rm_anova", "select_sessions",
            "tap_velocities", "zscore_by_subject"]

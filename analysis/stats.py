@@ -19,7 +19,7 @@ from scipy import special, stats
 __all__ = ["preflight", "zscore_by_subject", "pairwise_ttests", "rm_anova",
            "identification_scores", "cell_means", "wide_means", "p_adjust", "StatsError",
            "friedman", "pairwise_wilcoxon", "dz_ci", "participant_identification_test",
-           "mixed_oneway", "ordinal_oneway", "np2_ci"]
+           "mixed_oneway", "np2_ci", "signed_rank_test", "tie_groups"]
 
 PADJUST = ("none", "bonf", "holm", "fdr_bh")
 #: Values closer than this fraction of the data's spread (largest minus smallest) are
@@ -1171,62 +1171,3 @@ def mixed_oneway(data: pd.DataFrame, dv: str, within: str, subject: str,
                       "ci_high": (float(bk) + z * float(sk)) * scale + shift})
     out.attrs["fixed"] = fixed
     return out
-
-
-def ordinal_oneway(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.DataFrame:
-    """Cumulative-link (proportional-odds, logit) model of trial-level ratings on the
-    levels of ``within``, with subjects as fixed effects (statsmodels ``OrderedModel``,
-    which has no random effects), and the likelihood-ratio test of ``within``.
-
-    Returns
-    -------
-    DataFrame, one row
-        ``Source``, ``n_subjects``, ``n_obs``, ``categories`` (rating values used),
-        ``lr`` (likelihood-ratio χ²), ``dof``, ``p_unc``, ``converged``.
-
-    Raises
-    ------
-    StatsError
-        Fewer than 3 rating values used, too few subjects or levels, or a fit that fails
-        (the message says why; the report prints it instead of a number).
-    """
-    import warnings
-
-    from statsmodels.miscmodels.ordinal_model import OrderedModel
-
-    _check_columns(data, [dv, within, subject])
-    _check_values(data, dv, [within, subject])
-    d = data[[dv, within, subject]].copy()
-    d[dv] = pd.to_numeric(d[dv], errors="coerce")
-    d = d.dropna()
-    cats = sorted(d[dv].unique())
-    if len(cats) < 3:
-        raise StatsError(f"an ordinal model needs at least 3 distinct values of {dv}; the "
-                         f"data use {len(cats)}")
-    if d[subject].nunique() < 2 or d[within].nunique() < 2:
-        raise StatsError(f"an ordinal model needs at least 2 subjects and 2 levels of "
-                         f"{within!r}")
-    y = pd.Categorical(d[dv], categories=cats, ordered=True)
-    subj = pd.get_dummies(d[subject].astype(str), prefix="s", drop_first=True, dtype=float)
-    lev = pd.get_dummies(d[within].astype(str), prefix="x", drop_first=True, dtype=float)
-
-    def fit(X):
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                r = OrderedModel(y, X, distr="logit").fit(method="bfgs", disp=False,
-                                                           maxiter=2000)
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                raise StatsError(f"the ordinal model could not be fitted: {exc}") from None
-        ok = bool(r.mle_retvals.get("converged", False)) and not any(
-            "converge" in str(w.message).lower() for w in caught)
-        return r, ok
-
-    full, ok1 = fit(pd.concat([lev, subj], axis=1).to_numpy())
-    reduced, ok2 = fit(subj.to_numpy())
-    lr = max(0.0, 2.0 * float(full.llf - reduced.llf))
-    return pd.DataFrame([{"Source": within, "n_subjects": int(d[subject].nunique()),
-                          "n_obs": int(len(d)), "categories": len(cats), "lr": lr,
-                          "dof": int(lev.shape[1]),
-                          "p_unc": float(special.chdtrc(lev.shape[1], lr)),
-                          "converged": ok1 and ok2}])

@@ -20,6 +20,7 @@ import pandas as pd
 from scipy import special, stats
 
 from .load import tap_velocities
+from .ordinal import ordinal_mixed
 from .power import power_table, variance_components
 from .stats import (
     StatsError,
@@ -27,7 +28,6 @@ from .stats import (
     friedman,
     identification_scores,
     mixed_oneway,
-    ordinal_oneway,
     p_adjust,
     pairwise_ttests,
     pairwise_wilcoxon,
@@ -226,7 +226,7 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
     except StatsError as exc:
         ordinal = f"not computed: {exc}"
     models = {}  # trial-level models: keep participants with missing cells
-    for name, fn in (("mixed", mixed_oneway), ("ordinal", ordinal_oneway)):
+    for name, fn in (("mixed", mixed_oneway), ("ordinal", ordinal_mixed)):
         try:
             models[name] = fn(d, dv, within, subject)
         except StatsError as exc:
@@ -238,6 +238,8 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
             models["mixed_group"] = mixed_oneway(d, dv, within, subject, between="group")
         except StatsError as exc:
             models["mixed_group"] = f"not computed: {exc}"
+    estimates = {name: {k: m.attrs[k] for k in ("fixed", "thresholds") if k in m.attrs}
+                 for name, m in models.items() if not isinstance(m, str)}
     anova = rm_anova(d, dv, within, subject)
     per_subject = (d.groupby([subject, within], observed=True)[dv].mean()
                    .unstack(within).reset_index())
@@ -261,7 +263,7 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
         r["letters"] = letters[r["sample"]]
     return {"samples": samples, "pairwise": pw, "anova": anova, "session_length": length,
             "groups": groups, "letters": letters, "missing": missing, "ordinal": ordinal,
-            "models": models,
+            "models": models, "model_estimates": estimates,
             "excluded_subjects": holm.attrs.get("excluded_subjects", []),
             "per_subject": per_subject,
             "preflight": pre, "constant_pairs": holm.attrs.get("constant_pairs", []),

@@ -6,7 +6,10 @@ is installed and checks that the committed values still hold. Tolerances: 1e-9 r
 for closed forms (t, Wilcoxon, Friedman, ANOVA and their p; p below 1e-300 compared on the
 log scale), 1e-5 relative for the REML fits: hapticlab's profiled search stops at 1e-12
 in the variance ratio, lme4's bobyqa at its default tolerance (the largest differences
-measured: χ² 4e-7, SDs 6e-8, p 3e-6).
+measured: χ² 4e-7, SDs 6e-8, p 3e-6); for the ordinal mixed model, whose likelihood
+is a quadrature (20 adaptive nodes on both sides) maximised by L-BFGS-B here and by
+clmm's Newton there, 1e-4 × max(|value|, 1) (measured: log-likelihood and LR 4e-11
+relative, coefficients and SEs 2.2e-5 logit units at most).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import pandas as pd
 import pytest
 
 import analysis as A
+from analysis.ordinal import ordinal_mixed
 from analysis.stats import mixed_oneway
 from analysis.study import rating_factorial
 
@@ -30,6 +34,7 @@ import studies  # noqa: E402
 REF = pd.read_csv(R_DIR / "references.csv")
 CLOSED = 1e-9
 FITTED = 1e-5
+ORDINAL = 1e-4
 
 
 def _ours_oneway(d: pd.DataFrame) -> dict[tuple[str, str, str], float]:
@@ -57,6 +62,16 @@ def _ours_oneway(d: pd.DataFrame) -> dict[tuple[str, str, str], float]:
     out.update({("mixed", "sample", "chi2"): mx.chi2, ("mixed", "sample", "p"): mx.p_unc,
                 ("mixed", "sample", "sd_subject"): mx.sd_subject,
                 ("mixed", "sample", "sd_resid"): mx.sd_resid})
+    om = ordinal_mixed(*args)
+    out.update({("ordinal", "sample", k): float(om[k].iloc[0])
+                for k in ("lr", "loglik", "sd_subject")})
+    for t in om.attrs["thresholds"]:
+        out[("ordinal_coef", t["between"], "estimate")] = t["estimate"]
+        out[("ordinal_coef", t["between"], "se")] = t["se"]
+    for f in om.attrs["fixed"]:
+        key = f["term"].split("[", 1)[1].rstrip("]")
+        out[("ordinal_coef", key, "estimate")] = f["estimate"]
+        out[("ordinal_coef", key, "se")] = f["se"]
     if d["group"].fillna("").astype(str).str.len().gt(0).any():
         names = {"sample": "sample", "group": "group", "sample * group": "sample:group"}
         for r in mixed_oneway(*args, between="group").itertuples():
@@ -92,8 +107,12 @@ def test_every_statistic_matches_r(study):
     for r in ref.itertuples():
         key = (r.analysis, r.term, r.stat)
         assert key in ours, f"{study}: hapticlab has no {key} (R: {r.call})"
-        rel = FITTED if r.analysis.startswith("mixed") else CLOSED
-        if not _close(float(ours[key]), float(r.value), rel):
+        if r.analysis.startswith("ordinal"):  # logit units: relative, floor of 1
+            ok = abs(float(ours[key]) - float(r.value)) <= ORDINAL * max(abs(r.value), 1.0)
+        else:
+            ok = _close(float(ours[key]), float(r.value),
+                        FITTED if r.analysis.startswith("mixed") else CLOSED)
+        if not ok:
             wrong.append(f"{key}: ours {ours[key]!r}, R {r.value!r} ({r.call})")
     n_ours = sum(1 for k in ours if k[0] in set(ref["analysis"]))
     assert not wrong, f"{len(wrong)} of {len(ref)} differ:\n" + "\n".join(wrong[:20])

@@ -277,27 +277,28 @@ def test_identification_with_each_participant_as_the_unit():
 def test_trial_level_models_keep_participants_with_missing_cells():
     """The mixed model's Wald χ² equals statsmodels' own wald_test_terms on the unscaled
     data (174.2 on the example; ours fits centred, scaled ratings); both models keep the
-    participant who lacks a cell, which the ANOVA drops; the ordinal model's LR is ≥ 0 and
-    does not change when the samples are renamed."""
+    participant who lacks a cell, which the ANOVA drops; the ordinal mixed model's LR is
+    ≥ 0 and does not change when the samples are renamed."""
     import statsmodels.formula.api as smf
 
-    from analysis.stats import mixed_oneway, ordinal_oneway
+    from analysis.ordinal import ordinal_mixed
+    from analysis.stats import mixed_oneway
 
     df = A.datasets.read_dataset("ratings")
     ours = mixed_oneway(df, "rating", "sample", "participant").iloc[0]
-    ref = smf.mixedlm("rating ~ C(sample)", df, groups=df["participant"]).fit(reml=True)
+    ref = smf.mixedlm("rating ~ C(sample, Sum)", df, groups=df["participant"]).fit(reml=True)
     assert ours["chi2"] == pytest.approx(float(ref.wald_test_terms().table.loc[
-        "C(sample)", "statistic"]), rel=1e-4)
+        "C(sample, Sum)", "statistic"]), rel=1e-3)
     gap = df[~((df["participant"] == df["participant"].iloc[0]) & (df["sample"] == "wood"))]
     assert A.rm_anova(gap, "rating", "sample", "participant")["n"].iloc[0] == 5
     assert mixed_oneway(gap, "rating", "sample", "participant")["n_subjects"].iloc[0] == 6
-    o = ordinal_oneway(gap, "rating", "sample", "participant").iloc[0]
+    o = ordinal_mixed(gap, "rating", "sample", "participant").iloc[0]
     assert o["n_subjects"] == 6 and o["lr"] >= 0 and o["converged"]
     renamed = gap.assign(sample=gap["sample"].map(lambda s: f"z_{s}"))
-    assert ordinal_oneway(renamed, "rating", "sample", "participant")["lr"].iloc[0] == \
+    assert ordinal_mixed(renamed, "rating", "sample", "participant")["lr"].iloc[0] == \
         pytest.approx(o["lr"], rel=1e-4)
     with pytest.raises(StatsError, match="at least 3 distinct values"):
-        ordinal_oneway(_long(np.tile([1.0, 2.0], (4, 2))), "rating", "sample", "participant")
+        ordinal_mixed(_long(np.tile([1.0, 2.0], (4, 2))), "rating", "sample", "participant")
 
 
 def test_factorial_z_scores_per_material_as_the_paper():

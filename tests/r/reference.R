@@ -6,7 +6,7 @@
 # KIND is "oneway" (one within factor, sample; optional groups) or "factorial" (2x2x2
 # within each block, ratings z-scored per participant and block with divisor n).
 # Each output row carries the R call that produced its value.
-suppressMessages({library(afex); library(lme4); library(car)})
+suppressMessages({library(afex); library(lme4); library(car); library(ordinal)})
 options(contrasts = c("contr.sum", "contr.poly"), digits = 17)
 a <- commandArgs(trailingOnly = TRUE)
 d <- read.csv(a[1], stringsAsFactors = FALSE, na.strings = "")
@@ -82,6 +82,21 @@ if (kind == "oneway") {
   vc <- as.data.frame(VarCorr(m))
   add("mixed", "sample", "sd_subject", vc$sdcor[vc$grp == "participant"], "VarCorr(lmer(...))")
   add("mixed", "sample", "sd_resid", vc$sdcor[vc$grp == "Residual"], "VarCorr(lmer(...))")
+  d$r <- factor(d$rating, ordered = TRUE)
+  tr <- list(sample = "contr.treatment")
+  o1 <- clmm(r ~ sample + (1 | participant), data = d, nAGQ = 20, contrasts = tr)
+  o0 <- clmm(r ~ 1 + (1 | participant), data = d, nAGQ = 20)
+  call <- "ordinal::clmm(ordered(rating) ~ sample + (1 | participant), nAGQ = 20)"
+  add("ordinal", "sample", "lr", 2 * (as.numeric(logLik(o1)) - as.numeric(logLik(o0))),
+      paste("2 x logLik difference of", call, "and of ~ 1 + (1 | participant)"))
+  add("ordinal", "sample", "loglik", as.numeric(logLik(o1)), call)
+  add("ordinal", "sample", "sd_subject", sqrt(VarCorr(o1)$participant[1]), call)
+  cf <- coef(summary(o1))
+  for (t in rownames(cf)) {
+    key <- sub("^sample", "", t)
+    add("ordinal_coef", key, "estimate", cf[t, "Estimate"], paste("coef(summary(", call, "))"))
+    add("ordinal_coef", key, "se", cf[t, "Std. Error"], paste("coef(summary(", call, "))"))
+  }
   if (length(unique(na.omit(d$group))) >= 2) {
     d$group <- factor(d$group)
     m <- lmer(rating ~ sample * group + (1 | participant), data = d, REML = TRUE)
