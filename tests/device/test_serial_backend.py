@@ -19,7 +19,8 @@ from ..conftest import wait_for as _wait_for
 FIRM = Scene("firm", spring=680.0)
 
 HOST = r"""
-import sys
+import faulthandler, signal, sys
+faulthandler.register(signal.SIGUSR1, all_threads=True)  # the test asks where it hangs
 from app.guards import install_signal_guards
 from device import Scene, open_device
 install_signal_guards()  # the application's guards: SIGTERM unwinds, closing the device
@@ -135,12 +136,23 @@ def test_watchdog_zeroes_output_when_the_host_is_killed(own_emulator):
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_host_signals_zero_the_output(own_emulator, sig):
+    # The host starts as a foreground process at a terminal does, with SIGINT's default
+    # action: a shell without job control starts background jobs (`make test &`, CI
+    # runners) with SIGINT ignored, which the child would inherit and Python keep.
     host = subprocess.Popen([sys.executable, "-c", HOST, own_emulator.port],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert host.stdout.readline().strip() == "started"
     time.sleep(0.3)
     host.send_signal(sig)
-    host.wait(timeout=20)
+    try:
+        host.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        host.send_signal(signal.SIGUSR1)  # every thread's stack, then stop it
+        time.sleep(1.0)
+        host.kill()
+        pytest.fail(f"the host did not exit within 20 s of {sig.name}; its threads:\n"
+                    + host.communicate()[1][-6000:])
     _wait_for(lambda: "host: ZERO" in own_emulator.stderr(), what="ZERO from the host")
     assert "FAULT watchdog" not in own_emulator.stderr()  # zeroed by the host, not the watchdog
 
