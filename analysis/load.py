@@ -263,8 +263,8 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         The rows of the included sessions, and the selection table: the session table's
         columns plus ``included`` (bool) and ``reason`` (why it is out, or how it is in).
         A participant with several sessions of one design is analysed as the design
-        declares (``sessions``: ``first`` keeps the earliest, ``all`` pools them as
-        repetitions); a session whose participant, protocol, seed and rows equal another's
+        declares (``sessions``: ``first`` keeps the earliest complete one — an interrupted
+        session before it is left out, and named — ``all`` pools them as repetitions); a session whose participant, protocol, seed and rows equal another's
         (a backup copy) is left out as a duplicate.
 
     Examples
@@ -339,12 +339,18 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         if len(g) < 2:
             continue
         policy = (designs.get(key) or {}).get("sessions", "first")
-        if policy == "first":
-            first = g.index[0]
-            for i in g.index[1:]:
+        if policy == "first":  # the first complete one; the first of any only if none is
+            done = [i for i in g.index if g.loc[i, "status"] == "complete"]
+            first = done[0] if done else g.index[0]
+            what = "first complete session" if done else "first session (none is complete)"
+            for i in g.index:
+                if i == first:
+                    continue
+                when = "a later" if g.index.get_loc(i) > g.index.get_loc(first) else \
+                    f"an earlier {g.loc[i, 'status'] or 'unfinished'}"
                 table.loc[i, ["included", "reason"]] = (
-                    False, f"a later session of {g.loc[i, 'participant']} (the protocol analyses "
-                           f"each participant's first session: {table.loc[first, 'session_dir']})")
+                    False, f"{when} session of {g.loc[i, 'participant']} (the protocol analyses "
+                           f"each participant's {what}: {table.loc[first, 'session_dir']})")
         else:
             for i in g.index:
                 table.loc[i, "reason"] = (f"one of {len(g)} sessions of this participant, "

@@ -56,13 +56,29 @@ def test_default_is_people_only_with_every_exclusion_named(mixed):
     assert inc == {"sub-P01/ses-1", "sub-P02/ses-1"}
     reasons = {k[0]: v for k, v in got.items()}
     assert "later session of P01" in reasons["sub-P01/ses-2"]
-    assert "first session" in reasons["sub-P01/ses-2"]
+    assert "first complete session" in reasons["sub-P01/ses-2"]
     assert reasons["sub-P03/ses-1"].startswith("status interrupted")
     assert reasons["sub-D01/ses-1"] == "dry-run session (selected: human)"
     assert reasons["sub-S01/ses-1"] == "simulated session (selected: human)"
     assert reasons["backup/sub-P02/ses-1"].startswith("duplicate of ")
     assert reasons["sub-P01/ses-1"] == "kind human (the default: people's sessions exist)"
     assert set(sel["participant"]) == {"P01", "P02"}
+
+
+def test_first_session_means_the_first_complete_one(mixed, tmp_path):
+    """With --status all, a participant whose first session was interrupted and who then
+    completed a second is analysed on the complete one (it once kept the interrupted)."""
+    data = tmp_path / "data"
+    shutil.copytree(mixed, data)
+    _as_person(data / "sub-P01" / "ses-1", status="interrupted")
+    sel, table = select_sessions(load_sessions(data), status="all")
+    got = {Path(r.session_dir).relative_to(data).as_posix(): (r.included, r.reason)
+           for r in table.itertuples()}
+    assert got["sub-P01/ses-2"][0] and not got["sub-P01/ses-1"][0]
+    assert got["sub-P01/ses-1"][1].startswith("an earlier interrupted session of P01")
+    assert "first complete session" in got["sub-P01/ses-1"][1]
+    kept = {Path(x).name for x in sel.loc[sel["participant"] == "P01", "session_dir"]}
+    assert kept == {"ses-2"}
 
 
 def test_filters(mixed):
