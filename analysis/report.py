@@ -159,10 +159,14 @@ def methods_text(a: dict, design: dict) -> str:
         first = res[groups[0]]
         shape = " × ".join(str(len(first["sets"][f].unique())) for f in factors)
         norm = {"zscore": " Ratings were z-scored within each participant over the phase "
-                          "(mean 0, SD 1; a participant with constant ratings gets z = 0).",
+                          "(mean 0, SD with divisor n 1; a participant who gave every set "
+                          "the same rating has no z-scores and is left out, listed under "
+                          "exclusions).",
                 "zscore_block": " Ratings were z-scored within each participant and block "
-                                "(each material's sets: mean 0, SD 1, as the reality-based "
-                                "models study; constant ratings get z = 0)."}.get(
+                                "(each material's sets: mean 0, SD with divisor n 1, as the "
+                                "reality-based models study; a participant who rated every "
+                                "set of a block the same has no z-scores there and is left "
+                                "out of that block's ANOVA, listed under exclusions)."}.get(
                                     phase.get("normalize") or "none", "")
         per = f" Per block ({', '.join(groups)}), a" if phase.get("by") else " A"
         n = max(v["n_subjects"] for v in res.values())

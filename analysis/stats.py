@@ -274,7 +274,8 @@ def _complete(data, dv, within, subject) -> pd.DataFrame:
 
 # --------------------------------------------------------------------- z-scores
 def zscore_by_subject(data: pd.DataFrame, dv: str, subject: str) -> pd.Series:
-    """``dv`` normalised within each subject to mean 0 and SD 1 (population SD, ddof = 0).
+    """``dv`` normalised within each subject to mean 0 and SD 1 (the SD with divisor n,
+    ddof = 0).
 
     A subject who gave the same value everywhere has SD 0: their z-scores are 0 — they
     used no part of the scale to prefer anything — rather than NaN.

@@ -294,10 +294,20 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
         key = d[subject].astype(str) + "\x1f" + d["block"].astype(str)
         d["rating_z"] = zscore_by_subject(d.assign(_sb=key), dv, "_sb").to_numpy()
         y = "rating_z"
+    if y == "rating_z":  # rows whose normalisation unit has no spread
+        unit = [subject, "block"] if normalize == "zscore_block" else [subject]
+        rng = d.groupby(unit, observed=True)[dv].transform("max") - \
+            d.groupby(unit, observed=True)[dv].transform("min")
+        d["_flat"] = (rng <= 0).to_numpy()
     by_col = {"block": "block"}.get(by or "", None)
     out = {}
     groups = d.groupby(by_col, observed=True) if by_col else [("all", d)]
     for name, g in groups:
+        constant: list[str] = []
+        if y == "rating_z":  # z is 0/0 for a participant who rated every set the same
+            flat = g["_flat"].to_numpy(bool)
+            constant = sorted({str(s) for s in g.loc[flat, subject]})
+            g = g[~g[subject].astype(str).isin(constant)]
         anova = rm_anova(g, y, list(factors), subject)
         mains = anova[anova["Source"].isin(factors)]
         most = mains.sort_values(["p_unc", "F"], ascending=[True, False]).iloc[0]
@@ -322,10 +332,25 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
             "most_significant_p": float(most["p_unc"]),
             "best_set": {"sample": str(best["sample"]), "mean": float(best["mean"]),
                          **{f: str(best[f]) for f in factors}},
-            "sets": means, "preflight": preflight(g, y, list(factors), subject),
+            "sets": means, "preflight": _with_constant(preflight(g, y, list(factors), subject),
+                                                       constant, dv, name),
             "n_subjects": int(g[subject].nunique()),
             "simple_effects": simple_effects(g, y, list(factors), subject, anova)}
     return out
+
+
+def _with_constant(pre: pd.DataFrame, constant: list[str], dv: str, group) -> pd.DataFrame:
+    """The preflight table with a row for participants left out because their ratings in
+    the normalisation unit were all the same (their z-scores are undefined)."""
+    if not constant:
+        return pre
+    where = "this block" if group != "all" else "this phase"
+    row = {"check": "constant_ratings",
+           "detail": f"{len(constant)} participant(s) gave every set in {where} the same {dv}",
+           "policy": "excluded from this ANOVA: a z-score with SD 0 is undefined, and "
+                     "counting it as 0 would pull every effect toward 0",
+           "subjects_excluded": ",".join(constant), "n_excluded": len(constant)}
+    return pd.concat([pre, pd.DataFrame([row])], ignore_index=True)
 
 
 def simple_effects(data: pd.DataFrame, dv: str, factors: list[str], subject: str,

@@ -112,13 +112,16 @@ if (kind == "oneway") {
   for (x in f) d[[x]] <- factor(d[[x]], levels = c("low", "high"))
   for (b in unique(d$block)) {
     g <- d[d$block == b, ]
-    g$rating_z <- ave(g$rating, g$participant, FUN = function(x) {
-      s <- sqrt(mean((x - mean(x))^2)); if (s > 0) (x - mean(x)) / s else 0 * x })
+    # a participant who rated every set of the block the same has no z-scores: left out
+    flat <- ave(g$rating, g$participant, FUN = function(x) max(x) - min(x)) == 0
+    g <- droplevels(g[!flat, ])
+    g$rating_z <- ave(g$rating, g$participant, FUN = function(x)
+      (x - mean(x)) / sqrt(mean((x - mean(x))^2)))
     fit <- suppressWarnings(suppressMessages(
       aov_ez("participant", "rating_z", g, within = f, fun_aggregate = mean)))
     an <- anova(fit, correction = "none", es = "pes")
     call <- paste0("afex::aov_ez(\"participant\", \"rating_z\", block ", b,
-                   ", within = c(\"frequency\", \"decay\", \"slope\")); z = (x - mean) / sd with divisor n")
+                   ", within = c(\"frequency\", \"decay\", \"slope\")); z = (x - mean) / sd with divisor n; constant participants left out")
     for (t in rownames(an)) {
       key <- paste(b, gsub(":", " * ", t), sep = "|")
       add("factorial", key, "F", an[t, "F"], call)
