@@ -264,8 +264,9 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         columns plus ``included`` (bool) and ``reason`` (why it is out, or how it is in).
         A participant with several sessions of one design is analysed as the design
         declares (``sessions``: ``first`` keeps the earliest complete one — an interrupted
-        session before it is left out, and named — ``all`` pools them as repetitions); a session whose participant, protocol, seed and rows equal another's
-        (a backup copy) is left out as a duplicate.
+        session before it is left out, and named — ``all`` pools them as repetitions); a
+        session whose participant, protocol, seed and rows equal another's (a backup copy)
+        is left out as a duplicate.
 
     Examples
     --------
