@@ -19,6 +19,9 @@ Formats
 ``r``
     ``long.csv`` and ``load.R``, which reads it with every factor's levels in the order the
     protocol declares them.
+``spss``
+    The wide files and the long file as SPSS ``.sav`` (pyreadstat): variable labels from
+    the codebook, value labels for low/high factors and for ``correct``.
 
 Every format writes ``codebook.csv``: column, unit, meaning (and, for renamed columns, the
 original name).
@@ -30,6 +33,7 @@ import csv
 import re
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from .load import load_sessions, select_sessions
@@ -37,7 +41,7 @@ from .study import analysed_phases, phase_rows
 
 __all__ = ["export", "FORMATS", "LONG_COLUMNS"]
 
-FORMATS = ("long-csv", "wide-csv", "jasp", "r")
+FORMATS = ("long-csv", "wide-csv", "jasp", "r", "spss")
 
 #: column → (unit, meaning) of the long file.
 LONG_COLUMNS = {
@@ -47,11 +51,23 @@ LONG_COLUMNS = {
     "protocol": ("", "protocol name"),
     "phase": ("", "phase of the protocol"),
     "block": ("", "block (factorial material); empty when the phase has no blocks"),
-    "sample": ("", "sample id (a rendering or real sample; identification: the surfaces in "
-                   "order, joined by +)"),
+    "sample": ("", "sample id (a rendering or real sample; factorial sets are "
+                   "<material>-<code>, one letter per factor in the order frequency, decay, "
+                   "slope, L low and H high: rubber-LHL is low frequency, high decay, low "
+                   "slope; identification: the surfaces in order, joined by +)"),
     "repetition": ("", "1-based repetition of the sample within its phase"),
     "trial_index": ("", "1-based position of the attempt in the session"),
-    "rating": ("scale points", "the participant's rating on the protocol's scale"),
+    "rating": ("scale points", "the participant's rating on the protocol's scale: the "
+                               "dependent variable of the one-way analyses (ANOVA, t-tests, "
+                               "Wilcoxon, Friedman, mixed and ordinal models)"),
+    "rating_z": ("SD", "the rating z-scored within the participant (factorial: within "
+                       "participant and block), SD with divisor n: the dependent variable of "
+                       "the factorial ANOVA; empty where the participant gave one rating "
+                       "throughout (z undefined; the report leaves them out)"),
+    "frequency_hz": ("Hz", "factorial set: the vibration's frequency"),
+    "decay_per_s": ("1/s", "factorial set: the vibration's decay rate"),
+    "slope_per_s": ("1/s", "factorial set: the amplitude slope (peak acceleration per "
+                           "incoming speed)"),
     "scale": ("", "the rating scale, min-max"),
     "answer": ("", "identification: the names given to the surfaces, in order"),
     "correct": ("0/1", "identification: 1 when every surface was named right"),
@@ -59,7 +75,7 @@ LONG_COLUMNS = {
     "n_taps": ("", "contacts in the trial's window"),
     "mean_tap_velocity": ("m/s", "mean incoming speed of the trial's taps"),
     "peak_current": ("A", "largest commanded current in the window"),
-    "kind": ("", "session kind: real, dry-run or simulated"),
+    "kind": ("", "session kind: human (a person), dry-run or simulated"),
 }
 
 
@@ -83,6 +99,23 @@ def _analysed(data: pd.DataFrame) -> list[tuple[dict, dict, pd.DataFrame]]:
     return out
 
 
+def _z(rows: pd.DataFrame, phase: dict) -> pd.Series:
+    """The ratings z-scored within the participant (and block, for ``zscore_block``), SD
+    with divisor n; NaN where the unit has one rating throughout (undefined)."""
+    from .stats import zscore_by_subject
+
+    if "rating" not in rows or rows["rating"].isna().all():
+        return pd.Series(np.nan, index=rows.index)
+    unit = rows["participant"].astype(str)
+    if phase.get("normalize") == "zscore_block":
+        unit = unit + "\x1f" + rows["block"].astype(str)
+    r = rows.assign(_unit=unit.to_numpy())
+    z = zscore_by_subject(r, "rating", "_unit")
+    v = pd.to_numeric(r["rating"], errors="coerce")
+    flat = v.groupby(r["_unit"]).transform("max") == v.groupby(r["_unit"]).transform("min")
+    return z.where(~flat)
+
+
 def _long(parts) -> pd.DataFrame:
     frames = []
     for _design, phase, rows in parts:
@@ -92,10 +125,20 @@ def _long(parts) -> pd.DataFrame:
         v = f["tap_velocities"].fillna("").astype(str).str.split(";")
         f["mean_tap_velocity"] = [pd.to_numeric(pd.Series(x), errors="coerce").mean()
                                   if x != [""] else float("nan") for x in v]
+        f["rating_z"] = _z(f, phase)
+        params = {sid: (v or {}).get("params") or {}
+                  for sid, v in (_design.get("samples") or {}).items()}
+        for name, col in (("frequency", "frequency_hz"), ("decay", "decay_per_s"),
+                          ("slope", "slope_per_s")):
+            vals = f["sample"].map({sid: p.get(name) for sid, p in params.items()})
+            if vals.notna().any():
+                f[col] = pd.to_numeric(vals, errors="coerce").abs()
         cols = [c for c in LONG_COLUMNS if c in f.columns]
         cols += [c for c in factors if c in f.columns and c not in cols]
         frames.append(f[cols])
     out = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=[*LONG_COLUMNS])
+    if "group" in out and not out["group"].fillna("").astype(str).str.len().gt(0).any():
+        out = out.drop(columns="group")  # no participant has a group: no empty column
     return out.sort_values(["protocol", "phase", "participant", "session", "trial_index"],
                            kind="stable").reset_index(drop=True)
 
@@ -116,8 +159,15 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
              + sorted(present - set(phase.get("samples", [])), key=str)
              if cell == "sample" else sorted(present))
     w = w.reindex(columns=order)
-    groups = r.groupby("participant", observed=True)["group"].first()
-    w.insert(0, "group", groups.reindex(w.index).fillna(""))
+    normalized = dv == "rating" and phase.get("normalize") in ("zscore", "zscore_block")
+    if normalized:  # the factorial ANOVA's dependent variable, beside the raw means
+        z = r.assign(_z=_z(r, phase)).groupby(["participant", cell], observed=True)["_z"]
+        wz = z.mean().unstack(cell).reindex(columns=order)
+        wz.columns = [f"{c}_z" for c in order]
+        w = w.join(wz)
+    groups = r.groupby("participant", observed=True)["group"].first().fillna("").astype(str)
+    if groups.str.len().gt(0).any():
+        w.insert(0, "group", groups.reindex(w.index).fillna(""))
     w = w.reset_index()
     meaning = {"participant": ("", "participant id"),
                "group": ("", "participant group (between-subject factor); empty when none")}
@@ -132,8 +182,38 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
         unit = ("0/1" if dv == "correct" else
                 f"scale points ({scale['min']}–{scale['max']})" if scale else "scale points")
         meaning[new] = (unit, what + ("" if new == str(name) else f" (column {name})"))
+        if normalized:
+            zname = _safe(f"{name}_z") if safe else f"{name}_z"
+            rename[f"{c}_z"] = zname
+            meaning[zname] = ("SD", f"mean rating_z of sample {c}: the factorial ANOVA's "
+                                    "dependent variable (a repeated-measures ANOVA on a "
+                                    "block's _z columns gives the report's F and p)")
+    if "group" not in w.columns:
+        meaning.pop("group")
     w = w.rename(columns=rename)
     return w, meaning
+
+
+def _write_sav(path: Path, table: pd.DataFrame, meaning: dict[str, tuple[str, str]]) -> None:
+    """An SPSS file (pyreadstat) whose variable labels are the codebook's meanings (with
+    units) and whose 0/1 and low/high columns carry value labels."""
+    import pyreadstat
+
+    labels = {c: (f"{m} [{u}]" if u else m)[:255] for c, (u, m) in meaning.items()
+              if c in table.columns}
+    values: dict[str, dict] = {}
+    t = table.copy()
+    for c in t.columns:
+        col = t[c]
+        if c == "correct":
+            values[c] = {0: "wrong", 1: "all named right"}
+        elif (col.dtype == object or pd.api.types.is_string_dtype(col)) and \
+                set(col.dropna().astype(str)) - {""} == {"low", "high"}:
+            t[c] = col.map({"low": 1, "high": 2})  # anything else (empty) is missing
+            values[c] = {1: "low", 2: "high"}
+        elif col.dtype == bool:
+            t[c] = col.astype(int)
+    pyreadstat.write_sav(t, str(path), column_labels=labels, variable_value_labels=values)
 
 
 def _write_codebook(path: Path, entries: dict[str, tuple[str, str]], file: str) -> list[dict]:
@@ -184,12 +264,25 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
             written.append(p)
     else:
         for design, phase, rows in parts:
-            w, meaning = _wide(design, phase, rows, safe=fmt == "jasp")
-            name = f"wide_{_safe(design['protocol'])}_{_safe(phase['name'])}.csv"
+            w, meaning = _wide(design, phase, rows, safe=fmt in ("jasp", "spss"))
+            ext = "sav" if fmt == "spss" else "csv"
+            name = f"wide_{_safe(design['protocol'])}_{_safe(phase['name'])}.{ext}"
             p = out / name
-            w.to_csv(p, index=False)
+            if fmt == "spss":
+                _write_sav(p, w, meaning)
+            else:
+                w.to_csv(p, index=False)
             written.append(p)
             book += _write_codebook(p, meaning, name)
+        if fmt == "spss":  # the trials too, for mixed models in SPSS
+            long = _long(parts)
+            long.columns = [_safe(c) for c in long.columns]
+            entries = {c: LONG_COLUMNS.get(c, ("", f"level of factor {c} (low/high)"))
+                       for c in long.columns}
+            p = out / "long.sav"
+            _write_sav(p, long, entries)
+            written.append(p)
+            book += _write_codebook(p, entries, p.name)
     p = out / "codebook.csv"
     with p.open("w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=["file", "column", "unit", "meaning"])
@@ -218,5 +311,10 @@ def _r_script(long: pd.DataFrame, parts) -> str:
         if f in long.columns:
             q = ", ".join(f'"{x}"' for x in lv)
             lines.append(f"d${f} <- factor(d${f}, levels = c({q}))")
-    lines.append("str(d)")
+    lines += ["# rating is the dependent variable of the one-way analyses (ANOVA on participant",
+              "# x sample means, t-tests, Wilcoxon, Friedman, lmer and clmm on the trials);",
+              "# rating_z (z within participant, or participant and block, SD with divisor n)",
+              "# is the factorial ANOVA's: afex::aov_ez(\"participant\", \"rating_z\",",
+              "#   subset(d, block == \"wood\"), within = c(\"frequency\", \"decay\", \"slope\"))",
+              "# reproduces the report's wood table. codebook.csv gives every column's unit."]
     return "\n".join(lines) + "\n"

@@ -44,6 +44,9 @@ def _design_key(design: dict | None) -> str:
     if not design:
         return ""
     body = {k: v for k, v in design.items() if k not in ("sha256", "title")}
+    if isinstance(body.get("samples"), dict):  # physical values: recorded, not the design
+        body["samples"] = {k: {kk: vv for kk, vv in v.items() if kk != "params"}
+                           if isinstance(v, dict) else v for k, v in body["samples"].items()}
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:12]
 
 

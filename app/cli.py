@@ -572,10 +572,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "a codebook")
     ex.add_argument("data_dir")
     ex.add_argument("--out", required=True, help="folder to write into")
-    ex.add_argument("--format", default="long-csv", choices=("long-csv", "wide-csv", "jasp", "r"),
+    ex.add_argument("--format", default="long-csv",
+                    choices=("long-csv", "wide-csv", "jasp", "r", "spss"),
                     help="long-csv: one row per trial; wide-csv: one row per participant and "
                     "one column per cell, per analysed phase; jasp: wide with names JASP and R "
-                    "read unchanged; r: long.csv and load.R")
+                    "read unchanged; r: long.csv and load.R; spss: the wide and long files "
+                    "as .sav with variable and value labels")
     _selection_args(ex)
     ex.set_defaults(func=_export)
     _add_session_parsers(sub)

@@ -278,6 +278,7 @@ class Protocol:
                         "repetitions": p.repetitions, "blocks": p.blocks,
                         **p.design.to_dict()} for p in self.phases],
             "samples": {sid: {"block": s.block, "factors": dict(s.factors),
-                              "real": s.is_real, "rated": s.rated, "reference": s.reference}
+                              "real": s.is_real, "rated": s.rated, "reference": s.reference,
+                              "params": dict(s.params)}
                         for sid, s in self.samples.items()},
         }

@@ -128,7 +128,7 @@ def test_export_files_agree_with_the_report_cell_by_cell(study, tmp_path):
 
     rep = analyze(study, tmp_path / "r")
     files = {}
-    for fmt in ("long-csv", "wide-csv", "jasp", "r"):
+    for fmt in ("long-csv", "wide-csv", "jasp", "r", "spss"):
         out = subprocess.run([*CLI, "export", str(study), "--out", str(tmp_path / fmt),
                               "--format", fmt], capture_output=True, text=True, timeout=300)
         assert out.returncode == 0, out.stderr
@@ -145,8 +145,9 @@ def test_export_files_agree_with_the_report_cell_by_cell(study, tmp_path):
             assert (pd.isna(got) and value is None) or got == pytest.approx(value, rel=1e-10)
     jasp = pd.read_csv(files["jasp"] / "wide_realism_testing.csv")
     assert all(c.replace("_", "").isalnum() for c in jasp.columns)
-    assert jasp.drop(columns=["participant", "group"]).to_numpy() == pytest.approx(
-        wide.drop(columns="group").to_numpy(), rel=1e-12, nan_ok=True)
+    assert "group" not in jasp.columns  # nobody in realism has a group: no empty column
+    assert jasp.drop(columns=["participant"]).to_numpy() == pytest.approx(
+        wide.to_numpy(), rel=1e-12, nan_ok=True)
     ident = _analysis(rep, "identification/identification")
     pct = {r["scope"]: r["percent"] for r in ident["table"]}
     wid = pd.read_csv(files["wide-csv"] / "wide_identification_identification.csv")
@@ -161,12 +162,40 @@ def test_export_files_agree_with_the_report_cell_by_cell(study, tmp_path):
             if sample != "participant" and value is not None:
                 assert means[(row["participant"], sample)] == pytest.approx(value, rel=1e-10)
     assert (files["r"] / "load.R").read_text().count("factor(") >= 2
+    # the factorial ANOVA's dependent variable is exported: an RM ANOVA on long.csv's
+    # rating_z, and on the wide file's _z columns, gives the report's F per block
+    import analysis as A
+
+    fac = _analysis(rep, "factorial/rating")
+    rows = long[long["protocol"] == "factorial"]
+    wz = pd.read_csv(files["wide-csv"] / "wide_factorial_rating.csv").set_index("participant")
+    for block, g in rows.groupby("block"):
+        ours = A.rm_anova(g, "rating_z", ["frequency", "decay", "slope"], "participant")
+        ref = {r["Source"]: r["F"] for r in fac["groups"][block]["anova"]}
+        for r in ours.itertuples():
+            assert r.F == pytest.approx(ref[r.Source], rel=1e-9), (block, r.Source)
+        cells = g.groupby(["participant", "sample"])["rating_z"].mean()
+        for (pid, sample), v in cells.items():
+            assert wz.loc[pid, f"{sample}_z"] == pytest.approx(v, rel=1e-9, abs=1e-12)
+    assert {"frequency_hz", "decay_per_s", "slope_per_s"} <= set(rows.columns)
+    assert rows["frequency_hz"].gt(0).all()
+    r_text = (files["r"] / "load.R").read_text()
+    assert "str(d)" not in r_text and "rating_z" in r_text  # quiet when sourced
+    import pyreadstat
+
+    sav, meta = pyreadstat.read_sav(str(files["spss"] / "wide_factorial_rating.sav"))
+    assert sav.shape[0] == wz.shape[0] and meta.column_names_to_labels["participant"]
+    lsav, lmeta = pyreadstat.read_sav(str(files["spss"] / "long.sav"))
+    assert len(lsav) == len(long) and lmeta.variable_value_labels["frequency"] == {
+        1.0: "low", 2.0: "high"}
     for fmt, folder in files.items():
         book = pd.read_csv(folder / "codebook.csv", keep_default_na=False)
-        for f in folder.glob("*.csv"):
+        for f in [*folder.glob("*.csv"), *folder.glob("*.sav")]:
             if f.name != "codebook.csv":
-                cols = set(pd.read_csv(f, nrows=0).columns)
+                cols = (set(pyreadstat.read_sav(str(f), metadataonly=True)[1].column_names)
+                        if f.suffix == ".sav" else set(pd.read_csv(f, nrows=0).columns))
                 assert cols <= set(book[book["file"] == f.name]["column"]), (fmt, f.name)
+    assert "human" in set(book.loc[book["column"] == "kind", "meaning"].iloc[0].split())
 
 
 def _chromium_shot(page, png, height=1200):
