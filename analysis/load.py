@@ -31,7 +31,9 @@ __all__ = ["load_sessions", "select_sessions", "LoadError", "tap_velocities", "S
 #: columns of ``load_sessions(...).attrs["session_table"]``, one row per session folder
 SESSION_COLUMNS = ("session_dir", "participant", "session", "protocol", "protocol_sha256",
                    "kind", "responder", "status", "created_utc", "seed", "rows", "valid_rows",
-                   "design_key")
+                   "design_key", "folder_participant")
+#: how a participant id that the folder name and the recorded session disagree on is taken
+IDS = ("check", "record", "folder")
 
 
 class LoadError(ValueError):
@@ -48,6 +50,14 @@ def _design_key(design: dict | None) -> str:
         body["samples"] = {k: {kk: vv for kk, vv in v.items() if kk != "params"}
                            if isinstance(v, dict) else v for k, v in body["samples"].items()}
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:12]
+
+
+def _folder_id(folder: Path) -> str:
+    """The participant id a session folder's path names (``sub-<id>/ses-<n>``), or ''."""
+    for part in (folder.parent.name, folder.name):
+        if part.startswith("sub-"):
+            return part[4:]
+    return ""
 
 
 def _invalid(row: dict, phase: dict | None, design: dict | None) -> str:
@@ -165,7 +175,8 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
             "responder": meta.get("responder", ""), "status": status,
             "created_utc": (meta.get("times") or {}).get("created_utc") or "",
             "seed": meta.get("seed"), "rows": len(rows),
-            "valid_rows": sum(r["status"] == "valid" for r in rows), "design_key": key})
+            "valid_rows": sum(r["status"] == "valid" for r in rows), "design_key": key,
+            "folder_participant": _folder_id(folder)})
         if not rows:
             continue
         phases = {p["name"]: p for p in (design or {}).get("phases", [])}
@@ -240,7 +251,8 @@ def _date(text: str | None, name: str) -> dt.datetime | None:
 def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
                     kind: str | None = None, status: str = "complete",
                     participants: list[str] | None = None, since: str | None = None,
-                    until: str | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+                    until: str | None = None, ids: str = "check"
+                    ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Choose which sessions to analyse, and say why each is in or out.
 
     Parameters
@@ -259,6 +271,11 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
     since, until : str, optional
         Dates (``YYYY-MM-DD``, UTC) or ISO times bounding when a session was created
         (``until`` a date includes that whole day).
+    ids : {'check', 'record', 'folder'}
+        A session whose folder (``sub-<id>``) names another participant than its
+        session.json and trials.tsv (an operator typed the wrong ``--participant``, then
+        renamed the folder) is left out and named with ``check`` (default), analysed under
+        the recorded id with ``record``, or under the folder's id with ``folder``.
 
     Returns
     -------
@@ -293,6 +310,13 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         if kind not in (*KINDS, "all"):
             raise LoadError(f"--kind must be one of {', '.join(KINDS)} or all, got {kind!r}")
         kind_note = f"kind {kind}"
+    if ids not in IDS:
+        raise LoadError(f"--ids must be one of {', '.join(IDS)}, got {ids!r}")
+    table = table.assign(recorded_participant=table["participant"])
+    clash = (table["folder_participant"] != "") & (table["folder_participant"]
+                                                   != table["participant"])
+    if ids == "folder":
+        table.loc[clash, "participant"] = table.loc[clash, "folder_participant"]
     if status not in ("complete", "all"):
         raise LoadError(f"--status must be complete or all, got {status!r}")
     protos = [protocol] if isinstance(protocol, str) else protocol
@@ -303,7 +327,13 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
     for r in table.itertuples():
         why = ""
         created = _date(r.created_utc, "created") if r.created_utc else None
-        if protos is not None and r.protocol not in protos:
+        if ids == "check" and r.folder_participant and r.folder_participant != \
+                r.recorded_participant:
+            why = (f"folder sub-{r.folder_participant} holds participant "
+                   f"{r.recorded_participant}'s session (session.json, trials.tsv): choose "
+                   f"with --ids record (analyse as {r.recorded_participant}) or --ids folder "
+                   f"(as {r.folder_participant})")
+        elif protos is not None and r.protocol not in protos:
             why = f"protocol {r.protocol} not selected"
         elif kind != "all" and r.kind != kind:
             why = f"{r.kind} session (selected: {kind})"
@@ -363,6 +393,11 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         table.loc[i, "reason"] = kind_note
     keep = set(table.loc[table["included"], "session_dir"])
     out = data[data["session_dir"].isin(keep)].copy()
+    if ids == "folder" and clash.any():  # the rows follow the folder's id
+        rename = dict(zip(table.loc[clash, "session_dir"], table.loc[clash, "participant"],
+                          strict=True))
+        hit = out["session_dir"].isin(rename)
+        out.loc[hit, "participant"] = out.loc[hit, "session_dir"].map(rename)
     out.attrs = dict(data.attrs)
     out.attrs["selection"] = table
     return out, table

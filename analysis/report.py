@@ -227,8 +227,9 @@ def build_report(data: pd.DataFrame, selection: pd.DataFrame, filters: dict) -> 
         intro.append(SIMULATED_NOTE)
     if "dry-run" in kinds:
         intro.append(DRY_RUN_NOTE)
-    sel_text = (f"{len(inc)} of {len(selection)} sessions included "
-                f"({', '.join(f'{k}: {v}' for k, v in sorted(filters.items()) if v)}); "
+    shown = [f"{k}: {v}" for k, v in sorted(filters.items())
+             if v and not (k == "ids" and v == "check")]  # the default check goes unsaid
+    sel_text = (f"{len(inc)} of {len(selection)} sessions included ({', '.join(shown)}); "
                 "every session found is listed below with the reason it is in or out.")
     methods = " ".join([*intro, sel_text, *(a["methods"] for a in analyses)])
     report = {
@@ -338,7 +339,7 @@ def _agreement(pw: pd.DataFrame, wx: pd.DataFrame, alpha: float = 0.05) -> dict:
 
 def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"),
             protocol=None, kind=None, status: str = "complete", participants=None,
-            since=None, until=None, drop_invalid: bool = False) -> dict:
+            since=None, until=None, drop_invalid: bool = False, ids: str = "check") -> dict:
     """Select sessions, run every analysis their designs call for, write the report.
 
     Parameters
@@ -361,7 +362,7 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
     """
     data = load_sessions(data_dir, drop_invalid=drop_invalid)
     filters = {"protocol": protocol, "kind": kind, "status": status,
-               "participants": participants, "since": since, "until": until}
+               "participants": participants, "since": since, "until": until, "ids": ids}
     selected, table = select_sessions(data, **filters)
     filters = {**filters, "kind": kind or _default_kind(table)}
     out = Path(out)

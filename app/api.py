@@ -585,7 +585,7 @@ def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json")
             protocol: str | list[str] | None = None, kind: str | None = None,
             status: str = "complete", participants: list[str] | None = None,
             since: str | None = None, until: str | None = None,
-            drop_invalid: bool = False) -> dict:
+            drop_invalid: bool = False, ids: str = "check") -> dict:
     """Select sessions, run the analyses their designs call for, write the report.
 
     Parameters are those of :func:`analysis.report.analyze`; its errors come back as
@@ -605,7 +605,7 @@ def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json")
     try:
         return _analyze(data, out, tuple(formats), protocol=protocol, kind=kind, status=status,
                         participants=participants, since=since, until=until,
-                        drop_invalid=drop_invalid)
+                        drop_invalid=drop_invalid, ids=ids)
     except (LoadError, StatsError) as exc:
         raise AnalysisError(str(exc)) from None
     except OSError as exc:

@@ -335,7 +335,8 @@ def _analyze(args: argparse.Namespace) -> int:
         raise UsageError(f"--format takes html, md, json; got {sorted(bad)}")
     rep = analyze(args.data_dir, args.out, formats=formats, protocol=_list(args.protocol),
                   kind=args.kind, status=args.status, participants=_list(args.participants),
-                  since=args.since, until=args.until, drop_invalid=args.drop_invalid)
+                  since=args.since, until=args.until, drop_invalid=args.drop_invalid,
+                  ids=args.ids)
     sel = rep["selection"]
     ids = [a["id"] for a in rep["analyses"]]
     print(f"{len(ids)} analyses ({', '.join(ids) or 'none'}) of {sel['included']} sessions "
@@ -358,6 +359,10 @@ def _selection_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--participants", help="participant ids, comma-separated")
     p.add_argument("--since", help="sessions created on or after (YYYY-MM-DD, UTC)")
     p.add_argument("--until", help="sessions created on or before (YYYY-MM-DD, UTC)")
+    p.add_argument("--ids", choices=("check", "record", "folder"), default="check",
+                   help="a session whose folder sub-<id> names another participant than its "
+                   "files: leave it out and name it (check), or analyse it under the recorded "
+                   "id (record) or the folder's (folder)")
     p.add_argument("--drop-invalid", action="store_true",
                    help="leave out recorded rows that cannot be analysed (a rating off the "
                    "scale, …), listing each, instead of stopping at the first")
@@ -368,7 +373,8 @@ def _export(args: argparse.Namespace) -> int:
 
     files = export(args.data_dir, args.out, args.format, drop_invalid=args.drop_invalid,
                    protocol=_list(args.protocol), kind=args.kind, status=args.status,
-                   participants=_list(args.participants), since=args.since, until=args.until)
+                   participants=_list(args.participants), since=args.since, until=args.until,
+                   ids=args.ids)
     print(f"{len(files)} files written to {args.out}/: {', '.join(f.name for f in files)}")
     return 0
 

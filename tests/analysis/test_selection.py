@@ -81,6 +81,30 @@ def test_first_session_means_the_first_complete_one(mixed, tmp_path):
     assert kept == {"ses-2"}
 
 
+def test_a_folder_renamed_to_another_participant_is_named_not_merged(mixed, tmp_path):
+    """P03's session moved into sub-P09 (a wrong --participant, then a renamed folder): it
+    was once merged silently with whichever participant the files named. Now it is left
+    out and named; --ids record or folder decides."""
+    data = tmp_path / "data"
+    shutil.copytree(mixed, data)
+    _as_person(data / "sub-P03" / "ses-1")
+    (data / "sub-P03").rename(data / "sub-P09")
+    d = load_sessions(data)
+    sel, table = select_sessions(d)
+    row = table[table["session_dir"].str.contains("sub-P09")].iloc[0]
+    assert not row.included
+    assert row.reason.startswith("folder sub-P09 holds participant P03's session")
+    assert "--ids record" in row.reason and "--ids folder" in row.reason
+    sel, _ = select_sessions(d, ids="record")
+    assert "P03" in set(sel["participant"])
+    sel, _ = select_sessions(d, ids="folder")
+    assert "P09" in set(sel["participant"]) and "P03" not in set(sel["participant"])
+    out = subprocess.run([*CLI, "analyze", str(data), "--out", str(tmp_path / "r"),
+                          "--ids", "folder", "--format", "json"],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+
+
 def test_filters(mixed):
     d = load_sessions(mixed)
     sim, _ = select_sessions(d, kind="simulated")
