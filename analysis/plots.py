@@ -52,8 +52,15 @@ def rating_means(a: dict, out: Path) -> list[str]:
     scale = a.get("scale")
     if scale:
         ax.set_ylim(scale["min"] - 0.3, scale["max"] + 0.3)
+    letters = r.get("letters") or {}
+    for xi, sample in enumerate(s["sample"]):  # the report table's letters, above the axes
+        text = letters.get(sample, "")
+        if text and len(text) <= 6:
+            ax.text(xi, 1.01, text, transform=ax.get_xaxis_transform(), ha="center",
+                    va="bottom", fontsize=9)
     ax.set_ylabel("rating (mean ± 95 % CI)")
-    ax.set_title(f"{a['id']}: ratings of the samples (n = {r['n_subjects']} participants)")
+    ax.set_title(f"{a['id']}: ratings of the samples (n = {r['n_subjects']} participants; "
+                 "samples sharing a letter do not differ, Holm)", pad=18, fontsize=10)
     return _save(fig, out, f"{_name(a)}_means")
 
 
@@ -66,10 +73,18 @@ def rating_pmatrix(a: dict, out: Path) -> list[str]:
         m.loc[row.A, row.B] = m.loc[row.B, row.A] = row.p_holm
     fig, ax = plt.subplots(figsize=(max(4, 0.5 * len(order) + 2), max(3.5, 0.45 * len(order)
                                                                           + 1.5)))
-    im = ax.imshow(m.to_numpy(dtype=float), vmin=0, vmax=1, cmap="viridis")
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+
+    # bands, not a continuous map: p = .04 and .06 lie on either side of α and must look so
+    bounds = [0, 0.001, 0.01, 0.05, 1.0]
+    cmap = ListedColormap(["#08306b", "#2171b5", "#6baed6", "#f0f0f0"])
+    cmap.set_bad("white")
+    im = ax.imshow(m.to_numpy(dtype=float), cmap=cmap, norm=BoundaryNorm(bounds, cmap.N))
     ax.set_xticks(range(len(order)), order, rotation=60, ha="right")
     ax.set_yticks(range(len(order)), order)
-    fig.colorbar(im, label="Holm-adjusted p (paired t-test)")
+    bar = fig.colorbar(im, label="Holm-adjusted p (paired t-test)", ticks=[0.0005, 0.005,
+                                                                            0.03, 0.5])
+    bar.ax.set_yticklabels(["< .001", "< .01", "< .05", "≥ .05 (α)"])
     ax.set_title(f"{a['id']}: which samples differ")
     return _save(fig, out, f"{_name(a)}_pvalues")
 
@@ -89,13 +104,24 @@ def factorial_interactions(a: dict, out: Path) -> list[str]:
             levels = list(dict.fromkeys(sets.sort_values(f1)[f1]))
             if set(levels) == {"low", "high"}:
                 levels = ["low", "high"]
+            cells = res.get("cell_means")
             for lvl, g in sets.groupby(f2):
                 mm = g.groupby(f1)["mean"].mean().reindex(levels)
-                ax.plot(levels, mm.to_numpy(), "o-", label=f"{f2} {lvl}")
+                if cells is not None and len(cells):  # 95 % CI over participants
+                    per = (cells[cells[f2] == lvl].groupby(["participant", f1])["value"]
+                           .mean().unstack(f1).reindex(columns=levels))
+                    n = per.notna().sum().to_numpy()
+                    half = np.where(n > 1, per.std(ddof=1).to_numpy() / np.sqrt(np.maximum(n, 1))
+                                    * _t975(n - 1), 0.0)
+                    ax.errorbar(levels, per.mean().to_numpy(), yerr=half, fmt="o-", capsize=3,
+                                label=f"{f2} {lvl}")
+                else:
+                    ax.plot(levels, mm.to_numpy(), "o-", label=f"{f2} {lvl}")
             ax.set_xlabel(f1)
             ax.legend(fontsize=8)
         axes[0][0].set_ylabel("mean rating" + (" (z)" if (a["phase_design"].get("normalize")
-                                                          or "none") != "none" else ""))
+                                                          or "none") != "none" else "")
+                              + " ± 95 % CI")
         p = float(res["most_significant_p"])
         most = (f"most significant: {res['most_significant']}, p = {p:.3g}" if p < 0.05 else
                 f"no factor significant; smallest p = {p:.2g}, {res['most_significant']}")
@@ -104,13 +130,29 @@ def factorial_interactions(a: dict, out: Path) -> list[str]:
     return files
 
 
+def _ink(values: np.ndarray) -> np.ndarray:
+    """Text colour per cell of a 'Blues' image of ``values``: white on the dark half, black
+    on the light half (black numbers on navy could not be read)."""
+    top = float(values.max()) if values.size else 0.0
+    return np.where(values > top / 2, "white", "black")
+
+
+def _t975(df: np.ndarray) -> np.ndarray:
+    """The t distribution's 97.5 % quantile for each ``df`` (≥ 1)."""
+    from scipy import special
+
+    return special.stdtrit(np.maximum(df, 1), 0.975)
+
+
 def confusion(a: dict, out: Path) -> list[str]:
     plt = _plt()
     c = a["result"]["confusion"]
     fig, ax = plt.subplots(figsize=(4.5, 4))
-    ax.imshow(c.to_numpy(), cmap="Blues")
-    for (y, x), v in np.ndenumerate(c.to_numpy()):
-        ax.text(x, y, str(v), ha="center", va="center")
+    values = c.to_numpy()
+    ax.imshow(values, cmap="Blues")
+    ink = _ink(values)
+    for (y, x), v in np.ndenumerate(values):
+        ax.text(x, y, str(v), ha="center", va="center", color=ink[y, x])
     ax.set_xticks(range(len(c.columns)), c.columns)
     ax.set_yticks(range(len(c.index)), c.index)
     ax.set_xlabel("answered")

@@ -332,6 +332,8 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
             "most_significant_p": float(most["p_unc"]),
             "best_set": {"sample": str(best["sample"]), "mean": float(best["mean"]),
                          **{f: str(best[f]) for f in factors}},
+            "cell_means": (g.groupby([subject, *factors], observed=True)[y].mean()
+                           .reset_index().rename(columns={y: "value", subject: "participant"})),
             "sets": means, "preflight": _with_constant(preflight(g, y, list(factors), subject),
                                                        constant, dv, name),
             "n_subjects": int(g[subject].nunique()),

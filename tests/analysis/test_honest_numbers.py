@@ -101,3 +101,25 @@ def test_no_participant_variance_is_an_sd_of_zero():
     d = pd.DataFrame(rows, columns=["participant", "sample", "rating"])
     d["rating"] -= d.groupby("participant")["rating"].transform("mean")  # no offsets at all
     assert mixed_oneway(d, "rating", "sample", "participant")["sd_subject"].iloc[0] == 0.0
+
+
+def test_the_p_matrix_shows_alpha_and_the_confusion_numbers_read(tmp_path):
+    """p = .04 and .06 get different colours (bands at .001, .01, .05), and the confusion
+    matrix's numbers are white on dark cells (they were black on navy)."""
+    from matplotlib.colors import to_rgb
+    from PIL import Image
+
+    from analysis import plots
+
+    pw = pd.DataFrame({"A": ["a", "a", "b"], "B": ["b", "c", "c"],
+                       "p_holm": [0.04, 0.06, 0.0004]})
+    a = {"id": "t/p", "result": {"samples": [{"sample": s} for s in "abc"], "pairwise": pw}}
+    png = tmp_path / plots.rating_pmatrix(a, tmp_path)[0]
+    img = np.asarray(Image.open(png).convert("RGB"), float) / 255
+    colours = {tuple(np.round(c, 2)) for c in img.reshape(-1, 3)}
+    for band in ("#6baed6", "#f0f0f0", "#08306b"):  # < .05, ≥ .05, < .001
+        assert tuple(np.round(to_rgb(band), 2)) in colours, band
+    c = pd.DataFrame([[9, 1], [2, 8]], index=["x", "y"], columns=["x", "y"])
+    assert plots._ink(c.to_numpy()).tolist() == [["white", "black"], ["black", "white"]]
+    assert (tmp_path / plots.confusion({"id": "t/c", "result": {"confusion": c}},
+                                       tmp_path)[0]).exists()
