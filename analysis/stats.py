@@ -935,13 +935,20 @@ def np2_ci(F: float, df1: float, df2: float, alpha: float = 0.05) -> tuple[float
     """Confidence interval of partial η² by inverting the noncentral F distribution.
 
     The noncentrality λ with P(F' ≤ F | λ) = 1 − α/2 (lower) and α/2 (upper) — 0 when even
-    λ = 0 leaves less — becomes η² = λ / (λ + df1 + df2 + 1) (Steiger 2004). The lower bound
-    is above 0 exactly when p < α/2.
+    λ = 0 leaves less — becomes η² = λ / (λ + df2), as R's ``effectsize::F_to_eta2(F, df1,
+    df2, alternative = "two.sided")`` converts it (Steiger 2004 divides by the total
+    N = df1 + df2 + 1 of a between-subjects design, which has no counterpart within
+    subjects). The lower bound is above 0 exactly when p < α/2. (effectsize's own search
+    stops early at F near 0: rubber's slope, F = 0.020, gets 0.243 where the root of R's
+    ``pf`` is 0.249, which this function finds.)
 
     Examples
     --------
     >>> [round(x, 3) for x in np2_ci(10.0, 2, 20)]
-    [0.129, 0.664]
+    [0.145, 0.695]
+
+    R: ``effectsize::F_to_eta2(10, 2, 20, alternative = "two.sided")`` gives
+    [0.145339, 0.694645].
     """
     if not (math.isfinite(F) and F >= 0 and df1 > 0 and df2 > 0):
         raise StatsError(f"a CI of partial η² needs a finite F ≥ 0 and positive degrees of "
@@ -961,7 +968,7 @@ def np2_ci(F: float, df1: float, df2: float, alpha: float = 0.05) -> tuple[float
         return optimize.brentq(lambda lam: cdf(lam) - target, 0.0, hi, xtol=1e-10)
 
     def eta(lam: float) -> float:
-        return lam / (lam + df1 + df2 + 1)
+        return lam / (lam + df2)
 
     return eta(solve(1 - alpha / 2)), eta(solve(alpha / 2))
 

@@ -6,7 +6,7 @@
 # KIND is "oneway" (one within factor, sample; optional groups) or "factorial" (2x2x2
 # within each block, ratings z-scored per participant and block with divisor n).
 # Each output row carries the R call that produced its value.
-suppressMessages({library(afex); library(lme4); library(car); library(ordinal)})
+suppressMessages({library(afex); library(lme4); library(car); library(ordinal); library(effectsize)})
 options(contrasts = c("contr.sum", "contr.poly"), digits = 17)
 a <- commandArgs(trailingOnly = TRUE)
 d <- read.csv(a[1], stringsAsFactors = FALSE, na.strings = "")
@@ -17,6 +17,21 @@ add <- function(analysis, term, stat, value, call) {
                                         stat = stat, value = value, call = call)
 }
 d$participant <- factor(d$participant)
+
+# 95 % CI of partial eta^2: the noncentrality lambda with pf(F, df1, df2, lambda) = .975
+# and .025, as eta^2 = lambda / (lambda + df2) (effectsize's conversion). Solved here with
+# uniroot at tol 1e-12: effectsize::F_to_eta2 searches with a looser tolerance and, at
+# F near 0, returns upper bounds up to 0.03 away from the root of pf (checked with pf).
+np2_ci <- function(F, df1, df2) {
+  bound <- function(p) {
+    if (pf(F, df1, df2, ncp = 0) < p) return(0)
+    hi <- 1; while (pf(F, df1, df2, ncp = hi) > p) hi <- hi * 2
+    l <- uniroot(function(l) pf(F, df1, df2, ncp = l) - p, c(0, hi), tol = 1e-12)$root
+    l / (l + df2)
+  }
+  c(bound(0.975), bound(0.025))
+}
+NP2_CALL <- "uniroot(pf(F, df1, df2, ncp = l) - p, tol = 1e-12), eta2 = l / (l + df2)"
 
 if (kind == "oneway") {
   lv <- sort(unique(d$sample))
@@ -67,6 +82,9 @@ if (kind == "oneway") {
   add("anova", "sample", "DF_err", an$`den Df`[1], call)
   add("anova", "sample", "p_unc", an$`Pr(>F)`[1], call)
   add("anova", "sample", "np2", an$pes[1], call)
+  ci <- np2_ci(an$F[1], an$`num Df`[1], an$`den Df`[1])
+  add("anova", "sample", "np2_ci_low", ci[1], NP2_CALL)
+  add("anova", "sample", "np2_ci_high", ci[2], NP2_CALL)
   add("anova", "sample", "eps_gg", s$pval.adjustments[1, "GG eps"], paste("summary of", call))
   add("anova", "sample", "p_gg", s$pval.adjustments[1, "Pr(>F[GG])"], paste("summary of", call))
   add("anova", "sample", "eps_hf", min(1, s$pval.adjustments[1, "HF eps"]),
@@ -127,6 +145,9 @@ if (kind == "oneway") {
       add("factorial", key, "F", an[t, "F"], call)
       add("factorial", key, "p_unc", an[t, "Pr(>F)"], call)
       add("factorial", key, "np2", an[t, "pes"], call)
+      ci <- np2_ci(an[t, "F"], an[t, "num Df"], an[t, "den Df"])
+      add("factorial", key, "np2_ci_low", ci[1], NP2_CALL)
+      add("factorial", key, "np2_ci_high", ci[2], NP2_CALL)
     }
   }
 }
