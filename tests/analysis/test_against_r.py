@@ -6,9 +6,10 @@ is installed and checks that the committed values still hold. Tolerances: 1e-9 r
 for closed forms (t, Wilcoxon, Friedman, ANOVA and their p; p below 1e-300 compared on the
 log scale); 1e-6 for the CI of partial η², a root of the noncentral F found by two
 root-finders (measured: 1.5e-8; R's side uses uniroot at 1e-12 on pf, because
-effectsize::F_to_eta2 misses the root by up to 0.03 at F near 0); 1e-5 relative for the REML fits: hapticlab's profiled search stops at 1e-12
-in the variance ratio, lme4's bobyqa at its default tolerance (the largest differences
-measured: χ² 4e-7, SDs 6e-8, p 3e-6); for the ordinal mixed model, whose likelihood
+effectsize::F_to_eta2 misses the root by up to 0.03 at F near 0); 1e-5 relative for
+the REML fits: hapticlab's profiled search stops at 1e-12 in the variance ratio, lme4's
+bobyqa at its default tolerance (the largest differences measured: χ² 4e-7, SDs 6e-8,
+p 3e-6); for the ordinal mixed model, whose likelihood
 is a quadrature (20 adaptive nodes on both sides) maximised by L-BFGS-B here and by
 clmm's Newton there, 1e-4 × max(|value|, 1) (measured: log-likelihood and LR 4e-11
 relative, coefficients and SEs 2.2e-5 logit units at most).
