@@ -20,7 +20,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import studies  # noqa: E402
 
-KINDS = {"factorial": "factorial"}
+KINDS = {"factorial": "factorial", "crossed_2x3": "crossed"}
 
 
 def compute(out: Path) -> pd.DataFrame:

@@ -3,8 +3,9 @@
 #
 #   Rscript tests/r/reference.R STUDY.csv STUDY_NAME KIND OUT.csv
 #
-# KIND is "oneway" (one within factor, sample; optional groups) or "factorial" (2x2x2
-# within each block, ratings z-scored per participant and block with divisor n).
+# KIND is "oneway" (one within factor, sample; optional groups), "factorial" (2x2x2
+# within each block, ratings z-scored per participant and block with divisor n) or
+# "crossed" (hand x texture, 2 x 3 within, raw ratings).
 # Each output row carries the R call that produced its value.
 suppressMessages({library(afex); library(lme4); library(car); library(ordinal); library(effectsize)})
 options(contrasts = c("contr.sum", "contr.poly"), digits = 17)
@@ -123,6 +124,29 @@ if (kind == "oneway") {
     for (t in c("sample", "group", "sample:group")) {
       add("mixed_group", t, "chi2", ch[t, "Chisq"], call)
       add("mixed_group", t, "p", ch[t, "Pr(>Chisq)"], call)
+    }
+  }
+} else if (kind == "crossed") {
+  d$hand <- factor(d$hand, levels = c("left", "right"))
+  d$texture <- factor(d$texture, levels = c("smooth", "ridged", "coarse"))
+  fit <- suppressWarnings(suppressMessages(
+    aov_ez("participant", "rating", d, within = c("hand", "texture"), fun_aggregate = mean)))
+  an <- anova(fit, correction = "none", es = "pes")
+  s <- summary(fit)
+  call <- "afex::aov_ez(\"participant\", \"rating\", d, within = c(\"hand\", \"texture\"))"
+  for (t in rownames(an)) {
+    key <- gsub(":", " * ", t)
+    add("crossed", key, "F", an[t, "F"], call)
+    add("crossed", key, "p_unc", an[t, "Pr(>F)"], call)
+    add("crossed", key, "np2", an[t, "pes"], call)
+    if (t %in% rownames(s$pval.adjustments)) {
+      add("crossed", key, "eps_gg", s$pval.adjustments[t, "GG eps"], paste("summary of", call))
+      add("crossed", key, "p_gg", s$pval.adjustments[t, "Pr(>F[GG])"], paste("summary of", call))
+      add("crossed", key, "eps_hf", min(1, s$pval.adjustments[t, "HF eps"]),
+          paste("min(1, HF eps), summary of", call))
+      add("crossed", key, "W_mauchly", s$sphericity.tests[t, "Test statistic"],
+          paste("summary of", call))
+      add("crossed", key, "p_spher", s$sphericity.tests[t, "p-value"], paste("summary of", call))
     }
   }
 } else {

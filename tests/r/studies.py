@@ -79,6 +79,26 @@ def factorial() -> pd.DataFrame:
     return d
 
 
+def crossed_2x3() -> pd.DataFrame:
+    """A design beyond the papers': 2 × 3 within (hand × texture), 12 participants, 2
+    repetitions, 1–7; texture and the interaction have 2 degrees of freedom, so they get
+    sphericity tests and corrections."""
+    rng = np.random.default_rng(623)
+    rows = []
+    for p in range(12):
+        offset = rng.normal(0, 0.8)
+        slope = rng.normal(0, 0.6)  # participants differ in the texture effect: ε < 1
+        for hand in ("left", "right"):
+            for k, tex in enumerate(("smooth", "ridged", "coarse")):
+                for r in range(2):
+                    e = 0.5 * (hand == "right") + (0.6 + slope) * k + 0.3 * k * (hand == "left")
+                    y = np.clip(np.rint(3 + e + offset + rng.normal(0, 0.9)), 1, 7)
+                    rows.append({"participant": f"P{p + 1:02d}", "group": "", "block": "",
+                                 "sample": f"{hand}_{tex}", "hand": hand, "texture": tex,
+                                 "repetition": r + 1, "rating": int(y)})
+    return pd.DataFrame(rows)
+
+
 def _valid(make):
     def wrapped() -> pd.DataFrame:
         return make().assign(valid=True)
@@ -88,4 +108,4 @@ def _valid(make):
 
 STUDIES = {name: _valid(make) for name, make in (
     ("oneway_clean", oneway_clean), ("oneway_messy", oneway_messy),
-    ("oneway_small", oneway_small), ("factorial", factorial))}
+    ("oneway_small", oneway_small), ("factorial", factorial), ("crossed_2x3", crossed_2x3))}
