@@ -888,7 +888,7 @@ def pairwise_wilcoxon(data: pd.DataFrame, dv: str, within: str, subject: str,
     out.attrs["constant_pairs"] = constant
     n_all = m.shape[0]
     n_pairs = len(rows)
-    floor = min(1.0, 2.0 / 2.0 ** n_all) if n_all else 1.0
+    floor = min(1.0, math.ldexp(1.0, 1 - n_all)) if n_all else 1.0  # 2/2ⁿ, 0 past 2^-1074
     if padjust in ("holm", "bonf"):
         floor = min(1.0, floor * n_pairs)
     out.attrs["p_floor"] = floor

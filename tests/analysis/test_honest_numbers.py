@@ -123,3 +123,12 @@ def test_the_p_matrix_shows_alpha_and_the_confusion_numbers_read(tmp_path):
     assert plots._ink(c.to_numpy()).tolist() == [["white", "black"], ["black", "white"]]
     assert (tmp_path / plots.confusion({"id": "t/c", "result": {"confusion": c}},
                                        tmp_path)[0]).exists()
+
+
+def test_the_wilcoxon_floor_at_many_participants_is_zero_not_an_overflow():
+    """2/2ⁿ for the smallest exact p overflowed (OverflowError) above ~1024 participants."""
+    rng = np.random.default_rng(1)
+    rows = [(f"P{p}", s, float(rng.integers(1, 8))) for p in range(1100) for s in "abc"]
+    d = pd.DataFrame(rows, columns=["participant", "sample", "rating"])
+    wx = A.pairwise_wilcoxon(d, "rating", "sample", "participant")
+    assert wx.attrs["p_floor"] == 0.0 and (wx["method"] == "normal").all()
