@@ -552,10 +552,16 @@ def _summary(a: dict) -> str:
         parts = []
         for g, v in a["groups"].items():
             best = v["best_set"]
-            parts.append(f"{g}: most significant factor {_most(v)}; best set {best['sample']}"
-                         if v["most_significant_p"] < 0.05 else
-                         f"{g}: no factor significant (smallest {_p(v['most_significant_p'])}, "
-                         f"{v['most_significant']}); best set {best['sample']}")
+            inter = [f"{r['Source'].replace(' * ', ' × ')} ({_p(r.get('p_gg', r['p_unc']))})"
+                     for r in v["anova"] if " * " in r["Source"]
+                     and r.get("p_gg", r["p_unc"]) < 0.05]
+            parts.append((f"{g}: most significant factor {_most(v)}"
+                          if v["most_significant_p"] < 0.05 else
+                          f"{g}: no main effect significant (smallest "
+                          f"{_p(v['most_significant_p'])}, {v['most_significant']})")
+                         + (f"; interaction {', '.join(inter)} (simple effects below)"
+                            if inter else "")
+                         + f"; best set {best['sample']}")
         return head + "; ".join(parts) + "."
     t = {r["scope"]: r for r in a["table"]}
     al = t.get("all")

@@ -132,3 +132,17 @@ def test_the_wilcoxon_floor_at_many_participants_is_zero_not_an_overflow():
     d = pd.DataFrame(rows, columns=["participant", "sample", "rating"])
     wx = A.pairwise_wilcoxon(d, "rating", "sample", "participant")
     assert wx.attrs["p_floor"] == 0.0 and (wx["method"] == "normal").all()
+
+
+def test_the_summary_names_a_significant_interaction():
+    """It mentioned only main effects while a significant interaction had its own table."""
+    from analysis.report import _summary
+
+    a = {"id": "f/r", "type": "factorial", "n_subjects": 10, "groups": {"wood": {
+        "n_subjects": 10, "most_significant": "decay", "most_significant_p": 0.3,
+        "best_set": {"sample": "wood-LHL"},
+        "anova": [{"Source": "decay", "p_unc": 0.3},
+                  {"Source": "frequency * slope", "p_unc": 0.012}]}}}
+    text = _summary(a)
+    assert "no main effect significant" in text
+    assert "interaction frequency × slope (p = .012)" in text
