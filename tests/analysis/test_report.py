@@ -198,6 +198,57 @@ def test_export_files_agree_with_the_report_cell_by_cell(study, tmp_path):
     assert "human" in set(book.loc[book["column"] == "kind", "meaning"].iloc[0].split())
 
 
+@pytest.mark.skipif(__import__("shutil").which("Rscript") is None,
+                    reason="R missing: `make test` installs r-base-core and r-cran-*")
+def test_r_reproduces_the_report_from_its_own_export(study, tmp_path):
+    """The analyst's path: `hapticlab export --format r`, then load.R in R, then afex and
+    t.test on what it loaded give the report's realism ANOVA and t-tests (1e-9), and the
+    factorial ANOVA on rating_z gives the report's F per block."""
+    rep = analyze(study, tmp_path / "r")
+    out = subprocess.run([*CLI, "export", str(study), "--out", str(tmp_path / "x"), "--format",
+                          "r"], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    script = tmp_path / "x" / "check.R"
+    script.write_text("""
+suppressMessages(library(afex))
+source("load.R")
+r <- droplevels(d[d$protocol == "realism" & d$phase == "testing", ])
+a <- anova(suppressMessages(aov_ez("participant", "rating", r, within = "sample",
+                                   fun_aggregate = mean)), correction = "none")
+cat("realism_F", sprintf("%.17g", a$F[1]), "\n")
+cm <- tapply(r$rating, list(r$participant, r$sample), mean)
+ok <- complete.cases(cm)
+tt <- t.test(cm[ok, 1], cm[ok, 2], paired = TRUE)
+cat("t", colnames(cm)[1], colnames(cm)[2], sprintf("%.17g", tt$statistic), "\n")
+f <- d[d$protocol == "factorial", ]
+for (b in unique(f$block)) {
+  g <- droplevels(f[f$block == b & !is.na(f$rating_z), ])
+  a <- anova(suppressMessages(aov_ez("participant", "rating_z", g,
+             within = c("frequency", "decay", "slope"), fun_aggregate = mean)),
+             correction = "none")
+  cat("factorial", b, sprintf("%.17g", a["frequency", "F"]), "\n")
+}
+""")
+    res = subprocess.run(["Rscript", "check.R"], cwd=script.parent, capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.count("\n") >= 4 and not res.stderr.strip().startswith("'data.frame'")
+    lines = [ln.split() for ln in res.stdout.splitlines()]
+    realism = _analysis(rep, "realism/testing")
+    fac = _analysis(rep, "factorial/rating")
+    for ln in lines:
+        if ln[0] == "realism_F":
+            assert float(ln[1]) == pytest.approx(realism["anova"][0]["F"], rel=1e-9)
+        elif ln[0] == "t":
+            row = next(r for r in realism["pairwise"] if {r["A"], r["B"]} == {ln[1], ln[2]})
+            sign = 1 if row["A"] == ln[1] else -1
+            assert float(ln[3]) == pytest.approx(sign * row["t"], rel=1e-9)
+        else:
+            ref = {r["Source"]: r["F"] for r in fac["groups"][ln[1]]["anova"]}
+            assert float(ln[2]) == pytest.approx(ref["frequency"], rel=1e-9)
+    assert {ln[0] for ln in lines} == {"realism_F", "t", "factorial"}
+
+
 def _chromium_shot(page, png, height=1200):
     out = subprocess.run(["chromium", "--headless", "--no-sandbox", "--disable-gpu",
                           "--hide-scrollbars", "--virtual-time-budget=3000",
