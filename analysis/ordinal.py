@@ -69,13 +69,18 @@ class _Model:
 
     def _modes(self, a, b, s2):
         """Each participant's posterior mode of u and the curvature scale there."""
-        u = self._u if getattr(self, "_u", None) is not None else np.zeros(self.n_groups)
-        for _ in range(100):  # Newton; the log-posterior is concave in u
-            _l, d1, d2 = self._derivs(a, b, u)
-            step = (d1 - u / s2) / (d2 - 1 / s2)
+        u = getattr(self, "_u", None)
+        if u is None or not np.isfinite(u).all():
+            u = np.zeros(self.n_groups)
+        for _ in range(200):  # Newton, each step at most 1 logit: the log-posterior is
+            _l, d1, d2 = self._derivs(a, b, u)  # concave, so clipped steps still converge
+            step = np.clip((d1 - u / s2) / (d2 - 1 / s2), -1.0, 1.0)
             u = u - step
             if np.max(np.abs(step)) < 1e-10:
                 break
+        if not np.isfinite(u).all():
+            self._u = None
+            raise FloatingPointError("a participant's posterior mode is not finite")
         _l, _d1, d2 = self._derivs(a, b, u)
         self._u = u
         return u, 1.0 / np.sqrt(-(d2 - 1 / s2))
@@ -89,7 +94,10 @@ class _Model:
             return np.inf, np.zeros(par.size)
         a, b = self._bounds(theta, beta)
         s2 = sigma * sigma
-        u, s = self._modes(a, b, s2)
+        try:
+            u, s = self._modes(a, b, s2)
+        except FloatingPointError:
+            return np.inf, np.zeros(par.size)
         uq = u[:, None] + math.sqrt(2.0) * s[:, None] * self.x[None, :]  # groups × nodes
         A, B = a[:, None] - uq[self.g], b[:, None] - uq[self.g]  # rows × nodes
         p = np.maximum(_cell_probs(A, B), 1e-300)

@@ -77,7 +77,8 @@ def _p_bounds(v, key: str = ""):
         return {k: _p_bounds(x, k) for k, x in v.items()}
     if isinstance(v, list):
         return [_p_bounds(x, key) for x in v]
-    if isinstance(v, float) and (key == "p" or key.startswith("p_")) and 0 <= v < P_FLOOR:
+    is_p = key == "p" or key.startswith("p_") or key.endswith("_p")
+    if isinstance(v, float) and is_p and 0 <= v < P_FLOOR:
         return f"< {P_FLOOR:g}"
     return v
 
@@ -472,7 +473,8 @@ def _oneway_md(a: dict) -> tuple[list[str], list[str]]:
         if floor >= 0.05:
             out.append(f" With {a['anova'][0]['n']} participants the smallest Holm-adjusted "
                        f"Wilcoxon p any pair can reach is {_p_digits(min(floor, 1.0))} "
-                       f"({g['pairs']} pairs × 2/2ⁿ): no pair can reach .05 by Wilcoxon "
+                       f"({g['pairs']} pairs × the smallest p of a signed-rank test with "
+                       "that many differences, tied or not): no pair can reach .05 by Wilcoxon "
                        "whatever the data, so its count of 0 is not evidence against the "
                        "t-tests.")
         out.append("\n")

@@ -141,9 +141,9 @@ def wide_means(data: pd.DataFrame, dv: str, within: str, subject: str,
     li, levels = pd.factorize(data[within])
     if not keep.all():  # drop missing values, and levels or subjects left with none
         si, li, v = si[keep], li[keep], v[keep]
-        _, si = np.unique(si, return_inverse=True)
+        used_s, si = np.unique(si, return_inverse=True)
         used, li = np.unique(li, return_inverse=True)
-        subjects = pd.Index(data[subject][keep].unique())
+        subjects = pd.Index(np.asarray(subjects)[used_s])  # labels in the rows' code order
         levels = pd.Index(np.asarray(levels)[used])
     else:
         v = v[keep]
@@ -786,9 +786,24 @@ def _signrank_counts(n: int) -> np.ndarray:
     return c
 
 
+def _signrank_min_p(n: int) -> float:
+    """The smallest two-sided p the signed-rank test can give with ``n`` differences: the
+    exact 2/2ⁿ, or — when ties send it to the normal approximation — all ``n`` differences
+    tied and of one sign, whichever is smaller (0 past the doubles' range)."""
+    if n < 1:
+        return 1.0
+    exact = min(1.0, math.ldexp(1.0, 1 - n))
+    if n < 2:
+        return exact
+    sigma = math.sqrt(n * (n + 1) * (2 * n + 1) / 24 - (n ** 3 - n) / 48)
+    z = (n * (n + 1) / 4 - 0.5) / sigma
+    return min(exact, 2.0 * float(special.ndtr(-z)))
+
+
 def signed_rank_test(d: np.ndarray, tol: float = 0.0) -> dict:
     """Wilcoxon signed-rank test of paired differences ``d`` against 0, as R's
-    ``wilcox.test(x, y, paired = TRUE)`` with its defaults.
+    ``wilcox.test(x, y, paired = TRUE, digits.rank = 7)`` (R's default ranks floating-point
+    noise between equal fractions; here values within ``tol`` tie).
 
     Differences within ``tol`` of 0 are dropped (Wilcoxon's convention); absolute
     differences within ``tol`` of each other are tied (:func:`tie_groups`) and get mid-ranks.
@@ -820,6 +835,9 @@ def signed_rank_test(d: np.ndarray, tol: float = 0.0) -> dict:
     R: ``wilcox.test(c(1.5, 2, -0.5, 3, 2.5))`` gives V = 14, p-value = 0.125.
     """
     d = np.asarray(d, float)
+    if not np.isfinite(d).all():
+        raise StatsError("a paired difference is missing or not finite: the signed-rank test "
+                         "needs one difference per subject")
     zeros = bool((np.abs(d) <= tol).any())
     d = d[np.abs(d) > tol]
     n = int(d.size)
@@ -888,7 +906,7 @@ def pairwise_wilcoxon(data: pd.DataFrame, dv: str, within: str, subject: str,
     out.attrs["constant_pairs"] = constant
     n_all = m.shape[0]
     n_pairs = len(rows)
-    floor = min(1.0, math.ldexp(1.0, 1 - n_all)) if n_all else 1.0  # 2/2ⁿ, 0 past 2^-1074
+    floor = _signrank_min_p(n_all)
     if padjust in ("holm", "bonf"):
         floor = min(1.0, floor * n_pairs)
     out.attrs["p_floor"] = floor
@@ -1048,7 +1066,10 @@ def _reml_intercept(y: np.ndarray, X: np.ndarray, g: np.ndarray) -> dict:
     from scipy import optimize
 
     n, p = X.shape
-    gi, counts = np.unique(g, return_inverse=True)[1], None
+    if n <= p:
+        raise StatsError(f"the mixed model has {n} ratings for {p} fixed effects: no "
+                         "residual variance can be estimated")
+    gi = np.unique(g, return_inverse=True)[1]
     counts = np.bincount(gi).astype(float)
     Xs = np.zeros((counts.size, p))
     np.add.at(Xs, gi, X)  # per-group column sums (1'X_i)
@@ -1075,7 +1096,13 @@ def _reml_intercept(y: np.ndarray, X: np.ndarray, g: np.ndarray) -> dict:
     grid = np.concatenate([[0.0], np.geomspace(1e-4, 1e3, 57)])
     vals = np.array([crit(t) for t in grid])
     k = int(np.argmin(vals))
+    if k == grid.size - 1:  # σ²_u/σ²_e ≥ 1e6: the trials within a subject do not vary
+        raise StatsError("the mixed model is undefined: within each participant the ratings "
+                         "are explained by the fixed effects (no residual variance)")
     lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    if not np.isfinite(vals).any():
+        raise StatsError("the mixed model is undefined: every rating is explained by the "
+                         "fixed effects (no residual variance)")
     res = optimize.minimize_scalar(crit, bounds=(lo, hi), method="bounded",
                                    options={"xatol": 1e-12 * max(hi, 1.0)})
     theta = float(res.x) if res.fun <= vals[k] else float(grid[k])
@@ -1083,9 +1110,13 @@ def _reml_intercept(y: np.ndarray, X: np.ndarray, g: np.ndarray) -> dict:
         theta = 0.0  # the boundary: no participant variance (lme4: a singular fit, SD 0)
     gamma = theta * theta
     A, beta, rss = parts(gamma)
+    if rss <= RTOL ** 2 * n:  # the data's scale is 1 here: rounding, not residual variance
+        raise StatsError("the mixed model is undefined: every rating is explained by the "
+                         "fixed effects (no residual variance)")
     var_e = rss / (n - p)
     return {"beta": beta, "cov": var_e * np.linalg.inv(A), "var_u": gamma * var_e,
-            "var_e": var_e, "gamma": gamma, "reml": crit(theta)}
+            "var_e": var_e, "gamma": gamma, "reml": crit(theta),
+            "converged": bool(res.success) or theta == float(grid[k]) or theta == 0.0}
 
 
 def mixed_oneway(data: pd.DataFrame, dv: str, within: str, subject: str,
@@ -1164,7 +1195,8 @@ def mixed_oneway(data: pd.DataFrame, dv: str, within: str, subject: str,
                      "n_obs": int(len(d)), "chi2": chi2, "dof": len(idx),
                      "p_unc": float(special.chdtrc(len(idx), chi2)),
                      "sd_subject": math.sqrt(fit["var_u"]) * scale,
-                     "sd_resid": math.sqrt(fit["var_e"]) * scale, "converged": True})
+                     "sd_resid": math.sqrt(fit["var_e"]) * scale,
+                     "converged": fit["converged"]})
     out = pd.DataFrame(rows)
     se = np.sqrt(np.diag(fit["cov"]))
     z = float(special.ndtri(0.975))

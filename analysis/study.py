@@ -234,8 +234,9 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
     groups_present = sorted(g for g in d.get("group", pd.Series(dtype=str)).dropna().astype(str)
                             .unique() if g)
     if len(groups_present) >= 2:  # a between-subject factor (e.g. expert / novice)
+        grouped = d[d["group"].fillna("").astype(str) != ""]  # no group is not a group
         try:
-            models["mixed_group"] = mixed_oneway(d, dv, within, subject, between="group")
+            models["mixed_group"] = mixed_oneway(grouped, dv, within, subject, between="group")
         except StatsError as exc:
             models["mixed_group"] = f"not computed: {exc}"
     estimates = {name: {k: m.attrs[k] for k in ("fixed", "thresholds") if k in m.attrs}

@@ -146,3 +146,58 @@ def test_the_summary_names_a_significant_interaction():
     text = _summary(a)
     assert "no main effect significant" in text
     assert "interaction frequency × slope (p = .012)" in text
+
+
+def test_a_missing_first_rating_does_not_rename_participants():
+    """Rows (P1, NaN), (P2, 5), (P1, 3): P1's data were labelled P2 once a rating was
+    missing, so the wrong person was listed as excluded."""
+    from analysis.stats import wide_means
+
+    d = pd.DataFrame({"participant": ["P1", "P2", "P1", "P2", "P3"],
+                      "sample": ["a", "a", "b", "b", "a"],
+                      "rating": [np.nan, 5.0, 3.0, 4.0, 6.0]})
+    m, subjects, levels = wide_means(d, "rating", "sample", "participant")
+    got = {s: dict(zip(levels, row, strict=True)) for s, row in zip(subjects, m, strict=True)}
+    assert got["P1"]["b"] == 3.0 and np.isnan(got["P1"]["a"])
+    assert got["P2"] == {"a": 5.0, "b": 4.0} and got["P3"]["a"] == 6.0
+    pw = A.pairwise_ttests(pd.concat([d, d.assign(participant=d["participant"] + "x")]),
+                           "rating", "sample", "participant")
+    assert sorted(pw.attrs["excluded_subjects"]) == ["P1", "P1x", "P3", "P3x"]
+
+
+def test_a_mixed_model_without_residual_variance_is_undefined_in_words():
+    """Every participant gave each sample the same rating every time: no residual variance.
+    It raised LinAlgError (or printed χ² = 1e30) and stopped the whole report."""
+    rows = [(f"P{p}", s, float(k + (p % 3))) for p in range(6)
+            for k, s in enumerate("abc") for _ in range(2)]
+    d = pd.DataFrame(rows, columns=["participant", "sample", "rating"])
+    with pytest.raises(A.StatsError, match="no residual variance"):
+        mixed_oneway(d, "rating", "sample", "participant")
+
+
+def test_the_wilcoxon_floor_allows_for_ties():
+    """With ties the normal approximation goes below 2/2ⁿ: six equal positive differences
+    give p = .0197 < 2/64, so the stated floor must be the smaller."""
+    from analysis.stats import _signrank_min_p, signed_rank_test
+
+    r = signed_rank_test(np.full(6, 0.5))
+    assert r["method"] == "normal" and r["p"] < 2 / 64
+    assert _signrank_min_p(6) <= r["p"] + 1e-15
+
+
+def test_a_most_significant_p_that_underflowed_is_a_bound():
+    out = _p_bounds({"groups": {"wood": {"most_significant_p": 0.0, "F": 3.0}}})
+    assert out["groups"]["wood"] == {"most_significant_p": "< 2.3e-308", "F": 3.0}
+
+
+def test_the_ordinal_model_survives_a_participant_always_at_the_top():
+    """A participant who always gave the top rating pushes their posterior mode far out;
+    unclipped Newton steps once overshot to NaN and kept it for every later call."""
+    from analysis.ordinal import ordinal_mixed
+
+    rng = np.random.default_rng(3)
+    rows = [(f"P{p}", s, 7 if p == 0 else int(np.clip(np.rint(4 + k + rng.normal()), 1, 7)))
+            for p in range(8) for k, s in enumerate("abc") for _ in range(4)]
+    d = pd.DataFrame(rows, columns=["participant", "sample", "rating"])
+    r = ordinal_mixed(d, "rating", "sample", "participant").iloc[0]
+    assert np.isfinite(r["lr"]) and r["lr"] > 0 and r["converged"]
