@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint venv clean system-deps screens
+.PHONY: demo test lint venv clean system-deps screens contract
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -22,7 +22,8 @@ venv: $(STAMP)
 # the X libraries Qt needs for PsychoPy's participant-information dialog; installed only
 # when missing; chromium renders report.html headless for its screenshot test; gcc builds the
 # firmware's host build, arm-none-eabi-gcc (with newlib) its Cortex-M build, and
-# qemu-system-arm runs that on an emulated STM32F405; R and its packages recompute the
+# qemu-system-arm runs that on an emulated STM32F405; clang-14 and libFuzzer fuzz the
+# firmware's receive path and command executor; R and its packages recompute the
 # statistics' reference values (tests/r/).
 R_PACKAGES := afex lme4 lmerTest ordinal car effectsize coin multcompView
 R_CHECK := quit(status = !all(sapply(strsplit("$(R_PACKAGES)", " ")[[1]], requireNamespace, quietly = TRUE)))
@@ -32,16 +33,17 @@ system-deps:
 	    || ! command -v chromium >/dev/null 2>&1 || ! command -v cc >/dev/null 2>&1 \
 	    || ! command -v arm-none-eabi-gcc >/dev/null 2>&1 \
 	    || ! command -v qemu-system-arm >/dev/null 2>&1 \
+	    || ! command -v clang-14 >/dev/null 2>&1 || ! dpkg -s libfuzzer-14-dev >/dev/null 2>&1 \
 	    || [ ! -d /usr/lib/arm-none-eabi/newlib ] \
 	    || [ ! -f /usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf ] \
 	    || ! dpkg -s libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 >/dev/null 2>&1; then \
-	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries and chromium from Debian's packages"; \
+	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries, chromium, the compilers, QEMU and libFuzzer from Debian's packages"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
 	    xvfb libgl1-mesa-dri libglu1-mesa libportaudio2 libasound2 libsndfile1 xdotool tmux \
 	    fonts-dejavu-core libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 libxkbcommon-x11-0 \
 	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 \
 	    chromium gcc libc6-dev make gcc-arm-none-eabi libnewlib-arm-none-eabi \
-	    qemu-system-arm >/dev/null; \
+	    qemu-system-arm clang-14 libfuzzer-14-dev libclang-rt-14-dev >/dev/null; \
 	fi
 	@if ! command -v Rscript >/dev/null 2>&1 || ! Rscript -e '$(R_CHECK)' >/dev/null 2>&1; then \
 	  echo "installing R and the reference packages (afex, lme4, lmerTest, ordinal, car, effectsize, coin, multcompView) from Debian's packages"; \
@@ -60,6 +62,12 @@ test: $(STAMP) system-deps
 	$(VENV)/bin/ruff check .
 	$(MAKE) -C firmware test
 	$(PY) -m pytest -q
+
+# The wire contract (device/serial/contract.py) into the files made from it: the firmware's
+# include/hl_contract.h and the tables of docs/wire-protocol.md, then the test vectors
+contract: $(STAMP)
+	$(PY) -m device.serial.contract
+	$(PY) -m device.serial.vectors > docs/wire-vectors.txt
 
 # The README's screenshots, from the last `make test` (look at them before committing).
 SCREENS := realism-instructions realism-tap realism-rating factorial-rating factorial-tap \

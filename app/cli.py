@@ -540,12 +540,12 @@ def build_parser() -> argparse.ArgumentParser:
     em.add_argument("--rate", type=float, default=10_000.0, help="servo rate [Hz]")
     em.add_argument("--seed", type=int, default=0)
     em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
-    em.add_argument("--firmware", choices=("python", "host", "host-board", "qemu"),
+    em.add_argument("--firmware", choices=("python", "host", "host-board", "host-san", "qemu"),
                     default="python",
                     help="what serves the port (protocol 2): the Python emulator, or the C "
                     "reference firmware built for this machine (host-board: with the "
-                    "STM32F405's buffers and 1-Mbaud link) or run on an emulated STM32F405 "
-                    "under QEMU")
+                    "STM32F405's buffers and 1-Mbaud link; host-san: that under ASan and "
+                    "UBSan) or run on an emulated STM32F405 under QEMU")
     em.set_defaults(func=_device_emulate)
     from app.matching_cli import add_parsers
 

@@ -13,7 +13,6 @@ commands, so heartbeats, e-stop and STOP_WINDOW act during a window.
 from __future__ import annotations
 
 import gc
-import math
 import os
 import select
 import sys
@@ -28,16 +27,19 @@ import numpy as np
 from ..codes import Blend, SceneKind
 from ..scene import Material, Ringing, Scene, Support, TableTransient, TransientTable
 from ..sim.backend import SimDevice
+from . import contract
 from . import messages as M
+from .contract import RangeError
 from .framing import FrameDecoder
 
 __all__ = ["Emulator", "open_pty"]
 
-_FAULT = {name: code for code, name in M.FaultCode.NAMES.items()}
+#: the simulator's fault names as the wire's codes: a simulated stylus that left every
+#: physical bound commands, like a non-finite number, a current no servo should send
+_FAULT = {name: code for code, name in M.FaultCode.NAMES.items()} | {
+    "nan_command": M.FaultCode.NONFINITE, "diverged": M.FaultCode.NONFINITE}
 #: field ranges the device enforces (docs/wire-protocol.md §4): HOME's clearance [µm],
 #: a window's duration and first-contact timeout [ms]
-MAX_CLEARANCE_UM = 500_000
-MAX_WINDOW_MS = 600_000
 #: the resources LIMITS advertises: table and playback [i16 items], the trace ring
 #: [records], the channels recorded (all ten, the simulator's true_* included)
 LIMITS = M.Limits(table_items=1_000_000, play_items=4_194_304, ring_records=65_536,
@@ -90,6 +92,7 @@ class Emulator:
     def __init__(self, sim: SimDevice, fd: int, status_hz: float = 40.0,
                  limits: M.Limits = LIMITS):
         self.limits = limits
+        self._limit_values = M.limit_values(limits, int(round(sim.info.current_limit * 1000)))
         sim.live = True
         sim.trace_sink = self._stream
         sim.input_gate = self._input_read
@@ -107,6 +110,8 @@ class Emulator:
         self._play = np.zeros(0)
         self._worker: threading.Thread | None = None
         self._running: str | None = None  # what the worker runs: window, play, commit
+        self._stop_asked = False  # the host ended the run (ZERO, STOP_WINDOW, HELLO)
+        self._scene_ready = False  # a scene committed since the last upload command
         self._committing: tuple | None = None  # the SCENE_COMMIT being prepared
         self._prepared: int | None = None  # its verdict, once prepared
         self._homed_um: int | None = None  # HOME's clearance while homed (a playback
@@ -231,10 +236,20 @@ class Emulator:
         self._stop.set()
         self.sim.request_stop()
 
+    def _stop_run(self) -> None:
+        """End the running window or playback at the next block, even one whose worker has
+        not reached the servo loop yet (the loop clears stale requests when it starts, so
+        the worker asks again before each block: :meth:`_input_read`)."""
+        self._stop_asked = True
+        self.sim.request_stop()
+
     def _input_read(self) -> None:
         """From the servo worker before each block: wait until the serve loop has read the
         port lately (:data:`INPUT_TURN_S`), so device time never runs past frames that
-        arrived but were not read (the worker's clock slips meanwhile)."""
+        arrived but were not read (the worker's clock slips meanwhile); a stop asked
+        before the block is passed on."""
+        if self._stop_asked:
+            self.sim.request_stop()
         while time.monotonic() - self._turn > INPUT_TURN_S and not self._stop.is_set():
             time.sleep(0.0005)
 
@@ -248,10 +263,12 @@ class Emulator:
         return M.State.HOMED if self.sim.enabled else M.State.IDLE
 
     def _status(self) -> None:
-        f = self.sim.fault
-        self.send(M.StatusReport(self._now_us(), self._state(),
-                                 int(round(self.sim.output_force * 1000)),
-                                 _FAULT.get(f.code, 0) if f is not None else 0))
+        f, state = self.sim.fault, self._state()
+        # output off (IDLE, FAULT) delivers nothing, whatever the last run ended on
+        out = 0 if state in (M.State.IDLE, M.State.FAULT) else self.sim.output_force
+        out_mn = max(-2**31, min(2**31 - 1, int(round(out * 1000))))
+        self.send(M.StatusReport(self._now_us(), state, out_mn,
+                                 _FAULT[f.code] if f is not None else 0))
 
     def _report_fault(self) -> None:
         f = self.sim.fault
@@ -261,7 +278,7 @@ class Emulator:
                 lat = max(0.0, f.t - self._estop_rx)
                 self._estop_max = lat if self._estop_max is None else max(self._estop_max, lat)
                 self._estop_rx = None
-            self.send(M.Fault(_FAULT.get(f.code, 0), int(round(f.t * 1e6))))
+            self.send(M.Fault(_FAULT[f.code], int(round(f.t * 1e6))))
             # for people and tests: how long after the host's last frame output went off
             since = f.t - self.sim.last_heartbeat
             _log(f"FAULT {f.code} at device time {f.t:.4f} s, {since * 1e3:.1f} ms after the "
@@ -306,8 +323,10 @@ class Emulator:
         try:
             msg = M.decode(frame)
         except M.MessageError:
-            self.send(M.Ack(frame.seq, M.Status.BAD_MESSAGE))
-            return
+            if frame.type != M.EStop.TYPE or frame.version != 2:
+                self.send(M.Ack(frame.seq, M.Status.BAD_MESSAGE))
+                return
+            msg = M.EStop()  # acted on whatever its body: a stray byte must not keep output on
         if isinstance(msg, M.Heartbeat):
             return
         if isinstance(msg, M.Ping):
@@ -343,7 +362,7 @@ class Emulator:
         self._last = None  # a new host session starts its sequence numbers again
         if self._busy() and self._running != "commit":
             self._rehome = False
-            self.sim.request_stop()
+            self._stop_run()
             self._worker.join(timeout=2.0)
         with self._olock:
             self._outbox.clear()  # the old session's stream is nobody's now
@@ -386,6 +405,7 @@ class Emulator:
             try:
                 self.sim.load_scene(scene)
                 self._prepared = M.Status.OK
+                self._scene_ready = True
             except (ValueError, TypeError):  # SceneError is a ValueError
                 self._prepared = M.Status.BAD_MESSAGE
 
@@ -423,55 +443,38 @@ class Emulator:
         return S.OK, sc["scene"]
 
     def _scene_upload(self) -> None:
-        """A scene command accepted: output goes off (HOMED → IDLE); a fault stays."""
+        """A scene command accepted: output goes off (HOMED → IDLE; a fault stays) and the
+        scene is withdrawn until its SCENE_COMMIT (HOME is BAD_STATE meanwhile)."""
         if self.sim.enabled:
             self.sim.zero()
         self._homed_um = None
+        self._scene_ready = False
 
     def _fields_fit(self, msg: M.Message) -> bool:
-        """The ranges of docs/wire-protocol.md §4, checked before the state (a misfit is
-        BAD_MESSAGE in every state)."""
+        """The ranges of docs/wire-protocol.md §5a (the contract's, against this device's
+        limits) and the rules between fields, checked before the state (a misfit is
+        BAD_MESSAGE in every state, and changes nothing)."""
+        try:
+            msg.check(self._limit_values)
+        except RangeError:
+            return False
         if isinstance(msg, M.SceneBegin):
-            floats = (msg.spring, msg.stiffness, msg.damping, msg.ring_slope, msg.ring_decay,
-                      msg.ring_freq, msg.block_mass, msg.attenuation)
-            table = msg.kind == SceneKind.TABLE
-            return (msg.kind in tuple(SceneKind) and msg.blend in tuple(Blend)
-                    and all(math.isfinite(x) for x in floats) and 0 <= msg.attenuation <= 1
-                    and (msg.rows > 0 and msg.row_len > 0 if table
-                         else msg.rows == msg.row_len == 0)
-                    and msg.rows * msg.row_len <= self.limits.table_items)
+            if msg.kind == SceneKind.TABLE:
+                return msg.rows > 0 and msg.row_len > 0 and (
+                    msg.rows * msg.row_len <= self.limits.table_items)
+            return msg.rows == msg.row_len == 0
         if isinstance(msg, M.SceneVelocities):
-            v = np.asarray(msg.items, float)
-            return bool(np.isfinite(v).all() and (v > 0).all() and (np.diff(v) > 0).all())
-        if isinstance(msg, M.SceneSupport):
-            return math.isfinite(msg.stiffness) and math.isfinite(msg.damping)
-        if isinstance(msg, M.Home):
-            return 0 < msg.clearance_um <= MAX_CLEARANCE_UM  # 0 once killed the emulator
-        if isinstance(msg, M.StartWindow):
-            return (0 < msg.duration_ms <= MAX_WINDOW_MS and 0 < msg.timeout_ms <= MAX_WINDOW_MS
-                    and msg.from_contact in (0, 1))
+            return bool((np.diff(np.asarray(msg.items, np.float32)) > 0).all())
         if isinstance(msg, M.PlayChunk):
             return msg.offset + msg.n <= self.limits.play_items
-        if isinstance(msg, M.PlayStart):
-            return 0 < msg.n_samples <= self.limits.play_items
-        if isinstance(msg, M.LinkQuery):
-            return msg.reset in (0, 1)
-        if isinstance(msg, M.TraceConfig):
-            lim = self.limits
-            return (msg.channels != 0 and not msg.channels & ~lim.channels
-                    and 1 <= msg.decimation <= lim.max_decimation)
         return True
 
     def _execute(self, msg: M.Message) -> int:
         """The ACK status of a command, per the state × command table (docs §4)."""
         S = M.Status
         sim = self.sim
-        device_bound = isinstance(msg, (M.Ack, M.HelloAck, M.Limits, M.Pong, M.Contact,
-                                        M.Saturation, M.Fault, M.StatusReport, M.WindowDone,
-                                        M.TraceBlock, M.Position, M.TraceChunk, M.TraceLost,
-                                        M.TraceRequest, M.LinkReport))
-        if device_bound or not self._fields_fit(msg):
-            return S.BAD_MESSAGE
+        if not self._fields_fit(msg) or contract.gate(msg.NAME, 0) == S.BAD_MESSAGE:
+            return S.BAD_MESSAGE  # out of range, or a device → host type (any state)
         running = self._busy() and self._running in ("window", "play")
         if isinstance(msg, M.EStop):
             if sim.fault is None:
@@ -492,12 +495,13 @@ class Emulator:
             self._rehome = False
             self._homed_um = None
             sim.zero()
-            sim.request_stop()
+            if running:
+                self._stop_run()
             _log("host: ZERO")
             return S.OK
         if isinstance(msg, M.StopWindow):
             if running:
-                sim.request_stop()
+                self._stop_run()
             return S.OK
         if isinstance(msg, M.LinkQuery):
             return S.OK  # in every state; the report follows the ACK
@@ -508,8 +512,6 @@ class Emulator:
         if isinstance(msg, (M.Home, M.StartWindow, M.PlayStart)) and sim.fault is not None:
             return S.FAULT_LATCHED
         if isinstance(msg, M.SetLimit):
-            if not 0 < msg.current_ma <= int(round(sim.info.current_limit * 1000)):
-                return S.BAD_MESSAGE
             sim.set_current_limit(msg.current_ma / 1000)
             _log(f"host: current limit {msg.current_ma} mA")
             return S.OK
@@ -517,7 +519,7 @@ class Emulator:
             self._trace_config(msg.channels, msg.decimation)
             return S.OK
         if isinstance(msg, M.Home):
-            if sim.scene is None:
+            if sim.scene is None or not self._scene_ready:
                 return S.BAD_STATE
             sim.home(msg.clearance_um * 1e-6)
             self._homed_um = msg.clearance_um
@@ -595,6 +597,7 @@ class Emulator:
                 self.stop()
 
         self._running = kind
+        self._stop_asked = False
         self._worker = threading.Thread(target=run, daemon=True)
         self._worker.start()
 
@@ -653,7 +656,7 @@ class Emulator:
         for s in res.saturations:
             self.send(M.Saturation(window_id, int(round((s.t - t0) * rate)),
                                    int(round(s.duration * rate)),
-                                   int(round(s.peak_current * 1000))))
+                                   min(2**31 - 1, int(round(abs(s.peak_current) * 1000)))))
         if res.faults:
             self._report_fault()
         if self._n_pending:
@@ -661,9 +664,10 @@ class Emulator:
         first = -1 if res.t_first_contact is None else int(round((res.t_first_contact - t0)
                                                                   * rate))
         with self._olock:  # after the window's last chunk
+            fault = _FAULT[res.faults[0].code] if res.faults else 0
             self._outbox.append(M.WindowDone(window_id, t0_us, len(res.traces["t"]), first,
                                              len(res.contacts), len(res.saturations),
-                                             int(res.timed_out), int(bool(res.faults))))
+                                             int(res.timed_out), fault))
 
     def _run_window(self, msg: M.StartWindow) -> None:
         sent = 0
@@ -678,7 +682,8 @@ class Emulator:
             now = time.monotonic()
             if partial.live_height is not None and now - last_pos[0] >= 0.025:
                 last_pos[0] = now  # the cursor's stream, ~40 Hz
-                tick = int(round((self.sim.time - tick0) * rate))
+                # the tick that read this height: the last one run
+                tick = max(0, int(round((self.sim.time - tick0) * rate)) - 1)
                 height = max(-2**31, min(2**31 - 1, int(round(partial.live_height * 1e6))))
                 self.send(M.Position(msg.window_id, tick, height))
             for c in partial.contacts[sent:]:
@@ -703,8 +708,8 @@ class Emulator:
         device is homed again afterwards (a playback returns to the state it started from)."""
         self._open_stream(msg.window_id)
         t0_us = int(round(self.sim.time * 1e6))
+        # the buffer keeps its contents: a second PLAY_START plays it again (docs §5)
         res = self.sim.play_force(self._play[: msg.n_samples], heartbeats=False)
-        self._play = np.zeros(0)
         if self._rehome and self.sim.fault is None and self._homed_um is not None:
             self.sim.home(self._homed_um * 1e-6)
         self._finish(msg.window_id, res, t0_us)

@@ -1,11 +1,12 @@
 """The reference firmware (``firmware/``) as a device on a pseudo-terminal.
 
-Three builds serve the protocol with the firmware's simulated plant: ``host`` (the C code
+Four builds serve the protocol with the firmware's simulated plant: ``host`` (the C code
 compiled for this machine, paced to its clock), ``host-board`` (the same with the
 STM32F405's resources and its 1-Mbaud link as LIMITS: what a lab's board offers a host, at
-any speed) and ``qemu`` (the Cortex-M build on an emulated STM32F405, netduinoplus2, its
-USART on a pty). :func:`command` says how to start
-either, building it with ``make -C firmware`` when the binary is missing; the caller
+any speed), ``host-san`` (that under ASan and UBSan) and ``qemu`` (the Cortex-M build on
+an emulated STM32F405, netduinoplus2, its USART on a pty). :func:`host_command` and
+:func:`qemu_command` say how to start each, building it with ``make -C firmware`` when the
+binary is missing; the caller
 (``hapticlab device emulate --firmware``) prints the port as its first line.
 """
 
@@ -25,12 +26,13 @@ FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 #: builds by kind; ``board-qemu`` is the papers' board I/O built for QEMU (its peripheral
 #: traffic is what the tests check; it has no plant, so it serves no session)
 _TARGETS = {"host": "build/hlfw-host", "host-board": "build/hlfw-host-board",
+            "host-san": "build/hlfw-host-san",
             "qemu": "build/hlfw-stm32.elf", "board-qemu": "build/hlfw-board-qemu.elf"}
 _ARM = ("arm-none-eabi-gcc", "gcc-arm-none-eabi")
 _CC = ("cc", "build-essential")
-_TOOLS = {"host": _CC, "host-board": _CC, "qemu": _ARM, "board-qemu": _ARM}
+_TOOLS = {"host": _CC, "host-board": _CC, "host-san": _CC, "qemu": _ARM, "board-qemu": _ARM}
 #: the builds that run on this machine (paced to its clock, at any speed)
-HOST_KINDS = ("host", "host-board")
+HOST_KINDS = ("host", "host-board", "host-san")
 #: what qemu-system-arm prints when it puts a serial port on a pty
 QEMU_PTY = re.compile(r"char device redirected to (/dev/pts/\d+)")
 
@@ -66,8 +68,9 @@ def binary(kind: str) -> Path:
 
 
 def host_command(seed: int = 0, speed: float = 1.0, kind: str = "host") -> list[str]:
-    """The command line of host build ``kind`` (``host``, or ``host-board`` with the
-    STM32F405's resources and link width), paced at ``speed`` × real time; it prints its pty
+    """The command line of host build ``kind`` (``host``; ``host-board`` with the
+    STM32F405's resources and link width; ``host-san``, the board's, under ASan and UBSan,
+    which stop it at the first error), paced at ``speed`` × real time; it prints its pty
     as its first line."""
     return [str(binary(kind)), "--seed", str(int(seed)), "--speed", repr(float(speed))]
 

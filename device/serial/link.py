@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import DeviceError
 from . import messages as M
+from .contract import RangeError
 from .framing import PROTOCOL_VERSION, FrameDecoder
 from .native import NativeLink
 
@@ -162,6 +163,7 @@ class Link:
         self.version = 1
         #: a version-2 device's resources (LIMITS), None before HELLO or from a version-1 device
         self.limits: M.Limits | None = None
+        self.rating_ma: int | None = None  # HELLO_ACK's current limit [mA]
         self._handler = handler
         self._ser = transport if transport is not None else self._open(port)
         #: the native thread serving the port, or None (then :attr:`native_why` says why)
@@ -369,7 +371,13 @@ class Link:
             return self._seq
 
     def request(self, msg: M.Message, timeout: float | None = None) -> int:
-        """Send a command and wait for its ACK; retries, then DeviceTimeoutError."""
+        """Send a command and wait for its ACK; retries, then DeviceTimeoutError. A command
+        with a field outside the contract's range for this device is not sent
+        (:class:`~device.serial.contract.RangeError`, naming the field)."""
+        try:
+            msg.check(M.limit_values(self.limits, self.rating_ma))
+        except RangeError as exc:
+            raise RangeError(f"{self.port}: not sent: {exc}") from None
         timeout = self.timeout if timeout is None else timeout
         seq = self.next_seq()
         data = M.encode(msg, seq, self.version)
@@ -403,12 +411,16 @@ class Link:
         (:attr:`limits`)."""
         deadline = time.monotonic() + max(HELLO_WAIT_S, 4 * self.timeout)
         seq = self.next_seq()
+        # a lone delimiter first: it ends a half frame a previous host left in the device's
+        # receiver, which would otherwise swallow this HELLO (docs §7)
+        self.write(b"\x00")
         while time.monotonic() < deadline:
             self.write(M.encode(M.Hello(protocol), seq, 1))
             if self.wait_for(lambda ev: any(isinstance(e, M.HelloAck) for e in ev),
                              self.timeout):
                 acks = self.remove(lambda e: isinstance(e, M.HelloAck))
                 self.version = acks[-1].protocol
+                self.rating_ma = acks[-1].current_limit_ma
                 if self.version >= 2:
                     # a device may time its link before it answers LIMITS (the QEMU build
                     # sends 3 × 2 KiB: 0.26 s at the 24 kB/s measured on a busy host)

@@ -1,8 +1,8 @@
 """Messages of the hapticlab wire protocol, versions 1 and 2 (docs/wire-protocol.md).
 
-Each message is a frozen dataclass with a fixed little-endian layout (``FMT``) and,
-for some, a trailing array (``ARRAY`` = struct code of its items). Units and
-fixed-point encodings are stated per field.
+Each message is a frozen dataclass named after its entry in the wire contract
+(:mod:`device.serial.contract`), which gives its type byte, little-endian layout, item
+counts and field ranges. Units and fixed-point encodings are stated per field.
 """
 
 from __future__ import annotations
@@ -11,10 +11,11 @@ import struct
 from dataclasses import astuple, dataclass, fields
 from typing import ClassVar
 
+from . import contract as C
 from .framing import Frame, FramingError, encode_frame
 
 __all__ = ["MESSAGES", "encode", "decode", "Status", "Channel", "FaultCode", "State",
-           "MessageError", "contact_velocity_nm_s"]
+           "MessageError", "contact_velocity_nm_s", "limit_values"]
 
 
 class MessageError(FramingError):
@@ -38,9 +39,12 @@ class Status:
 
 
 class FaultCode:
+    """Why output latched off (FAULT.code, STATUS.fault, WINDOW_DONE.fault)."""
+
     WATCHDOG = 1
     ESTOP = 2
-    NAMES: ClassVar[dict[int, str]] = {1: "watchdog", 2: "estop"}
+    NONFINITE = 3  #: the servo computed a current that is not finite
+    NAMES: ClassVar[dict[int, str]] = dict(C.FAULTS)
 
 
 class State:
@@ -57,10 +61,24 @@ class Channel:
 
 @dataclass(frozen=True)
 class Message:
+    """A message of the wire contract (:mod:`device.serial.contract`), named by ``NAME``;
+    its type byte, struct layout (``FMT``), trailing array (``ARRAY``, the struct code of
+    its items) and item counts come from the contract's entry."""
+
+    NAME: ClassVar[str] = ""
     TYPE: ClassVar[int] = -1
     FMT: ClassVar[str] = ""
     ARRAY: ClassVar[str | None] = None  # struct code of a trailing array field "items"
     ITEMS: ClassVar[int | None] = None  # the array's fixed length, when it has one
+    MAX_ITEMS: ClassVar[int | None] = None  # the most items one frame carries
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        spec = C.BY_NAME[cls.NAME]
+        cls.TYPE, cls.FMT = spec.type, spec.fmt
+        cls.ARRAY = spec.items.code if spec.items is not None else None
+        cls.ITEMS = spec.fixed_items
+        cls.MAX_ITEMS = spec.fixed_items or spec.max_items
 
     def body(self) -> bytes:
         vals = tuple(getattr(self, f.name) for f in fields(self))  # astuple deep-copies
@@ -81,8 +99,10 @@ class Message:
         if len(body) < size or (len(body) - size) % item:
             raise MessageError(f"{cls.__name__}: body of {len(body)} bytes does not fit "
                                f"{size} + n×{item}")
-        head = struct.unpack("<" + cls.FMT, body[:size])
         n = (len(body) - size) // item
+        if cls.MAX_ITEMS is not None and n > cls.MAX_ITEMS:
+            raise MessageError(f"{cls.__name__}: {n} items, at most {cls.MAX_ITEMS}")
+        head = struct.unpack("<" + cls.FMT, body[:size])
         items = struct.unpack(f"<{n}{cls.ARRAY}", body[size:])
         obj = cls(*head, tuple(items))
         obj.check_count()
@@ -93,6 +113,25 @@ class Message:
         if n is not None and n != len(self.items):  # type: ignore[attr-defined]
             raise MessageError(f"{type(self).__name__}: n = {n} but "
                                f"{len(self.items)} items follow")  # type: ignore[attr-defined]
+        if self.ITEMS is not None and len(self.items) != self.ITEMS:  # type: ignore
+            raise MessageError(f"{type(self).__name__}: {len(self.items)} items, "  # type: ignore
+                               f"expected {self.ITEMS}")
+
+    def check(self, limits: dict[str, int] | None = None) -> None:
+        """Raise :class:`~device.serial.contract.RangeError` naming the first field outside
+        the range the contract gives it; ``limits``: the device's (:func:`limit_values`),
+        None to skip the bounds that name them."""
+        C.check(self.NAME, {f.name: getattr(self, f.name) for f in fields(self)}, limits)
+
+
+def limit_values(limits: Limits | None, current_limit_ma: int | None) -> dict[str, int]:
+    """The device's resources by the names the contract's bounds use."""
+    out = {} if limits is None else {k: getattr(limits, k) for k in
+                                     ("table_items", "play_items", "channels",
+                                      "max_decimation")}
+    if current_limit_ma is not None:
+        out["current_limit_ma"] = current_limit_ma
+    return out
 
 
 def _str(b: bytes) -> str:
@@ -104,8 +143,7 @@ def _str(b: bytes) -> str:
 class Hello(Message):
     """Open a session. host_protocol: the protocol version the host speaks."""
 
-    TYPE = 0x01
-    FMT = "B"
+    NAME = "HELLO"
     host_protocol: int = 1
 
 
@@ -113,16 +151,14 @@ class Hello(Message):
 class Heartbeat(Message):
     """Host is alive; resets the device watchdog. No reply."""
 
-    TYPE = 0x02
-    FMT = ""
+    NAME = "HEARTBEAT"
 
 
 @dataclass(frozen=True)
 class Ping(Message):
     """Round-trip probe; the device answers PONG with the same stamp. stamp: host µs (u32)."""
 
-    TYPE = 0x03
-    FMT = "I"
+    NAME = "PING"
     stamp: int = 0
 
 
@@ -140,8 +176,7 @@ class SceneBegin(Message):
     attenuation: [1, f32].
     """
 
-    TYPE = 0x10
-    FMT = "HBifffffffBHBf"
+    NAME = "SCENE_BEGIN"
     scene_id: int = 0
     kind: int = 0
     surface_um: int = 0
@@ -162,9 +197,7 @@ class SceneBegin(Message):
 class SceneVelocities(Message):
     """Reference speed of each table row [m/s, f32], ascending."""
 
-    TYPE = 0x11
-    FMT = "H"
-    ARRAY = "f"
+    NAME = "SCENE_VELOCITIES"
     scene_id: int = 0
     items: tuple = ()
 
@@ -173,9 +206,7 @@ class SceneVelocities(Message):
 class SceneChunk(Message):
     """Part of the force table, row-major: offset [samples, u32], n, items [i16, 1 mN LSB]."""
 
-    TYPE = 0x12
-    FMT = "HIH"
-    ARRAY = "h"
+    NAME = "SCENE_CHUNK"
     scene_id: int = 0
     offset: int = 0
     n: int = 0
@@ -186,8 +217,7 @@ class SceneChunk(Message):
 class SceneSupport(Message):
     """What a real block rests on: stiffness [N/m, f32], damping [N·s/m, f32] (emulators)."""
 
-    TYPE = 0x14
-    FMT = "Hff"
+    NAME = "SCENE_SUPPORT"
     scene_id: int = 0
     stiffness: float = 0.0
     damping: float = 0.0
@@ -197,8 +227,7 @@ class SceneSupport(Message):
 class SceneCommit(Message):
     """Finish the upload; crc32 over the table's i16 LE bytes (0 when there is no table)."""
 
-    TYPE = 0x13
-    FMT = "HI"
+    NAME = "SCENE_COMMIT"
     scene_id: int = 0
     crc32: int = 0
 
@@ -207,8 +236,7 @@ class SceneCommit(Message):
 class Home(Message):
     """Move to rest clearance_um [µm, u32] above the surface; enable output with a ramp."""
 
-    TYPE = 0x20
-    FMT = "I"
+    NAME = "HOME"
     clearance_um: int = 20_000
 
 
@@ -217,8 +245,7 @@ class StartWindow(Message):
     """Run a tapping window: duration_ms from the first contact (or from now when
     from_contact = 0); timeout_ms to wait for a first contact."""
 
-    TYPE = 0x21
-    FMT = "HIIB"
+    NAME = "START_WINDOW"
     window_id: int = 0
     duration_ms: int = 5000
     timeout_ms: int = 30000
@@ -227,17 +254,14 @@ class StartWindow(Message):
 
 @dataclass(frozen=True)
 class StopWindow(Message):
-    TYPE = 0x22
-    FMT = ""
+    NAME = "STOP_WINDOW"
 
 
 @dataclass(frozen=True)
 class PlayChunk(Message):
     """Open-loop force buffer: offset [samples, u32], n, items [i16, 1 mN LSB]."""
 
-    TYPE = 0x23
-    FMT = "IH"
-    ARRAY = "h"
+    NAME = "PLAY_CHUNK"
     offset: int = 0
     n: int = 0
     items: tuple = ()
@@ -247,8 +271,7 @@ class PlayChunk(Message):
 class PlayStart(Message):
     """Play the buffer's first n_samples in free air with the hand holding the stylus."""
 
-    TYPE = 0x24
-    FMT = "HI"
+    NAME = "PLAY_START"
     window_id: int = 0
     n_samples: int = 0
 
@@ -258,35 +281,30 @@ class SetLimit(Message):
     """Clamp the amplifier current at current_ma [mA, u16, 1 … rating] from now on; a HELLO
     restores the rating."""
 
-    TYPE = 0x25
-    FMT = "H"
+    NAME = "SET_LIMIT"
     current_ma: int = 0
 
 
 @dataclass(frozen=True)
 class EStop(Message):
-    TYPE = 0x30
-    FMT = ""
+    NAME = "ESTOP"
 
 
 @dataclass(frozen=True)
 class ClearFault(Message):
-    TYPE = 0x31
-    FMT = ""
+    NAME = "CLEAR_FAULT"
 
 
 @dataclass(frozen=True)
 class Zero(Message):
-    TYPE = 0x32
-    FMT = ""
+    NAME = "ZERO"
 
 
 @dataclass(frozen=True)
 class TraceRequest(Message):
     """Ask for count samples of a channel of a finished window, from sample start."""
 
-    TYPE = 0x40
-    FMT = "HBII"
+    NAME = "TRACE_REQUEST"
     window_id: int = 0
     channel: int = 0
     start: int = 0
@@ -298,8 +316,7 @@ class TraceConfig(Message):
     """Version 2: the channels (bit mask, bit i = channel i) and decimation (1 record per
     ``decimation`` servo ticks) streamed during the following windows and playbacks."""
 
-    TYPE = 0x41
-    FMT = "HH"
+    NAME = "TRACE_CONFIG"
     channels: int = 0x7F
     decimation: int = 1
 
@@ -309,8 +326,7 @@ class LinkQuery(Message):
     """Version 2: ask for LINK_REPORT, the device's view of the host's frames since HELLO
     or the last reset; ``reset`` 1 starts counting afresh after the report."""
 
-    TYPE = 0x42
-    FMT = "B"
+    NAME = "LINK_QUERY"
     reset: int = 0
 
 
@@ -319,8 +335,7 @@ class LinkQuery(Message):
 class Ack(Message):
     """Reply to every command: the command's seq and a Status code."""
 
-    TYPE = 0x80
-    FMT = "HB"
+    NAME = "ACK"
     ack_seq: int = 0
     status: int = 0
 
@@ -335,8 +350,7 @@ class HelloAck(Message):
     zero-padded.
     """
 
-    TYPE = 0x81
-    FMT = "BIHHIHII32s16s16s"
+    NAME = "HELLO_ACK"
     protocol: int = 1
     servo_rate_hz: int = 10_000
     current_limit_ma: int = 1400
@@ -367,8 +381,7 @@ class Limits(Message):
     link carries towards the host [B/s] (e.g. 100,000 for a 1-Mbaud UART), 0 when the link
     is no limit (USB, a pty)."""
 
-    TYPE = 0x82
-    FMT = "IIIHHI"
+    NAME = "LIMITS"
     table_items: int = 0
     play_items: int = 0
     ring_records: int = 0
@@ -379,8 +392,7 @@ class Limits(Message):
 
 @dataclass(frozen=True)
 class Pong(Message):
-    TYPE = 0x83
-    FMT = "I"
+    NAME = "PONG"
     stamp: int = 0
 
 
@@ -389,8 +401,7 @@ class Contact(Message):
     """A contact: window tick [u32] and incoming speed [nm/s, i32; ±2.1 m/s, a device
     saturates faster readings (:func:`contact_velocity_nm_s`)]."""
 
-    TYPE = 0x90
-    FMT = "HIi"
+    NAME = "CONTACT"
     window_id: int = 0
     tick: int = 0
     velocity_nm_s: int = 0
@@ -407,8 +418,7 @@ def contact_velocity_nm_s(velocity: float) -> int:
 class Saturation(Message):
     """A run of clamped ticks: start tick, duration [ticks], peak commanded current [mA, i32]."""
 
-    TYPE = 0x91
-    FMT = "HIIi"
+    NAME = "SATURATION"
     window_id: int = 0
     tick: int = 0
     duration: int = 0
@@ -419,8 +429,7 @@ class Saturation(Message):
 class Fault(Message):
     """Output latched off: FaultCode, device time [µs, u64] when output was zeroed."""
 
-    TYPE = 0x92
-    FMT = "BQ"
+    NAME = "FAULT"
     code: int = 0
     time_us: int = 0
 
@@ -430,8 +439,7 @@ class StatusReport(Message):
     """Sent at ≥ 20 Hz: device time [µs, u64], State, output force [mN, i32], latched
     FaultCode (0: none)."""
 
-    TYPE = 0x93
-    FMT = "QBiB"
+    NAME = "STATUS"
     time_us: int = 0
     state: int = 0
     output_mn: int = 0
@@ -443,8 +451,7 @@ class WindowDone(Message):
     """End of a window or playback: t0 [µs, u64] of tick 0, ticks recorded, first contact
     tick (−1: none), event counts, timed_out and fault flags."""
 
-    TYPE = 0x94
-    FMT = "HQIiHHBB"
+    NAME = "WINDOW_DONE"
     window_id: int = 0
     t0_us: int = 0
     n_ticks: int = 0
@@ -459,9 +466,7 @@ class WindowDone(Message):
 class TraceBlock(Message):
     """Samples start..start+n−1 of a channel [binary32, SI units]."""
 
-    TYPE = 0x95
-    FMT = "HBIH"
-    ARRAY = "f"
+    NAME = "TRACE_BLOCK"
     window_id: int = 0
     channel: int = 0
     start: int = 0
@@ -474,8 +479,7 @@ class Position(Message):
     """During a window, at 20–50 Hz: the stylus's height above the surface [µm, i32] at a
     window tick (for the participant's cursor)."""
 
-    TYPE = 0x96
-    FMT = "HIi"
+    NAME = "POSITION"
     window_id: int = 0
     tick: int = 0
     height_um: int = 0
@@ -486,9 +490,7 @@ class TraceChunk(Message):
     """Version 2, streamed during a window: records start..start+n−1, each one binary32 per
     channel of the mask in channel order (``items`` record-major)."""
 
-    TYPE = 0x97
-    FMT = "HHIH"
-    ARRAY = "f"
+    NAME = "TRACE_CHUNK"
     window_id: int = 0
     channels: int = 1
     start: int = 0
@@ -510,8 +512,7 @@ class TraceLost(Message):
     """Version 2: records start..start+n−1 of a window were dropped on the device (its ring
     buffer overflowed); the trace has a gap there, said, never silent."""
 
-    TYPE = 0x98
-    FMT = "HII"
+    NAME = "TRACE_LOST"
     window_id: int = 0
     start: int = 0
     n: int = 0
@@ -519,7 +520,7 @@ class TraceLost(Message):
 
 #: LINK_REPORT's gap histogram: bins of this many µs of device time, the last one open
 LINK_GAP_BIN_US = 2000
-LINK_GAP_BINS = 64  # LinkReport.ITEMS
+LINK_GAP_BINS = C.GAP_BINS  # LinkReport.ITEMS
 
 
 @dataclass(frozen=True)
@@ -532,10 +533,7 @@ class LinkReport(Message):
     ≥ 126 ms; a count saturates at 65,535). The gaps are what the device's watchdog
     judges."""
 
-    TYPE = 0x99
-    FMT = "QIIII"
-    ARRAY = "H"
-    ITEMS = 64
+    NAME = "LINK_REPORT"
     since_us: int = 0
     frames: int = 0
     bad_frames: int = 0
@@ -558,8 +556,8 @@ MESSAGES: dict[int, type[Message]] = {
                         Fault, StatusReport, WindowDone, TraceBlock, Position, TraceConfig,
                         Limits, TraceChunk, TraceLost, LinkQuery, LinkReport)}
 
-CHUNK_ITEMS = 480  # i16 items per SceneChunk / PlayChunk (960 bytes of data)
-TRACE_ITEMS = 250  # f32 items per TraceBlock, and at most per TraceChunk (n × k)
+CHUNK_ITEMS = C.CHUNK_ITEMS  # i16 items per SceneChunk / PlayChunk (960 bytes of data)
+TRACE_ITEMS = C.TRACE_ITEMS  # f32 items per TraceBlock, and at most per TraceChunk (n × k)
 
 
 def encode(msg: Message, seq: int, version: int = 1) -> bytes:
@@ -568,12 +566,20 @@ def encode(msg: Message, seq: int, version: int = 1) -> bytes:
 
 
 def decode(frame: Frame) -> Message:
-    """The message in a decoded frame; MessageError for unknown types or misfit bodies."""
+    """The message in a decoded frame; MessageError for unknown types, misfit bodies, and a
+    device → host message with a field outside its range (a host → device command's ranges
+    are the device's to judge, against its own limits: :meth:`Message.check`)."""
     cls = MESSAGES.get(frame.type)
     if cls is None:
         raise MessageError(f"unknown message type 0x{frame.type:02x}")
     try:
-        return cls.from_body(frame.body)
+        msg = cls.from_body(frame.body)
     except struct.error as exc:
         raise MessageError(f"{cls.__name__}: {exc}") from None
+    if C.BY_TYPE[cls.TYPE].sender == "device":
+        try:
+            msg.check()
+        except C.RangeError as exc:
+            raise MessageError(str(exc)) from None
+    return msg
 

@@ -62,7 +62,7 @@ def _examples() -> list[tuple[str, M.Message]]:
         ("saturation", M.Saturation(9, 100, 150, 1_650_000)),
         ("fault", M.Fault(M.FaultCode.ESTOP, 2**40 + 5)),
         ("status", M.StatusReport(2**33, M.State.HOMED, -52000, 0)),
-        ("window_done", M.WindowDone(9, 2**35, 50000, -110000, 8, 1, 0, 0)),
+        ("window_done", M.WindowDone(9, 2**35, 50000, -1, 8, 1, 0, M.FaultCode.ESTOP)),
         ("trace_block", M.TraceBlock(9, 1, 0, 3, (0.0, -1.5, 3.25))),
         ("position", M.Position(9, 777, -5000)),
         # version 2

@@ -169,6 +169,7 @@ class SimDevice(HapticDevice):
         self._fst = np.zeros(K.FST)
         self._rb = np.zeros(len(self._vel_w))
         self._tick = 0  # device time in ticks
+        self._tick_enabled = 0  # the tick output was last enabled at (home)
         self._t_heartbeat = 0.0
         self._enabled = False
         self._homed_clearance: float | None = None
@@ -329,6 +330,7 @@ class SimDevice(HapticDevice):
         x[K.Z1] = x[K.Z2] = z
         self._x = x
         self._reset_loop_state(z)
+        self._tick_enabled = self._tick  # the enable ramp runs from here, in device time
         self._homed_clearance = c
         self._enabled = True
         self._output_force = 0.0
@@ -421,6 +423,9 @@ class SimDevice(HapticDevice):
         self.last_plan = plan  # the intended taps of the last window (audits read them)
         n_max = int(math.ceil(total_s / dev.dt))
         stop_after = int(round(duration / dev.dt)) if from_first_contact else -1
+        # the enable ramp ran from HOME in device time: a live device's clock ran meanwhile
+        self._ist[K.IST_SINCE_ENABLE] = max(int(self._ist[K.IST_SINCE_ENABLE]),
+                                            self._tick - self._tick_enabled)
         res = self._run(cs, plan, n_max, stop_after, _EMPTY, on_progress, heartbeats,
                         timeout if from_first_contact else None, duration + 2.0)
         res.timed_out = from_first_contact and res.t_first_contact is None
@@ -437,7 +442,10 @@ class SimDevice(HapticDevice):
             far = Scene("free-air", surface_height=-MAX_REACH_M, spring=0.0)  # out of reach
             self._free_air = compile_scene(far, self.params, self.hand)
         self._x = np.zeros(self._free_air.plant.n_states)
+        # output already on (homed) stays on, its ramp long done; off, it ramps up now
+        since = self._tick - self._tick_enabled if self._enabled else 0
         self._reset_loop_state(0.0)
+        self._ist[K.IST_SINCE_ENABLE] = since
         self._enabled = False  # a window needs home() afterwards
         self.heartbeat()
         return self._run(self._free_air, HoldPlan(0.0), f.size, -1, f, None, heartbeats, None,
@@ -486,6 +494,9 @@ class SimDevice(HapticDevice):
             ft = int(self._ist[K.IST_FAULT_TICK])
             if ft >= 0:  # latch now, so callers see it mid-window, timed at the zeroing tick
                 self._latch((tick0 + ft) * dt)
+                if f_ext.size:  # a fault ends a playback at the tick that zeroed output
+                    n = min(n, ft + 1)
+                    break
             if self.live:
                 target = wall0 + n * dt / self.speed
                 lag = time.perf_counter() - target

@@ -56,7 +56,7 @@
 enum { HL_IDLE = 0, HL_HOMED = 1, HL_WINDOW = 2, HL_PLAYING = 3, HL_FAULT = 4 };
 enum { HL_OK = 0, HL_BAD_MESSAGE = 1, HL_BAD_STATE = 2, HL_FAULT_LATCHED = 3,
        HL_UNKNOWN_SCENE = 4, HL_TABLE_CRC = 5, HL_BUSY = 6 };
-enum { HL_FAULT_NONE = 0, HL_FAULT_WATCHDOG = 1, HL_FAULT_ESTOP = 2 };
+enum { HL_FAULT_NONE = 0, HL_FAULT_WATCHDOG = 1, HL_FAULT_ESTOP = 2, HL_FAULT_NONFINITE = 3 };
 /* trace flag bits (channel 6) */
 enum { HL_FLAG_CONTACT = 1, HL_FLAG_SATURATED = 2, HL_FLAG_TRANSIENT = 4, HL_FLAG_ZEROED = 8,
        HL_FLAG_RAMP = 16 };
@@ -67,6 +67,12 @@ void hl_device_poll(void);
 /* host build only: the device runs at `speed` x real time, so the watchdog (a limit on
  * the host's wall-clock silence) counts `speed` x as many ticks */
 void hl_device_pace(float speed);
+
+#ifdef HL_TEST_HOOKS
+/* [N] added to every servo tick's command: the unit tests' way to a non-finite command,
+ * which no field in its range can produce (built into the tests only) */
+extern float hl_test_extra_force;
+#endif
 
 /* for tests and the host build's statistics */
 typedef struct {

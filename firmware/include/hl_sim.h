@@ -17,5 +17,8 @@ float sim_current(void);
 int sim_amp_enabled(void);
 /* press (1) or release (0) the operator's e-stop button */
 void sim_estop_button(int pressed);
+/* the encoder reads `counts` whatever the stylus does (1), or the plant again (0): a broken
+ * or runaway encoder, for the tests at the ends of its range */
+void sim_encoder_force(int on, int32_t counts);
 
 #endif

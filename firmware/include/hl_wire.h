@@ -69,6 +69,15 @@ size_t hl_encode_frame(uint8_t type, uint16_t seq, const uint8_t *body, size_t b
  * follow. An unknown type does not fit. */
 int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len);
 
+/* Are the fields of a command that fits its layout within their ranges (docs section 5a:
+ * every f32 finite, every bounded field within its bounds, the device's limits as this
+ * build has them)? Checked before the command acts, in every state. */
+int hl_fields_fit(uint8_t type, const uint8_t *body, size_t body_len);
+
+/* The ACK status the state x command table (docs section 4) gives a host command in a
+ * state (HL_IDLE ... HL_FAULT) before it acts: 0 (OK) lets it go on to its own checks. */
+uint8_t hl_gate(uint8_t type, int state);
+
 /* Streaming receiver: feed bytes, get whole frames; bad frames are counted and skipped,
  * and the receiver resynchronises at the next 0x00. */
 typedef struct {

@@ -11,6 +11,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "hl_contract.h"
 #include "hl_hal.h"
 
 #define RAMP_TICKS (HL_SERVO_HZ / 20u)      /* the enable ramp: 50 ms */
@@ -19,8 +20,6 @@
 #define REPORT_TICKS (HL_SERVO_HZ / 40u)    /* STATUS and POSITION at 40 Hz */
 #define WATCHDOG_TICKS (HL_WATCHDOG_MS * (HL_SERVO_HZ / 1000u))
 #define N_EVENTS 64u
-#define MAX_WINDOW_MS 600000u
-#define MAX_CLEARANCE_UM 500000u
 #define TX_RESERVE 2200u /* UART room kept for control frames while traces stream */
 #define GAP_BINS 64u      /* LINK_REPORT: gaps between host frames in 2-ms bins */
 #define GAP_BIN_US 2000u
@@ -115,6 +114,7 @@ static struct {
     uint64_t next_status;
     /* the window whose traces and WINDOW_DONE are being sent */
     uint8_t done_pending;
+    uint8_t discard_run; /* a HELLO ended the running window: report nothing more of it */
     event done;
     uint32_t next_record, done_records;
     uint16_t trace_window;
@@ -122,6 +122,9 @@ static struct {
 } D HL_STATE_SECTION;
 
 static scene_t S;
+#ifdef HL_TEST_HOOKS
+float hl_test_extra_force; /* [N], added to every tick's command (tests only) */
+#endif
 static int16_t TABLE[HL_TABLE_ITEMS];
 static int16_t PLAY[HL_PLAY_ITEMS];
 
@@ -174,6 +177,23 @@ static float clamp_of(uint32_t ma)
 }
 
 static uint64_t ticks_to_us(uint64_t t) { return t * (1000000u / HL_SERVO_HZ); }
+
+/* The height [um] of an encoder reading above the surface, in int64: |enc| <= 2^31 counts
+ * x 10 um and |surface| <= HL_MAX_SURFACE_UM (a range SCENE_BEGIN checks) are below 2^35,
+ * so nothing here can overflow, whatever the encoder reads. (In int32 a surface of -2^31
+ * um once commanded the full current in free air.) */
+static int64_t height_um(int32_t enc)
+{
+    return (int64_t)enc * (int64_t)(HL_ENCODER_NM / 1000u) - (int64_t)S.surface_um;
+}
+
+/* a current [A] as the wire's i32 mA, saturated (a peak may be any finite float) */
+static int32_t milliamps(float a)
+{
+    float ma = a * 1000.0f;
+    return ma >= 2147483520.0f ? INT32_MAX : ma <= -2147483520.0f ? -INT32_MAX
+                                                                  : (int32_t)lroundf(ma);
+}
 
 /* ------------------------------------------------------------------ servo side */
 static void push_event(uint8_t type, uint8_t code, uint32_t tick, int32_t a, int32_t b,
@@ -260,10 +280,10 @@ static void end_run(uint8_t timed_out)
     if (D.sat_on) {
         D.sat_on = 0;
         push_event(EV_SATURATION, 0, D.sat_start, (int32_t)(D.wtick - D.sat_start),
-                   (int32_t)lroundf(D.sat_peak * 1000.0f), 0);
+                   milliamps(D.sat_peak), 0);
     }
     uint8_t playing = D.state == HL_PLAYING;
-    push_event(EV_DONE, (uint8_t)(timed_out | (D.fault ? 2u : 0u)), D.wtick, D.first_contact,
+    push_event(EV_DONE, (uint8_t)(timed_out | (D.fault << 1)), D.wtick, D.first_contact,
                (int32_t)((uint32_t)D.n_contacts | ((uint32_t)D.n_sats << 16)), D.t0_us);
     D.tr_on = 0;
     if (playing) {
@@ -334,7 +354,7 @@ void hl_servo_tick(void)
     }
 
     if (D.state == HL_WINDOW) {
-        int32_t above = enc * (int32_t)(HL_ENCODER_NM / 1000u) - S.surface_um; /* [um] */
+        int64_t above = height_um(enc); /* [um] */
         if (above >= HYST_UM) {
             D.armed = 1;
         }
@@ -367,11 +387,15 @@ void hl_servo_tick(void)
                 D.tr_on = 0;
             }
         }
-        D.height_um = above;
+        D.height_um = above > INT32_MAX ? INT32_MAX : above < -INT32_MAX ? -INT32_MAX
+                                                                         : (int32_t)above;
     } else if (D.state == HL_PLAYING) {
         fcmd = (float)PLAY[D.wtick] * 1e-3f;
     }
 
+#ifdef HL_TEST_HOOKS
+    fcmd += hl_test_extra_force; /* the unit tests' way to a command no field can reach */
+#endif
     /* enable ramp, fault zeroing, NaN guard, clamp */
     float gain = 0.0f;
     if (D.enabled) {
@@ -386,8 +410,13 @@ void hl_servo_tick(void)
         gain = 0.0f;
     }
     float want = fcmd * gain / KF;
-    if (!(fabsf(want) <= 1e6f)) {
-        want = 0.0f; /* NaN or inf never reaches the amplifier */
+    if (!isfinite(want)) {
+        /* never with fields in their ranges (a spring <= 1e6 N/m over the encoder's whole
+         * span, a table row at >= 1 um/s: below 1e11 N); should it happen, output goes
+         * off and the fault says why, never silently */
+        latch_fault(HL_FAULT_NONFINITE);
+        flags |= HL_FLAG_ZEROED;
+        want = 0.0f;
     }
     float cur = want;
     if (fabsf(want) > D.limit) {
@@ -414,9 +443,9 @@ void hl_servo_tick(void)
         } else if (D.sat_on) {
             D.sat_on = 0;
             push_event(EV_SATURATION, 0, D.sat_start, (int32_t)(D.wtick - D.sat_start),
-                       (int32_t)lroundf(D.sat_peak * 1000.0f), 0);
+                       milliamps(D.sat_peak), 0);
         }
-        record(pos, -speed, fcmd, cur * KF, cur, acc, flags);
+        record(pos, -speed, want * KF, cur * KF, cur, acc, flags); /* force_cmd: ramped */
         if ((D.wtick % REPORT_TICKS) == 0) {
             D.position_due = 1;
         }
@@ -429,7 +458,7 @@ void hl_servo_tick(void)
         } else if (!D.from_contact) {
             over = D.wtick >= D.duration;
         } else if (D.first_contact >= 0) {
-            over = D.wtick > (uint32_t)D.first_contact + D.duration;
+            over = D.wtick >= (uint32_t)D.first_contact + D.duration; /* duration ticks */
         } else if (D.wtick >= D.timeout) {
             over = timed_out = 1;
         }
@@ -513,16 +542,6 @@ static void send_hello_ack(void)
     send(0x82, l, sizeof l, 1);
 }
 
-static int finite_all(const uint8_t *p, size_t n)
-{
-    for (size_t i = 0; i < n; i++) {
-        if (!isfinite(get_f32(p + 4 * i))) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 static uint8_t popcount16(uint16_t m)
 {
     uint8_t n = 0;
@@ -534,23 +553,26 @@ static uint8_t popcount16(uint16_t m)
 
 static int running(void) { return D.state == HL_WINDOW || D.state == HL_PLAYING; }
 
-/* a scene upload command: allowed unless running; it turns output off (docs §4 table) */
-static uint8_t scene_gate(void)
+/* a scene upload command, past the gate: output goes off (HOMED -> IDLE) and the scene
+ * is withdrawn until its SCENE_COMMIT, so a table changed after a commit is never
+ * rendered unchecked (docs section 4) */
+static void scene_upload(void)
 {
-    if (running()) {
-        return HL_BUSY;
-    }
     hal_lock();
     D.enabled = 0;
     if (D.state == HL_HOMED) {
         D.state = HL_IDLE;
     }
     hal_unlock();
-    return HL_OK;
+    S.committed = 0;
 }
 
 static void begin_run(uint8_t state, uint16_t window_id)
 {
+    if (D.discard_run) { /* the run a HELLO ended is over (the gate saw it end): its events */
+        D.ev_r = D.ev_w; /* are all in the ring, and none is for this host */
+        D.discard_run = 0;
+    }
     D.window_id = window_id;
     D.wtick = 0;
     D.first_contact = -1;
@@ -559,8 +581,7 @@ static void begin_run(uint8_t state, uint16_t window_id)
     D.sat_on = 0;
     D.tr_on = 0;
     D.req_stop = 0;
-    D.armed = D.enc[(D.enc_n + VEL_TICKS - 1u) % VEL_TICKS] * (int32_t)(HL_ENCODER_NM / 1000u) >
-              S.surface_um;
+    D.armed = height_um(D.enc[(D.enc_n + VEL_TICKS - 1u) % VEL_TICKS]) > 0;
     D.t0_us = ticks_to_us(D.ticks + 1u);
     D.ring_w = 0;
     D.ring_r = 0;
@@ -570,87 +591,94 @@ static void begin_run(uint8_t state, uint16_t window_id)
     D.state = state;
 }
 
-/* HOME, START_WINDOW, PLAY_START: refused with a latched fault or while running */
-static uint8_t run_gate(void)
+/* rules between fields that need no state (docs section 5a, "and" rows) */
+static int rules_fit(uint8_t type, const uint8_t *b, size_t len)
 {
-    return D.state == HL_FAULT ? HL_FAULT_LATCHED : running() ? HL_BUSY : HL_OK;
+    if (type == HL_MSG_SCENE_BEGIN) {
+        uint8_t kind = b[2], rows = b[35];
+        uint16_t row_len = get_u16(b + 36);
+        return kind == 2 ? rows > 0 && row_len > 0 && (uint32_t)rows * row_len <= HL_TABLE_ITEMS
+                         : rows == 0 && row_len == 0;
+    }
+    if (type == HL_MSG_SCENE_VELOCITIES) {
+        for (size_t i = 1; i < (len - 2) / 4; i++) {
+            if (!(get_f32(b + 2 + 4 * i) > get_f32(b + 4 * i - 2))) {
+                return 0; /* ascending */
+            }
+        }
+        return 1;
+    }
+    if (type == HL_MSG_PLAY_CHUNK) {
+        return get_u16(b + 4) <= HL_PLAY_ITEMS - get_u32(b); /* offset <= play_items: ranges */
+    }
+    return 1;
 }
 
+/* A command whose body fits its layout: its fields and rules first (BAD_MESSAGE in every
+ * state, nothing changed), then the state table's gate, then its own checks and action. */
 static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
 {
+    if (!hl_fields_fit(type, b, len) || !rules_fit(type, b, len)) {
+        return HL_BAD_MESSAGE;
+    }
+    uint8_t gate = hl_gate(type, D.state);
+    if (gate != HL_OK) {
+        return gate;
+    }
     switch (type) {
-    case 0x10: { /* SCENE_BEGIN */
-        uint8_t st = scene_gate();
-        if (st != HL_OK) {
-            return st;
-        }
-        uint8_t kind = b[2], rows = b[35], blend = b[38];
-        uint16_t row_len = get_u16(b + 36);
-        float atten = get_f32(b + 39);
-        if (kind > 2 || blend > 2 || !finite_all(b + 7, 7) || !isfinite(get_f32(b + 31)) ||
-            !isfinite(atten) || atten < 0.0f || atten > 1.0f) {
-            return HL_BAD_MESSAGE;
-        }
-        if (kind == 2 ? (rows == 0 || row_len == 0 ||
-                         (uint32_t)rows * row_len > HL_TABLE_ITEMS)
-                      : (rows != 0 || row_len != 0)) {
-            return HL_BAD_MESSAGE;
-        }
+    case HL_MSG_SCENE_BEGIN: {
+        scene_upload();
         memset(&S, 0, sizeof S);
         S.scene_id = get_u16(b);
-        S.kind = kind;
+        S.kind = b[2];
         S.begun = 1;
         S.surface_um = (int32_t)get_u32(b + 3);
         S.spring = get_f32(b + 7);
         S.sample.stiffness = get_f32(b + 11);
         S.sample.damping = get_f32(b + 15);
         S.sample.block_mass = get_f32(b + 31);
-        S.rows = rows;
-        S.row_len = row_len;
-        S.blend = blend;
-        S.attenuation = atten;
-        if (kind == 2) {
-            memset(TABLE, 0, (size_t)rows * row_len * sizeof TABLE[0]);
+        S.rows = b[35];
+        S.row_len = get_u16(b + 36);
+        S.blend = b[38];
+        S.attenuation = get_f32(b + 39);
+        if (S.kind == 2) {
+            memset(TABLE, 0, (size_t)S.rows * S.row_len * sizeof TABLE[0]);
         }
         return HL_OK;
     }
-    case 0x11: case 0x12: case 0x14: case 0x13: {
-        uint8_t st = scene_gate();
-        if (st != HL_OK) {
-            return st;
-        }
+    case HL_MSG_SCENE_VELOCITIES: case HL_MSG_SCENE_CHUNK: case HL_MSG_SCENE_SUPPORT:
+    case HL_MSG_SCENE_COMMIT: {
         if (!S.begun || get_u16(b) != S.scene_id) {
             return HL_UNKNOWN_SCENE;
         }
-        if (type == 0x11) { /* SCENE_VELOCITIES */
+        if (type == HL_MSG_SCENE_VELOCITIES) {
             size_t n = (len - 2) / 4;
-            if (n != S.rows || !finite_all(b + 2, n)) {
+            if (n != S.rows) {
                 return HL_BAD_MESSAGE;
             }
+            scene_upload();
             for (size_t i = 0; i < n; i++) {
-                float v = get_f32(b + 2 + 4 * i);
-                if (!(v > 0.0f) || (i > 0 && !(v > S.v[i - 1]))) {
-                    return HL_BAD_MESSAGE; /* > 0 and ascending */
-                }
-                S.v[i] = v;
+                S.v[i] = get_f32(b + 2 + 4 * i);
             }
             S.have_v = 1;
             return HL_OK;
         }
-        if (type == 0x12) { /* SCENE_CHUNK */
+        if (type == HL_MSG_SCENE_CHUNK) {
             uint32_t off = get_u32(b + 2), n = get_u16(b + 6);
             if (off > (uint32_t)S.rows * S.row_len || n > (uint32_t)S.rows * S.row_len - off) {
                 return HL_BAD_MESSAGE;
             }
+            scene_upload();
             for (uint32_t i = 0; i < n; i++) {
                 TABLE[off + i] = (int16_t)get_u16(b + 8 + 2 * i);
             }
             return HL_OK;
         }
-        if (type == 0x14) { /* SCENE_SUPPORT: nothing to render; a simulated plant uses it */
-            if (S.kind != 0 || !finite_all(b + 2, 2)) {
+        if (type == HL_MSG_SCENE_SUPPORT) { /* nothing to render; a simulated plant uses it */
+            if (S.kind != 0) {
                 return HL_BAD_MESSAGE;
             }
+            scene_upload();
             S.sample.support_k = get_f32(b + 2);
             S.sample.support_b = get_f32(b + 6);
             return HL_OK;
@@ -664,23 +692,16 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         if (crc != get_u32(b + 2)) {
             return HL_TABLE_CRC;
         }
+        scene_upload();
         S.committed = 1;
         hal_plant_scene((float)S.surface_um * 1e-6f, S.kind == 0, &S.sample);
         return HL_OK;
     }
-    case 0x20: { /* HOME */
-        uint32_t c = get_u32(b);
-        if (c == 0 || c > MAX_CLEARANCE_UM) {
-            return HL_BAD_MESSAGE;
-        }
-        uint8_t gate = run_gate();
-        if (gate != HL_OK) {
-            return gate;
-        }
+    case HL_MSG_HOME: {
         if (!S.committed) {
             return HL_BAD_STATE;
         }
-        hal_plant_home((float)S.surface_um * 1e-6f + (float)c * 1e-6f);
+        hal_plant_home((float)S.surface_um * 1e-6f + (float)get_u32(b) * 1e-6f);
         hal_lock();
         D.enabled = 1;
         D.ramp = 0;
@@ -688,55 +709,28 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         hal_unlock();
         return HL_OK;
     }
-    case 0x21: { /* START_WINDOW */
-        uint32_t dur = get_u32(b + 2), to = get_u32(b + 6);
-        uint8_t fc = b[10];
-        if (dur == 0 || dur > MAX_WINDOW_MS || to == 0 || to > MAX_WINDOW_MS || fc > 1) {
-            return HL_BAD_MESSAGE;
-        }
-        uint8_t gate = run_gate();
-        if (gate != HL_OK) {
-            return gate;
-        }
-        if (D.state != HL_HOMED) {
-            return HL_BAD_STATE;
-        }
+    case HL_MSG_START_WINDOW:
         hal_lock();
-        D.duration = dur * (HL_SERVO_HZ / 1000u);
-        D.timeout = to * (HL_SERVO_HZ / 1000u);
-        D.from_contact = fc;
+        D.duration = get_u32(b + 2) * (HL_SERVO_HZ / 1000u);
+        D.timeout = get_u32(b + 6) * (HL_SERVO_HZ / 1000u);
+        D.from_contact = b[10];
         begin_run(HL_WINDOW, get_u16(b));
         hal_unlock();
         hal_plant_task(HAL_TASK_TAP);
         return HL_OK;
-    }
-    case 0x22: /* STOP_WINDOW */
+    case HL_MSG_STOP_WINDOW:
         if (running()) {
             D.req_stop = 1;
         }
         return HL_OK;
-    case 0x23: { /* PLAY_CHUNK */
-        if (running()) {
-            return HL_BUSY;
-        }
+    case HL_MSG_PLAY_CHUNK: {
         uint32_t off = get_u32(b), n = get_u16(b + 4);
-        if (off > HL_PLAY_ITEMS || n > HL_PLAY_ITEMS - off) {
-            return HL_BAD_MESSAGE;
-        }
         for (uint32_t i = 0; i < n; i++) {
             PLAY[off + i] = (int16_t)get_u16(b + 6 + 2 * i);
         }
         return HL_OK;
     }
-    case 0x24: { /* PLAY_START */
-        uint32_t n = get_u32(b + 2);
-        if (n == 0 || n > HL_PLAY_ITEMS) {
-            return HL_BAD_MESSAGE;
-        }
-        uint8_t gate = run_gate();
-        if (gate != HL_OK) {
-            return gate;
-        }
+    case HL_MSG_PLAY_START:
         hal_plant_task(HAL_TASK_HOLD);
         hal_lock();
         D.prev_enabled = D.enabled;
@@ -744,27 +738,18 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
             D.enabled = 1;
             D.ramp = 0;
         }
-        D.play_n = n;
+        D.play_n = get_u32(b + 2);
         begin_run(HL_PLAYING, get_u16(b));
         hal_unlock();
         return HL_OK;
-    }
-    case 0x25: { /* SET_LIMIT */
-        uint16_t ma = get_u16(b);
-        if (ma == 0 || ma > HL_CURRENT_RATING_MA) {
-            return HL_BAD_MESSAGE;
-        }
-        if (running()) {
-            return HL_BUSY;
-        }
-        D.limit = clamp_of(ma);
+    case HL_MSG_SET_LIMIT:
+        D.limit = clamp_of(get_u16(b));
         return HL_OK;
-    }
-    case 0x30: /* ESTOP */
+    case HL_MSG_ESTOP:
         D.estop_rx_tick = D.ticks; /* before the request: the tick reads it after */
         D.req_estop = 1;
         return HL_OK;
-    case 0x31: /* CLEAR_FAULT */
+    case HL_MSG_CLEAR_FAULT:
         if (hal_estop_pressed()) {
             return HL_FAULT_LATCHED; /* the button is still held */
         }
@@ -776,27 +761,19 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
             hal_unlock();
         }
         return HL_OK;
-    case 0x32: /* ZERO */
+    case HL_MSG_ZERO:
         D.req_zero = 1;
         if (running()) {
             D.req_stop = 1;
         }
         return HL_OK;
-    case 0x42: /* LINK_QUERY: answered in every state (handle() sends the report) */
-        return b[0] <= 1 ? HL_OK : HL_BAD_MESSAGE;
-    case 0x41: { /* TRACE_CONFIG */
-        uint16_t mask = get_u16(b), dec = get_u16(b + 2);
-        if (mask == 0 || (mask & ~HL_CHANNEL_MASK) || dec == 0 || dec > HL_MAX_DECIMATION) {
-            return HL_BAD_MESSAGE;
-        }
-        if (running()) {
-            return HL_BUSY;
-        }
-        D.mask = mask;
-        D.decim = dec;
-        D.nch = popcount16(mask);
+    case HL_MSG_LINK_QUERY: /* answered in every state (handle() sends the report) */
         return HL_OK;
-    }
+    case HL_MSG_TRACE_CONFIG:
+        D.mask = get_u16(b);
+        D.decim = get_u16(b + 2);
+        D.nch = popcount16(D.mask);
+        return HL_OK;
     default:
         return HL_BAD_MESSAGE; /* a device -> host type, or v1's TRACE_REQUEST */
     }
@@ -876,7 +853,9 @@ static void handle(const hl_frame *f, uint8_t version)
         hal_lock();
         if (running()) {
             D.req_stop = 1;
+            D.discard_run = 1; /* it ends unreported: nothing of it follows HELLO_ACK */
         }
+        D.ring_r = D.ring_w; /* an old window's unsent records are nobody's now */
         D.enabled = 0;
         D.prev_enabled = 0;
         D.limit = clamp_of(HL_CURRENT_RATING_MA);
@@ -892,17 +871,20 @@ static void handle(const hl_frame *f, uint8_t version)
         send_ack(f->seq, HL_BAD_MESSAGE);
         return;
     }
-    if (f->type == 0x02) {
-        return;
-    }
-    if (f->type == 0x03) {
-        if (f->body_len == 4) {
-            send(0x83, f->body, 4, 1);
-        }
+    if (f->type == HL_MSG_ESTOP) { /* acted on whatever its body: a stray byte must not
+                                      * leave the output on (docs section 3) */
+        send_ack(f->seq, execute(f->type, f->body, 0));
         return;
     }
     if (!hl_body_fits(f->type, f->body, f->body_len)) {
         send_ack(f->seq, HL_BAD_MESSAGE);
+        return;
+    }
+    if (f->type == HL_MSG_HEARTBEAT) {
+        return;
+    }
+    if (f->type == HL_MSG_PING) {
+        send(0x83, f->body, 4, 1);
         return;
     }
     uint32_t crc = hl_crc32(f->body, f->body_len);
@@ -932,6 +914,18 @@ static void send_events(void)
     while (D.ev_r != D.ev_w) {
         event e = D.ev[D.ev_r % N_EVENTS];
         uint8_t b[24], *p;
+        if (e.type == EV_DONE && D.discard_run) {
+            D.discard_run = 0; /* the window a HELLO ended: dropped with its records */
+            hal_lock();
+            D.ring_r = D.ring_w;
+            hal_unlock();
+            D.ev_r = D.ev_r + 1;
+            continue;
+        }
+        if (D.discard_run) {
+            D.ev_r = D.ev_r + 1; /* its contacts, saturations, faults */
+            continue;
+        }
         if (e.type == EV_DONE) {
             D.done = e;
             D.done_pending = 1;
@@ -976,6 +970,9 @@ static void send_lost(uint32_t start, uint32_t n)
 /* stream the ring: TRACE_CHUNKs of consecutive records, TRACE_LOST for a gap */
 static void send_traces(void)
 {
+    if (D.discard_run) {
+        return;
+    }
     for (int budget = 8; budget > 0; budget--) {
         uint32_t w = D.ring_w, r = D.ring_r;
         if (r == w) {
@@ -1022,7 +1019,7 @@ static void send_traces(void)
         p = put_u16(p, (uint32_t)D.done.b & 0xFFFFu);
         p = put_u16(p, (uint32_t)D.done.b >> 16);
         *p++ = D.done.code & 1u;
-        *p = (D.done.code & 2u) ? 1u : 0u;
+        *p = (uint8_t)(D.done.code >> 1); /* the fault code that ended it, 0: none */
         send(0x94, b, 24, 1);
         D.done_pending = 0;
     }
@@ -1071,7 +1068,7 @@ void hl_device_poll(void)
     uint8_t pos_due = D.position_due;
     D.position_due = 0;
     int32_t height = D.height_um;
-    uint32_t wt = D.wtick;
+    uint32_t wt = D.wtick ? D.wtick - 1u : 0u; /* the tick that read this height */
     hal_unlock();
     if (pos_due && D.state == HL_WINDOW) {
         uint8_t b[10], *p = put_u16(b, D.window_id);

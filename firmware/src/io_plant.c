@@ -9,17 +9,20 @@
 static float last_current;
 static int amp_on;
 static int estop_button;
+static int enc_forced;
+static int32_t enc_value;
 
 void hal_io_init(uint64_t seed)
 {
     last_current = 0.0f;
     amp_on = 0;
     estop_button = 0;
+    enc_forced = 0;
     plant_init(seed, (float)HL_SERVO_HZ, (float)HL_ENCODER_NM * 1e-9f,
                (float)HL_FORCE_CONSTANT_MN_A * 1e-3f);
 }
 
-int32_t hal_encoder_counts(void) { return plant_encoder(); }
+int32_t hal_encoder_counts(void) { return enc_forced ? enc_value : plant_encoder(); }
 
 void hal_current_set(float amps)
 {
@@ -35,3 +38,8 @@ int hal_estop_pressed(void) { return estop_button; }
 float sim_current(void) { return last_current; }
 int sim_amp_enabled(void) { return amp_on; }
 void sim_estop_button(int pressed) { estop_button = pressed != 0; }
+void sim_encoder_force(int on, int32_t counts)
+{
+    enc_forced = on != 0;
+    enc_value = counts;
+}

@@ -1,5 +1,5 @@
-/* The simulated plant (hl_plant.h). Semi-implicit Euler, sub-stepped so that the stiffest
- * contact (a few MN/m on 155 g) stays well inside the method's stability limit. */
+/* The simulated plant (hl_plant.h). Semi-implicit Euler, sub-stepped so that every contact
+ * and support stays well inside the method's stability limit (substeps()). */
 #include "hl_plant.h"
 
 #include <math.h>
@@ -88,13 +88,30 @@ void plant_scene(float surface_m, int real_sample, float stiffness, float dampin
     substeps();
 }
 
-/* semi-implicit Euler is stable for w*h < 2; keep w*h <= 0.25 on the contact, whose
- * frequency is set by the reduced mass of stylus and block */
+/* Semi-implicit Euler is stable for w*h < 2 and, damped, for c*h/m < 2: keep w*h <= 0.25
+ * and c*h/m <= 0.5 on the contact (its frequency set by the reduced mass of stylus and
+ * block) and on the block's support. A sample the servo's tick cannot integrate in
+ * SUB_MAX steps (a 0.1-mg block on 70 kN/m, a 10^6 N*s/m damper: any value SCENE_BEGIN
+ * allows) is simulated at the stiffness and damping SUB_MAX steps hold, so that the
+ * simulated plant never diverges; a board has no plant. */
+#define SUB_MAX 256
 static void substeps(void)
 {
     float inv_m = 1.0f / MASS + (P.mb > 0.0f ? 1.0f / P.mb : 0.0f);
-    float wh = sqrtf(P.k * inv_m) * P.dt;
-    P.sub = P.real ? 1 + (int)(wh / 0.25f) : 1;
+    float hmin = P.dt / (float)SUB_MAX;
+    float k_max = (0.25f / hmin) * (0.25f / hmin) / inv_m, c_max = 0.5f / hmin / inv_m;
+    P.k = fminf(P.k, k_max);
+    P.b = fminf(P.b, c_max);
+    if (P.mb > 0.0f) {
+        P.ks = fminf(P.ks, (0.25f / hmin) * (0.25f / hmin) * P.mb);
+        P.bs = fminf(P.bs, 0.5f / hmin * P.mb);
+    }
+    float need = fmaxf(sqrtf(P.k * inv_m) * P.dt / 0.25f, P.b * inv_m * P.dt / 0.5f);
+    if (P.mb > 0.0f) {
+        need = fmaxf(need, fmaxf(sqrtf(P.ks / P.mb) * P.dt / 0.25f, P.bs / P.mb * P.dt / 0.5f));
+    }
+    int sub = 1 + (int)need;
+    P.sub = P.real ? (sub < SUB_MAX ? sub : SUB_MAX) : 1;
 }
 
 void plant_block(float mass, float support_k, float support_b)

@@ -1,6 +1,11 @@
 /* Framing and message layouts of the hapticlab wire protocol v2 (see hl_wire.h). */
 #include "hl_wire.h"
 
+#include <math.h>
+
+#include "hl_contract.h"
+#include "hl_device.h"
+
 #include <string.h>
 
 uint32_t hl_crc32(const uint8_t *data, size_t len)
@@ -149,27 +154,17 @@ size_t hl_encode_frame_v(uint8_t version, uint8_t type, uint16_t seq, const uint
     return e + 1;
 }
 
-/* type, fixed body size, array item size (0: none), count: the fixed part ends with a
- * u16 that must equal the number of items */
+/* the body layouts of docs section 5a, generated into hl_contract.h */
 typedef struct {
     uint8_t type;
-    uint16_t fixed;
-    uint8_t item;
-    uint8_t counted;
+    uint16_t fixed;   /* bytes before the array */
+    uint8_t item;     /* bytes per array item (0: no array) */
+    int8_t count_off; /* offset of the u16 that counts the items (-1: none) */
+    uint16_t items;   /* the most items a frame carries */
+    uint8_t exact;    /* 1: exactly `items` items */
 } layout;
 
-static const layout LAYOUTS[] = {
-    {0x01, 1, 0, 0},  {0x02, 0, 0, 0},  {0x03, 4, 0, 0},  {0x10, 43, 0, 0},
-    {0x11, 2, 4, 0},  {0x12, 8, 2, 1},  {0x13, 6, 0, 0},  {0x14, 10, 0, 0},
-    {0x20, 4, 0, 0},  {0x21, 11, 0, 0}, {0x22, 0, 0, 0},  {0x23, 6, 2, 1},
-    {0x24, 6, 0, 0},  {0x25, 2, 0, 0},  {0x30, 0, 0, 0},  {0x31, 0, 0, 0},
-    {0x32, 0, 0, 0},  {0x40, 11, 0, 0}, {0x80, 3, 0, 0},  {0x81, 87, 0, 0},
-    {0x83, 4, 0, 0},  {0x90, 10, 0, 0}, {0x91, 14, 0, 0}, {0x92, 9, 0, 0},
-    {0x93, 14, 0, 0}, {0x94, 24, 0, 0}, {0x95, 9, 4, 1},  {0x96, 10, 0, 0},
-    /* version 2 */
-    {0x41, 4, 0, 0},  {0x82, 20, 0, 0}, {0x97, 10, 4, 0}, {0x98, 10, 0, 0},
-    {0x42, 1, 0, 0},  {0x99, 152, 0, 0},
-};
+static const layout LAYOUTS[] = {HL_LAYOUT_ROWS};
 
 static unsigned channels_in(uint16_t mask)
 {
@@ -193,18 +188,122 @@ int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len)
         if (body_len < l->fixed || (body_len - l->fixed) % l->item) {
             return 0;
         }
-        if (l->counted) {
-            size_t n = (size_t)body[l->fixed - 2] | ((size_t)body[l->fixed - 1] << 8);
-            return n == (body_len - l->fixed) / l->item;
+        size_t items = (body_len - l->fixed) / l->item;
+        if (items > l->items || (l->exact && items != l->items)) {
+            return 0;
         }
-        if (type == 0x97) { /* TRACE_CHUNK: n records of one f32 per channel in the mask */
-            size_t n = (size_t)body[8] | ((size_t)body[9] << 8);
+        if (l->count_off < 0) {
+            return 1;
+        }
+        size_t n = (size_t)body[l->count_off] | ((size_t)body[l->count_off + 1] << 8);
+        if (type == HL_MSG_TRACE_CHUNK) { /* n records of one f32 per channel in the mask */
             unsigned k = channels_in((uint16_t)(body[2] | (body[3] << 8)));
-            return k > 0 && n * k == (body_len - l->fixed) / l->item;
+            return k > 0 && n * k == items;
         }
-        return 1;
+        return n == items;
     }
     return 0;
+}
+
+/* the field ranges of docs section 5a (hl_contract.h) */
+enum { HL_F_U8, HL_F_U16, HL_F_U32, HL_F_I32, HL_F_F32, HL_F_I16, HL_F_U64 };
+typedef struct {
+    uint8_t type;
+    int16_t off; /* -1: every item of the array */
+    uint8_t kind;
+    double lo, hi;
+    uint8_t subset; /* a bit mask: non-empty and within hi */
+} range_row;
+
+static const range_row RANGES[] = {HL_RANGE_ROWS};
+
+static double field_value(uint8_t kind, const uint8_t *p, int *finite)
+{
+    uint32_t u = (uint32_t)p[0];
+    if (kind != HL_F_U8) {
+        u |= (uint32_t)p[1] << 8;
+    }
+    if (kind == HL_F_U32 || kind == HL_F_I32 || kind == HL_F_F32) {
+        u |= ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+    }
+    *finite = 1;
+    switch (kind) {
+    case HL_F_I32:
+        return (double)(int32_t)u;
+    case HL_F_F32: {
+        float f;
+        memcpy(&f, &u, 4);
+        *finite = isfinite(f);
+        return (double)f;
+    }
+    default:
+        return (double)u;
+    }
+}
+
+static int value_fits(const range_row *r, const uint8_t *p)
+{
+    int finite;
+    double x = field_value(r->kind, p, &finite);
+    if (!finite) {
+        return 0;
+    }
+    if (r->subset) {
+        uint32_t m = (uint32_t)x;
+        return m != 0 && (m & ~(uint32_t)r->hi) == 0;
+    }
+    if (r->kind == HL_F_F32) { /* in binary32, as the host rounds its bounds (contract.f32) */
+        float f = (float)x;
+        return f >= (float)r->lo && f <= (float)r->hi;
+    }
+    return x >= r->lo && x <= r->hi;
+}
+
+int hl_fields_fit(uint8_t type, const uint8_t *body, size_t body_len)
+{
+    size_t fixed = 0, item = 0;
+    for (size_t i = 0; i < sizeof LAYOUTS / sizeof LAYOUTS[0]; i++) {
+        if (LAYOUTS[i].type == type) {
+            fixed = LAYOUTS[i].fixed;
+            item = LAYOUTS[i].item;
+        }
+    }
+    for (size_t i = 0; i < sizeof RANGES / sizeof RANGES[0]; i++) {
+        const range_row *r = &RANGES[i];
+        if (r->type != type) {
+            continue;
+        }
+        if (r->off >= 0) {
+            if (!value_fits(r, body + r->off)) {
+                return 0;
+            }
+            continue;
+        }
+        for (size_t at = fixed; item && at + item <= body_len; at += item) {
+            if (!value_fits(r, body + at)) {
+                return 0;
+            }
+        }
+    }
+    return 1;
+}
+
+/* the state x command table of docs section 4 (hl_contract.h) */
+typedef struct {
+    uint8_t type;
+    uint8_t status[5];
+} gate_row;
+
+static const gate_row GATES[] = {HL_GATE_ROWS};
+
+uint8_t hl_gate(uint8_t type, int state)
+{
+    for (size_t i = 0; i < sizeof GATES / sizeof GATES[0]; i++) {
+        if (GATES[i].type == type && state >= 0 && state < 5) {
+            return GATES[i].status[state];
+        }
+    }
+    return 1u; /* BAD_MESSAGE: a type no host command row names */
 }
 
 void hl_receiver_init(hl_receiver *rx)

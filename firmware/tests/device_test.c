@@ -2,6 +2,7 @@
  * e-stop and the trace stream, driven through the simulated-plant HAL's byte queues
  * exactly as a host drives it (frames in, frames out). Called from hl_test.c. */
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -29,6 +30,8 @@ static uint8_t payload[HL_MAX_PAYLOAD];
 static int seen[256];
 static uint8_t last_body[256][HL_MAX_PAYLOAD];
 static uint32_t chunk_records, chunk_next, lost_records;
+/* channel 0 of chunks that carry it first, by record: the encoder's position [m] */
+static float positions[20000];
 static int chunk_gap;
 
 static void drain(void)
@@ -51,6 +54,13 @@ static void drain(void)
                 chunk_gap |= start != chunk_next;
                 chunk_next = start + k;
                 chunk_records += k;
+                unsigned width = 0;
+                for (unsigned m = (unsigned)(f.body[2] | (f.body[3] << 8)); m; m &= m - 1u) {
+                    width++;
+                }
+                for (uint32_t r = 0; (f.body[2] & 1u) && r < k && start + r < 20000u; r++) {
+                    memcpy(&positions[start + r], f.body + 10 + 4u * width * r, 4);
+                }
             } else if (f.type == 0x98) {
                 uint32_t start = (uint32_t)f.body[2] | ((uint32_t)f.body[3] << 8) |
                                  ((uint32_t)f.body[4] << 16) | ((uint32_t)f.body[5] << 24);
@@ -333,12 +343,245 @@ static void test_ramp_clamp_estop(void)
     EXPECT(sim_current() == 0.0f && !sim_amp_enabled());
     ticks(5, 1, 1);
     EXPECT(seen[0x92] == 1 && seen[0x94] == 1);
-    EXPECT(last_body[0x94][23] == 1); /* WINDOW_DONE says a fault ended it */
+    EXPECT(last_body[0x94][23] == HL_FAULT_ESTOP); /* WINDOW_DONE: the fault that ended it */
     EXPECT(home(20000) == HL_FAULT_LATCHED);
     EXPECT(window(5, 100, 0) == HL_FAULT_LATCHED);
     EXPECT(cmd(0x31, none, 0) == HL_OK);
     EXPECT(hl_device_peek().state == HL_IDLE);
     EXPECT(home(20000) == HL_OK);
+}
+
+static int scene_at(uint16_t id, int32_t surface_um, float k)
+{
+    uint8_t b[43] = {0};
+    b[0] = (uint8_t)id;
+    b[2] = 1;
+    hl_le32(b + 3, (uint32_t)surface_um);
+    hl_lef(b + 7, k);
+    hl_lef(b + 39, 1.0f);
+    int st = cmd(0x10, b, sizeof b);
+    if (st != 0) {
+        return st;
+    }
+    uint8_t c[6] = {(uint8_t)id, 0, 0, 0, 0, 0};
+    return cmd(0x13, c, 6);
+}
+
+static int32_t le_i32(const uint8_t *p)
+{
+    return (int32_t)((uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) |
+                     ((uint32_t)p[3] << 24));
+}
+
+/* Issue 28, safety 1 and 2: a surface of -2^31 um once made the servo's int32 arithmetic
+ * overflow and command the full current in free air; a 1e9 N/m spring was zeroed silently.
+ * Every range end of the surface, with the encoder at both ends of its own range (a broken
+ * encoder), under UBSan: no overflow, no current in free air, a clamped and reported one in
+ * contact. */
+static void test_safety_at_range_ends(void)
+{
+    fresh(7);
+    EXPECT(scene_at(1, INT32_MIN, 680.0f) == HL_BAD_MESSAGE);
+    EXPECT(scene_at(1, -500001, 680.0f) == HL_BAD_MESSAGE);
+    EXPECT(scene_at(1, 500001, 680.0f) == HL_BAD_MESSAGE);
+    EXPECT(scene_at(1, 0, -1.0f) == HL_BAD_MESSAGE);                        /* negative */
+    EXPECT(scene_at(1, 0, nextafterf(1e6f, INFINITY)) == HL_BAD_MESSAGE);   /* above 1e6 */
+    EXPECT(scene_at(1, 0, 1e9f) == HL_BAD_MESSAGE);
+    const int32_t surfaces[2] = {-500000, 500000};
+    const int32_t encoders[2] = {INT32_MIN, INT32_MAX};
+    for (int s = 0; s < 2; s++) {
+        for (int e = 0; e < 2; e++) {
+            fresh(8);
+            EXPECT(scene_at(1, surfaces[s], 1e6f) == HL_OK);
+            EXPECT(home(20000) == HL_OK);
+            ticks_fed(10); /* the encoder reads the stylus at its rest, 20 mm up */
+            EXPECT(window(1, 100, 0) == HL_OK);
+            memset(seen, 0, sizeof seen);
+            sim_encoder_force(1, encoders[e]);
+            ticks_fed(600); /* past the 50-ms enable ramp */
+            float a = sim_current();
+            int32_t height = le_i32(last_body[0x96] + 6);
+            if (encoders[e] == INT32_MIN) { /* 21 km into the surface: full, clamped, said */
+                EXPECT(a > 1.399f && a <= 1.4f);
+                EXPECT(seen[0x90] == 1); /* the contact */
+                EXPECT(height == -INT32_MAX);
+            } else { /* 21 km above it: free air */
+                EXPECT(a == 0.0f);
+                EXPECT(seen[0x90] == 0);
+                EXPECT(height == INT32_MAX);
+            }
+            ticks_fed(600);
+            EXPECT(seen[0x94] == 1);
+            if (encoders[e] == INT32_MIN) { /* the run's peak, saturated in the i32 field */
+                EXPECT(seen[0x91] == 1 && le_i32(last_body[0x91] + 10) == INT32_MAX);
+            }
+            EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
+            sim_encoder_force(0, 0);
+        }
+    }
+    /* a large finite command clamps and saturates; a non-finite one latches a named fault */
+    fresh(9);
+    uint8_t none[1] = {0};
+    EXPECT(scene_at(1, 0, 680.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(window(1, 1000, 0) == HL_OK);
+    ticks_fed(600);
+    hl_test_extra_force = 1e30f;
+    ticks(1, 1, 1);
+    EXPECT(sim_current() > 1.399f && hl_device_peek().fault == HL_FAULT_NONE);
+    const float bad[2] = {NAN, -INFINITY};
+    for (int k = 0; k < 2; k++) {
+        memset(seen, 0, sizeof seen);
+        hl_test_extra_force = bad[k];
+        ticks(1, 1, 1);
+        EXPECT(hl_device_peek().fault == HL_FAULT_NONFINITE);
+        EXPECT(sim_current() == 0.0f && !sim_amp_enabled());
+        ticks(3, 1, 1);
+        EXPECT(seen[0x92] == 1 && last_body[0x92][0] == HL_FAULT_NONFINITE);
+        if (k == 0) {
+            EXPECT(seen[0x94] == 1 && last_body[0x94][23] == HL_FAULT_NONFINITE);
+        }
+        hl_test_extra_force = 0.0f;
+        EXPECT(cmd(0x31, none, 0) == HL_OK);
+        EXPECT(home(20000) == HL_OK);
+    }
+}
+
+/* Issue 28, safety 3: a command refused for its fields changes nothing, in every state; a
+ * table changed after its commit is not rendered until it is committed again. */
+static void test_refusal_changes_nothing(void)
+{
+    fresh(10);
+    EXPECT(scene_at(1, 0, 680.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    ticks_fed(600);
+    uint8_t b[43] = {0};
+    b[0] = 2;
+    b[2] = 1;
+    hl_lef(b + 7, 680.0f);
+    hl_lef(b + 39, 2.0f); /* attenuation out of range */
+    EXPECT(cmd(0x10, b, 43) == HL_BAD_MESSAGE);
+    hl_lef(b + 39, NAN);
+    EXPECT(cmd(0x10, b, 43) == HL_BAD_MESSAGE);
+    hl_lef(b + 39, 1.0f);
+    b[2] = 2;
+    b[35] = 255;
+    b[36] = 0xFF;
+    b[37] = 0xFF; /* 255 x 65,535 table items */
+    EXPECT(cmd(0x10, b, 43) == HL_BAD_MESSAGE);
+    ticks_fed(10);
+    EXPECT(hl_device_peek().state == HL_HOMED && sim_amp_enabled());
+    EXPECT(window(1, 1000, 0) == HL_OK);
+    ticks_fed(10);
+    EXPECT(cmd(0x10, b, 43) == HL_BAD_MESSAGE); /* not BUSY: the fields come first */
+    b[2] = 1;
+    b[35] = b[36] = b[37] = 0;
+    EXPECT(cmd(0x10, b, 43) == HL_BUSY);
+    ticks_fed(10);
+    EXPECT(hl_device_peek().state == HL_WINDOW);
+    /* chunks of 481 items fit no layout (the document: n <= 480) */
+    static uint8_t big[8 + 2 * 481];
+    memset(big, 0, sizeof big);
+    big[6] = (uint8_t)(481 & 0xFF);
+    big[7] = (uint8_t)(481 >> 8);
+    EXPECT(cmd(0x12, big, sizeof big) == HL_BAD_MESSAGE);
+    uint8_t none[1] = {0};
+    EXPECT(cmd(0x22, none, 0) == HL_OK);
+    ticks_fed(10);
+    memmove(big, big + 2, 6 + 2 * 481); /* PLAY_CHUNK: offset, n, items */
+    EXPECT(cmd(0x23, big, 6 + 2 * 481) == HL_BAD_MESSAGE);
+    EXPECT(hl_device_peek().state == HL_HOMED);
+    /* a chunk into the committed table withdraws the scene until the next commit */
+    uint8_t t[43] = {0};
+    t[0] = 5;
+    t[2] = 2;
+    t[35] = 1;
+    t[36] = 4;
+    hl_lef(t + 7, 680.0f);
+    hl_lef(t + 39, 1.0f);
+    EXPECT(cmd(0x10, t, 43) == HL_OK);
+    uint8_t v[6] = {5, 0};
+    hl_lef(v + 2, 0.1f);
+    EXPECT(cmd(0x11, v, 6) == HL_OK);
+    uint8_t c[6] = {5, 0, 0, 0, 0, 0};
+    EXPECT(cmd(0x13, c, 6) == HL_TABLE_CRC); /* an all-zero table's CRC is not 0 */
+    static const uint8_t zeros[8] = {0};
+    hl_le32(c + 2, hl_crc32(zeros, 8));
+    EXPECT(cmd(0x13, c, 6) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    uint8_t ch[10] = {5, 0, 0, 0, 0, 0, 1, 0, 0x10, 0x27}; /* item 0 = 10 N */
+    EXPECT(cmd(0x12, ch, 10) == HL_OK);
+    ticks_fed(2);
+    EXPECT(hl_device_peek().state == HL_IDLE);
+    EXPECT(home(20000) == HL_BAD_STATE);
+    EXPECT(cmd(0x13, c, 6) == HL_TABLE_CRC);
+}
+
+static uint32_t le_u32(const uint8_t *p) { return (uint32_t)le_i32(p); }
+
+/* Issue 28, conformance: ESTOP whatever its body; PING and HEARTBEAT that do not fit are
+ * BAD_MESSAGE; a from-contact window lasts exactly its duration after the contact; a HELLO
+ * ends a running window with nothing of it after HELLO_ACK; POSITION's height belongs to
+ * its tick. */
+static void test_conformance(void)
+{
+    fresh(11);
+    uint8_t stray[1] = {0x55};
+    uint8_t none[1] = {0};
+    EXPECT(scene_at(1, 0, 680.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(cmd(0x30, stray, 1) == HL_OK); /* ESTOP with a stray byte still stops */
+    ticks(1, 1, 1);
+    EXPECT(hl_device_peek().fault == HL_FAULT_ESTOP && !sim_amp_enabled());
+    EXPECT(cmd(0x31, none, 0) == HL_OK);
+    uint8_t three[3] = {1, 2, 3};
+    EXPECT(cmd(0x03, three, 3) == HL_BAD_MESSAGE); /* PING: 4 bytes */
+    EXPECT(cmd(0x02, three, 1) == HL_BAD_MESSAGE); /* HEARTBEAT: none */
+    /* from contact: n_ticks = first contact + duration; POSITION at its own tick */
+    uint8_t tc[4] = {0x01, 0, 1, 0}; /* position alone, every tick */
+    EXPECT(cmd(0x41, tc, 4) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    ticks_fed(10);
+    memset(seen, 0, sizeof seen);
+    chunk_records = chunk_next = 0;
+    int checked = 0, wrong = 0;
+    uint8_t sw[11] = {1, 0};
+    hl_le32(sw + 2, 100);   /* 100 ms from the first contact */
+    hl_le32(sw + 6, 30000); /* which may take up to 30 s */
+    sw[10] = 1;
+    EXPECT(cmd(0x21, sw, 11) == HL_OK);
+    for (int k = 0; k < 400 && !seen[0x94]; k++) {
+        int before = seen[0x96];
+        ticks_fed(250);
+        if (seen[0x96] != before) { /* the last POSITION's height vs the record at its tick */
+            uint32_t tick = le_u32(last_body[0x96] + 2);
+            int32_t h = le_i32(last_body[0x96] + 6);
+            if (tick < chunk_next) {
+                checked++;
+                wrong += lroundf(positions[tick] * 1e6f) != h;
+            }
+        }
+    }
+    EXPECT(seen[0x94] == 1);
+    int32_t first = le_i32(last_body[0x94] + 14);
+    EXPECT(first > 0 && le_u32(last_body[0x94] + 10) == (uint32_t)first + 1000u);
+    EXPECT(checked > 3 && wrong == 0);
+    /* a HELLO during a window: it ends, and nothing of it follows HELLO_ACK */
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(window(2, 5000, 0) == HL_OK);
+    ticks_fed(3000);
+    hello();
+    int chunks = seen[0x97];
+    ticks_fed(2000);
+    EXPECT(seen[0x94] == 0 && seen[0x97] == chunks && seen[0x90] == 0);
+    EXPECT(hl_device_peek().state == HL_IDLE);
+    EXPECT(scene_at(1, 0, 680.0f) == HL_OK); /* and a new window streams from record 0 */
+    EXPECT(home(20000) == HL_OK);
+    chunk_records = chunk_next = 0;
+    chunk_gap = 0;
+    EXPECT(window(3, 100, 0) == HL_OK);
+    ticks_fed(1500);
+    EXPECT(seen[0x94] == 1 && chunk_records == 1000 && !chunk_gap);
 }
 
 static void test_watchdog(void)
@@ -455,11 +698,43 @@ static void test_plant_is_passive(void)
     }
 }
 
+/* Any sample SCENE_BEGIN allows keeps the simulated plant finite and passive, the ones the
+ * fuzzer found first (a 0.1-mg block on 70 kN/m) and the ends of every range. */
+static void test_plant_at_extremes(void)
+{
+    const hal_sample cases[] = {
+        {70000.0f, 20.0f, 1e-7f, 350.0f, 3.0f},  /* what the fuzzer found */
+        {1e9f, 1e6f, 1e-7f, 1e9f, 1e6f},         /* every range's top, the lightest block */
+        {1e9f, 0.0f, 5.0f, 1e9f, 0.0f},          /* stiff and lossless, the heaviest block */
+        {1e9f, 1e6f, 0.0f, 0.0f, 0.0f},          /* fixed to the ground */
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+        plant_init(1, (float)HL_SERVO_HZ, HL_ENCODER_NM * 1e-9f, HL_FORCE_CONSTANT_MN_A * 1e-3f);
+        plant_task(HAL_TASK_REST);
+        hal_plant_scene(0.0f, 1, &cases[c]);
+        plant_home(-0.0001f);
+        float e0 = plant_energy(), e_max = e0;
+        int finite = 1;
+        for (int k = 0; k < 2000; k++) {
+            plant_step(0.0f);
+            float e = plant_energy();
+            finite &= isfinite(e) && isfinite(plant_accel());
+            e_max = e > e_max ? e : e_max;
+        }
+        EXPECT(finite);
+        EXPECT(e_max <= e0 * (1.0f + 1e-3f));
+    }
+}
+
 int device_tests(void)
 {
+    test_plant_at_extremes();
     test_plant_is_passive();
     test_state_table();
     test_ranges_and_nan();
+    test_safety_at_range_ends();
+    test_refusal_changes_nothing();
+    test_conformance();
     test_ramp_clamp_estop();
     test_watchdog();
     test_estop_button();

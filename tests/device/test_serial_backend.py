@@ -377,7 +377,7 @@ def test_an_estop_is_served_while_the_trace_streams():
         done = host.read_until(lambda m: isinstance(m, M.WindowDone), 10)
         kinds = [(type(m).__name__, getattr(m, "ack_seq", None)) for m in host.seen]
         assert kinds.index(("Ack", stop)) < kinds.index(("WindowDone", None))
-        assert done.fault == 1 and done.n_ticks < 3000 * 10, done
+        assert done.fault == M.FaultCode.ESTOP and done.n_ticks < 3000 * 10, done
         got = [m for m in host.seen if isinstance(m, M.TraceChunk)]
         assert sum(m.n for m in got) == done.n_ticks  # decimation 1: one record per tick
         assert [m.start for m in got] == list(np.cumsum([0] + [m.n for m in got[:-1]]))

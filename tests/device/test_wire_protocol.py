@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from device.serial import contract as C
 from device.serial import messages as M
 from device.serial.framing import (
     MAX_PAYLOAD,
@@ -51,6 +52,18 @@ def test_document_states_the_layouts_the_code_uses():
         assert f"0x{cls.TYPE:02x}" in text, cls.__name__
 
 
+def test_the_documented_sizes_are_the_encoders():
+    """The document once said 1,034 bytes on the wire where the encoder's worst case is
+    1,030: the largest payload of bytes that are never zero (COBS's worst), delimited."""
+    text = " ".join(DOC.read_text(encoding="utf-8").split())
+    worst = len(cobs_encode(b"\x01" * MAX_PAYLOAD)) + 1
+    assert f"at most {worst:,} bytes on the wire" in text
+    longest = max(4 + s.fixed_size + 4 + (s.max_items or 0) * (s.items.size if s.items else 0)
+                  for s in C.SPECS if s.fixed_items is None)
+    assert longest <= MAX_PAYLOAD
+    assert f"The longest message is {longest:,} bytes of payload" in text
+
+
 @given(st.binary(max_size=2000))
 def test_cobs_round_trip(data):
     enc = cobs_encode(data)
@@ -81,24 +94,32 @@ def test_decoder_handles_any_chunking(chunks, n):
     assert [f.seq for f in got] == list(range(n))
 
 
-_F32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
-_CODES = {"B": st.integers(0, 255), "H": st.integers(0, 65535), "I": st.integers(0, 2**32 - 1),
-          "i": st.integers(-2**31, 2**31 - 1), "Q": st.integers(0, 2**64 - 1), "f": _F32,
-          "h": st.integers(-32768, 32767)}
+_TYPE_RANGE = {"u8": (0, 255), "u16": (0, 65535), "u32": (0, 2**32 - 1), "u64": (0, 2**64 - 1),
+               "i16": (-32768, 32767), "i32": (-2**31, 2**31 - 1)}
+
+
+def _field(f: C.Field):
+    """Any value the contract allows in field ``f`` (bounds that name a device limit: the
+    type's range)."""
+    if f.type.startswith("bytes"):  # fixed-width text: no trailing zeros (they are padding)
+        return st.binary(max_size=int(f.type[5:])).map(lambda b: b.rstrip(b"\x00"))
+    lo = f.lo if isinstance(f.lo, (int, float)) else None
+    hi = f.hi if isinstance(f.hi, (int, float)) else None
+    if f.type == "f32":
+        return st.floats(min_value=C.f32(lo), max_value=C.f32(hi), width=32, allow_nan=False,
+                         allow_infinity=False)
+    tlo, thi = _TYPE_RANGE[f.type]
+    lo = tlo if lo is None else int(lo)
+    return st.integers(max(lo, 1) if f.subset else lo, thi if hi is None else int(hi))
 
 
 def _strategy(cls):
-    parts = re.findall(r"(\d*)([a-zA-Z])", cls.FMT)
-    head = []
-    for count, code in parts:
-        if code == "s":  # fixed-width text: no trailing zeros (they are padding)
-            head.append(st.binary(max_size=int(count)).map(lambda b: b.rstrip(b"\x00")))
-        else:
-            head += [_CODES[code]] * (int(count) if count else 1)
-    if cls.ARRAY is None:
+    spec = C.BY_NAME[cls.NAME]
+    head = [_field(f) for f in spec.fields]
+    if spec.items is None:
         return st.tuples(*head).map(lambda v: cls(*v))
     names = [f.name for f in dataclasses.fields(cls)]
-    items = st.lists(_CODES[cls.ARRAY], max_size=60).map(tuple)
+    items = st.lists(_field(spec.items), max_size=min(60, cls.MAX_ITEMS)).map(tuple)
 
     def build(v):
         *h, it = v

@@ -1,0 +1,239 @@
+"""The wire contract written once (device/serial/contract.py): the files generated from it
+are current, the host's messages take their layouts from it, its range check refuses exactly
+what it should, and every device target answers every bounded field, at and beyond its
+range ends, as the contract says (over raw frames on a pty)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import struct
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from device.serial import contract as C
+from device.serial import messages as M
+
+from ..conftest import start_emulator, stop_emulator
+from .test_state_table import Host
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_generated_files_are_current():
+    """`make contract` was run after the contract last changed."""
+    assert (ROOT / C.HEADER).read_text() == C.render_header(), "run `make contract`"
+    doc = (ROOT / C.DOC).read_text()
+    assert C.render_doc(doc) == doc, "run `make contract`"
+
+
+def test_every_message_class_is_its_contract_entry():
+    assert {cls.NAME for cls in M.MESSAGES.values()} == set(C.BY_NAME)
+    for cls in M.MESSAGES.values():
+        spec = C.BY_NAME[cls.NAME]
+        names = [f.name for f in dataclasses.fields(cls)]
+        expect = [f.name for f in spec.fields] + (["items"] if spec.items else [])
+        assert names == expect, cls.__name__
+        assert cls.TYPE == spec.type and cls.FMT == spec.fmt
+
+
+def test_the_state_table_gate_reads_the_documented_cells():
+    s = M.Status
+    assert C.gate("START_WINDOW", C.STATES.index("IDLE")) == s.BAD_STATE
+    assert C.gate("HOME", C.STATES.index("FAULT")) == s.FAULT_LATCHED
+    assert C.gate("SCENE_CHUNK", C.STATES.index("PLAYING")) == s.BUSY
+    assert C.gate("ESTOP", C.STATES.index("WINDOW")) == s.OK
+    assert C.gate("TRACE_REQUEST", 0) == C.gate("ACK", 4) == s.BAD_MESSAGE
+
+
+LIMITS = {"table_items": 16_384, "play_items": 37_888, "channels": 0x7F, "max_decimation": 100,
+          "current_limit_ma": 1400}
+
+
+def _bounded():
+    """(message, field) of every host → device field with a stated bound."""
+    for spec in C.SPECS:
+        if spec.sender != "host" or spec.versions == (1,):
+            continue
+        for f in spec.fields + ((spec.items,) if spec.items else ()):
+            if f.lo is not None or f.hi is not None or f.subset or f.type == "f32":
+                yield spec, f
+
+
+def _limit(v):
+    return LIMITS[v] if isinstance(v, str) else v
+
+
+def _beyond(f: C.Field) -> list:
+    """Values just outside the field's range (and, for f32, the non-finite ones)."""
+    out = []
+    if f.subset:
+        return [0, _limit(f.subset) + 1 if f.subset else 0]
+    lo, hi = _limit(f.lo), _limit(f.hi)
+    if f.type == "f32":
+        out += [math.nan, math.inf, -math.inf]
+        if lo is not None:
+            out.append(float(np.nextafter(np.float32(C.f32(lo)), np.float32(-np.inf))))
+        if hi is not None:
+            out.append(float(np.nextafter(np.float32(C.f32(hi)), np.float32(np.inf))))
+        return out
+    tlo, thi = {"u8": (0, 255), "u16": (0, 65535), "u32": (0, 2**32 - 1),
+                "i32": (-2**31, 2**31 - 1)}[f.type]
+    if lo is not None and lo > tlo:
+        out.append(int(lo) - 1)
+    if hi is not None and hi < thi:
+        out.append(int(hi) + 1)
+    return out
+
+
+def _ends(f: C.Field) -> list:
+    if f.subset:
+        return [1, _limit(f.subset)]
+    return [x for x in (_limit(f.lo), _limit(f.hi)) if x is not None]
+
+
+@pytest.mark.parametrize(("spec", "f"), list(_bounded()), ids=lambda x: getattr(x, "name", ""))
+def test_check_refuses_just_beyond_and_accepts_the_ends(spec, f):
+    base = BASE[spec.name]
+    for x in _beyond(f):
+        with pytest.raises(C.RangeError, match=rf"{spec.name}\.{f.name}"):
+            _with(base, f, x).check(LIMITS)
+    for x in _ends(f):
+        _with(base, f, x).check(LIMITS)
+
+
+@given(surface=st.integers(-2**31, 2**31 - 1), spring=st.floats(width=32))
+def test_check_is_the_range_for_any_value(surface, spring):
+    msg = dataclasses.replace(BASE["SCENE_BEGIN"], surface_um=surface, spring=spring)
+    inside = abs(surface) <= C.MAX_SURFACE_UM and 0.0 <= spring <= 1e6  # NaN: False
+    try:
+        msg.check()
+        ok = True
+    except C.RangeError:
+        ok = False
+    assert ok == inside
+
+
+#: one valid instance of each host → device command (a real sample, kind 0: a
+#: SCENE_SUPPORT for it is valid; a chunk of no items fits any table)
+BASE = {
+    "HELLO": M.Hello(2),
+    "SCENE_BEGIN": M.SceneBegin(1, 0, 0, 0.0, 1000.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0, 1.0),
+    "SCENE_VELOCITIES": M.SceneVelocities(1, ()),
+    "SCENE_CHUNK": M.SceneChunk(1, 0, 0, ()),
+    "SCENE_SUPPORT": M.SceneSupport(1, 500.0, 1.0),
+    "SCENE_COMMIT": M.SceneCommit(1, 0),
+    "HOME": M.Home(20_000),
+    "START_WINDOW": M.StartWindow(3, 100, 100, 0),
+    "PLAY_CHUNK": M.PlayChunk(0, 0, ()),
+    "PLAY_START": M.PlayStart(4, 10),
+    "SET_LIMIT": M.SetLimit(1000),
+    "TRACE_CONFIG": M.TraceConfig(0x7F, 1),
+    "LINK_QUERY": M.LinkQuery(0),
+}
+
+
+def _with(base: M.Message, f: C.Field, x) -> M.Message:
+    """``base`` with field ``f`` = x (an array item: one item of value x, counted; a count:
+    that many items)."""
+    spec = C.BY_NAME[base.NAME]
+    if f.name == spec.count:
+        return dataclasses.replace(base, **{f.name: x, "items": (0,) * x})
+    if f is spec.items:
+        changes = {"items": (x,)}
+        if spec.count:
+            changes[spec.count] = 1
+        return dataclasses.replace(base, **changes)
+    return dataclasses.replace(base, **{f.name: x})
+
+
+#: ends a target may refuse for a reason other than the field's own range: a rule
+#: between fields or the scene's state (the document's "and" rows)
+STATEFUL = {("SCENE_BEGIN", "kind", 2),            # a table scene needs rows
+            ("SCENE_CHUNK", "offset", "table_items"),  # beyond this scene's (empty) table
+            ("SCENE_CHUNK", "n", 480),             # idem
+            ("SCENE_VELOCITIES", "speed", None),   # as many speeds as rows (none)
+            ("PLAY_CHUNK", "n", 480)}              # offset + n: checked with the items
+
+
+#: under QEMU (an emulated board on a busy computer) a shorter subset: the fields behind the
+#: safety findings, and one of each kind (i32, f32, u32, u16, a count, a bit mask)
+QEMU_FIELDS = {("SCENE_BEGIN", "surface_um"), ("SCENE_BEGIN", "spring"),
+               ("SCENE_BEGIN", "attenuation"), ("HOME", "clearance_um"), ("SCENE_CHUNK", "n"),
+               ("SET_LIMIT", "current_ma"), ("TRACE_CONFIG", "channels")}
+
+
+@pytest.mark.parametrize("firmware", ["python", "host", "host-board", "host-san", "qemu"])
+def test_every_target_refuses_every_field_beyond_its_range(firmware):
+    """Each bounded field of each command, in IDLE with a real sample committed: just
+    beyond its range (NaN and ±inf for every f32) BAD_MESSAGE and nothing changes; at its
+    ends, anything but BAD_MESSAGE (unless a rule between fields forbids that end). The
+    same suite on every target: the Python emulator, the firmware built for this machine
+    (as is, with the board's resources, and those under ASan and UBSan), and the Cortex-M
+    build under QEMU (a subset)."""
+    emu = start_emulator("--firmware", firmware, "--seed", "3")
+    host = Host(emu.port)
+    wrong = []
+    try:
+        assert host.ask(M.Hello(2)) == "hello"
+        lim = host.limits
+        limits = {"table_items": lim.table_items, "play_items": lim.play_items,
+                  "channels": lim.channels, "max_decimation": lim.max_decimation,
+                  "current_limit_ma": host.rating_ma}
+        LIMITS.update(limits)  # _beyond and _ends read the target's own limits
+        for spec, f in _bounded():
+            if firmware == "qemu" and (spec.name, f.name) not in QEMU_FIELDS:
+                continue
+            base = BASE[spec.name]
+            for x in _beyond(f):
+                _ready(host, base)
+                got = host.ask(_with(base, f, x))
+                state = host.settled_state()
+                if got != M.Status.BAD_MESSAGE or state != "IDLE":
+                    wrong.append(f"{spec.name}.{f.name} = {x}: {got}, then {state}")
+            for x in _ends(f):
+                key = (spec.name, f.name)
+                if any(k[:2] == key and (k[2] is None or _limit(k[2]) == x) for k in STATEFUL):
+                    continue
+                _ready(host, base)
+                got = host.ask(_with(base, f, x))
+                if got == M.Status.BAD_MESSAGE:
+                    wrong.append(f"{spec.name}.{f.name} = {x} (an end of its range): "
+                                 "BAD_MESSAGE")
+    finally:
+        LIMITS.update({"table_items": 16_384, "play_items": 37_888})
+        host.close()
+        stop_emulator(emu)
+    assert not wrong, "\n".join(wrong)
+    sanitizer = [line for line in emu.stderr_lines if "runtime error" in line
+                 or "Sanitizer" in line]
+    assert not sanitizer, "".join(sanitizer)
+
+
+def _ready(host: Host, base: M.Message) -> None:
+    """IDLE, a real sample begun and committed (ids 1), the rating and trace defaults."""
+    host.ask(M.ClearFault())
+    host.ask(M.Zero())
+    host.ask(M.Hello(2))
+    end = time.monotonic() + 5  # a playback the ZERO ended may take a moment to wind down
+    while host.settled_state() != "IDLE" and time.monotonic() < end:
+        pass
+    assert host.ask(BASE["SCENE_BEGIN"]) == M.Status.OK
+    assert host.ask(BASE["SCENE_COMMIT"]) == M.Status.OK
+    assert host.settled_state() == "IDLE"
+
+
+def test_range_errors_name_the_field_before_anything_is_sent():
+    msg = dataclasses.replace(BASE["SCENE_BEGIN"], surface_um=-2**31)
+    with pytest.raises(C.RangeError, match=r"SCENE_BEGIN\.surface_um = -2147483648 outside "
+                                           r"-500,000 … 500,000 µm"):
+        msg.check()
+    with pytest.raises(C.RangeError, match=r"SET_LIMIT\.current_ma = 1401 outside 1 … "
+                                           r"HELLO_ACK\.current_limit mA"):
+        M.SetLimit(1401).check(LIMITS)
+    assert struct.calcsize("<" + M.SceneBegin.FMT) == 43
