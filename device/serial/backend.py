@@ -210,8 +210,8 @@ class SerialDevice(HapticDevice):
             why = (f"the device heard nothing from this computer for {wd} and zeroed its "
                    "output (the computer was held up, or the cable is loose)"
                    if code == "watchdog" else
-                   "the device computed a current that is not a finite number and zeroed "
-                   "its output (a defect in the device's firmware: please report it)"
+                   "the device computed a current that is not a finite number (a simulated "
+                   "device: its stylus left every physical bound) and zeroed its output"
                    if code == "nonfinite" else
                    "emergency stop (latched): output zeroed" if self._estop_sent else
                    "the device's own e-stop button was pressed: output zeroed")

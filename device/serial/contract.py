@@ -91,7 +91,7 @@ def _fmt(v) -> str:
     if isinstance(v, float) and v.is_integer() and abs(v) < 1e15:
         v = int(v)
     if isinstance(v, int):
-        return f"{v:,}".replace(",", ",")
+        return f"{v:,}"
     return f"{v:g}"
 
 
@@ -421,12 +421,10 @@ _LIMIT_C = {"table_items": "HL_TABLE_ITEMS", "play_items": "HL_PLAY_ITEMS",
             "current_limit_ma": "HL_CURRENT_RATING_MA"}
 
 
-def _c_num(v, f: Field) -> str:
+def _c_num(v) -> str:
     if isinstance(v, str):
         return f"(double){_LIMIT_C[v]}"
-    if v is None:
-        return "0.0"
-    return repr(float(v)) if f.type == "f32" else f"{float(v)!r}"
+    return repr(float(v))
 
 
 def render_header() -> str:
@@ -454,6 +452,7 @@ def render_header() -> str:
             off = 0
             for f in s.fields:
                 if f.name == s.count:
+                    assert f.type == "u16", (s.name, f.name)  # hl_body_fits reads a u16
                     count_off = off
                 off += f.size
         items = s.fixed_items or s.max_items or 0
@@ -476,12 +475,15 @@ def render_header() -> str:
                 continue
             if f.lo is None and f.hi is None and f.subset is None and f.type != "f32":
                 continue
+            # wire.c's field_value reads these kinds only: say so rather than emit a row
+            # it would misread
+            assert f.type in ("u8", "u16", "u32", "i32", "f32"), (s.name, f.name, f.type)
             if f.subset:
                 rows.append(f"    {{0x{s.type:02X}u, {off}, {_KIND[f.type]}, 0.0, "
                             f"(double){_LIMIT_C[f.subset]}, 1}}")
                 continue
-            lo = _c_num(f.lo, f) if f.lo is not None else "-3.4028234663852886e38"
-            hi = _c_num(f.hi, f) if f.hi is not None else "3.4028234663852886e38"
+            lo = _c_num(f.lo) if f.lo is not None else "-3.4028234663852886e38"
+            hi = _c_num(f.hi) if f.hi is not None else "3.4028234663852886e38"
             rows.append(f"    {{0x{s.type:02X}u, {off}, {_KIND[f.type]}, {lo}, {hi}, 0}}")
     out.append(", \\\n".join(rows))
     out += ["", "/* the state x command gate: for each host command, the status in IDLE, HOMED,",

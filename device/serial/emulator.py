@@ -320,24 +320,26 @@ class Emulator:
         self._sync()
         self._link_note(self.sim.time)
         self.sim.heartbeat()  # every intact frame feeds the watchdog
-        try:
-            msg = M.decode(frame)
-        except M.MessageError:
-            if frame.type != M.EStop.TYPE or frame.version != 2:
+        if frame.type == M.EStop.TYPE:  # acted on whatever its body and frame version: a
+            msg: M.Message = M.EStop()  # stray byte must not keep the output on (docs §3)
+        else:
+            try:
+                msg = M.decode(frame)
+            except M.MessageError:
                 self.send(M.Ack(frame.seq, M.Status.BAD_MESSAGE))
                 return
-            msg = M.EStop()  # acted on whatever its body: a stray byte must not keep output on
-        if isinstance(msg, M.Heartbeat):
-            return
-        if isinstance(msg, M.Ping):
-            self.send(M.Pong(msg.stamp))
-            return
         if isinstance(msg, M.Hello):
             self._link_reset(self.sim.time)  # a new host session
             self._hello()
             return
-        if frame.version != 2:  # this device speaks version 2 only, from HELLO_ACK on
+        if frame.version != 2 and not isinstance(msg, M.EStop):
+            # this device speaks version 2 only, from HELLO_ACK on
             self.send(M.Ack(frame.seq, M.Status.BAD_MESSAGE))
+            return
+        if isinstance(msg, M.Heartbeat):
+            return
+        if isinstance(msg, M.Ping):
+            self.send(M.Pong(msg.stamp))
             return
         last = self._last
         if last is not None and last[:3] == (frame.seq, frame.type, frame.body):

@@ -302,7 +302,7 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
         u[2] = 1.0
         # 4. record
         out[OUT_POS, n] = enc
-        out[OUT_FCMD, n] = fc
+        out[OUT_FCMD, n] = fc if ist[IST_FAULT] == 0 else 0.0  # ramped, zeroed (docs §6)
         out[OUT_FOUT, n] = x[FA]
         out[OUT_CUR, n] = cur
         out[OUT_ACC, n] = x[Y]

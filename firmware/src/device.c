@@ -31,6 +31,7 @@ enum { EV_CONTACT = 1, EV_SATURATION, EV_FAULT, EV_DONE };
 typedef struct {
     uint8_t type;
     uint8_t code;
+    uint8_t session; /* the host session the run began in (a HELLO starts a new one) */
     uint16_t window_id;
     uint32_t tick;
     int32_t a;
@@ -114,7 +115,11 @@ static struct {
     uint64_t next_status;
     /* the window whose traces and WINDOW_DONE are being sent */
     uint8_t done_pending;
-    uint8_t discard_run; /* a HELLO ended the running window: report nothing more of it */
+    /* host sessions: a HELLO starts the next; a run's events and records go only to the
+     * session it began in (a FAULT goes to any: output latched off is always news) */
+    uint8_t session, run_session;
+    uint16_t run_mask, run_decim; /* the trace layout of the run being recorded and sent */
+    uint8_t run_nch;
     event done;
     uint32_t next_record, done_records;
     uint16_t trace_window;
@@ -205,6 +210,7 @@ static void push_event(uint8_t type, uint8_t code, uint32_t tick, int32_t a, int
     event *e = &D.ev[D.ev_w % N_EVENTS];
     e->type = type;
     e->code = code;
+    e->session = D.run_session;
     e->window_id = D.window_id;
     e->tick = tick;
     e->a = a;
@@ -296,10 +302,10 @@ static void end_run(uint8_t timed_out)
 static void record(float pos, float vel, float fcmd, float fout, float cur, float acc,
                    uint16_t flags)
 {
-    if (D.wtick % D.decim) {
+    if (D.wtick % D.run_decim) {
         return;
     }
-    uint32_t idx = D.wtick / D.decim;
+    uint32_t idx = D.wtick / D.run_decim;
     D.records_total = idx + 1;
     if (D.ring_w - D.ring_r >= HL_RING_RECORDS) {
         D.records_lost++; /* the main loop reports the gap as TRACE_LOST */
@@ -309,7 +315,7 @@ static void record(float pos, float vel, float fcmd, float fout, float cur, floa
     const float all[HL_N_CHANNELS] = {pos, vel, fcmd, fout, cur, acc, (float)flags};
     uint8_t k = 0;
     for (uint8_t c = 0; c < HL_N_CHANNELS; c++) {
-        if (D.mask & (1u << c)) {
+        if (D.run_mask & (1u << c)) {
             D.ring[slot][k++] = all[c];
         }
     }
@@ -569,10 +575,11 @@ static void scene_upload(void)
 
 static void begin_run(uint8_t state, uint16_t window_id)
 {
-    if (D.discard_run) { /* the run a HELLO ended is over (the gate saw it end): its events */
-        D.ev_r = D.ev_w; /* are all in the ring, and none is for this host */
-        D.discard_run = 0;
-    }
+    D.run_session = D.session;
+    D.run_mask = D.mask;
+    D.run_decim = D.decim;
+    D.run_nch = D.nch;
+    D.position_due = 0;
     D.window_id = window_id;
     D.wtick = 0;
     D.first_contact = -1;
@@ -845,6 +852,7 @@ static void handle(const hl_frame *f, uint8_t version)
     D.last_rx_tick = D.ticks; /* every intact frame feeds the watchdog */
     if (f->type == 0x01) { /* HELLO: any header version */
         if (f->body_len != 1) {
+            send_ack(f->seq, HL_BAD_MESSAGE); /* as any command that does not fit */
             return;
         }
         link_reset(); /* a new host session */
@@ -852,10 +860,11 @@ static void handle(const hl_frame *f, uint8_t version)
         D.have_last = 0;
         hal_lock();
         if (running()) {
-            D.req_stop = 1;
-            D.discard_run = 1; /* it ends unreported: nothing of it follows HELLO_ACK */
+            D.req_stop = 1; /* it ends unreported: nothing of it follows HELLO_ACK */
         }
+        D.session++;
         D.ring_r = D.ring_w; /* an old window's unsent records are nobody's now */
+        D.position_due = 0;
         D.enabled = 0;
         D.prev_enabled = 0;
         D.limit = clamp_of(HL_CURRENT_RATING_MA);
@@ -867,13 +876,13 @@ static void handle(const hl_frame *f, uint8_t version)
         send_hello_ack();
         return;
     }
-    if (version != 2) {
-        send_ack(f->seq, HL_BAD_MESSAGE);
+    if (f->type == HL_MSG_ESTOP) { /* acted on whatever its body and frame version: a
+                                      * stray byte must not leave the output on (docs 3) */
+        send_ack(f->seq, execute(f->type, f->body, 0));
         return;
     }
-    if (f->type == HL_MSG_ESTOP) { /* acted on whatever its body: a stray byte must not
-                                      * leave the output on (docs section 3) */
-        send_ack(f->seq, execute(f->type, f->body, 0));
+    if (version != 2) {
+        send_ack(f->seq, HL_BAD_MESSAGE);
         return;
     }
     if (!hl_body_fits(f->type, f->body, f->body_len)) {
@@ -914,16 +923,8 @@ static void send_events(void)
     while (D.ev_r != D.ev_w) {
         event e = D.ev[D.ev_r % N_EVENTS];
         uint8_t b[24], *p;
-        if (e.type == EV_DONE && D.discard_run) {
-            D.discard_run = 0; /* the window a HELLO ended: dropped with its records */
-            hal_lock();
-            D.ring_r = D.ring_w;
-            hal_unlock();
-            D.ev_r = D.ev_r + 1;
-            continue;
-        }
-        if (D.discard_run) {
-            D.ev_r = D.ev_r + 1; /* its contacts, saturations, faults */
+        if (e.type != EV_FAULT && e.session != D.session) {
+            D.ev_r = D.ev_r + 1; /* a run a HELLO ended: dropped, with its records */
             continue;
         }
         if (e.type == EV_DONE) {
@@ -970,7 +971,8 @@ static void send_lost(uint32_t start, uint32_t n)
 /* stream the ring: TRACE_CHUNKs of consecutive records, TRACE_LOST for a gap */
 static void send_traces(void)
 {
-    if (D.discard_run) {
+    if (D.run_session != D.session) {
+        D.ring_r = D.ring_w; /* a run a HELLO ended: its records are nobody's */
         return;
     }
     for (int budget = 8; budget > 0; budget--) {
@@ -978,7 +980,7 @@ static void send_traces(void)
         if (r == w) {
             break;
         }
-        uint32_t per = HL_CHUNK_FLOATS / D.nch;
+        uint32_t per = HL_CHUNK_FLOATS / D.run_nch;
         uint32_t first = D.ring_idx[r % HL_RING_RECORDS];
         if (first != D.next_record) {
             send_lost(D.next_record, first - D.next_record);
@@ -992,12 +994,12 @@ static void send_traces(void)
             break; /* wait for a full chunk while the window runs */
         }
         uint8_t b[10 + 4 * HL_CHUNK_FLOATS], *p = put_u16(b, D.trace_window);
-        p = put_u16(p, D.mask);
+        p = put_u16(p, D.run_mask);
         p = put_u32(p, first);
         p = put_u16(p, n);
         for (uint32_t i = 0; i < n; i++) {
             const float *rec = D.ring[(r + i) % HL_RING_RECORDS];
-            for (uint8_t k = 0; k < D.nch; k++) {
+            for (uint8_t k = 0; k < D.run_nch; k++) {
                 p = put_f32(p, rec[k]);
             }
         }
@@ -1032,9 +1034,9 @@ void hl_device_init(const char *serial_number)
     hl_receiver_init(&D.rx);
     D.state = HL_IDLE;
     D.limit = clamp_of(HL_CURRENT_RATING_MA);
-    D.mask = HL_CHANNEL_MASK;
-    D.decim = 1;
-    D.nch = HL_N_CHANNELS;
+    D.mask = D.run_mask = HL_CHANNEL_MASK;
+    D.decim = D.run_decim = 1;
+    D.nch = D.run_nch = HL_N_CHANNELS;
     D.proto = 2;
     D.wd_ticks = WATCHDOG_TICKS;
     copy_str((uint8_t *)D.serial, serial_number, sizeof D.serial - 1);

@@ -3,7 +3,8 @@
  * UBSan. After every tick it checks what must hold for any input whatever:
  *
  *   - the amplifier current is a finite number within the rating;
- *   - with a fault latched, the amplifier passes no current and its enable line is off;
+ *   - with a fault latched, or at a tick that began IDLE, the amplifier passes no current
+ *     and its enable line is off;
  *   - every frame the device sends decodes and fits its layout.
  *
  * An input is read as a script. Its first byte picks the mode:
@@ -56,15 +57,16 @@ static void drain(void)
 
 static void tick(void)
 {
+    int before = hl_device_peek().state; /* as the commands so far left it */
     hl_servo_tick();
-    hl_device_poll();
     hl_device_view v = hl_device_peek();
     float a = sim_current();
     fail_if(!isfinite(v.current) || fabsf(v.current) > (float)HL_CURRENT_RATING_MA / 1000.0f);
     fail_if(!isfinite(a) || fabsf(a) > (float)HL_CURRENT_RATING_MA / 1000.0f);
-    if (v.fault != HL_FAULT_NONE) {
-        fail_if(a != 0.0f || sim_amp_enabled());
+    if (v.fault != HL_FAULT_NONE || before == HL_IDLE || before == HL_FAULT) {
+        fail_if(a != 0.0f || sim_amp_enabled()); /* output off: no current, no enable */
     }
+    hl_device_poll();
 }
 
 static void ticks(unsigned n)

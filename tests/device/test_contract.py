@@ -65,16 +65,16 @@ def _bounded():
                 yield spec, f
 
 
-def _limit(v):
-    return LIMITS[v] if isinstance(v, str) else v
+def _limit(v, limits=LIMITS):
+    return limits[v] if isinstance(v, str) else v
 
 
-def _beyond(f: C.Field) -> list:
+def _beyond(f: C.Field, limits=LIMITS) -> list:
     """Values just outside the field's range (and, for f32, the non-finite ones)."""
     out = []
     if f.subset:
-        return [0, _limit(f.subset) + 1 if f.subset else 0]
-    lo, hi = _limit(f.lo), _limit(f.hi)
+        return [0, _limit(f.subset, limits) + 1]
+    lo, hi = _limit(f.lo, limits), _limit(f.hi, limits)
     if f.type == "f32":
         out += [math.nan, math.inf, -math.inf]
         if lo is not None:
@@ -91,10 +91,10 @@ def _beyond(f: C.Field) -> list:
     return out
 
 
-def _ends(f: C.Field) -> list:
+def _ends(f: C.Field, limits=LIMITS) -> list:
     if f.subset:
-        return [1, _limit(f.subset)]
-    return [x for x in (_limit(f.lo), _limit(f.hi)) if x is not None]
+        return [1, _limit(f.subset, limits)]
+    return [x for x in (_limit(f.lo, limits), _limit(f.hi, limits)) if x is not None]
 
 
 @pytest.mark.parametrize(("spec", "f"), list(_bounded()), ids=lambda x: getattr(x, "name", ""))
@@ -152,13 +152,31 @@ def _with(base: M.Message, f: C.Field, x) -> M.Message:
     return dataclasses.replace(base, **{f.name: x})
 
 
-#: ends a target may refuse for a reason other than the field's own range: a rule
-#: between fields or the scene's state (the document's "and" rows)
-STATEFUL = {("SCENE_BEGIN", "kind", 2),            # a table scene needs rows
-            ("SCENE_CHUNK", "offset", "table_items"),  # beyond this scene's (empty) table
-            ("SCENE_CHUNK", "n", 480),             # idem
-            ("SCENE_VELOCITIES", "speed", None),   # as many speeds as rows (none)
-            ("PLAY_CHUNK", "n", 480)}              # offset + n: checked with the items
+#: ends a target refuses by a rule between fields (the document's "and" rows)
+STATEFUL = {("SCENE_BEGIN", "kind", 2),  # a table scene needs rows; the base has none
+            ("SCENE_BEGIN", "rows", 0)}  # and the rows' test uses a table scene
+
+
+def _table(items: int) -> tuple[int, int]:
+    """(rows, row_len) of a table of exactly ``items`` (a device's whole table)."""
+    for rows in range(1, C.MAX_ROWS + 1):
+        if items % rows == 0 and items // rows <= 0xFFFF:
+            return rows, items // rows
+    raise AssertionError(f"no table shape holds exactly {items} items")
+
+
+def _setup(spec: C.Spec, f: C.Field, limits: dict) -> tuple[M.Message | None, M.Message]:
+    """(the scene to begin first, the base command) for testing field ``f``, chosen so that
+    no other rule refuses the command: only the field's own range can."""
+    base = BASE[spec.name]
+    if spec.name == "SCENE_BEGIN" and f.name == "rows":  # a table scene: rows x 1 item
+        return None, dataclasses.replace(base, kind=2, rows=1, row_len=1)
+    if spec.name == "SCENE_VELOCITIES":  # a one-row table scene takes one speed
+        return M.SceneBegin(1, 2, 0, 680.0, 0, 0, 0, 0, 0, 0, 1, 1, 0, 1.0), base
+    if spec.name == "SCENE_CHUNK":  # a table scene as large as the device's table
+        rows, row_len = _table(limits["table_items"])
+        return M.SceneBegin(1, 2, 0, 680.0, 0, 0, 0, 0, 0, 0, rows, row_len, 0, 1.0), base
+    return None, base
 
 
 #: under QEMU (an emulated board on a busy computer) a shorter subset: the fields behind the
@@ -185,28 +203,25 @@ def test_every_target_refuses_every_field_beyond_its_range(firmware):
         limits = {"table_items": lim.table_items, "play_items": lim.play_items,
                   "channels": lim.channels, "max_decimation": lim.max_decimation,
                   "current_limit_ma": host.rating_ma}
-        LIMITS.update(limits)  # _beyond and _ends read the target's own limits
         for spec, f in _bounded():
             if firmware == "qemu" and (spec.name, f.name) not in QEMU_FIELDS:
                 continue
-            base = BASE[spec.name]
-            for x in _beyond(f):
-                _ready(host, base)
+            scene, base = _setup(spec, f, limits)
+            for x in _beyond(f, limits):
+                _ready(host, scene)
                 got = host.ask(_with(base, f, x))
                 state = host.settled_state()
                 if got != M.Status.BAD_MESSAGE or state != "IDLE":
                     wrong.append(f"{spec.name}.{f.name} = {x}: {got}, then {state}")
-            for x in _ends(f):
-                key = (spec.name, f.name)
-                if any(k[:2] == key and (k[2] is None or _limit(k[2]) == x) for k in STATEFUL):
+            for x in _ends(f, limits):
+                if (spec.name, f.name, x) in STATEFUL:
                     continue
-                _ready(host, base)
+                _ready(host, scene)
                 got = host.ask(_with(base, f, x))
                 if got == M.Status.BAD_MESSAGE:
                     wrong.append(f"{spec.name}.{f.name} = {x} (an end of its range): "
                                  "BAD_MESSAGE")
     finally:
-        LIMITS.update({"table_items": 16_384, "play_items": 37_888})
         host.close()
         stop_emulator(emu)
     assert not wrong, "\n".join(wrong)
@@ -215,8 +230,9 @@ def test_every_target_refuses_every_field_beyond_its_range(firmware):
     assert not sanitizer, "".join(sanitizer)
 
 
-def _ready(host: Host, base: M.Message) -> None:
-    """IDLE, a real sample begun and committed (ids 1), the rating and trace defaults."""
+def _ready(host: Host, scene: M.Message | None) -> None:
+    """IDLE, a real sample begun and committed (ids 1), the rating and trace defaults; then
+    ``scene`` begun (id 1), when given."""
     host.ask(M.ClearFault())
     host.ask(M.Zero())
     host.ask(M.Hello(2))
@@ -226,6 +242,8 @@ def _ready(host: Host, base: M.Message) -> None:
     assert host.ask(BASE["SCENE_BEGIN"]) == M.Status.OK
     assert host.ask(BASE["SCENE_COMMIT"]) == M.Status.OK
     assert host.settled_state() == "IDLE"
+    if scene is not None:
+        assert host.ask(scene) == M.Status.OK
 
 
 def test_range_errors_name_the_field_before_anything_is_sent():
