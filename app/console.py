@@ -12,17 +12,23 @@ state    keys
 ======== ====================================================================
 placing  r ready · s skip · u re-queue · p pause · q stop and save · n note · e E-STOP
 trial    e E-STOP (everything else waits for the trial to end)
+rating   e E-STOP (the participant is answering)
 paused   p resume (then r to start the trial) · q stop and save · n note · e E-STOP
-fault    c clear the fault and continue · q stop and save · n note
+fault    c clear the fault and continue · q stop and save · n note · e E-STOP
 reference r ready (the real block is in place) · n note · e E-STOP
 ======== ====================================================================
 
-``e`` latches the device's e-stop at once, from the key reader's thread.
+``e`` latches the device's e-stop at once, from the key reader's thread, in every state;
+while a note is typed ``e`` is a letter and Ctrl-E is the e-stop (Ctrl-E works everywhere).
+Keys are read as whole characters in the terminal's encoding (``ü`` is one key, never the
+end of the reader); a key the reader cannot handle is reported and the reader goes on.
 """
 
 from __future__ import annotations
 
+import codecs
 import datetime as dt
+import locale
 import os
 import sys
 import threading
@@ -30,15 +36,19 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 
-__all__ = ["PlainConsole", "KeyConsole", "make_console", "OperatorView", "KEYS"]
+__all__ = ["PlainConsole", "KeyConsole", "make_console", "OperatorView", "KEYS", "ESTOP_CTRL"]
+
+#: Ctrl-E: the e-stop in every state, also while a note is being typed
+ESTOP_CTRL = "\x05"
 
 #: state → {key: action}
 KEYS: dict[str, dict[str, str]] = {
     "placing": {"r": "go", "s": "skip", "u": "requeue", "p": "pause", "q": "abort",
                 "n": "note", "e": "estop"},
     "trial": {"e": "estop"},
+    "rating": {"e": "estop"},
     "paused": {"p": "resume", "q": "abort", "n": "note", "e": "estop"},
-    "fault": {"c": "clear", "q": "abort", "n": "note"},
+    "fault": {"c": "clear", "q": "abort", "n": "note", "e": "estop"},
     "reference": {"r": "go", "n": "note", "e": "estop"},
     "idle": {"e": "estop"},
 }
@@ -56,8 +66,9 @@ class OperatorView:
 
     title: str = ""
     phase: str = ""
-    trial: int = 0
-    total: int = 0
+    trial: int = 0  # the attempt's trial_index (redraws and retries count)
+    total: int = 0  # items in the plan
+    done: int = 0  # items finished
     place: str = ""
     detail: str = ""
     block: str = ""
@@ -98,7 +109,7 @@ class PlainConsole:
 
     def place(self, trial, total: int, done: int, what: str = "", detail: str = "") -> None:
         v = self.view
-        v.phase, v.trial, v.total = trial.phase, trial.trial_index, total
+        v.phase, v.trial, v.total, v.done = trial.phase, trial.trial_index, total, done
         v.place, v.detail = what, detail
         self.say(f"[{done}/{total}] {trial.phase} #{trial.trial_index} (attempt {trial.attempt})"
                  f": place {what}" + (f" — {detail}" if detail else ""))
@@ -122,7 +133,8 @@ class PlainConsole:
 
     def take_notes(self) -> list[dict]:
         """Notes typed since the last call."""
-        out, self.notes = self.notes, []
+        with self._lock:  # the key reader appends under the same lock
+            out, self.notes = self.notes, []
         return out
 
     def close(self) -> None:
@@ -146,6 +158,7 @@ class KeyConsole(PlainConsole):
         self._stop = threading.Event()
         self._cv = threading.Condition()
         self._note: list[str] | None = None  # characters of a note being typed
+        self._esc = ""  # an escape sequence being skipped ("", ESC, "[" or "O")
         self._live = None
         if live:
             from rich.console import Console
@@ -159,7 +172,7 @@ class KeyConsole(PlainConsole):
         self._reader.start()
         if self._live is None:  # the live view shows the keys of the moment instead
             self.say("operator keys: r ready · s skip · u re-queue · p pause · q stop and "
-                     "save · n note · e E-STOP")
+                     "save · n note · e E-STOP (Ctrl-E while typing a note)")
 
     # ---------------------------------------------------------------- the view
     def say(self, text: str) -> None:
@@ -175,53 +188,103 @@ class KeyConsole(PlainConsole):
         from rich.text import Text
 
         v = self.view
+        # copies: the reader and the runner append while this (Rich's thread) draws
+        taps, messages, note = list(v.taps), list(v.messages), self._note
+        note = None if note is None else list(note)
         t = Table.grid(padding=(0, 2))
         t.add_column(style="bold", no_wrap=True)
         t.add_column()
         el = time.monotonic() - v.started
         left = "—" if v.left_s is None else f"≈ {v.left_s / 60:.0f} min"
-        t.add_row("trial", f"{v.phase} · {v.trial} of {v.total} · elapsed {int(el // 60):02d}:"
+        t.add_row("trial", f"{v.phase} · item {min(v.done + 1, v.total)} of {v.total} "
+                           f"(trial #{v.trial}) · elapsed {int(el // 60):02d}:"
                            f"{int(el % 60):02d} · left {left}")
         t.add_row("PLACE", Text.assemble((f" {v.place or '—'} ", "reverse bold"),
                                          f"  {v.detail}"))
         if v.block:
             t.add_row("block", v.block)
-        t.add_row("taps", "  ".join(f"{x:.3f}" for x in v.taps) + (" m/s" if v.taps else "—"))
+        t.add_row("taps", "  ".join(f"{x:.3f}" for x in taps) + (" m/s" if taps else "—"))
         t.add_row("saturations", str(v.saturations))
         keys = " · ".join(f"{k} {_NAMES[a]}" for k, a in KEYS.get(v.state, {}).items())
         t.add_row("keys", Text.assemble((f"{v.state}:", "bold yellow" if v.state != "fault"
                                          else "bold red"), f" {keys}"))
-        if self._note is not None:
-            t.add_row("NOTE", "".join(self._note) + "▏  (ENTER saves · ESC cancels)")
-        log = [Text(m, style="dim" if i < len(v.messages) - 1 else "") for i, m in
-               enumerate(v.messages)]  # wrapped, never cut: the newest may be an instruction
+        if note is not None:
+            t.add_row("NOTE", "".join(note) + "▏  (ENTER saves · ESC cancels · "
+                      "Ctrl-E E-STOP)")
+        log = [Text(m, style="dim" if i < len(messages) - 1 else "") for i, m in
+               enumerate(messages)]  # wrapped, never cut: the newest may be an instruction
         return Panel(Group(t, Rule(style="dim"), *log), title=v.title or "hapticlab",
                      border_style="red" if v.state == "fault" else "cyan")
 
     # ---------------------------------------------------------------- keys
     def _read(self) -> None:
+        """Whole characters in the terminal's encoding, until close(); never dies on a key."""
         import select
 
+        enc = getattr(sys.stdin, "encoding", None) or locale.getpreferredencoding(False)
+        try:
+            decoder = codecs.getincrementaldecoder(enc)(errors="replace")
+        except LookupError:
+            decoder = codecs.getincrementaldecoder("utf-8")(errors="replace")
         while not self._stop.is_set():
             try:
                 r, _, _ = select.select([self._fd], [], [], 0.1)
                 if not r:
                     continue
-                ch = os.read(self._fd, 1).decode("utf-8", "ignore")
-            except (OSError, ValueError):  # the terminal went away: nobody is at the keys
+                data = os.read(self._fd, 64)
+            except (OSError, ValueError) as exc:  # the terminal went away
+                self.say(f"the operator's terminal is gone ({exc}): keys are no longer read; "
+                         "the device's own e-stop button still acts")
                 return
-            if not ch:
+            if not data:
+                self.say("the operator's terminal closed: keys are no longer read; the "
+                         "device's own e-stop button still acts")
                 return
-            self._key(ch)
+            for ch in decoder.decode(data):  # a multibyte key may end in the next read
+                if self._escape(ch):
+                    continue
+                try:
+                    self._key(ch)
+                except Exception as exc:  # noqa: BLE001 — the reader must outlive any key
+                    self.say(f"key {ch!r} failed ({type(exc).__name__}: {exc}); the keys "
+                             "still act")
+
+    def _escape(self, ch: str) -> bool:
+        """Whether ``ch`` belongs to a terminal escape sequence (an arrow key is ESC [ C:
+        its C must not clear a fault). ESC itself still reaches a note (it cancels it)."""
+        if self._esc == "":
+            if ch == "\x1b" and self._note is None:
+                self._esc = "\x1b"
+                return True
+            return False
+        if self._esc == "\x1b":
+            self._esc = ch if ch in "[O" else ""
+            return ch in "[O"  # ESC then another key: that key acts
+        if "@" <= ch <= "~":  # the final byte of a CSI/SS3 sequence
+            self._esc = ""
+        return True
+
+    def _estop(self) -> None:
+        try:
+            self.device.estop()
+        except Exception as exc:  # noqa: BLE001 — said, never swallowed: the operator acts
+            self.say(f"E-STOP NOT CONFIRMED ({type(exc).__name__}: {exc}): press the "
+                     "device's own e-stop button or switch the amplifier off")
+            return
+        self.say("E-STOP latched: output is zero")
 
     def _key(self, ch: str) -> None:
+        if ch == ESTOP_CTRL:  # in every state, also in the middle of a note
+            self._estop()
+            return
         if self._note is not None:  # typing a note: every key is text but ENTER and ESC
             if ch in "\r\n":
                 text = "".join(self._note).strip()
                 self._note = None
                 if text:
-                    self.notes.append({"utc": dt.datetime.now(dt.UTC).isoformat(
-                        timespec="seconds"), "trial_index": self.view.trial, "text": text})
+                    with self._lock:
+                        self.notes.append({"utc": dt.datetime.now(dt.UTC).isoformat(
+                            timespec="seconds"), "trial_index": self.view.trial, "text": text})
                     self.say(f"note saved: {text}")
             elif ch == "\x1b":
                 self._note = None
@@ -233,16 +296,13 @@ class KeyConsole(PlainConsole):
             return
         key = ch.lower()
         state = self.view.state
+        if key == "e":  # at once, from this thread, whatever the state: never queued
+            self._estop()
+            return
         action = KEYS.get(state, {}).get(key)
         if action is None:
             if any(key in keys for keys in KEYS.values()):
                 self.say(f"key '{key}' ignored: {state} — it acts {_WHEN.get(key, 'later')}")
-            return
-        if action == "estop":  # at once, from this thread: never queued behind a trial
-            try:
-                self.device.estop()
-            finally:
-                self.say("E-STOP latched: output is zero")
             return
         if action == "note":
             self._note = []

@@ -32,12 +32,18 @@ def _until(pred, limit=5.0):
     return pred()
 
 
-def test_keys_act_only_in_their_state_and_estop_acts_at_once(tty_stdin):
+@pytest.fixture
+def dev():
+    """The simulated device, homed on a spring: output on, so an e-stop has work to do."""
+    d = open_device("sim")
+    d.load_scene(Scene("firm", spring=680.0))
+    d.home()
+    return d
+
+
+def test_keys_act_only_in_their_state_and_estop_acts_at_once(tty_stdin, dev):
     """A key pressed where it means nothing is discarded with a line saying so; nothing
     pressed in one state acts in the next (an s during a trial never skips the next one)."""
-    dev = open_device("sim")
-    dev.load_scene(Scene("firm", spring=680.0))
-    dev.home()
     con = KeyConsole(dev, live=False)
     try:
         con.set_state("placing")
@@ -70,6 +76,70 @@ def test_keys_act_only_in_their_state_and_estop_acts_at_once(tty_stdin):
         con.set_state("fault")
         os.write(tty_stdin, b"c")
         assert con.poll(2.0) == "clear"
+    finally:
+        con.close()
+
+
+def test_non_ascii_keys_never_end_the_reader_and_estop_acts_in_every_state(tty_stdin, dev):
+    """A German operator's keys: ü beside p, a note about Müller, a byte no encoding knows.
+    The reader reads whole characters, says what it cannot use, and e (Ctrl-E inside a note)
+    latches the e-stop in every state — the rating screen included."""
+    con = KeyConsole(dev, live=False)
+    try:
+        con.set_state("placing")
+        os.write(tty_stdin, "ü".encode())  # one key, two bytes: nothing happens
+        os.write(tty_stdin, "ö".encode()[:1])  # half a character, the rest in the next read
+        time.sleep(0.2)
+        os.write(tty_stdin, "ö".encode()[1:] + b"\xff")  # and a byte that is no character
+        os.write(tty_stdin, b"p")  # the reader is alive: p still pauses
+        assert con.poll(2.0) == "pause"
+        con.set_state("placing")
+        os.write(tty_stdin, "nProband Müller: Griff zu fest\r".encode())
+        assert _until(lambda: con.notes)
+        assert con.take_notes()[0]["text"] == "Proband Müller: Griff zu fest"
+        os.write(tty_stdin, "nÄrger".encode())  # a note half typed: e is a letter in it ...
+        os.write(tty_stdin, b"e")
+        time.sleep(0.3)
+        assert dev.fault is None
+        os.write(tty_stdin, b"\x05")  # ... and Ctrl-E is the e-stop, at once
+        assert _until(lambda: dev.fault is not None) and dev.fault.code == "estop"
+        os.write(tty_stdin, b"\r")
+        assert _until(lambda: con.notes) and con.take_notes()[0]["text"] == "Ärgere"
+        for state in ("rating", "trial", "idle", "reference", "paused", "placing", "fault"):
+            dev.clear_fault()
+            con.set_state(state)
+            os.write(tty_stdin, "é".encode() + b"e")
+            assert _until(lambda: dev.fault is not None), state
+            assert dev.output_force == 0.0
+        assert not any("ignored" in m for m in con.view.messages if "'e'" in m)
+        assert any("E-STOP latched" in m for m in con.view.messages)
+        os.write(tty_stdin, b"\x1b[C\x1bOD")  # arrow keys (ESC [ C, ESC O D): no c, no D
+        assert con.poll(0.5) is None and dev.fault is not None
+        os.write(tty_stdin, b"c")  # c itself still clears
+        assert con.poll(2.0) == "clear"
+    finally:
+        con.close()
+
+
+def test_an_estop_the_device_does_not_confirm_is_said_loudly(tty_stdin):
+    """A link that fails as e is pressed: the console says the e-stop is not confirmed and
+    names the device's own button, and the reader goes on."""
+
+    class Gone:
+        fault = None
+
+        def estop(self):
+            raise OSError(5, "Input/output error")
+
+    con = KeyConsole(Gone(), live=False)
+    try:
+        con.set_state("trial")
+        os.write(tty_stdin, b"e")
+        assert _until(lambda: any("E-STOP NOT CONFIRMED" in m for m in con.view.messages))
+        assert not any("E-STOP latched" in m for m in con.view.messages)
+        con.set_state("placing")
+        os.write(tty_stdin, b"r")
+        assert con.poll(2.0) == "go"
     finally:
         con.close()
 
