@@ -40,8 +40,17 @@ class Participant:
         again), or None. A screen keeps its window alive here."""
         return None
 
+    def choose_reference(self, trial, blocks: list[tuple[str, str]]) -> str | None:
+        """The participant asked for a real block again (R) and the phase has several:
+        which one (a sample id of ``blocks``, pairs of (sample id, what it is called)), or
+        None for none. Default: the first."""
+        return blocks[0][0] if blocks else None
+
     def reference(self, trial, sample) -> None:
         """A real reference block is about to be tapped (``sample``)."""
+
+    def saturated(self, trial) -> None:
+        """The trial saturated: it is redrawn later (a screen says so, also without sound)."""
 
     def before_window(self, trial, sample_id: str, device, rng: np.random.Generator) -> None:
         """Just before a tapping window on ``sample_id``."""

@@ -8,13 +8,16 @@
   the folder), rewritten at start, on resume and at the end.
 * ``protocol.toml`` — the protocol file the session runs, copied byte for byte.
 * ``traces/`` — per attempt, the device's raw streams as compressed NumPy (``.npz``), also
-  written atomically.
+  written atomically, each recording its own file: the recorder never overwrites one. A
+  trace no row names (the process stopped between the two) is moved to
+  ``traces/unrecorded/`` before a resume, never deleted.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import fcntl
+import fnmatch
 import io
 import json
 import os
@@ -150,7 +153,36 @@ class SessionFiles:
                                 "mark")
         except OSError as exc:
             raise io_error(exc, "cannot repair trials.tsv") from None
+        done += self._set_aside_unrecorded_traces()
         return done
+
+    def _set_aside_unrecorded_traces(self) -> list[str]:
+        """Traces no row of trials.tsv names (the process stopped after writing the trace,
+        before the row) go to ``traces/unrecorded/``: the attempt runs again and writes its
+        own, and nothing recorded is lost."""
+        rows, _ = self.read_rows()
+        named = [r["trace_file"] for r in rows if r.get("trace_file")]
+        moved = []
+        try:
+            for f in sorted(self.traces.glob("*.npz")):
+                rel = f"{TRACES}/{f.name}"
+                if any(fnmatch.fnmatchcase(rel, pat) for pat in named):
+                    continue
+                aside = self.traces / "unrecorded"
+                aside.mkdir(exist_ok=True)
+                target = aside / f.name
+                n = 1
+                while target.exists():
+                    n += 1
+                    target = aside / f"{f.stem}.{n}{f.suffix}"
+                os.rename(f, target)
+                moved.append(f"{TRACES}/{target.relative_to(self.traces)}")
+        except OSError as exc:
+            raise io_error(exc, "cannot set an unrecorded trace aside") from None
+        if not moved:
+            return []
+        return [f"moved {len(moved)} trace file(s) no row names (the session stopped between "
+                f"trace and row) to {TRACES}/unrecorded/: {', '.join(moved)}"]
 
     def write_meta(self, meta: dict) -> None:
         try:
@@ -187,12 +219,22 @@ class SessionFiles:
             raise io_error(exc, "cannot record the attempt in trials.tsv") from None
 
     def save_trace(self, name: str, traces: dict, contacts: list) -> str:
+        """Write one recording to ``traces/<name>``; returns the path trials.tsv names.
+
+        Raises
+        ------
+        SessionFileError
+            ``traces/<name>`` exists: a recording never replaces another.
+        """
         buf = io.BytesIO()
         np.savez_compressed(buf, contacts_t=np.array([c.t for c in contacts]),
                             contacts_v=np.array([c.velocity for c in contacts]),
                             **{k: np.asarray(v) for k, v in traces.items()})
         try:
-            atomic_write(self.traces / name, buf.getvalue())
+            atomic_write(self.traces / name, buf.getvalue(), overwrite=False)
+        except FileExistsError:
+            raise SessionFileError(f"{self.traces / name}: exists; a recording never "
+                                   "overwrites another (nothing was replaced)") from None
         except OSError as exc:
             raise io_error(exc, "cannot save the attempt's traces") from None
         return f"{TRACES}/{name}"

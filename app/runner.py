@@ -27,8 +27,19 @@ import numpy as np
 
 from analysis.session_format import FORMAT_VERSION, PROTOCOL_COPY
 from device import DeviceError, DeviceFaultError, HapticDevice
-from protocols import DONE, PAUSED, RNG_ALGORITHM, Attempt, Protocol, SessionEngine, Trial
+from protocols import (
+    DONE,
+    PAUSED,
+    RNG_ALGORITHM,
+    Attempt,
+    Protocol,
+    SessionEngine,
+    Trial,
+    is_reference,
+    reference_item,
+)
 
+from . import __version__
 from .console import PlainConsole
 from .errors import DataFolderError, SessionFileError
 from .participants import Participant
@@ -36,7 +47,7 @@ from .recorder import SessionFiles
 
 __all__ = ["SessionRunner", "SessionInterrupted", "session_meta", "utc_now"]
 
-APP_VERSION = "0.1.0"
+APP_VERSION = __version__
 
 
 class _FaultStop(Exception):
@@ -141,6 +152,7 @@ class SessionRunner:
     _expected: list[dict] | None = None  # while replaying: the recorded rows still to meet
     _durations: list[float] = field(default_factory=list)
     _windows_in_attempt: int = 0
+    _on_device: str | None = None  # the real block last placed on the device, if any
 
     def load_log(self) -> None:
         rows, torn = self.files.read_rows()
@@ -238,14 +250,19 @@ class SessionRunner:
     def _placement(self, trial: Trial) -> tuple[str, str]:
         """What the operator places for ``trial``, and what it is (never on the participant's
         screen)."""
+        clear = f"nothing: remove the {self._on_device}" if self._on_device else "nothing"
         if trial.kind == "identification":
-            return "nothing (the scene's surfaces are virtual)", " / ".join(trial.samples)
+            return f"{clear} (the scene's surfaces are virtual)", " / ".join(trial.samples)
         sample = self.protocol.samples[trial.samples[0]]
-        what = trial.placement or "nothing"
+        what = trial.placement or clear
         detail = "real sample" if sample.is_real else f"virtual: {sample.id}"
         return what, detail
 
     def _block_line(self, trial: Trial) -> str:
+        if trial.kind == "reference":
+            return f"real reference block: {trial.placement}"
+        if trial.kind == "identification":  # surface 1's block is not the scene's
+            return ""
         sample = self.protocol.samples[trial.samples[0]]
         block = trial.block or sample.block
         if block is None and sample.reference is None:
@@ -274,13 +291,15 @@ class SessionRunner:
                 self.console.place(trial, self._total(), done, what, detail)
                 self.console.set_state("placing")
             if self.participant_ui.poll() == "reference":
-                ref = self.protocol.samples[trial.samples[0]].reference
+                ref = self.participant_ui.choose_reference(trial, self._real_blocks(trial))
                 if ref is not None:
                     self.console.say(f"the participant asks for the real block: {ref}")
                     self._reference(trial, ref, asked=True)
-                    self.participant_ui.waiting(trial)
+                    what, detail = self._placement(trial)  # the real block is on it now
+                    v.block = self._block_line(trial)
                     self.console.place(trial, self._total(), done, what, detail)
                     self.console.set_state("placing")
+                self.participant_ui.waiting(trial)
             action = self.console.poll(0.03)
             if action is None:
                 continue
@@ -347,14 +366,26 @@ class SessionRunner:
         phase = next(p for p in self.protocol.phases if p.name == trial.phase)
         if phase.references == "none" or trial.kind == "free":
             return
-        if phase.references == "block":
+        if phase.references == "block" and trial.kind != "identification":
             refs = [self.protocol.samples[trial.samples[0]].reference]
         else:
             refs = list(dict.fromkeys(self.protocol.samples[s].reference
                                       for s in phase.samples))
         for ref in refs:
-            if ref is not None and not self._referenced(f"{trial.phase}/ref:{ref}"):
+            if ref is not None and not self._referenced(reference_item(trial.phase, ref)):
                 self._reference(trial, ref)
+
+    def _real_blocks(self, trial: Trial) -> list[tuple[str, str]]:
+        """The real blocks a participant may ask for before ``trial``: (sample id, what it
+        is called). A rated trial's own block; in identification every real block of the
+        phase, in the protocol's order — never one that follows from the scene (surface 1's
+        block would be its answer)."""
+        if trial.kind != "identification":
+            ref = self.protocol.samples[trial.samples[0]].reference
+            return [] if ref is None else [(ref, self.protocol.samples[ref].placement or ref)]
+        phase = next(p for p in self.protocol.phases if p.name == trial.phase)
+        refs = dict.fromkeys(self.protocol.samples[s].reference for s in phase.samples)
+        return [(r, self.protocol.samples[r].placement or r) for r in refs if r is not None]
 
     def _reference(self, trial: Trial, ref_id: str, asked: bool = False) -> None:
         """The operator places a real reference block; the participant taps it (one window);
@@ -362,13 +393,14 @@ class SessionRunner:
         placed or tapped pauses the session like any trial; the block is tapped again."""
         ref = self.protocol.samples[ref_id]
         k = sum(a.status == "reference" for a in self.log)
-        rtrial = dataclasses.replace(trial, item=f"{trial.phase}/ref:{ref_id}", kind="reference",
+        rtrial = dataclasses.replace(trial, item=reference_item(trial.phase, ref_id),
+                                     kind="reference",
                                      samples=(ref_id,), placement=ref.placement or ref_id,
                                      attempt=0, block=trial.block)
         reason = "participant asked" if asked else ""
         while True:
             self.participant_ui.waiting(rtrial)
-            self.console.view.block = self._block_line(trial)
+            self.console.view.block = self._block_line(rtrial)
             self.console.place(rtrial, self._total(), len(self.engine.outcomes(self.log)),
                                ref.placement or ref_id, "real reference block (compare with it)")
             self.console.set_state("reference")
@@ -380,6 +412,7 @@ class SessionRunner:
                     self.participant_ui.waiting(rtrial)
                     self.console.set_state("reference")
             self.console.set_state("trial")
+            self._on_device = ref.placement or ref_id
             self.participant_ui.reference(rtrial, ref)
             t_start = utc_now()
             self._windows_in_attempt = 0
@@ -426,6 +459,7 @@ class SessionRunner:
     # ------------------------------------------------------------------ one attempt
     def _attempt(self, trial: Trial) -> None:
         self._windows_in_attempt = 0
+        self._on_device = trial.placement if trial.kind != "identification" else None
         rng = self._rng(trial)
         t_start = utc_now()
         self.participant_ui.ready(trial)
@@ -490,6 +524,7 @@ class SessionRunner:
             if self.audio is not None and self.protocol.saturation.tone:
                 self.audio.low_tone()
             self.console.saturated()
+            self.participant_ui.saturated(trial)
             status = self.engine.saturated_status(trial, self.log)
             self._record(trial, status, t_start=t_start, result=res, results=results)
             return
@@ -553,15 +588,21 @@ class SessionRunner:
             self.log.append(Attempt(trial.item, status, reason))
             return
         if results and self.traces != "none" and any(len(r.traces) for r in results):
+            # every recording its own name: a trial's windows by its index (unique per
+            # attempt), a real block's tapping by its place among the session's references
+            # (several may come before one trial); the recorder refuses to overwrite
+            if trial.kind == "reference":
+                stem = f"reference-{sum(is_reference(a.item) for a in self.log) + 1:03d}"
+            else:
+                stem = f"trial-{trial.trial_index:04d}"
             for k, r in enumerate(results):
                 if not r.traces:
                     continue
-                kind = "reference" if status == "reference" else "trial"
-                name = f"{kind}-{trial.trial_index:04d}-{k}.npz"
                 trace_file = self.files.save_trace(
-                    name, _trace_payload(r, self.traces, self.device.info), r.contacts)
+                    f"{stem}-{k}.npz", _trace_payload(r, self.traces, self.device.info),
+                    r.contacts)
             if len(results) > 1:
-                trace_file = f"traces/trial-{trial.trial_index:04d}-*.npz"
+                trace_file = f"traces/{stem}-*.npz"
         row = {
             "participant": self.participant, "session": self.session, "phase": trial.phase,
             "trial_index": trial.trial_index, "item": trial.item, "attempt": trial.attempt,

@@ -18,6 +18,7 @@ demos): a callable returning newly pressed keys, each a name or a (name, modifie
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable, Iterable
 
@@ -27,11 +28,26 @@ from .participants import Participant
 
 __all__ = ["PsychoPyScreen", "info_dialog"]
 
-_PUNCT = {"comma": ",", "period": ".", "slash": "/", "semicolon": ";", "apostrophe": "'",
-          "minus": "-", "equal": "=", "bracketleft": "(", "bracketright": ")",
-          "backslash": "\\", "grave": "`"}
-_SHIFTED = {"1": "!", "slash": "?", "apostrophe": '"', "semicolon": ":", "9": "(", "0": ")",
-            "minus": "_", "equal": "+", "comma": "<", "period": ">", "2": "@", "3": "#"}
+#: pyglet's key names (as PsychoPy reports them, lower case) → the character: a layout
+#: that has ! or ( on its own key, or a shifted key reported by its symbol, types it
+_PUNCT = {name: chr(code) for name, code in (
+    ("exclamation", 0x21), ("doublequote", 0x22), ("hash", 0x23), ("pound", 0x23),
+    ("dollar", 0x24), ("percent", 0x25), ("ampersand", 0x26), ("apostrophe", 0x27),
+    ("parenleft", 0x28), ("parenright", 0x29), ("asterisk", 0x2A), ("plus", 0x2B),
+    ("comma", 0x2C), ("minus", 0x2D), ("period", 0x2E), ("slash", 0x2F), ("colon", 0x3A),
+    ("semicolon", 0x3B), ("less", 0x3C), ("equal", 0x3D), ("greater", 0x3E),
+    ("question", 0x3F), ("at", 0x40), ("bracketleft", 0x5B), ("backslash", 0x5C),
+    ("bracketright", 0x5D), ("asciicircum", 0x5E), ("underscore", 0x5F), ("grave", 0x60),
+    ("quoteleft", 0x60), ("braceleft", 0x7B), ("bar", 0x7C), ("braceright", 0x7D),
+    ("asciitilde", 0x7E))}
+#: a US layout's shifted digits and punctuation where the key is reported unshifted (pyglet
+#: on Windows and macOS); on X11 the key is reported as the character Shift made, so this is
+#: not applied there (a French layout's Shift+4 is 4, not $)
+_US_SHIFTED = {"1": "!", "2": "@", "3": "#", "4": "$", "5": "%", "6": "^", "7": "&", "8": "*",
+               "9": "(", "0": ")", "slash": "?", "apostrophe": '"', "semicolon": ":",
+               "minus": "_", "equal": "+", "comma": "<", "period": ">", "bracketleft": "{",
+               "bracketright": "}", "backslash": "|", "grave": "~", "quoteleft": "~"}
+_SHIFTED = {} if sys.platform.startswith("linux") else _US_SHIFTED
 _NUM = {f"num_{d}": str(d) for d in range(10)}
 
 
@@ -84,6 +100,7 @@ class PsychoPyScreen(Participant):
         self._cursor = visual.Circle(self.win, radius=0.013 * h, fillColor=(0.9, 0.9, 0.2),
                                      lineColor=None)
         self._slider = None
+        self._scale_stims = None  # the scale's points and its end anchors, made when needed
         self._keys = keys or self._psychopy_keys
         self._clock = clock or time.perf_counter
         self.cursor = bool(protocol.cursor)
@@ -92,6 +109,9 @@ class PsychoPyScreen(Participant):
         self._waiting: tuple | None = None  # what the "please wait" screen shows, while shown
         self.drawn_text: list[str] = []  # what the last frame said (tests read it)
         self._done = False
+        self._notice = ""  # said once on the next 'please wait' (a saturated trial)
+        self._tapping = ""  # the title while tapping ('Tap', 'Tap · Surface 2')
+        self._detail = ""  # and the line below it
         self.debrief_text = ""
 
     # ------------------------------------------------------------------ drawing
@@ -108,8 +128,14 @@ class PsychoPyScreen(Participant):
         self._keys()  # drop everything pressed so far: a double press counts once
 
     def _frame(self, text: str, small: str = "", cursor: bool = False, progress: float = 0.0,
-               flip: bool = True, slider: bool = False) -> None:
-        self.drawn_text = [t for t in (text, small) if t]
+               flip: bool = True, slider: bool = False,
+               scale: tuple[str, str, str] | None = None) -> None:
+        """One frame: ``text`` (centred), ``small`` (grey, at the bottom); ``scale`` = (the
+        scale's points, the low anchor, the high anchor) draws the points under ``text``
+        with each anchor under its end."""
+        self.drawn_text = [t for t in (text, small, *(scale or ())) if t]
+        if scale is not None:
+            self._draw_scale(*scale)
         if cursor and self.cursor:
             self._surface.draw()
             if self._height is not None:
@@ -118,7 +144,8 @@ class PsychoPyScreen(Participant):
                 self._cursor.pos = (0, top + max(0.0, self._height * 1000) * 0.01 * self.H)
                 self._cursor.draw()
         self._text.text = text
-        self._text.pos = (0, 0.16 * self.H if (cursor and self.cursor) or slider else 0)
+        self._text.pos = (0, 0.16 * self.H if (cursor and self.cursor) or slider or scale
+                          else 0)
         self._text.draw()
         if slider and self._slider is not None:
             self._slider.draw()
@@ -130,6 +157,25 @@ class PsychoPyScreen(Participant):
             self._bar.draw()
         if flip:
             self.win.flip()
+
+    def _draw_scale(self, points: str, low: str, high: str) -> None:
+        from psychopy import visual
+
+        if self._scale_stims is None:
+            h = self.H
+            self._scale_stims = (
+                visual.TextStim(self.win, text="", height=0.042 * h, pos=(0, 0), color="white"),
+                *(visual.TextStim(self.win, text="", height=0.026 * h, color=(0.5, 0.5, 0.5),
+                                  wrapWidth=0.24 * self.W) for _ in range(2)))
+        line, lo, hi = self._scale_stims
+        line.text = points
+        line.draw()
+        half = line.boundingBox[0] / 2
+        for stim, word, x in ((lo, low, -half), (hi, high, half)):
+            if word:  # centred under its end point, wrapped to a quarter of the window
+                stim.text = word
+                stim.pos = (x, -0.07 * self.H - stim.boundingBox[1] / 2)
+                stim.draw()
 
     def screenshot(self, path: str, **frame) -> None:
         """Draw a frame and save it as an image (the back buffer, before the flip)."""
@@ -172,7 +218,9 @@ class PsychoPyScreen(Participant):
         else:
             ph = next((p for p in self.protocol.phases if p.name == trial.phase), None)
             offer = ph is not None and ph.references != "none" and trial.kind != "free"
-            self._waiting = (self.t("wait"), self.t("wait_detail") + (
+            notice, self._notice = self._notice, ""  # said once, on this wait
+            self._waiting = (self.t("wait"), (notice + "\n" if notice else "")
+                             + self.t("wait_detail") + (
                 "\n" + self.t("reference_offer") if offer else ""), offer)
         self._flush()
         self._frame(*self._waiting[:2])
@@ -189,23 +237,59 @@ class PsychoPyScreen(Participant):
             return "reference"
         return None
 
+    def saturated(self, trial) -> None:
+        """Said on the next 'please wait' screen: the participant sees why the sample will
+        come back, with or without the tone."""
+        self._notice = self.t("saturated")
+
+    def choose_reference(self, trial, blocks: list[tuple[str, str]]) -> str | None:
+        """Several real blocks (identification): the participant picks one with its number
+        key, or ESC for none; the order is the protocol's, never the scene's."""
+        if len(blocks) < 2:
+            return blocks[0][0] if blocks else None
+        names = "   ".join(f"{i + 1} = {label}" for i, (_, label) in enumerate(blocks))
+        valid = [str(i + 1) for i in range(len(blocks))] + [
+            f"num_{i + 1}" for i in range(len(blocks))] + ["escape"]
+        key, _ = self._wait(valid, lambda: self._frame(
+            self.t("reference_which"), self.t("reference_which_keys", names=names)))
+        if key == "escape":  # the runner shows 'please wait' (and the offer) again
+            return None
+        self._waiting = (self.t("wait"), self.t("reference_requested"), False)
+        self._frame(*self._waiting[:2])
+        return blocks[int(key.removeprefix("num_")) - 1][0]
+
     def ready(self, trial) -> None:
         self._waiting = None
         if trial.phase != self._shown_phase:
             self.instructions(trial.phase)
 
     def reference(self, trial, sample) -> None:
-        """The real block to tap (shown while the operator places it and during the taps)."""
+        """The real block to tap (shown while the operator places it and during the taps);
+        a phase that begins with its real blocks shows its instructions first."""
+        if trial.phase != self._shown_phase:
+            self.instructions(trial.phase)
         self._waiting = None
         self._height = None
         self._frame(self.t("reference"), self.t("reference_detail",
                                                  block=sample.placement or sample.id),
                     cursor=True)
 
+    def _tap_title(self, trial, sample_id) -> str:
+        """'Tap', and in identification which surface ('Surface 2') — never its name; 'Tap
+        the real block' for as long as a real block is tapped."""
+        if trial.kind == "reference":
+            return self.t("reference")
+        if trial.kind == "identification" and sample_id in trial.samples:
+            return f"{self.t('tap')} · {self.t('surface', i=trial.samples.index(sample_id) + 1)}"
+        return self.t("tap")
+
     def before_window(self, trial, sample_id, device, rng) -> None:
         self._height = None
-        done = self.t("done_hint") if trial.kind == "free" else ""
-        self._frame(self.t("tap"), done, cursor=True)
+        self._tapping = self._tap_title(trial, sample_id)
+        self._detail = (self.t("reference_detail", block=trial.placement or sample_id)
+                        if trial.kind == "reference" else
+                        self.t("done_hint") if trial.kind == "free" else "")
+        self._frame(self._tapping, self._detail, cursor=True)
 
     def keep_tapping(self) -> bool:
         """Familiarization: another window, unless ENTER was pressed during the last one."""
@@ -221,7 +305,7 @@ class PsychoPyScreen(Participant):
             self._done = True
         self._height = partial.live_height
         started = partial.t_first_contact is not None or bool(partial.contacts)
-        self._frame(self.t("tap"), self.t("done_hint") if free else "", cursor=True,
+        self._frame(self._tapping or self.t("tap"), self._detail, cursor=True,
                     progress=(t / duration) if started else 0.0)
 
     # ------------------------------------------------------------------ answers
@@ -229,18 +313,39 @@ class PsychoPyScreen(Participant):
         mode = scale.entry_mode
         anchors = "   ".join(f"{k} = {v}" for k, v in sorted(scale.anchors.items()))
         if mode == "keys":
-            return self._rate_keys(scale, anchors)
+            return self._rate_keys(scale)
         if mode == "slider":
             return self._rate_slider(scale, anchors)
         return self._rate_typed(scale, anchors)
 
-    def _rate_keys(self, scale, anchors: str) -> tuple[int, float]:
+    def _rate_keys(self, scale) -> tuple[int, float]:
+        """A number key chooses (shown in brackets), another changes it, BACKSPACE clears,
+        ENTER confirms; the response time runs to the confirming ENTER (PsychoPy's rating
+        scale counts to its accept the same way)."""
         keymap = scale.key_map()
-        hint = "  ".join(str(v) for v in scale.values)
-        key, rt = self._wait(keymap, lambda: self._frame(
-            f"{scale.question}\n\n{hint}", f"{anchors}\n{self.t('rating_keys')}"))
-        self._frame(f"{scale.question}\n\n{hint}", self.t("rating_confirmed", value=keymap[key]))
-        return keymap[key], rt
+        ends = (scale.anchors.get(scale.min, ""), scale.anchors.get(scale.max, ""))
+        inner = "   ".join(f"{k} = {v}" for k, v in sorted(scale.anchors.items())
+                           if k not in (scale.min, scale.max))  # anchors between the ends
+        chosen: int | None = None
+        self._flush()
+        t0 = self._clock()
+        while True:
+            line = "     ".join(f"[{v}]" if v == chosen else f" {v} " for v in scale.values)
+            hint = (self.t("rating_chosen", value=chosen) if chosen is not None
+                    else self.t("rating_keys"))
+            self._frame(scale.question, f"{inner}\n{hint}" if inner else hint,
+                        scale=(line, *ends))
+            for k in self._names():
+                if k in keymap:
+                    chosen = keymap[k]
+                elif k == "backspace":
+                    chosen = None
+                elif k in ("return", "num_enter") and chosen is not None:
+                    rt = self._clock() - t0
+                    self._frame(scale.question, self.t("rating_confirmed", value=chosen),
+                                scale=(line, *ends))
+                    return chosen, rt
+            time.sleep(0.005)
 
     def _rate_typed(self, scale, anchors: str) -> tuple[int, float]:
         """Digits typed, ENTER confirms; BACKSPACE deletes; a number off the scale is said so."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -23,13 +24,38 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write(path: str | Path, data: bytes) -> None:
+def _place_new(tmp: str, path: Path) -> None:
+    """Give ``tmp`` the name ``path`` only if the name is free: a hard link, which fails
+    when it is taken; where the file system has no hard links (FAT and exFAT sticks, many
+    SMB mounts) a check, then the rename (the session lock makes the recorder the only
+    writer of its folder)."""
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.ENOSYS,
+                             errno.EMLINK, errno.EACCES):
+            raise
+        if os.path.lexists(path):
+            raise FileExistsError(errno.EEXIST, "file exists", str(path)) from None
+        os.replace(tmp, path)
+
+
+def atomic_write(path: str | Path, data: bytes, overwrite: bool = True) -> None:
     """Write ``data`` to ``path`` atomically: a reader sees the old file or the new one,
     never a part, and a crash right after the call loses neither.
 
     Temporary file in the same folder, fsync, rename over the target, fsync the folder. The
     file gets the permissions any new file of this user gets (0666 less the umask): a
     temporary file is private (0600), which would hide session files from colleagues.
+
+    Raises
+    ------
+    FileExistsError
+        ``overwrite=False`` and ``path`` exists (the temporary file is hard-linked to its
+        name, which fails rather than replace: no window in which another writer's file
+        could be lost).
     """
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -39,7 +65,10 @@ def atomic_write(path: str | Path, data: bytes) -> None:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+        if overwrite:
+            os.replace(tmp, path)
+        else:
+            _place_new(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

@@ -17,6 +17,8 @@ from .engine import (
     SessionEngine,
     SessionSetupError,
     Trial,
+    is_reference,
+    reference_item,
     seed_from_entropy,
 )
 from .loader import BUILTIN, ProtocolError, load_protocol, parse_protocol, protocol_text
@@ -35,6 +37,7 @@ from .model import (
 from .williams import williams_square
 
 __all__ = [
+    "is_reference", "reference_item",
     "Answer", "Attempt", "Attempts", "BUILTIN", "DONE", "Done", "FINAL_STATUSES", "Limits",
     "LogMismatch",
     "PAUSED", "Paused", "Phase", "PhaseDesign", "Protocol", "ProtocolError", "RNG_ALGORITHM",

@@ -60,7 +60,21 @@ from .williams import williams_square
 
 __all__ = ["SessionEngine", "Trial", "Attempt", "Done", "Paused", "DONE", "PAUSED",
            "LogMismatch", "ResumeMismatch", "SessionSetupError", "STATUSES", "FINAL_STATUSES",
-           "SATURATION_SAFETY_CAP"]
+           "SATURATION_SAFETY_CAP", "reference_item", "is_reference"]
+
+#: a real reference block's row in trials.tsv: item ``<phase>/ref:<sample>``
+_REF = "/ref:"
+
+
+def reference_item(phase: str, sample: str) -> str:
+    """The item of a row where the real block ``sample`` was tapped before a trial of
+    ``phase`` (not an item of the session's plan)."""
+    return f"{phase}{_REF}{sample}"
+
+
+def is_reference(item: str) -> bool:
+    """Whether a row's item is a real reference block's (see :func:`reference_item`)."""
+    return _REF in item
 
 STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "timed_out",
             "excluded_timeout", "aborted_device", "excluded_device", "skipped", "estop")
@@ -283,6 +297,14 @@ class SessionEngine:
         """The uninterrupted order of items (no saturations, no operator actions)."""
         return list(self._plan)
 
+    def placements(self) -> list[str | None]:
+        """What the operator places for each item of :meth:`plan` (None: nothing)."""
+        out, previous = [], None
+        for item in self._plan:
+            previous = self._placement(item, previous)
+            out.append(previous)
+        return out
+
     # ------------------------------------------------------------------ replay
     def _replay(self, log: Iterable[Attempt]) -> _State:
         _, redraw_ss = np.random.SeedSequence(self.seed).spawn(2)
@@ -298,8 +320,8 @@ class SessionEngine:
             if entry.status == "resumed":
                 st.paused = False
                 continue
-            if entry.status == "reference":
-                continue
+            if entry.status == "reference" or is_reference(entry.item):
+                continue  # a real block tapped (or an e-stop while it was): not a plan item
             if not st.queue:
                 raise LogMismatch(f"log entry {n + 1} ({entry.item}, {entry.status}) comes after "
                                   "the session was complete")

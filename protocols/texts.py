@@ -9,7 +9,8 @@ surface keys), ``{names}`` (the answer keys and names), ``{list}`` (surfaces tap
 
 The keys these texts name are the keys the screen uses: SPACE begins a phase, ENTER ends
 familiarization and confirms a typed or slider rating, R asks for the real block again,
-number keys choose surfaces and name them, N starts naming.
+number keys choose surfaces and name them (and, where a phase has several real blocks, the
+block to tap again), N starts naming.
 """
 
 from __future__ import annotations
@@ -35,9 +36,14 @@ DEFAULT_TEXTS: dict[str, str] = {
     "wait_detail": "The experimenter is preparing the next sample.",
     "reference_offer": "Press R to tap the real block again.",
     "reference_requested": "The experimenter is placing the real block.",
+    "reference_which": "Which real block would you like to tap again?",
+    "reference_which_keys": "{names}      (ESC: none)",
+    "saturated": "That tap was too hard for the device: this sample comes back later.",
+    "surface": "Surface {i}",
     "reference": "Tap the real block",
     "reference_detail": "Compare the next samples with this one: {block}.",
-    "rating_keys": "Press a number key.",
+    "rating_keys": "Press a number key, then ENTER.",
+    "rating_chosen": "Your rating: {value} — ENTER confirms, another number changes it.",
     "rating_typed": "Type a number from {min} to {max}, then press ENTER.",
     "rating_slider": "Move the marker with the arrow keys (or click), then press ENTER.",
     "rating_confirmed": "Your rating: {value}",

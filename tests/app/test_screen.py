@@ -88,7 +88,7 @@ def test_realism_screens_are_text_only_and_say_the_keys_they_use(xdisplay, shots
 
 
 def test_between_trials_please_wait_until_the_operator_starts(xdisplay, shots):
-    scr = make("factorial", Keys([], ["x"], ["r"], [], []))
+    scr = make("factorial", Keys([], ["x"], ["r"], [], [], [], ["space"]))
     trial = SimpleNamespace(phase="rating", samples=("wood-HHH",), trial_index=4, attempt=1,
                             kind="rated")
     try:
@@ -105,7 +105,7 @@ def test_between_trials_please_wait_until_the_operator_starts(xdisplay, shots):
         assert "is placing the real block" in scr.drawn_text[1]
         assert "Press R" not in scr.drawn_text[1]
         ref = load_protocol("factorial").samples["wood-real"]
-        scr.reference(trial, ref)
+        scr.reference(trial, ref)  # the phase's instructions first (SPACE), then the block
         assert scr.drawn_text[0] == "Tap the real block" and "real wood block" in \
             scr.drawn_text[1]
         scr.screenshot(shots / "reference-block.png", text=scr.drawn_text[0],
@@ -117,17 +117,23 @@ def test_between_trials_please_wait_until_the_operator_starts(xdisplay, shots):
 
 def test_single_key_rating_ignores_other_keys_and_counts_a_double_press_once(xdisplay, shots):
     keys = Keys(["a", "5", "5"],  # flushed: pressed before the screen appeared
-                ["x", "9", "space"], ["6", "6"])
+                ["return"],  # nothing chosen yet: ENTER does nothing
+                ["x", "9", "space"], ["3"], ["6", "6"], ["return"])
     scr = make("realism", keys)
     try:
         scale = scr.protocol.rating
         assert scale.entry_mode == "keys"
         rating, rt = scr.rate(TRIAL, scale, None, None)
-        assert rating == 6 and rt >= 0  # 'x', '9' (off the 1–7 scale) and 'space' ignored
+        # 'x', '9' (off the 1–7 scale) and 'space' ignored; 3 chosen, changed to 6, confirmed
+        assert rating == 6 and rt >= 0
         assert scr.drawn_text[1] == "Your rating: 6"
-        scr.screenshot(shots / "realism-rating.png",
-                       text=f"{scale.question}\n\n1  2  3  4  5  6  7",
-                       small="1 = not at all like the real wood   7 = exactly like the real wood")
+        low, high = scale.anchors[scale.min], scale.anchors[scale.max]
+        assert scr.drawn_text[3:] == [low, high]  # each anchor under its end of the scale
+        line = scr.drawn_text[2]
+        assert line.index("[6]") > line.index(" 1 ") and line.rstrip().endswith("7")
+        scr.screenshot(shots / "realism-rating.png", text=scale.question,
+                       small="Your rating: 6 — ENTER confirms, another number changes it.",
+                       scale=(line, low, high))
         assert image_stats(shots / "realism-rating.png")[0] > 1.0
     finally:
         scr.close()
@@ -213,18 +219,51 @@ def test_identification_surfaces_and_names_by_number_keys(xdisplay, shots):
         scr.close()
 
 
+def test_identification_real_block_choice_saturation_notice_and_surface_title(xdisplay,
+                                                                              shots):
+    """R in identification: the participant picks which real block (by number, in the
+    protocol's order; ESC for none); a saturated trial is said on the next 'please wait'
+    (also with the sound off); while tapping, the screen says which surface — not its name."""
+    blocks = [("rubber-real", "real rubber block"), ("wood-real", "real wood block"),
+              ("aluminum-real", "real aluminum block")]
+    scr = make("identification", Keys([], ["9"], ["3"], [], ["escape"], [], [], [], [], []))
+    try:
+        assert scr.choose_reference(ID_TRIAL, blocks) == "aluminum-real"
+        assert scr.drawn_text[1] == "The experimenter is placing the real block."
+        scr.screenshot(shots / "identification-which-block.png",
+                       text="Which real block would you like to tap again?",
+                       small="1 = real rubber block   2 = real wood block   3 = real aluminum "
+                             "block      (ESC: none)")
+        assert scr.choose_reference(ID_TRIAL, blocks) is None  # ESC: none after all
+        assert scr.choose_reference(ID_TRIAL, blocks[:1]) == "rubber-real"  # one: no question
+        scr.saturated(ID_TRIAL)
+        scr.waiting(ID_TRIAL)
+        assert "too hard for the device" in scr.drawn_text[1]
+        scr.screenshot(shots / "saturated-notice.png", text=scr.drawn_text[0],
+                       small=scr.drawn_text[1])
+        scr.waiting(ID_TRIAL)  # said once
+        assert "too hard" not in scr.drawn_text[1]
+        scr.before_window(ID_TRIAL, "rubber", None, None)
+        assert scr.drawn_text[0] == "Tap · Surface 2"
+        assert not any("rubber" in t for t in scr.drawn_text)
+    finally:
+        scr.close()
+
+
 def test_pause_and_a_debrief_with_capitals_and_punctuation(xdisplay, shots):
     shift = {"shift": True}
     scr = make("realism", Keys([], [("a", shift), "space", "s", "u", "d", "d", "e", "n"],
                                ["backspace", "comma", "space", "s", "t", "o", "p",
-                                ("1", shift), "return"]))
+                                # X reports the character Shift made: ! is 'exclamation', and
+                                # a layout whose Shift+key is a digit gives that digit
+                                ("exclamation", shift), ("4", shift), "return"]))
     try:
         scr.pause(fault=True)
         assert scr.drawn_text[0] == "Paused"
         scr.screenshot(shots / "pause.png", text="Paused",
                        small="The experimenter will continue shortly.")
         text = scr.debrief()
-        assert text == "A sudde, stop!"
+        assert text == "A sudde, stop!4"
         scr.screenshot(shots / "debrief.png", text="What made a sample feel real or not?\n\n"
                        "A sudden stop, no buzzing.", small="Type, then press ENTER.")
     finally:

@@ -70,6 +70,8 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     participant.press("Return")  # familiarization: ENTER when done
     t.wait("reference: r ready")  # the block's real block, before its first trial
     t.keys("r")
+    time.sleep(1.0)
+    participant.press("space")  # the rating phase's instructions come before its real block
     t.wait("rating #2")
     time.sleep(0.8)
     participant.screenshot(shots / "between-trials-session.png")
@@ -83,11 +85,17 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     t.keys("c")
     t.wait("fault cleared by the operator")
     t.keys("r")
-    time.sleep(1.0)
-    participant.press("space")  # the rating phase's instructions
-    time.sleep(1.5)
+    t.wait("rating: e E-STOP")  # the rating screen is up: e acts here too, at once
+    t.keys("e")
+    time.sleep(0.5)
+    assert "key 'e' ignored" not in t.screen()
     participant.press("1", "0", "Return")  # 10, typed and confirmed
     t.wait("rating 10")
+    t.wait("fault: c clear")  # the e-stop latched: the session holds before the next trial
+    t.save_png(shots / "operator-estop-at-rating.png",
+               "operator terminal — e pressed on the rating screen")
+    t.keys("c")
+    t.wait("placing: r ready")
     participant.press("r")  # the participant asks for the real block again
     t.wait("the participant asks for the real block")
     t.wait("reference: r ready")
@@ -101,8 +109,12 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
         time.sleep(1.2)
         participant.press(str(4 + k), "Return")
     time.sleep(1.5)
+    t.wait("the participant is answering the debrief question")
+    assert "session complete" not in t.screen()  # not while the participant still types
+    # shifted punctuation as a person types it: X reports ( ! ? % by their own names
     participant.press("shift+a", "space", "s", "u", "d", "d", "e", "n", "space", "s", "t", "o",
-                      "p", "period", "Return")
+                      "p", "space", "parenleft", "1", "0", "0", "percent", "parenright",
+                      "exclam", "question", "period", "Return")
     assert t.exit_code(60) == 0
     end = t.screen()  # the operator still sees how the session went
     assert "session complete: 5 valid, 0 saturated" in end, end
@@ -118,7 +130,7 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     meta = json.loads((folder / "session.json").read_text())
     assert meta["kind"] == "human" and meta["responder"] == "person"
     assert meta["participant"]["info"] == {"age": "31", "handedness": "right"}
-    assert meta["participant"]["debrief"] == "A sudden stop."
+    assert meta["participant"]["debrief"] == "A sudden stop (100%)!?."
     assert [n["text"] for n in meta["notes"]] == ["grip steady"]
     assert meta["summary"].startswith("5 valid, 0 saturated, 0 excluded, 0 skipped")
 
@@ -137,6 +149,7 @@ def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp
                               str(data)], env(), cwd=tmp_path)
     folder = data / "sub-P02" / "ses-1"
     t.wait("placing: r ready")
+    t.keys("ü")  # a German keyboard's key beside p: it used to end the key reader
     t.keys("r")  # familiarization: one window for the scripted responder
     t.wait("#2 (attempt 1)")
     t.keys("r")
