@@ -23,8 +23,9 @@ Formats
     The wide files and the long file as SPSS ``.sav`` (pyreadstat): variable labels from
     the codebook, value labels for low/high factors and for ``correct``.
 
-Every format writes ``codebook.csv``: column, unit, meaning (and, for renamed columns, the
-original name).
+Every format writes ``codebook.csv``: column, type (text or number), unit, meaning (and,
+for renamed columns, the original name). CSV files quote every text cell, so a reader that
+honours quotes keeps a participant id ``001`` as typed; ``load.R`` reads text as text.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .load import load_sessions, select_sessions
+from .load import DEVICE_COLUMNS, load_sessions, select_sessions
 from .study import analysed_phases, phase_rows
 
 __all__ = ["export", "FORMATS", "LONG_COLUMNS"]
@@ -45,7 +46,7 @@ FORMATS = ("long-csv", "wide-csv", "jasp", "r", "spss")
 
 #: column → (unit, meaning) of the long file.
 LONG_COLUMNS = {
-    "participant": ("", "participant id as entered at the session"),
+    "participant": ("", "participant id as entered at the session (text: 001 stays 001)"),
     "group": ("", "participant group (e.g. expert, novice); empty when none was given"),
     "session": ("", "session number of this participant (ses-N)"),
     "protocol": ("", "protocol name"),
@@ -76,6 +77,16 @@ LONG_COLUMNS = {
     "mean_tap_velocity": ("m/s", "mean incoming speed of the trial's taps"),
     "peak_current": ("A", "largest commanded current in the window"),
     "kind": ("", "session kind: human (a person), dry-run or simulated"),
+    "device_backend": ("", "the device the session ran on: sim is the simulated device (no "
+                           "physical contact: a rehearsal even with a person), serial a "
+                           "hapticlab device on a serial port"),
+    "device_id": ("", "the device's model and serial number (#…), as it reported them"),
+    "firmware": ("", "the device's firmware version, as it reported it"),
+    "simulated_plant": ("0/1", "1: the device was simulated (sim, the emulator, or a "
+                               "firmware build with its simulated plant): nobody touched a "
+                               "physical surface"),
+    "libraries": ("", "transient libraries played: sample=sha256 of the file (first 12 hex "
+                      "digits), joined by ;"),
 }
 
 
@@ -168,9 +179,15 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
     groups = r.groupby("participant", observed=True)["group"].first().fillna("").astype(str)
     if groups.str.len().gt(0).any():
         w.insert(0, "group", groups.reindex(w.index).fillna(""))
+    for c in reversed(DEVICE_COLUMNS):  # what each person tapped on (several: joined by |)
+        if c in r:
+            v = r.groupby("participant", observed=True)[c].agg(
+                lambda x: "|".join(dict.fromkeys(x.fillna("").astype(str))))
+            w.insert(0, c, v.reindex(w.index).fillna(""))
     w = w.reset_index()
-    meaning = {"participant": ("", "participant id"),
-               "group": ("", "participant group (between-subject factor); empty when none")}
+    meaning = {"participant": ("", "participant id (text)"),
+               "group": ("", "participant group (between-subject factor); empty when none"),
+               **{c: LONG_COLUMNS[c] for c in DEVICE_COLUMNS if c in w.columns}}
     rename = {}
     for c in order:
         name = f"rep{c}" if cell == "repetition" else str(c)
@@ -216,8 +233,29 @@ def _write_sav(path: Path, table: pd.DataFrame, meaning: dict[str, tuple[str, st
     pyreadstat.write_sav(t, str(path), column_labels=labels, variable_value_labels=values)
 
 
-def _write_codebook(path: Path, entries: dict[str, tuple[str, str]], file: str) -> list[dict]:
-    return [{"file": file, "column": c, "unit": u, "meaning": m} for c, (u, m) in entries.items()]
+def _type(col: pd.Series) -> str:
+    """``number`` or ``text``: how a reader must take the column (a participant id ``001``
+    is text, and stays so only when read as text)."""
+    return ("number" if pd.api.types.is_numeric_dtype(col)
+            and not pd.api.types.is_bool_dtype(col) else "text")
+
+
+def _write_codebook(table: pd.DataFrame, entries: dict[str, tuple[str, str]],
+                    file: str) -> list[dict]:
+    return [{"file": file, "column": c, "type": _type(table[c]) if c in table else "text",
+             "unit": u, "meaning": m} for c, (u, m) in entries.items()]
+
+
+def _write_csv(table: pd.DataFrame, path: Path) -> None:
+    """Text quoted, numbers bare (a reader that honours quotes keeps ``001`` as typed;
+    codebook.csv's ``type`` says which columns are text for those that do not). A missing
+    text cell is written ``""``, which R and pandas read as missing."""
+    t = table.copy()
+    for c in t.columns:  # every text cell a string: quoted (empty cells stay empty)
+        if _type(t[c]) == "text":
+            t[c] = t[c].map(lambda v: "" if v is None or (isinstance(v, float) and v != v)
+                            else str(v))
+    t.to_csv(path, index=False, quoting=csv.QUOTE_NONNUMERIC)
 
 
 def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
@@ -234,7 +272,7 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
     drop_invalid : bool
         As :func:`analysis.report.analyze`.
     **filters
-        protocol, kind, status, participants, since, until: as the report.
+        protocol, kind, status, participants, since, until, ids, sim_device: as the report.
 
     Returns
     -------
@@ -253,11 +291,11 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
     if fmt in ("long-csv", "r"):
         long = _long(parts)
         p = out / "long.csv"
-        long.to_csv(p, index=False)
+        _write_csv(long, p)
         written.append(p)
         entries = {c: LONG_COLUMNS.get(c, ("", f"level of factor {c} (low/high)"))
                    for c in long.columns}
-        book += _write_codebook(p, entries, p.name)
+        book += _write_codebook(long, entries, p.name)
         if fmt == "r":
             p = out / "load.R"
             p.write_text(_r_script(long, parts))
@@ -271,9 +309,9 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
             if fmt == "spss":
                 _write_sav(p, w, meaning)
             else:
-                w.to_csv(p, index=False)
+                _write_csv(w, p)
             written.append(p)
-            book += _write_codebook(p, meaning, name)
+            book += _write_codebook(w, meaning, name)
         if fmt == "spss":  # the trials too, for mixed models in SPSS
             long = _long(parts)
             long.columns = [_safe(c) for c in long.columns]
@@ -282,14 +320,23 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
             p = out / "long.sav"
             _write_sav(p, long, entries)
             written.append(p)
-            book += _write_codebook(p, entries, p.name)
+            book += _write_codebook(long, entries, p.name)
     p = out / "codebook.csv"
     with p.open("w", newline="") as fh:
-        wr = csv.DictWriter(fh, fieldnames=["file", "column", "unit", "meaning"])
+        wr = csv.DictWriter(fh, fieldnames=["file", "column", "type", "unit", "meaning"])
         wr.writeheader()
         wr.writerows(book)
     written.append(p)
     return written
+
+
+def _r_name(column: str) -> str:
+    """The name R's read.csv gives ``column`` (``make.names``: ``grain-size`` is
+    ``grain.size``, ``2nd`` is ``X2nd``)."""
+    name = re.sub(r"[^0-9A-Za-z._]", ".", str(column))
+    if not name or name[0].isdigit() or name[0] == "_" or re.match(r"\.[0-9]", name):
+        name = "X" + name
+    return name
 
 
 def _r_script(long: pd.DataFrame, parts) -> str:
@@ -305,12 +352,16 @@ def _r_script(long: pd.DataFrame, parts) -> str:
                                   else sorted(set(rows[f].dropna()), key=str))
     lines = ["# Reads long.csv, written by: hapticlab export DATA --out DIR --format r",
              "# (codebook.csv gives the units).",
-             'd <- read.csv("long.csv", stringsAsFactors = FALSE, na.strings = "")',
+             "# Text columns are read as text: a participant id 001 stays 001.",
+             'd <- read.csv("long.csv", stringsAsFactors = FALSE, na.strings = "",',
+             "              colClasses = c(" + ", ".join(
+                 f'"{_r_name(c)}" = "character"' for c in long.columns
+                 if _type(long[c]) == "text") + "))",
              "d$participant <- factor(d$participant)"]
     for f, lv in levels.items():
         if f in long.columns:
             q = ", ".join(f'"{x}"' for x in lv)
-            lines.append(f"d${f} <- factor(d${f}, levels = c({q}))")
+            lines.append(f'd[["{_r_name(f)}"]] <- factor(d[["{_r_name(f)}"]], levels = c({q}))')
     lines += ["# rating is the dependent variable of the one-way analyses (ANOVA on participant",
               "# x sample means, t-tests, Wilcoxon, Friedman, lmer and clmm on the trials);",
               "# rating_z (z within participant, or participant and block, SD with divisor n)",

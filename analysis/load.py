@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
+import re
 from pathlib import Path
 
 import numpy as np
@@ -26,12 +27,19 @@ from .session_format import (
     session_kind,
 )
 
-__all__ = ["load_sessions", "select_sessions", "LoadError", "tap_velocities", "SESSION_COLUMNS"]
+__all__ = ["load_sessions", "select_sessions", "LoadError", "tap_velocities", "SESSION_COLUMNS",
+           "DEVICE_COLUMNS"]
 
+#: what a session recorded of the device it ran on (also a column of every row)
+DEVICE_COLUMNS = ("device_backend", "device_id", "firmware", "simulated_plant",
+                  "libraries")
+#: firmware builds that serve the wire protocol with a simulated plant (nobody touches a
+#: physical surface): the Python emulator and the reference firmware's host and QEMU builds
+_SIMULATED_FIRMWARE = re.compile(r"^(emulator|hlfw-[0-9.]+ (host|stm32))")
 #: columns of ``load_sessions(...).attrs["session_table"]``, one row per session folder
 SESSION_COLUMNS = ("session_dir", "participant", "session", "protocol", "protocol_sha256",
                    "kind", "responder", "status", "created_utc", "seed", "rows", "valid_rows",
-                   "design_key", "folder_participant")
+                   "design_key", "folder_participant", *DEVICE_COLUMNS)
 #: how a participant id that the folder name and the recorded session disagree on is taken
 IDS = ("check", "record", "folder")
 
@@ -50,6 +58,24 @@ def _design_key(design: dict | None) -> str:
         body["samples"] = {k: {kk: vv for kk, vv in v.items() if kk != "params"}
                            if isinstance(v, dict) else v for k, v in body["samples"].items()}
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:12]
+
+
+def _device(meta: dict) -> dict[str, str]:
+    """What a session recorded of its device: backend, model and serial number, firmware,
+    whether the device was simulated (1: the ``sim`` backend, the emulator or a firmware
+    build with its simulated plant — nobody touched a physical surface), and the transient
+    libraries it played (sample=sha256, first 12 hex digits)."""
+    d = meta.get("device") or {}
+    model, serial = str(d.get("model") or ""), str(d.get("serial_number") or "")
+    libs = meta.get("libraries") or {}
+    backend, firmware = str(d.get("backend") or ""), str(d.get("firmware") or "")
+    return {"device_backend": backend,
+            "device_id": " ".join(x for x in (model, serial and f"#{serial}") if x),
+            "firmware": firmware,
+            "simulated_plant": int(backend == "sim"
+                                   or _SIMULATED_FIRMWARE.match(firmware) is not None),
+            "libraries": ";".join(f"{sid}={str((lib or {}).get('sha256', ''))[:12]}"
+                                  for sid, lib in sorted(libs.items()))}
 
 
 def _folder_id(folder: Path) -> str:
@@ -168,6 +194,7 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
             designs.setdefault(key, design)
         kind = session_kind(meta)
         status = meta.get("status", "")
+        device = _device(meta)
         sessions.append({
             "session_dir": str(folder), "participant": str(meta["participant"]["id"]),
             "session": int(meta["session"]), "protocol": proto["name"],
@@ -176,7 +203,7 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
             "created_utc": (meta.get("times") or {}).get("created_utc") or "",
             "seed": meta.get("seed"), "rows": len(rows),
             "valid_rows": sum(r["status"] == "valid" for r in rows), "design_key": key,
-            "folder_participant": _folder_id(folder)})
+            "folder_participant": _folder_id(folder), **device})
         if not rows:
             continue
         phases = {p["name"]: p for p in (design or {}).get("phases", [])}
@@ -194,7 +221,8 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
         df["seed"] = meta.get("seed")
         df["group"] = (meta["participant"].get("group") or "")
         df["scale"] = f"{rating['min']}-{rating['max']}" if rating else ""
-        df["device_backend"] = (meta.get("device") or {}).get("backend", "")
+        for c, v in device.items():
+            df[c] = v
         df["kind"] = kind
         df["responder"] = meta.get("responder", "") if kind != "human" else "person"
         df["session_status"] = status
@@ -211,7 +239,7 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
     table = pd.DataFrame(sessions, columns=list(SESSION_COLUMNS))
     data = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
         columns=[*COLUMNS, "protocol", "protocol_sha256", "design_key", "seed", "group", "scale",
-                 "device_backend", "kind", "responder", "session_status", "session_dir",
+                 *DEVICE_COLUMNS, "kind", "responder", "session_status", "session_dir",
                  "invalid_reason"])
     for c in INT_COLUMNS:
         if c in data:
@@ -251,7 +279,7 @@ def _date(text: str | None, name: str) -> dt.datetime | None:
 def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
                     kind: str | None = None, status: str = "complete",
                     participants: list[str] | None = None, since: str | None = None,
-                    until: str | None = None, ids: str = "check"
+                    until: str | None = None, ids: str = "check", sim_device: bool = False
                     ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Choose which sessions to analyse, and say why each is in or out.
 
@@ -276,6 +304,11 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         session.json and trials.tsv (an operator typed the wrong ``--participant``, then
         renamed the folder) is left out and named with ``check`` (default), analysed under
         the recorded id with ``record``, or under the folder's id with ``folder``.
+    sim_device : bool
+        Keep people's (human) sessions on a simulated device (the ``sim`` backend, the
+        emulator, a firmware build with its simulated plant: nobody touched a physical
+        surface). Default False: they are left out of a human analysis and named — a
+        rehearsal is not a participant.
 
     Returns
     -------
@@ -300,8 +333,9 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
             P03     False                             participant not selected
     """
     table = data.attrs["session_table"].copy()
-    if kind is None:
-        present = set(table["kind"])
+    if kind is None:  # people on a simulated device count only when they are asked for
+        counted = (table["kind"] != "human") | (table["simulated_plant"] == 0) | sim_device
+        present = set(table["kind"][counted])
         kind = next((k for k in ("human", "simulated", "dry-run") if k in present), "human")
         kind_note = f"kind {kind} (the default: " + ("people's sessions exist)"
                                                        if kind == "human" else
@@ -337,6 +371,9 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
             why = f"protocol {r.protocol} not selected"
         elif kind != "all" and r.kind != kind:
             why = f"{r.kind} session (selected: {kind})"
+        elif r.kind == "human" and r.simulated_plant and not sim_device:
+            why = (f"a person on a simulated device ({r.device_backend}, {r.firmware}): no "
+                   "physical contact; include with --sim-device")
         elif status == "complete" and r.status != "complete":
             why = f"status {r.status or 'unknown'} (selected: complete sessions)"
         elif participants is not None and r.participant not in participants:

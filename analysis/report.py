@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .load import load_sessions, select_sessions
+from .load import DEVICE_COLUMNS, load_sessions, select_sessions
 from .stats import StatsError
 from .study import analyse_phase, analysed_phases, phase_rows
 
@@ -240,7 +240,8 @@ def build_report(data: pd.DataFrame, selection: pd.DataFrame, filters: dict) -> 
                       "excluded": int(len(selection) - len(inc)),
                       "sessions": selection[["session_dir", "participant", "session",
                                              "protocol", "kind", "status", "rows", "included",
-                                             "reason"]].to_dict(orient="records")},
+                                             "reason", *DEVICE_COLUMNS]].to_dict(
+                                                 orient="records")},
         "analyses": [_report_entry(a) for a in analyses],
     }
     return report, analyses
@@ -341,7 +342,8 @@ def _agreement(pw: pd.DataFrame, wx: pd.DataFrame, alpha: float = 0.05) -> dict:
 
 def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"),
             protocol=None, kind=None, status: str = "complete", participants=None,
-            since=None, until=None, drop_invalid: bool = False, ids: str = "check") -> dict:
+            since=None, until=None, drop_invalid: bool = False, ids: str = "check",
+            sim_device: bool = False) -> dict:
     """Select sessions, run every analysis their designs call for, write the report.
 
     Parameters
@@ -351,7 +353,7 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
     out : path
         Where report.json / report.md / report.html and the figures go.
     formats : tuple of {'html', 'md', 'json'}
-    protocol, kind, status, participants, since, until
+    protocol, kind, status, participants, since, until, ids, sim_device
         Filters, as :func:`analysis.load.select_sessions`.
     drop_invalid : bool
         Leave out (and list) recorded rows that cannot be analysed, instead of stopping
@@ -364,7 +366,8 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
     """
     data = load_sessions(data_dir, drop_invalid=drop_invalid)
     filters = {"protocol": protocol, "kind": kind, "status": status,
-               "participants": participants, "since": since, "until": until, "ids": ids}
+               "participants": participants, "since": since, "until": until, "ids": ids,
+               "sim_device": sim_device}
     selected, table = select_sessions(data, **filters)
     filters = {**filters, "kind": kind or _default_kind(table)}
     out = Path(out)
@@ -689,8 +692,9 @@ def _markdown(rep: dict) -> str:
     out += ["", "## Methods\n", _md_text(general) + "\n"]
     out.append("## Sessions included and excluded\n")
     out.append(_table(rep["selection"]["sessions"],
-                      ["participant", "session", "protocol", "kind", "status", "rows",
-                       "included", "reason", "session_dir"]))
+                      ["participant", "session", "protocol", "kind", "device_backend",
+                       "device_id", "firmware", "status", "rows", "included", "reason",
+                       "session_dir"]))
     appendix = []
     left_out = rep["selection"].get("rows_left_out") or []
     if left_out:

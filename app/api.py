@@ -116,11 +116,13 @@ def _audio(enabled: bool, device_backend: str, say: Callable[[str], None]):
         return None
 
 
-def _open(spec: str, seed: int):
+def _open(spec: str, seed: int, person: bool = False):
+    """The session's device; the simulated one paced to the wall clock when a person sits
+    at it (unpaced it tapped 910 times in 13 s of familiarization)."""
     from device import open_device
 
     if spec == "sim" or spec.startswith("sim:"):
-        return open_device(spec, seed=seed)
+        return open_device(spec, seed=seed, live=person)
     return open_device(spec)
 
 
@@ -165,16 +167,20 @@ def _drive(runner, files, meta, console) -> SessionResult:
     meta["status"] = "complete"
     summary = runner.summary(time.monotonic() - started)
     meta["summary"] = summary
-    console.say(f"session complete: {summary}")
-    runner.participant_ui.finished(summary)
     meta["link"] = runner.device.link_stats()
     if runner.timing:  # live pacing (the simulator in live mode): achieved servo rate
         rates = [t["achieved_rate_hz"] for t in runner.timing]
         meta["timing"] = {"achieved_rate_hz_median": float(np.median(rates)),
                           "lateness_p99_s_max": max(t["lateness_p99_s"] for t in runner.timing),
                           "slipped_s_total": sum(t.get("slipped_s", 0.0) for t in runner.timing)}
+    files.write_meta(meta)  # the trials are complete and durable before the debrief
+    if runner.console.interactive or runner.participant_ui.name == "person":
+        console.say(f"trials complete: {summary} — the participant is answering the "
+                    "debrief question")
     meta["participant"]["debrief"] = runner.participant_ui.debrief()
     files.write_meta(meta)
+    console.say(f"session complete: {summary}")
+    runner.participant_ui.finished(summary)
     return SessionResult(files.folder, "complete", len(runner.log),
                          f"session complete: {files.folder} ({len(runner.log)} attempts)")
 
@@ -190,7 +196,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 row: int | None = None, group: str = "", traces: str = "full",
                 audio: bool = True, fullscreen: bool = False, quiet: bool = False,
                 operator_keys: bool | None = None, clear_fault: bool = False,
-                info_fields: dict | None = None,
+                info_fields: dict | None = None, new_session: bool = False,
                 say: Callable[[str], None] | None = None) -> SessionResult:
     """Run one session to the end (or until it is stopped) and record it.
 
@@ -229,6 +235,10 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     info_fields : dict, optional
         Ask the participant's details in a dialog first (the protocol's ``[participant]
         fields`` when it declares them, else these); stored in session.json.
+    new_session : bool
+        A person who already has sessions of this protocol in ``data`` gets another only
+        with this (the error lists what exists, and how to resume an unfinished one); for
+        a dry run or a simulated participant what exists is said, and the session runs.
     say : callable, optional
         Where messages for the operator go (default: stderr).
 
@@ -268,6 +278,16 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     engine = SessionEngine(proto, seed, participant, row)
     console = make_console(quiet=quiet)
     say = say or console.say
+    earlier = _earlier_sessions(Path(data), participant, proto.name)
+    if earlier:
+        listed = "; ".join(earlier)
+        if responder == "person" and not new_session:
+            raise UsageError(f"participant {participant} already has {proto.name} session(s) "
+                             f"in {data}: {listed}. Resume an unfinished one with hapticlab "
+                             "resume FOLDER, or start another with --new-session (check the "
+                             "participant id first)")
+        say(f"participant {participant} already has {proto.name} session(s): {listed}; "
+            "this one is the next")
     keys = operator_keys if operator_keys is not None else responder == "person"
     # before any device or window opens: nothing starts that cannot be kept or answered
     data_folder_ready(data, expected_session_bytes(proto, traces))
@@ -278,7 +298,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
         early.append(check_display())
     if failed(early):
         raise PreflightError(failed(early))
-    with _open(device, seed) as dev:
+    with _open(device, seed, person=responder == "person") as dev:
         close_at_exit(dev)
         if clear_fault and dev.fault is not None:
             say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
@@ -327,6 +347,29 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                     part.close()
             if "files" in locals():
                 files.release()
+
+
+def _earlier_sessions(data: Path, participant: str, protocol: str) -> list[str]:
+    """``ses-<n> (status, created)`` of each earlier session of ``participant`` with the
+    protocol named ``protocol`` in ``data`` (unreadable ones named as such)."""
+    from analysis.session_format import META, SessionMetaError, read_meta
+
+    out = []
+    sub = data / f"sub-{participant}"
+    if not sub.is_dir():
+        return out
+    for folder in sorted(sub.glob("ses-*"), key=lambda f: (len(f.name), f.name)):
+        try:
+            meta = read_meta(folder / META)
+        except (SessionMetaError, OSError):
+            out.append(f"{folder.name} (session.json unreadable)")
+            continue
+        if (meta.get("protocol") or {}).get("name") != protocol:
+            continue
+        created = str((meta.get("times") or {}).get("created_utc") or "")[:10]
+        out.append(f"{folder.name} ({meta.get('status', 'unknown')}, {meta.get('kind', '')}"
+                   f"{', ' + created if created else ''})")
+    return out
 
 
 def _check_rows(files, meta: dict, rows: list[dict]) -> None:
@@ -403,7 +446,7 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                              f"{proto.sha256[:12]}… now)")
     proto = with_libraries(proto, meta.get("libraries", {}))
     p = meta["participant"]
-    validate_participant(p["id"])
+    validate_participant(p["id"], new=False)
     engine = SessionEngine(proto, meta["seed"], p["id"], p.get("counterbalance_row"))
     engine.check_resume({"protocol_sha256": meta["protocol"]["sha256"], "seed": meta["seed"],
                          "participant": p["id"],
@@ -421,7 +464,7 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
     if responder not in KIND_OF:
         responder = "person" if meta.get("ui") == "psychopy" else "scripted"
     spec = device or meta["device"]["spec"]
-    with _open(spec, meta["seed"]) as dev:
+    with _open(spec, meta["seed"], person=responder == "person") as dev:
         close_at_exit(dev)
         if clear_fault and dev.fault is not None:
             console.say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
@@ -585,7 +628,7 @@ def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json")
             protocol: str | list[str] | None = None, kind: str | None = None,
             status: str = "complete", participants: list[str] | None = None,
             since: str | None = None, until: str | None = None,
-            drop_invalid: bool = False, ids: str = "check") -> dict:
+            drop_invalid: bool = False, ids: str = "check", sim_device: bool = False) -> dict:
     """Select sessions, run the analyses their designs call for, write the report.
 
     Parameters are those of :func:`analysis.report.analyze`; its errors come back as
@@ -605,7 +648,7 @@ def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json")
     try:
         return _analyze(data, out, tuple(formats), protocol=protocol, kind=kind, status=status,
                         participants=participants, since=since, until=until,
-                        drop_invalid=drop_invalid, ids=ids)
+                        drop_invalid=drop_invalid, ids=ids, sim_device=sim_device)
     except (LoadError, StatsError) as exc:
         raise AnalysisError(str(exc)) from None
     except OSError as exc:

@@ -18,9 +18,11 @@ PROTO = str(Path(__file__).resolve().parents[1] / "data" / "protocols" / "six_on
 
 def _as_person(folder: Path, status: str = "complete") -> None:
     """Stand-in for a person's session: the file format a PsychoPy session writes (kind human,
-    responder person); the ratings themselves came from a scripted responder."""
+    responder person, the lab's serial device); the ratings came from a scripted responder."""
     meta = json.loads((folder / "session.json").read_text())
     meta.update(kind="human", responder="person", ui="psychopy", status=status)
+    meta["device"].update(backend="serial", model="hapticlab stylus", serial_number="HL-0042",
+                          firmware="1.3")
     (folder / "session.json").write_text(json.dumps(meta))
 
 
@@ -134,7 +136,8 @@ def test_cli_report_opens_with_the_selection(mixed, tmp_path):
     md = (tmp_path / "r" / "report.md").read_text()
     first = md.index("## Sessions included and excluded")
     assert first < md.index("## six_on_nine/main")
-    assert "| P03 | 1 | six_on_nine | human | interrupted |" in md
+    assert ("| P03 | 1 | six_on_nine | human | serial | hapticlab stylus #HL-0042 | 1.3 | "
+            "interrupted |") in md
     assert "2 of 8 sessions included (kind: human, status: complete)" in rep["methods"]
     # another selection, chosen on the command line
     sim = subprocess.run([*CLI, "analyze", str(mixed), "--out", str(tmp_path / "s"),

@@ -110,6 +110,7 @@ def test_seed_is_drawn_and_recorded_when_not_given(tmp_path):
     ("CON", "reserved device name"), ("nul", "reserved device name"),
     ("P\x0701", "control characters"), ("", "empty"), ("P 01", "use letters"),
     ("x" * 40, "longer than 32"),
+    ("nan", "missing value"), ("NA", "missing value"), ("True", "truth value"),
 ])
 def test_bad_participant_ids(tmp_path, pid, fragment):
     out = run("run", "realism", "--participant", pid, "--data", str(tmp_path), *HEADLESS)

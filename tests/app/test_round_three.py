@@ -1,0 +1,242 @@
+"""Test day, round three: recordings that keep their data, a participant who chooses which
+real block to tap again, and what a session says about the device it ran on."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.errors import SessionFileError
+from app.participants import ScriptedResponder
+from app.recorder import SessionFiles, new_session_dir, read_trials
+from app.runner import SessionRunner
+from device import open_device
+from protocols import Attempt, SessionEngine, parse_protocol, protocol_text, reference_item
+
+
+def _identification(duration: float = 1.0, repetitions: int = 2):
+    source, text = protocol_text("identification")
+    text = (text.replace("duration = 20.0", f"duration = {duration}")
+            .replace("repetitions = 3", f"repetitions = {repetitions}"))
+    return parse_protocol(text, source)
+
+
+class AsksForTheThirdBlock(ScriptedResponder):
+    """Asks for a real block once before every scene and picks the third one offered."""
+
+    def __init__(self):
+        self.offered: list[list[tuple[str, str]]] = []
+        self._asked_for: set[str] = set()
+        self._trial = None
+
+    def waiting(self, trial):
+        self._trial = trial
+
+    def poll(self):
+        t = self._trial
+        if t is not None and t.kind == "identification" and t.item not in self._asked_for:
+            self._asked_for.add(t.item)  # once per scene (a redrawn scene keeps its item)
+            return "reference"
+        return None
+
+    def choose_reference(self, trial, blocks):
+        self.offered.append(list(blocks))
+        return blocks[2][0]
+
+
+@pytest.fixture(scope="module")
+def identification_session(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("ident")
+    p = _identification()
+    folder, n = new_session_dir(tmp, "P01")
+    files = SessionFiles(folder)
+    files.start("")
+    ui = AsksForTheThirdBlock()
+    runner = SessionRunner(p, SessionEngine(p, 5, "P01"), open_device("sim", seed=5), files,
+                           ui, "P01", n, 5, traces="full")
+    assert runner.run() == "complete"
+    rows, _ = read_trials(folder / "trials.tsv")
+    return folder, rows, ui
+
+
+def test_every_reference_tap_has_its_own_trace(identification_session):
+    """references = "start" taps all three real blocks before trial 1: each row names its
+    own file (they all were traces/reference-0001-0.npz, only the last one kept), and each
+    file holds that block's taps."""
+    folder, rows, _ = identification_session
+    refs = [r for r in rows if r["status"] == "reference"]
+    assert len(refs) == 3 + 2  # three at the start, one asked for before each scene
+    files = [r["trace_file"] for r in refs]
+    assert len(set(files)) == len(files), files
+    for r in refs:
+        with np.load(folder / r["trace_file"]) as z:
+            assert len(z["contacts_v"]) == int(r["n_taps"]) > 0
+            speeds = ";".join(f"{v:.5f}" for v in z["contacts_v"])
+            assert speeds == r["tap_velocities"]  # the file is this row's recording
+    named = {r["trace_file"] for r in rows if r["trace_file"] and "*" not in r["trace_file"]}
+    on_disk = {f"traces/{f.name}" for f in (folder / "traces").glob("*.npz")}
+    assert named <= on_disk
+
+
+def test_the_participant_chooses_which_real_block_and_it_is_recorded(identification_session):
+    """R in identification offers every real block in the protocol's order — never surface
+    1's block, which would be that scene's answer — and the row records the one chosen."""
+    _, rows, ui = identification_session
+    protocol_order = [("rubber-real", "real rubber block"), ("wood-real", "real wood block"),
+                      ("aluminum-real", "real aluminum block")]
+    assert ui.offered and all(o == protocol_order for o in ui.offered)
+    asked = [r for r in rows if r["status"] == "reference" and r["reason"]]
+    assert [r["reason"] for r in asked] == ["participant asked"] * 2
+    assert [r["sample"] for r in asked] == ["aluminum-real"] * 2
+    scenes = [r["sample"] for r in rows if r["phase"] == "identification"
+              and r["status"] == "valid"]
+    assert len(set(scenes)) > 1 or len(scenes) == 1  # the scenes differ: no fixed cue
+
+
+def test_the_recorder_never_overwrites_a_recording(tmp_path):
+    folder, _ = new_session_dir(tmp_path, "P01")
+    files = SessionFiles(folder)
+    files.save_trace("trial-0001-0.npz", {"x": np.arange(3)}, [])
+    before = (folder / "traces" / "trial-0001-0.npz").read_bytes()
+    with pytest.raises(SessionFileError, match="exists; a recording never overwrites"):
+        files.save_trace("trial-0001-0.npz", {"x": np.arange(5)}, [])
+    assert (folder / "traces" / "trial-0001-0.npz").read_bytes() == before
+    assert [f.name for f in (folder / "traces").iterdir()] == ["trial-0001-0.npz"]
+
+
+def test_a_trace_no_row_names_is_set_aside_before_a_resume(identification_session, tmp_path):
+    """The process stopped after the trace, before its row: the attempt runs again and
+    writes its own trace, so the old one moves to traces/unrecorded/ (never deleted)."""
+    import shutil
+
+    src, rows, _ = identification_session
+    folder = tmp_path / "copy"
+    shutil.copytree(src, folder)
+    stray = folder / "traces" / "trial-0099-0.npz"
+    stray.write_bytes(b"stray")
+    done = SessionFiles(folder).repair()
+    assert any("traces/unrecorded/trial-0099-0.npz" in d for d in done), done
+    assert (folder / "traces" / "unrecorded" / "trial-0099-0.npz").read_bytes() == b"stray"
+    assert not stray.exists()
+    for r in rows:  # every recorded trace is where its row says
+        if r["trace_file"] and "*" not in r["trace_file"]:
+            assert (folder / r["trace_file"]).exists()
+
+
+def test_an_estop_while_a_real_block_is_tapped_does_not_break_the_log():
+    """An e-stop row of a reference tap (item <phase>/ref:<block>) is not an item of the
+    plan: the engine skips it (it raised LogMismatch, so the session could not go on)."""
+    p = _identification()
+    eng = SessionEngine(p, 5, "P01")
+    first = eng.next_trial([])
+    log = [Attempt(reference_item(first.phase, "wood-real"), "estop", "estop: operator"),
+           Attempt(reference_item(first.phase, "wood-real"), "reference", "")]
+    again = eng.next_trial(log)
+    assert again.item == first.item and again.trial_index == first.trial_index
+
+
+SIX = Path(__file__).resolve().parents[1] / "data" / "protocols" / "six_on_nine.toml"
+
+
+def _run_with(tmp_path, pid, device_spec, **kw):
+    from app.api import run_session
+
+    args = dict(device=device_spec, data=tmp_path / "data", responder="scripted", seed=3,
+                traces="none", audio=False, quiet=True)
+    return run_session(SIX, pid, **{**args, **kw})
+
+
+def test_ids_that_look_like_numbers_survive_every_export_as_text(tmp_path):
+    """001 and 1e5 are kept as typed by pandas (quoted, codebook type text), by R through
+    load.R, and in the SPSS file; nan and NA are refused at entry."""
+    import subprocess
+
+    import pandas as pd
+
+    from app.api import export
+    from app.ids import ParticipantIdError, validate_participant
+
+    for bad in ("nan", "NA", "null", "TRUE"):
+        with pytest.raises(ParticipantIdError, match="missing value or a truth value"):
+            validate_participant(bad)
+    for pid in ("001", "1e5"):
+        assert _run_with(tmp_path, pid, "sim").status == "complete"
+    out = tmp_path / "r"
+    export(tmp_path / "data", out, "r", kind="dry-run")
+    book = pd.read_csv(out / "codebook.csv", keep_default_na=False)
+    types = dict(zip(book["column"], book["type"], strict=True))
+    assert types["participant"] == "text" and types["rating"] == "number"
+    text_cols = [c for c, t in types.items() if t == "text"]
+    long = pd.read_csv(out / "long.csv", dtype={c: str for c in text_cols},
+                       keep_default_na=False)
+    assert set(long["participant"]) == {"001", "1e5"}
+    assert (out / "long.csv").read_text().count('"001"') > 0  # quoted on disk
+    r = subprocess.run(["Rscript", "-e", 'source("load.R"); cat(levels(d$participant), '
+                        'sep = ",")'], cwd=out, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "001,1e5"  # R's read.csv alone gives 1 and 1e+05
+    sav = tmp_path / "sav"
+    export(tmp_path / "data", sav, "spss", kind="dry-run")
+    import pyreadstat
+
+    df, _meta = pyreadstat.read_sav(str(sav / "long.sav"))
+    assert set(df["participant"]) == {"001", "1e5"}
+
+
+def test_the_device_is_on_the_record_and_a_person_on_sim_is_not_pooled(tmp_path):
+    """The report and every export carry the device backend, id and firmware; a person's
+    session on the simulated device is left out of a human analysis unless asked."""
+    import pandas as pd
+
+    from analysis import load_sessions, select_sessions
+    from app.api import export
+
+    for pid in ("S01", "P01"):
+        assert _run_with(tmp_path, pid, "sim").status == "complete"
+    meta_path = tmp_path / "data" / "sub-P01" / "ses-1" / "session.json"
+    meta = json.loads(meta_path.read_text())
+    # P01 stands for a person on a serial device, S01 for a person on the simulator
+    meta.update(kind="human", responder="person")
+    meta["device"].update(backend="serial", model="hapticlab stylus", serial_number="0042",
+                          firmware="hl-2.1")
+    meta_path.write_text(json.dumps(meta))
+    s_path = tmp_path / "data" / "sub-S01" / "ses-1" / "session.json"
+    s_meta = json.loads(s_path.read_text())
+    s_meta.update(kind="human", responder="person")
+    s_path.write_text(json.dumps(s_meta))
+    data = load_sessions(tmp_path / "data")
+    _, table = select_sessions(data, kind="human")
+    by = table.set_index("participant")
+    assert bool(by.loc["P01", "included"]) and not bool(by.loc["S01", "included"])
+    assert "simulated device" in by.loc["S01", "reason"]
+    assert by.loc["P01", "device_id"] == "hapticlab stylus #0042"
+    assert by.loc["P01", "firmware"] == "hl-2.1" and by.loc["S01", "device_backend"] == "sim"
+    _, both = select_sessions(data, kind="human", sim_device=True)
+    assert both["included"].all()
+    out = tmp_path / "x"
+    export(tmp_path / "data", out, "long-csv", kind="human", sim_device=True)
+    long = pd.read_csv(out / "long.csv", keep_default_na=False)
+    devs = long.groupby("participant")["device_backend"].first().to_dict()
+    assert devs == {"P01": "serial", "S01": "sim"}
+    wide = tmp_path / "w"
+    export(tmp_path / "data", wide, "wide-csv", kind="human", sim_device=True)
+    w = pd.read_csv(next(wide.glob("wide_*.csv")), keep_default_na=False)
+    assert dict(zip(w["participant"], w["device_backend"], strict=True)) == devs
+
+
+def test_a_persons_second_session_of_a_protocol_needs_new_session(tmp_path, monkeypatch):
+    """P01's next session of the same protocol is not created silently: the error lists what
+    exists and how to go on; a dry run says so and runs."""
+    from app.errors import UsageError
+
+    assert _run_with(tmp_path, "P01", "sim").status == "complete"
+    said = []
+    assert _run_with(tmp_path, "P01", "sim", seed=4, say=said.append).status == "complete"
+    assert any("already has six_on_nine session(s): ses-1 (complete, dry-run" in s
+               for s in said)
+    with pytest.raises(UsageError, match=r"already has six_on_nine session\(s\).*ses-1 .*ses-2 .*"
+                                         r"--new-session"):
+        _run_with(tmp_path, "P01", "sim", seed=5, responder="person")
+    assert sorted(f.name for f in (tmp_path / "data" / "sub-P01").iterdir()) == ["ses-1",
+                                                                                  "ses-2"]
