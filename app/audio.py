@@ -16,6 +16,16 @@ class AudioUnavailable(RuntimeError):
     """No sound library or no output device."""
 
 
+def _outputs() -> int | None:
+    """Output devices PortAudio lists (None when it cannot be asked)."""
+    try:
+        import sounddevice
+
+        return sum(d["max_output_channels"] > 0 for d in sounddevice.query_devices())
+    except Exception:  # noqa: BLE001 — no PortAudio: PsychoPy's own error will say
+        return None
+
+
 class Audio:
     """Masking noise (looped), the "tap" cue and the saturation tone, with set volumes."""
 
@@ -28,6 +38,12 @@ class Audio:
             from psychopy import sound
         except Exception as exc:  # ImportError, or a backend that fails to load
             raise AudioUnavailable(f"PsychoPy sound is not available: {exc}") from None
+        outputs = _outputs()
+        if outputs == 0:
+            raise AudioUnavailable("no audio output device: the sound system (PortAudio) lists "
+                                   "none — is a sound card connected and the sound server "
+                                   "(PulseAudio, PipeWire) running for this user? Or run "
+                                   "with --no-audio")
         rng = np.random.default_rng(0)
         try:
             self._noise = sound.Sound(rng.uniform(-1, 1, rate * 2) * noise_volume, loops=-1,
@@ -37,7 +53,9 @@ class Audio:
             self._cue = sound.Sound(str(wav), volume=cue_volume)
             self._noise.play()
         except Exception as exc:
-            raise AudioUnavailable(f"no audio output device: {exc}") from None
+            raise AudioUnavailable(f"audio output failed on {outputs or 'an unknown number of'} "
+                                   f"output device(s) ({type(exc).__name__}: {exc}); run "
+                                   "with --no-audio, or fix the sound setup") from None
 
     def tap_cue(self) -> None:
         self._cue.play()

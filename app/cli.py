@@ -69,10 +69,19 @@ def _protocol_validate(args: argparse.Namespace) -> int:
             libs = "; matched samples: a missing library is built on first use (simulated)"
         elif found:
             libs = f"; libraries found for {', '.join(sorted(found))}"
-    print(f"{p.source}: valid protocol '{p.name}' — {len(p.samples)} samples, "
-          f"{len(p.phases)} phases, {n_items} trials without redraws"
+    print(f"{p.source}: valid protocol '{p.name}' — {_plural(len(p.samples), 'sample')}, "
+          f"{_plural(len(p.phases), 'phase')}, {_plural(n_items, 'trial')} without redraws"
           + (f"; checked against device '{args.device}'{libs}" if args.device else ""))
     return 0
+
+
+#: seconds per trial besides tapping (the operator swaps the block, the participant answers):
+#: a rule of thumb for the estimate ``protocol show`` prints; a lab measures its own
+OVERHEAD_S = 20.0
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
 
 
 def _protocol_show(args: argparse.Namespace) -> int:
@@ -81,29 +90,69 @@ def _protocol_show(args: argparse.Namespace) -> int:
     p = _load_protocol(args.file)
     engine = SessionEngine(p, args.seed, args.participant, args.row)
     phases: list[dict] = []
-    for item in engine.plan():
+    for item, place in zip(engine.plan(), engine.placements(), strict=True):
         if not phases or phases[-1]["name"] != item.phase:
             phases.append({"name": item.phase, "trials": []})
         trial = {"sample": item.samples[0] if len(item.samples) == 1 else list(item.samples),
-                 "item": item.key}
+                 "item": item.key, "placement": place}
         if item.block is not None:
             trial["block"] = item.block
         phases[-1]["trials"].append(trial)
+    n = sum(len(ph["trials"]) for ph in phases)
+    windows = sum(len(t["sample"]) if isinstance(t["sample"], list) else 1
+                  for ph in phases for t in ph["trials"])
+    tapping = windows * p.window.duration
+    estimate = {"tapping_s": tapping, "overhead_per_trial_s": OVERHEAD_S,
+                "total_s": tapping + n * OVERHEAD_S}
     plan = {"protocol": p.name, "source": p.source, "sha256": p.sha256, "seed": args.seed,
-            "participant": args.participant, "phases": phases, "design": p.design()}
+            "participant": args.participant, "phases": phases, "design": p.design(),
+            "duration_estimate": estimate}
     if args.json:
         print(json.dumps(plan, indent=2))
         return 0
     print(f"{p.title} ({p.source}, sha256 {p.sha256[:12]}…), seed {args.seed}")
+    print(f"{_plural(n, 'trial')}, {_plural(windows, 'tapping window')} of "
+          f"{p.window.duration:g} s: ≈ {estimate['total_s'] / 60:.0f} min without redraws "
+          f"({tapping / 60:.1f} min tapping + {OVERHEAD_S:g} s per trial to place and answer, "
+          "a rule of thumb: time your own; reference taps and redrawn trials add to it)")
     for ph, design in zip(phases, p.design()["phases"], strict=False):
-        what = design["role"] if design["role"] != "analysed" else (
+        what = {"none": "not analysed"}.get(design["role"], design["role"]) \
+            if design["role"] != "analysed" else (
             f"analysed: {design['dv']}" + (f" over {' × '.join(design['within'])}"
                                            if design["within"] else "")
             + (f" per {design['by']}" if design["by"] else ""))
-        print(f"\n{ph['name']} ({len(ph['trials'])} trials; {what})")
+        print(f"\n{ph['name']} ({_plural(len(ph['trials']), 'trial')}; {what})")
+        previous = None
         for i, t in enumerate(ph["trials"], 1):
             s = t["sample"] if isinstance(t["sample"], str) else " / ".join(t["sample"])
-            print(f"  {i:3d}  {s}")
+            again = "  (the same sample again)" if s == previous else ""
+            previous = s
+            print(f"  {i:3d}  {s:<28} place: {t['placement'] or 'nothing'}{again}")
+    return 0
+
+
+def _device_list(args: argparse.Namespace) -> int:
+    """Serial ports and the simulated device, without opening any port (opening one can
+    reset a board)."""
+    from serial.tools import list_ports
+
+    from device import backends
+
+    ports = [{"spec": f"serial:{p.device}", "description": p.description or "",
+              "hwid": p.hwid or ""} for p in sorted(list_ports.comports(), key=lambda p: p.device)]
+    found = {"backends": list(backends()), "ports": ports,
+             "simulated": [{"spec": "sim", "description": "the simulated device (no hardware)"}]}
+    if args.json:
+        print(json.dumps(found, indent=2))
+        return 0
+    print("simulated: sim (or sim:RATE) — no hardware")
+    if not ports:
+        print("serial ports: none found (is the device plugged in, and may this user open "
+              "it? on Linux: the dialout group)")
+    for d in ports:
+        print(f"{d['spec']:<32} {d['description']}  [{d['hwid']}]")
+    if ports:
+        print("check one with: hapticlab device selftest SPEC (it opens the port)")
     return 0
 
 
@@ -298,7 +347,7 @@ def _run(args: argparse.Namespace) -> int:
                     quiet=args.quiet, clear_fault=args.clear_fault,
                     operator_keys=True if args.operator_keys else None,
                     info_fields={"age": "", "handedness": ["right", "left", "both"]}
-                    if args.info_dialog else None)
+                    if args.info_dialog else None, new_session=args.new_session)
     _report(r, args.quiet)
     return r.exit_code
 
@@ -336,7 +385,7 @@ def _analyze(args: argparse.Namespace) -> int:
     rep = analyze(args.data_dir, args.out, formats=formats, protocol=_list(args.protocol),
                   kind=args.kind, status=args.status, participants=_list(args.participants),
                   since=args.since, until=args.until, drop_invalid=args.drop_invalid,
-                  ids=args.ids)
+                  ids=args.ids, sim_device=args.sim_device)
     sel = rep["selection"]
     ids = [a["id"] for a in rep["analyses"]]
     print(f"{len(ids)} analyses ({', '.join(ids) or 'none'}) of {sel['included']} sessions "
@@ -355,7 +404,8 @@ def _selection_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--protocol", help="protocol names to analyse, comma-separated")
     p.add_argument("--kind", choices=("human", "dry-run", "simulated", "all"),
                    help="session kind (default: human when any human session exists)")
-    p.add_argument("--status", choices=("complete", "all"), default="complete")
+    p.add_argument("--status", choices=("complete", "all"), default="complete",
+                   help="complete sessions only (default), or all (interrupted ones too)")
     p.add_argument("--participants", help="participant ids, comma-separated")
     p.add_argument("--since", help="sessions created on or after (YYYY-MM-DD, UTC)")
     p.add_argument("--until", help="sessions created on or before (YYYY-MM-DD, UTC)")
@@ -366,6 +416,9 @@ def _selection_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drop-invalid", action="store_true",
                    help="leave out recorded rows that cannot be analysed (a rating off the "
                    "scale, …), listing each, instead of stopping at the first")
+    p.add_argument("--sim-device", action="store_true",
+                   help="keep people's sessions on the simulated device (--device sim: no "
+                   "physical contact); by default they are left out and named")
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -374,7 +427,7 @@ def _export(args: argparse.Namespace) -> int:
     files = export(args.data_dir, args.out, args.format, drop_invalid=args.drop_invalid,
                    protocol=_list(args.protocol), kind=args.kind, status=args.status,
                    participants=_list(args.participants), since=args.since, until=args.until,
-                   ids=args.ids)
+                   ids=args.ids, sim_device=args.sim_device)
     print(f"{len(files)} files written to {args.out}/: {', '.join(f.name for f in files)}")
     return 0
 
@@ -466,7 +519,8 @@ def _add_session_parsers(sub) -> None:
                    help="counterbalance row (Williams-ordered protocols)")
     r.add_argument("--traces", choices=("full", "contacts", "none"), default="full",
                    help="raw device streams kept per attempt")
-    r.add_argument("--fullscreen", action="store_true")
+    r.add_argument("--fullscreen", action="store_true", help="the participant's window "
+                   "fills the screen")
     r.add_argument("--group", default="", help="participant group label, e.g. expert or novice")
     r.add_argument("--info-dialog", action="store_true", help="ask the participant's details "
                    "(the protocol's [participant] fields, or age and handedness) in a dialog")
@@ -475,30 +529,39 @@ def _add_session_parsers(sub) -> None:
     r.add_argument("--operator-keys", action="store_true",
                    help="read the operator's keys in a dry run too (to rehearse the operator's "
                    "part; a session with a person always does)")
-    r.add_argument("--quiet", action="store_true")
+    r.add_argument("--new-session", action="store_true",
+                   help="start another session for a person who already has sessions of this "
+                   "protocol (without it the run lists them and stops)")
+    r.add_argument("--quiet", action="store_true", help="no console lines (errors still "
+                   "print)")
     r.set_defaults(func=_run)
     pf = sub.add_parser("preflight", help="every check a session makes before it starts")
     pf.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
     pf.add_argument("--device", required=True, help="serial:PORT, sim or sim:RATE")
-    pf.add_argument("--data", default="data")
+    pf.add_argument("--data", default="data", help="data folder to check (default ./data)")
     pf.add_argument("--responder", choices=("person", "scripted", "simulated"),
-                    default="person")
-    pf.add_argument("--traces", choices=("full", "contacts", "none"), default="full")
-    pf.add_argument("--no-audio", action="store_true")
+                    default="person", help="who will answer (default person: checks the "
+                    "display and the operator's terminal too)")
+    pf.add_argument("--traces", choices=("full", "contacts", "none"), default="full",
+                    help="traces the session will keep (sizes the disk check)")
+    pf.add_argument("--no-audio", action="store_true", help="the session will run "
+                    "without sound (skips the audio check)")
     _add_clear_fault(pf)
     pf.set_defaults(func=_preflight)
     rs = sub.add_parser("resume", help="continue an interrupted session exactly where it stopped")
-    rs.add_argument("session_dir")
+    rs.add_argument("session_dir", help="the session folder, e.g. data/sub-P01/ses-1")
     rs.add_argument("--device", default=None, help="override the recorded device spec")
-    rs.add_argument("--no-audio", action="store_true")
+    rs.add_argument("--no-audio", action="store_true", help="continue without sound")
     rs.add_argument("--clear-fault", action="store_true",
                     help="clear a latched e-stop/watchdog fault first (when it is safe)")
-    rs.add_argument("--fullscreen", action="store_true")
-    rs.add_argument("--quiet", action="store_true")
+    rs.add_argument("--fullscreen", action="store_true", help="the participant's window "
+                    "fills the screen")
+    rs.add_argument("--quiet", action="store_true", help="no console lines")
     rs.set_defaults(func=_resume)
     s = sub.add_parser("simulate", help="run a whole study with simulated participants")
     s.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
-    s.add_argument("--participants", type=int, default=9)
+    s.add_argument("--participants", type=int, default=9, help="simulated participants "
+                   "(default 9)")
     s.add_argument("--seed", type=int, default=0, help="study seed (session seeds derive from it)")
     s.add_argument("--data", default="sim-data", help="data folder (default ./sim-data: never "
                    "beside people's data)")
@@ -506,7 +569,8 @@ def _add_session_parsers(sub) -> None:
                    help="sim, sim:RATE, serial:PORT or serial:emulator (paced by --speed)")
     s.add_argument("--speed", type=float, default=1.0,
                    help="serial:emulator only: device seconds per wall second (default 1)")
-    s.add_argument("--traces", choices=("full", "contacts", "none"), default="contacts")
+    s.add_argument("--traces", choices=("full", "contacts", "none"), default="contacts",
+                   help="raw device streams kept per attempt (default contacts)")
     s.add_argument("--prefix", default="sim", help="participant ids are PREFIX01, PREFIX02, …")
     s.add_argument("--group", default="", help="group label of these participants")
     _add_clear_fault(s)
@@ -517,9 +581,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="hapticlab",
         description="Psychophysics of haptic contact realism: devices, protocols, analysis.")
+    from app import __version__
+
+    p.add_argument("--version", action="version", version=f"hapticlab {__version__}",
+                   help="print the version and exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    dev = sub.add_parser("device", help="device tools (selftest, check, emulate, sysid, "
+    dev = sub.add_parser("device", help="device tools (list, selftest, check, emulate, sysid, "
                          "fit-grasp)")
     dsub = dev.add_subparsers(dest="device_command", required=True, metavar="ACTION")
     st = dsub.add_parser("selftest", help="run the backend-independent checks against a device")
@@ -527,18 +595,23 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--json", action="store_true", help="print a JSON summary")
     _add_clear_fault(st)
     st.set_defaults(func=_device_selftest)
+    dl = dsub.add_parser("list", help="the serial ports and devices found (opens none)")
+    dl.add_argument("--json", action="store_true", help="print the list as JSON")
+    dl.set_defaults(func=_device_list)
     ck = dsub.add_parser("check", help="predict how often each virtual sample saturates")
-    ck.add_argument("protocol")
-    ck.add_argument("--device", default="sim")
+    ck.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    ck.add_argument("--device", default="sim", help="device spec: sim (default), sim:RATE or "
+                    "serial:PORT")
     ck.add_argument("--windows", type=int, default=12, help="5-s windows per sample")
     ck.add_argument("--warn", type=float, default=0.2, help="warn above this share of trials")
-    ck.add_argument("--json", action="store_true")
+    ck.add_argument("--json", action="store_true", help="print the prediction as JSON")
     _add_clear_fault(ck)
     ck.set_defaults(func=_device_check)
     em = dsub.add_parser("emulate", help="serve the wire protocol on a pseudo-terminal "
                          "(simulated plant); prints the port first")
     em.add_argument("--rate", type=float, default=10_000.0, help="servo rate [Hz]")
-    em.add_argument("--seed", type=int, default=0)
+    em.add_argument("--seed", type=int, default=0, help="seed of the simulated plant and "
+                    "tapping (default 0)")
     em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
     em.add_argument("--firmware", choices=("python", "host", "host-board", "host-san", "qemu"),
                     default="python",
@@ -552,31 +625,39 @@ def build_parser() -> argparse.ArgumentParser:
     add_parsers(dsub, sub, _matching, _add_clear_fault)
 
     pw = sub.add_parser("power", help="Monte-Carlo power and precision for session length")
-    pw.add_argument("protocol")
-    pw.add_argument("--subjects", default="5..30")
+    pw.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    pw.add_argument("--subjects", default="5..30", help="participant counts: A..B (with "
+                    "--step) or a list 5,10,20 (default 5..30)")
     pw.add_argument("--step", type=int, default=5, help="step over the subjects range")
-    pw.add_argument("--reps", default="1..5")
+    pw.add_argument("--reps", default="1..5", help="repetitions per cell: A..B or a list "
+                    "(default 1..5)")
     pw.add_argument("--effect", type=float, default=1.0, help="key contrast [scale points]")
-    pw.add_argument("--alpha", type=float, default=0.05)
+    pw.add_argument("--alpha", type=float, default=0.05, help="significance level (default "
+                    "0.05)")
     pw.add_argument("--sd-trial", type=float, default=None,
                     help="trial-to-trial SD [scale points] (default 0.9; with --pilot: "
                     "estimated from it, or this value when the pilot rates each cell once)")
-    pw.add_argument("--sd-interaction", type=float, default=0.5)
-    pw.add_argument("--sd-subject", type=float, default=0.8)
+    pw.add_argument("--sd-interaction", type=float, default=0.5,
+                    help="participant × sample SD [scale points] (default 0.5)")
+    pw.add_argument("--sd-subject", type=float, default=0.8,
+                    help="between-participant SD of the mean rating [scale points] (default "
+                    "0.8)")
     pw.add_argument("--pilot", help="session folder to estimate the SDs from")
-    pw.add_argument("--experiments", type=int, default=10_000)
-    pw.add_argument("--json", action="store_true")
+    pw.add_argument("--experiments", type=int, default=10_000,
+                    help="simulated experiments per cell (default 10,000)")
+    pw.add_argument("--json", action="store_true", help="print the table as JSON")
     pw.set_defaults(func=_power)
     an = sub.add_parser("analyze", help="statistics, figures and report from session folders")
-    an.add_argument("data_dir")
-    an.add_argument("--out", required=True)
+    an.add_argument("data_dir", help="folder of session folders (sub-*/ses-*)")
+    an.add_argument("--out", required=True, help="folder for report.html/.md/.json and "
+                    "the figures (created)")
     an.add_argument("--format", default="html,md,json", help="comma-separated: html, md, json")
     _selection_args(an)
     an.set_defaults(func=_analyze)
 
     ex = sub.add_parser("export", help="the analysed trials as CSV for JASP, SPSS or R, with "
                         "a codebook")
-    ex.add_argument("data_dir")
+    ex.add_argument("data_dir", help="folder of session folders (sub-*/ses-*)")
     ex.add_argument("--out", required=True, help="folder to write into")
     ex.add_argument("--format", default="long-csv",
                     choices=("long-csv", "wide-csv", "jasp", "r", "spss"),
@@ -596,11 +677,12 @@ def build_parser() -> argparse.ArgumentParser:
     pv.set_defaults(func=_protocol_validate)
     ps = psub.add_parser("show", help="print the resolved trial plan for a seed")
     ps.add_argument("file", help="built-in name or a path")
-    ps.add_argument("--seed", type=int, required=True)
+    ps.add_argument("--seed", type=int, required=True, help="session seed: the plan is "
+                    "the one a session with this seed runs")
     ps.add_argument("--participant", default="P00", help="participant id (default P00)")
     ps.add_argument("--row", type=int, default=None,
                     help="counterbalance row for Williams-ordered blocks")
-    ps.add_argument("--json", action="store_true")
+    ps.add_argument("--json", action="store_true", help="print the plan as JSON")
     ps.set_defaults(func=_protocol_show)
 
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
@@ -631,7 +713,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="what `make demo` runs: a whole simulated study and its "
                        "report")
-    d.add_argument("--seed", type=int, default=1)
+    d.add_argument("--seed", type=int, default=1, help="session seed (default 1)")
     d.add_argument("--out", default="out/demo", help="data/ and report/ go here")
     d.set_defaults(func=_demo)
     return p

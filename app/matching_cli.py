@@ -307,36 +307,46 @@ def add_parsers(device_sub, sub, func, clear_fault) -> None:
     """
     di = device_sub.add_parser("sysid", help="system identification: force → acceleration "
                                "on a device, with the hand holding the stylus")
-    di.add_argument("--device", default="sim")
-    di.add_argument("--order", type=int, default=7)
-    di.add_argument("--relative-degree", type=int, default=4)
+    di.add_argument("--device", default="sim", help="device spec: sim (default) or "
+                    "serial:PORT")
+    di.add_argument("--order", type=int, default=7, help="model order (poles, default 7)")
+    di.add_argument("--relative-degree", type=int, default=4,
+                    help="poles minus zeros of the model (default 4)")
     di.add_argument("--delay", type=float, default=None, help="fixed delay [ms]; default: fit it")
     di.add_argument("--levels", type=float, nargs="+", default=[0.5, 1.0, 1.5],
                     help="sweep force amplitudes [N]")
-    di.add_argument("--repeats", type=int, default=4)
-    di.add_argument("--png", type=Path)
-    di.add_argument("--json", action="store_true")
+    di.add_argument("--repeats", type=int, default=4, help="sweeps per force level "
+                    "(default 4)")
+    di.add_argument("--png", type=Path, help="plot the fit to this PNG file")
+    di.add_argument("--json", action="store_true", help="print the model as JSON")
     clear_fault(di)
     di.set_defaults(action="sysid", func=func)
 
     dg = device_sub.add_parser("fit-grasp", help="fit the grasp-force model to impacts (SPEC §3)")
     dg.add_argument("--simulated", action="store_true", help="use the simulated grasping rig")
-    dg.add_argument("--impacts", type=int, default=100)
-    dg.add_argument("--seed", type=int, default=1)
-    dg.add_argument("--estimate", choices=("ls", "manual", "rls"), default="ls")
-    dg.add_argument("--json", action="store_true")
+    dg.add_argument("--impacts", type=int, default=100, help="impacts to fit (default 100)")
+    dg.add_argument("--seed", type=int, default=1, help="seed of the simulated rig "
+                    "(default 1)")
+    dg.add_argument("--estimate", choices=("ls", "manual", "rls"), default="ls",
+                    help="least squares (default), the paper's manual fit from frequency, "
+                    "settling time and peak gain, or recursive least squares")
+    dg.add_argument("--json", action="store_true", help="print the fit as JSON")
     dg.set_defaults(action="fit-grasp", func=func)
 
     lib = sub.add_parser("library", help="acceleration-matched transient libraries")
     lsub = lib.add_subparsers(dest="library_command", required=True, metavar="ACTION")
     lb = lsub.add_parser("build", help="record, identify, invert: build a library on a device "
                          "(into the library store, where sessions on that device find it)")
-    lb.add_argument("--device", default="sim")
+    lb.add_argument("--device", default="sim", help="device spec: sim (default) or "
+                    "serial:PORT — the device the library will play on")
     lb.add_argument("--protocol", default="realism", help="protocol holding the source sample")
     lb.add_argument("--source", default="wood_on_foam", help="real sample to reproduce")
-    lb.add_argument("--entries", type=int, default=12)
+    lb.add_argument("--entries", type=int, default=12, help="transients in the library, "
+                    "spread over the tapped speeds (default 12)")
     lb.add_argument("--windows", type=int, default=8, help="5-s tap windows to record")
-    lb.add_argument("--method", choices=("regularized", "stable"), default="regularized")
+    lb.add_argument("--method", choices=("regularized", "stable"), default="regularized",
+                    help="inversion: regularized in the frequency domain (default) or "
+                    "exact stable inversion (zeros outside the circle anti-causally)")
     lb.add_argument("--out", type=Path, default=None,
                     help="write here instead of the library store (a protocol's sample then "
                     "names it in 'path')")
@@ -349,8 +359,8 @@ def add_parsers(device_sub, sub, func, clear_fault) -> None:
     clear_fault(lb)
     lb.set_defaults(action="library-build", func=func)
     ls = lsub.add_parser("show", help="describe a library file and plot it")
-    ls.add_argument("file", type=Path)
-    ls.add_argument("--png", type=Path)
+    ls.add_argument("file", type=Path, help="a library file (.npz)")
+    ls.add_argument("--png", type=Path, help="plot the library to this PNG file")
     ls.add_argument("--device", help="also check the library belongs to this device")
     clear_fault(ls)
     ls.set_defaults(action="library-show", func=func)

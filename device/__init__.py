@@ -4,7 +4,15 @@ Importing this package does no I/O and imports no backend; ``open_device`` impor
 the backend it is asked for.
 """
 
-from .base import DeviceInfo, HapticDevice, SimulatedHand, backends, open_device, register_backend
+from .base import (
+    DeviceInfo,
+    HapticDevice,
+    SimulatedHand,
+    backends,
+    max_spring,
+    open_device,
+    register_backend,
+)
 from .codes import Blend, SceneKind
 from .errors import (
     DeviceError,
@@ -66,7 +74,7 @@ __all__ = [
     "UnknownBackendError",
     "WindowResult",
     "backends",
-    "open_device",
+    "open_device", "max_spring",
     "register_backend",
     "register_transient",
     "transient_kinds",

@@ -17,13 +17,19 @@ from typing import Any
 
 import numpy as np
 
-from .errors import DeviceError, DeviceFaultError, DeviceSpecError, UnknownBackendError
+from .errors import (
+    DeviceError,
+    DeviceFaultError,
+    DeviceSpecError,
+    SceneError,
+    UnknownBackendError,
+)
 from .events import TRACE_CHANNELS, FaultEvent, WindowResult
 from .info import DeviceInfo
 from .scene import Scene, Transient, TransientTable
 
 __all__ = ["DeviceInfo", "HapticDevice", "SimulatedHand", "register_backend", "open_device",
-           "backends"]
+           "backends", "max_spring"]
 
 
 @dataclass(frozen=True)
@@ -120,6 +126,12 @@ class HapticDevice(ABC):
         """Raise :class:`~device.errors.SceneError` when this device could not present
         ``scene``, without loading it (nothing moves; the loaded scene stays)."""
         self._check_open()
+        k_max = max_spring(self.info)
+        if scene.spring is not None and scene.spring > k_max:
+            raise SceneError(f"spring {scene.spring:g} N/m is above the stiffest this device "
+                             f"renders, {k_max:.3g} N/m (full force within one encoder count, "
+                             "or the sampled spring unstable on its moving mass)", "spring",
+                             where=scene.name)
         self._check_scene(scene, self._table_for(scene))
 
     def _table_for(self, scene: Scene) -> TransientTable | None:
@@ -426,6 +438,18 @@ def _resolve(factory: _Factory | str) -> _Factory:
     return obj
 
 
+def max_spring(info) -> float:
+    """The stiffest virtual spring [N/m] a device renders as a spring: the smaller of the
+    force range over one encoder count (current limit × force constant / resolution:
+    stiffer reaches full force within one count, a relay) and 4·m·f_s² (a spring sampled
+    at f_s on the moving mass m oscillates unstably above it, ω·T = 2)."""
+    f_max = info.current_limit * info.force_constant
+    stable = 4.0 * info.effective_mass * info.servo_rate_hz ** 2
+    if not info.encoder_resolution > 0:  # a device that reports no resolution
+        return stable
+    return min(f_max / info.encoder_resolution, stable)
+
+
 def open_device(spec: str, **options: Any) -> HapticDevice:
     """Open a device from a spec string such as ``"sim"`` or ``"serial:/dev/ttyACM0"``.
 
@@ -438,6 +462,9 @@ def open_device(spec: str, **options: Any) -> HapticDevice:
         raise UnknownBackendError(f"device spec must be a non-empty string, got {spec!r}")
     name, _, arg = spec.partition(":")
     if name not in _BACKENDS:
+        port = spec.startswith(("/", "COM", "com", "\\\\.\\")) or name.startswith("tty")
+        hint = f": did you mean serial:{spec}?" if port else ""
         raise UnknownBackendError(
-            f"unknown device backend {name!r} in spec {spec!r}; available: {', '.join(backends())}")
+            f"unknown device backend {name!r} in spec {spec!r}{hint} (available: "
+            f"{', '.join(backends())}; a port is given as serial:PORT)")
     return _resolve(_BACKENDS[name])(arg or None, **options)

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from device import DeviceInfo, LibraryTransient, Scene, SceneError
+from device import DeviceInfo, LibraryTransient, Scene, SceneError, max_spring
 from device.errors import HapticlabError
 from device.scene import AccelSinusoid, unknown_key
 
@@ -275,13 +275,20 @@ def _link_libraries(cx: _Ctx, samples: dict[str, Sample]) -> None:
         samples[sid] = dataclasses.replace(s, scene=dataclasses.replace(s.scene, transient=linked))
 
 
+#: the longest tapping window [s] and wait for the first contact [s] a protocol may ask:
+#: the papers' windows last seconds; a full trace holds ~0.5 MB per second at 10 kHz, so
+#: 10 minutes stays within a few hundred MB, and an hour's wait is a session gone wrong
+MAX_WINDOW_S = 600.0
+MAX_TIMEOUT_S = 3600.0
+
+
 def _window(cx: _Ctx, raw: Any) -> Window:
     w = cx.table(("window",), raw, {"duration", "timeout"})
     return Window(
         duration=float(cx.number(("window", "duration"), w.get("duration", 5.0),
-                                 minimum=0, strict=True)),
+                                 minimum=0, strict=True, maximum=MAX_WINDOW_S)),
         timeout=float(cx.number(("window", "timeout"), w.get("timeout", 30.0),
-                                minimum=0, strict=True)))
+                                minimum=0, strict=True, maximum=MAX_TIMEOUT_S)))
 
 
 def _rating(cx: _Ctx, raw: Any) -> RatingScale:
@@ -623,7 +630,14 @@ def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:
         limit = proto.limits.max_current
     f_max = limit * device.force_constant
     v = proto.limits.design_speed
+    k_max = max_spring(device)
     for i, s in enumerate(proto.samples.values()):
+        if s.scene.spring is not None and s.scene.spring > k_max:
+            raise cx.error(("samples", i, "scene", "spring"),
+                           f"sample '{s.id}': {s.scene.spring:g} N/m is above the stiffest "
+                           f"spring the device '{device.backend}' renders, {k_max:.3g} N/m "
+                           "(full force within one encoder count, or the sampled spring "
+                           "unstable on the moving mass)")
         tr = s.scene.transient
         if tr is None or isinstance(tr, LibraryTransient):
             continue  # a library's forces exist only once it is built on the device
