@@ -18,6 +18,7 @@ import pytest
 import serial
 
 from device.serial import messages as M
+from device.serial.contract import FAULTS
 from device.serial.framing import FrameDecoder
 
 from ..conftest import start_emulator, stop_emulator
@@ -28,6 +29,10 @@ ANSWERS = {name: getattr(M.Status, name) for name in ("OK", "BAD_MESSAGE", "BAD_
                                                        "FAULT_LATCHED", "BUSY")}
 ANSWERS |= {"HELLO_ACK": "hello", "PONG": "pong"}
 SPRING = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
+WATCHDOG = next(code for code, name in FAULTS.items() if name == "watchdog")
+#: attempts at one cell when this host's own heartbeat came late (a watchdog fault is the
+#: loaded host's timing, not the table's answer)
+ATTEMPTS = 6
 
 #: one valid instance of the command each row names (the first name of a row that names
 #: several: the others share its column of statuses)
@@ -87,6 +92,7 @@ class Host:
         self.sent = time.monotonic()  # when the host last wrote a frame
         self.limits: M.Limits | None = None  # from the last HELLO
         self.rating_ma: int | None = None
+        self.watchdog = False  # a STATUS reported a watchdog fault since it was last reset
 
     def _pump(self, pred, limit: float):
         end = time.monotonic() + limit
@@ -99,6 +105,7 @@ class Host:
                 m = self.pending.pop(0)
                 if isinstance(m, M.StatusReport):
                     self.state, self.status_count = m.state, self.status_count + 1
+                    self.watchdog |= m.fault == WATCHDOG
                 if pred(m):
                     return m
         raise AssertionError("the device did not answer")
@@ -150,6 +157,7 @@ class Host:
         end = time.monotonic() + 5
         while self.settled_state() != "IDLE" and time.monotonic() < end:
             pass
+        self.watchdog = False  # what was latched before the reset is cleared
         assert self.ask(SPRING) == M.Status.OK
         assert self.ask(M.SceneCommit(1, 0)) == M.Status.OK
 
@@ -166,6 +174,26 @@ class Host:
         if state == "FAULT":
             assert self.ask(M.EStop()) == M.Status.OK
         assert self.settled_state() == state
+
+    def observe(self, state: str, cmd: M.Message) -> tuple[object, str, int]:
+        """``cmd`` sent in ``state``: (its answer, the state after, attempts it took). A
+        cell where this host's heartbeat came too late (the device latched its watchdog:
+        the host missed a deadline on a busy machine) is observed again; the table never
+        calls for a watchdog fault."""
+        for attempt in range(1, ATTEMPTS + 1):
+            self.watchdog = False
+            try:
+                self.enter(state)
+                got = self.ask(cmd)
+                now = self.settled_state()
+            except AssertionError:
+                if self.watchdog and attempt < ATTEMPTS:
+                    continue
+                raise
+            if not self.watchdog:
+                return got, now, attempt
+        raise AssertionError(f"{state}: the device latched its watchdog on all {ATTEMPTS} "
+                             "attempts (this host's heartbeats came late every time)")
 
     def close(self) -> None:
         self.ask(M.Zero())
@@ -189,12 +217,10 @@ def test_every_state_answers_every_command_as_the_document_says(firmware):
         assert host.ask(M.Hello(2)) == "hello"
         for row, cells in table().items():
             for state, (answer, after) in cells.items():
-                host.enter(state)
                 cmd = COMMANDS[row]
                 if isinstance(cmd, M.PlayStart):  # within this device's buffer
                     cmd = M.PlayStart(cmd.window_id, min(cmd.n_samples, host.limits.play_items))
-                got = host.ask(cmd)
-                now = host.settled_state()
+                got, now, _ = host.observe(state, cmd)
                 expect_after = {"previous": "IDLE"}.get(after, after) or state
                 if (got, now) != (answer, expect_after):
                     wrong.append(f"{row} in {state}: {got}, then {now}; the document says "
