@@ -79,7 +79,7 @@ LONG_COLUMNS = {
     "kind": ("", "session kind: human (a person), dry-run or simulated"),
     "device_backend": ("", "the device the session ran on: sim is the simulated device (no "
                            "physical contact: a rehearsal even with a person), serial a "
-                           "hapticlab device on a serial port"),
+                           "device on a serial port"),
     "device_id": ("", "the device's model and serial number (#…), as it reported them"),
     "firmware": ("", "the device's firmware version, as it reported it"),
     "simulated_plant": ("0/1", "1: the device was simulated (sim, the emulator, or a "

@@ -283,9 +283,9 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
         listed = "; ".join(earlier)
         if responder == "person" and not new_session:
             raise UsageError(f"participant {participant} already has {proto.name} session(s) "
-                             f"in {data}: {listed}. Resume an unfinished one with hapticlab "
-                             "resume FOLDER, or start another with --new-session (check the "
-                             "participant id first)")
+                             f"in {data}: {listed}. Check the participant id; start another "
+                             "session with --new-session, or continue an unfinished one with: "
+                             "hapticlab resume FOLDER")
         say(f"participant {participant} already has {proto.name} session(s): {listed}; "
             "this one is the next")
     keys = operator_keys if operator_keys is not None else responder == "person"

@@ -146,8 +146,14 @@ def test_export_files_agree_with_the_report_cell_by_cell(study, tmp_path):
     jasp = pd.read_csv(files["jasp"] / "wide_realism_testing.csv")
     assert all(c.replace("_", "").isalnum() for c in jasp.columns)
     assert "group" not in jasp.columns  # nobody in realism has a group: no empty column
-    assert jasp.drop(columns=["participant"]).to_numpy() == pytest.approx(
-        wide.to_numpy(), rel=1e-12, nan_ok=True)
+    from analysis.load import DEVICE_COLUMNS
+
+    device = list(DEVICE_COLUMNS)  # text: what each participant tapped on
+    assert (jasp.set_index("participant")[device].astype(str).to_numpy()
+            == wide[device].astype(str).to_numpy()).all()
+    assert set(jasp["device_backend"]) == {"sim"}
+    assert jasp.drop(columns=["participant", *device]).to_numpy() == pytest.approx(
+        wide.drop(columns=device).to_numpy(), rel=1e-12, nan_ok=True)
     ident = _analysis(rep, "identification/identification")
     pct = {r["scope"]: r["percent"] for r in ident["table"]}
     wid = pd.read_csv(files["wide-csv"] / "wide_identification_identification.csv")

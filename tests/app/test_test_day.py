@@ -72,7 +72,8 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     t.keys("r")
     time.sleep(1.0)
     participant.press("space")  # the rating phase's instructions come before its real block
-    t.wait("rating #2")
+    t.wait("placing: r ready")  # the real block tapped (paced: a person on sim is live)
+    assert "rating #2" in t.screen()
     time.sleep(0.8)
     participant.screenshot(shots / "between-trials-session.png")
     t.keys("ngrip steady")
@@ -106,7 +107,8 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
         t.wait("placing: r ready")
         time.sleep(0.3)
         t.keys("r")
-        time.sleep(1.2)
+        t.wait("rating: e E-STOP")  # the window ran in real time; the rating screen is up
+        time.sleep(0.3)
         participant.press(str(4 + k), "Return")
     time.sleep(1.5)
     t.wait("the participant is answering the debrief question")
