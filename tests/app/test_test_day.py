@@ -298,8 +298,16 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
                          timeout=900)
     assert run.returncode == 0, run.stderr + "\nemulator:\n" + emu.stderr()
     rows = rows_of(tmp_path / "d" / "sub-P04" / "ses-1")
-    matched = [r for r in rows if r["sample"].startswith("matched") and r["status"] == "valid"]
-    assert len(matched) == 4
+    matched = [r for r in rows if r["sample"].startswith("matched")]
+    final = {(r["phase"], r["sample"]): r["status"] for r in matched}  # each item's last row
+    # the 4 matched items each played to their end: valid, or left out after the protocol's
+    # 3 saturations (the simulated hand's taps depend on when the host starts each window,
+    # so which trial saturates varies from run to run)
+    statuses = [(r["sample"], r["status"]) for r in matched]
+    assert len(final) == 4, statuses
+    assert set(final.values()) <= {"valid", "excluded_saturated"}, statuses
+    assert "valid" in final.values(), statuses
+    assert not any(r["status"].endswith("_device") for r in rows), statuses
     meta = json.loads((tmp_path / "d" / "sub-P04" / "ses-1" / "session.json").read_text())
     assert meta["libraries"]["matched_firm"]["path"].endswith(".npz")
     # built from the accelerometer at every servo tick, on the board's 1-Mbaud link too:
