@@ -164,6 +164,7 @@ class SerialDevice(HapticDevice):
         self._status_after_clear = True  # a FAULT state in STATUS is believed
         self._cleared_at = 0.0
         self.last_status: tuple[float, float] | None = None  # (host perf time, device time)
+        self._dev_state: int | None = None  # the state the last STATUS reported (M.State)
         #: the last STATUS frames (host perf time [s] at receipt, device time [s]): the
         #: device's clock against the host's (:func:`device_clock_on_host`)
         self.status_log: deque[tuple[float, float]] = deque(maxlen=400)
@@ -193,6 +194,7 @@ class SerialDevice(HapticDevice):
             self._output = msg.output_mn / 1000.0
             self.last_status = (time.perf_counter(), msg.time_us * 1e-6)
             self.status_log.append(self.last_status)
+            self._dev_state = msg.state
             if msg.state != M.State.FAULT:
                 self._status_after_clear = True
             elif self._fault is None and (self._status_after_clear
@@ -487,9 +489,10 @@ class SerialDevice(HapticDevice):
                     raise err
                 now = time.monotonic()
                 if now > deadline and self._overdue(dev_start, limit, now - start):
+                    why = self._why_overdue(dev_start, now - start)
                     self._stop_window()
                     raise DeviceTimeoutError(f"{self.port}: window {wid} did not end in time "
-                                             f"({limit:g} s of the device's time)")
+                                             f"({limit:g} s of the device's time); {why}")
                 if on_progress is not None and time.monotonic() >= next_progress:
                     next_progress = time.monotonic() + 0.1
                     partial = WindowResult(rate, None, list(contacts))
@@ -528,6 +531,22 @@ class SerialDevice(HapticDevice):
         if self.last_status is None or dev_start is None:
             return True
         return self.last_status[1] - dev_start >= limit or wall >= 10 * limit
+
+    def _why_overdue(self, dev_start: float | None, wall: float) -> str:
+        """What the link knew when a window was given up on: the device's last reported
+        state and clock, and the frames that went missing on the way (by the device's
+        sequence numbers) or failed their check."""
+        names = {v: k.lower() for k, v in vars(M.State).items() if isinstance(v, int)}
+        state = names.get(self._dev_state, "unknown") if self._dev_state is not None else "unknown"
+        dev = ("no report of its clock" if self.last_status is None or dev_start is None else
+               f"{self.last_status[1] - dev_start:.2f} s of its clock")
+        st = self.link.stats
+        ended = ("the device had left the window, so its WINDOW_DONE frame was lost"
+                 if self._dev_state not in (None, M.State.WINDOW, M.State.PLAYING) else
+                 "the device was still in it")
+        return (f"{ended} (last STATUS: {state}; {dev} and {wall:.2f} s of this computer's "
+                f"passed; link: {st['lost']} frames missing, {st['crc_errors']} failed their "
+                f"CRC, {st['other_errors']} other errors)")
 
     def _stop_window(self) -> None:
         """Best effort: end a window the host gave up on, so the device is free again."""

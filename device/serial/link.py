@@ -182,6 +182,8 @@ class Link:
         self.cv = threading.Condition()
         self._seq = 0
         self._acks: dict[int, int] = {}
+        #: the device's clock in its last STATUS [s]: an ACK's wait is judged in it
+        self._dev_clock: float | None = None
         self._events: deque = deque()
         self._gone: DeviceGoneError | None = None
         self.closed = False
@@ -327,7 +329,9 @@ class Link:
             else:
                 if self._handler is not None:
                     self._handler(msg)
-                if not isinstance(msg, M.StatusReport):
+                if isinstance(msg, M.StatusReport):
+                    self._dev_clock = msg.time_us * 1e-6
+                else:
                     self._events.append(msg)
             self.cv.notify_all()
 
@@ -373,7 +377,14 @@ class Link:
     def request(self, msg: M.Message, timeout: float | None = None) -> int:
         """Send a command and wait for its ACK; retries, then DeviceTimeoutError. A command
         with a field outside the contract's range for this device is not sent
-        (:class:`~device.serial.contract.RangeError`, naming the field)."""
+        (:class:`~device.serial.contract.RangeError`, naming the field).
+
+        A try lasts ``timeout`` [s] of this computer's time and of the device's (its STATUS
+        clock), at most ten times ``timeout`` of this computer's: a device simulated on a
+        busy computer (QEMU beside two CPU-bound processes) once took longer than four
+        200-ms tries to acknowledge a playback chunk while its clock had moved less. A
+        real device's clock keeps pace with this one's, and one that stops reporting is
+        gone after :data:`SILENCE_S`."""
         try:
             msg.check(M.limit_values(self.limits, self.rating_ma))
         except RangeError as exc:
@@ -387,12 +398,18 @@ class Link:
             t0 = time.perf_counter()
             self.write(data)
             self.last_sent[msg.TYPE] = time.perf_counter()
-            deadline = time.monotonic() + timeout
+            start = time.monotonic()
+            deadline, cap = start + timeout, start + 10 * timeout
             with self.cv:
+                dev0 = self._dev_clock
                 while seq not in self._acks and self._gone is None:
                     left = deadline - time.monotonic()
                     if left <= 0:
-                        break
+                        behind = (dev0 is not None and self._dev_clock is not None
+                                  and self._dev_clock - dev0 < timeout)
+                        if not behind or time.monotonic() >= cap:
+                            break
+                        left = min(0.01, cap - time.monotonic())
                     self.cv.wait(left)
                 self.check()
                 if seq in self._acks:

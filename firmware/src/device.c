@@ -1022,8 +1022,9 @@ static void send_traces(void)
         p = put_u16(p, (uint32_t)D.done.b >> 16);
         *p++ = D.done.code & 1u;
         *p = (uint8_t)(D.done.code >> 1); /* the fault code that ended it, 0: none */
-        send(0x94, b, 24, 1);
-        D.done_pending = 0;
+        if (send(0x94, b, 24, 1)) {
+            D.done_pending = 0; /* a frame the UART had no room for is tried again */
+        }
     }
 }
 

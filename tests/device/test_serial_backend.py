@@ -618,3 +618,101 @@ def test_a_failed_check_does_not_fail_the_checks_after_it(own_emulator, monkeypa
         "CheckFailed: gave up after an e-stop (it left a latched estop fault: cleared for the "
         "next checks)")
     assert second["ok"] and second["detail"] == "2000 records", second
+
+
+def test_a_window_whose_end_is_lost_on_the_wire_says_so():
+    """A loaded computer once lost a QEMU build's single WINDOW_DONE frame (1 run in 3 of
+    the suite beside two CPU-bound processes): the host waited out the window's limit in
+    the device's time and said only "did not end in time". Here the emulator loses that
+    frame after numbering it, as the wire would; the error must say that the device had
+    left the window (its STATUS says so) and that one frame is missing by the device's
+    sequence numbers, so the next occurrence names its cause."""
+    import os
+    import threading
+
+    from device.serial import messages as M
+    from device.serial.backend import DeviceTimeoutError
+    from device.serial.emulator import Emulator, warm_up
+    from device.sim.backend import SimDevice
+
+    warm_up(10_000.0)  # as the emulator's main: a first window that loads machine code
+    # stalls the link for longer than the host's silence limit
+
+    class LosesTheEnd(Emulator):
+        def send(self, msg, flush=True):
+            if isinstance(msg, M.WindowDone):
+                with self._wlock:
+                    self._seq = (self._seq + 1) & 0xFFFF  # numbered, never delivered
+                return
+            super().send(msg, flush)
+
+    master, slave, path = open_pty()
+    emu = LosesTheEnd(SimDevice(seed=1), master)
+    server = threading.Thread(target=emu.serve_forever, daemon=True)
+    server.start()
+    try:
+        with open_device(f"serial:{path}") as dev:
+            dev.load_scene(FIRM)
+            dev.home()
+            with pytest.raises(DeviceTimeoutError) as err:
+                dev.run_window(0.2, from_first_contact=False)
+        text = str(err.value)
+        assert "did not end in time (2.2 s of the device's time)" in text
+        assert "the device had left the window, so its WINDOW_DONE frame was lost" in text
+        assert "last STATUS: homed" in text
+        assert re.search(r"link: [1-9]\d* frames missing, 0 failed their CRC", text), text
+    finally:
+        emu.stop()
+        server.join(timeout=5)
+        os.close(master)
+        os.close(slave)
+
+
+def test_an_acknowledgement_is_awaited_in_the_devices_time():
+    """A device held up as a whole (QEMU descheduled on a busy computer) answers late,
+    and its clock stood still meanwhile. Beside two CPU-bound processes the QEMU build
+    once acknowledged a playback chunk after the host's four 200-ms tries had run out.
+    Here the emulator stalls 0.6 s before it handles a ZERO, longer than four tries of
+    100 ms of this computer's time; the host must wait while the device's clock has not
+    moved a try's length (up to ten tries' length), and still give up on a device whose
+    clock runs on without answering."""
+    import os
+    import threading
+
+    from device.serial import messages as M
+    from device.serial.backend import DeviceTimeoutError, SerialDevice
+    from device.serial.emulator import Emulator
+    from device.sim.backend import SimDevice
+
+    class Stalls(Emulator):
+        stalled = False
+        deaf = False
+
+        def _handle(self, frame):
+            if frame.type == M.Zero.TYPE:
+                if self.deaf:
+                    return  # never answers, its clock running on
+                if not self.stalled:
+                    self.stalled = True
+                    time.sleep(0.6)  # the whole device held up, its clock with it
+            super()._handle(frame)
+
+    master, slave, path = open_pty()
+    emu = Stalls(SimDevice(seed=1), master)
+    server = threading.Thread(target=emu.serve_forever, daemon=True)
+    server.start()
+    try:
+        with SerialDevice(path, timeout=0.1) as dev:
+            assert dev.link.request(M.Zero()) == M.Status.OK
+            assert emu.stalled
+            emu.deaf = True
+            t0 = time.monotonic()
+            with pytest.raises(DeviceTimeoutError, match="after 4 tries of 100 ms"):
+                dev.link.request(M.Zero())
+            assert time.monotonic() - t0 >= 0.4  # four tries of 100 ms, of both clocks
+            emu.deaf = False
+    finally:
+        emu.stop()
+        server.join(timeout=5)
+        os.close(master)
+        os.close(slave)
