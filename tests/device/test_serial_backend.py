@@ -1,5 +1,6 @@
 """The serial backend against the emulator over a real pseudo-terminal."""
 
+import contextlib
 import re
 import signal
 import subprocess
@@ -30,6 +31,28 @@ with open_device("serial:" + sys.argv[1]) as dev:
     print("started", flush=True)
     dev.run_window(30.0, from_first_contact=False)
 """
+
+
+@contextlib.contextmanager
+def serving(emulator_cls, **options):
+    """An emulator of class ``emulator_cls`` served in this process on a new pty; yields
+    (emulator, port path) and stops it afterwards."""
+    import os
+    import threading
+
+    from device.sim.backend import SimDevice
+
+    master, slave, path = open_pty()
+    emu = emulator_cls(SimDevice(seed=1), master, **options)
+    server = threading.Thread(target=emu.serve_forever, daemon=True)
+    server.start()
+    try:
+        yield emu, path
+    finally:
+        emu.stop()
+        server.join(timeout=5)
+        os.close(master)
+        os.close(slave)
 
 
 def test_exclusive_open(emulator):
@@ -391,13 +414,10 @@ def test_streamed_records_are_checked_for_coverage_not_counted(fault):
     window's end, or a ring too small for a host that reads late (records dropped, said
     with TRACE_LOST): each is a DeviceError naming the records, and no trace with holes is
     returned (the driver once counted samples and returned 250 NaN without a word)."""
-    import os
-    import threading
     from dataclasses import replace
 
     from device import DeviceError
     from device.serial.emulator import LIMITS, Emulator
-    from device.sim.backend import SimDevice
 
     class Faulty(Emulator):
         def _link_has_room(self):
@@ -417,11 +437,7 @@ def test_streamed_records_are_checked_for_coverage_not_counted(fault):
                     self._outbox[-1] = replace(c, start=c.start + 100_000)
 
     limits = replace(LIMITS, ring_records=500) if fault == "overflow" else LIMITS
-    master, slave, path = open_pty()
-    emu = Faulty(SimDevice(seed=1), master, limits=limits)
-    server = threading.Thread(target=emu.serve_forever, daemon=True)
-    server.start()
-    try:
+    with serving(Faulty, limits=limits) as (emu, path):
         with open_device(f"serial:{path}") as dev:
             dev.load_scene(FIRM)
             dev.home()
@@ -431,11 +447,6 @@ def test_streamed_records_are_checked_for_coverage_not_counted(fault):
                 dev.run_window(0.2, from_first_contact=False)
         if fault == "overflow":
             assert emu.records_lost == 1500
-    finally:
-        emu.stop()
-        server.join(timeout=5)
-        os.close(master)
-        os.close(slave)
 
 
 def test_status_reports_a_playback_its_force_and_one_clock():
@@ -627,13 +638,10 @@ def test_a_window_whose_end_is_lost_on_the_wire_says_so():
     frame after numbering it, as the wire would; the error must say that the device had
     left the window (its STATUS says so) and that one frame is missing by the device's
     sequence numbers, so the next occurrence names its cause."""
-    import os
-    import threading
 
     from device.serial import messages as M
     from device.serial.backend import DeviceTimeoutError
     from device.serial.emulator import Emulator, warm_up
-    from device.sim.backend import SimDevice
 
     warm_up(10_000.0)  # as the emulator's main: a first window that loads machine code
     # stalls the link for longer than the host's silence limit
@@ -646,26 +654,17 @@ def test_a_window_whose_end_is_lost_on_the_wire_says_so():
                 return
             super().send(msg, flush)
 
-    master, slave, path = open_pty()
-    emu = LosesTheEnd(SimDevice(seed=1), master)
-    server = threading.Thread(target=emu.serve_forever, daemon=True)
-    server.start()
-    try:
+    with serving(LosesTheEnd) as (emu, path):
         with open_device(f"serial:{path}") as dev:
             dev.load_scene(FIRM)
             dev.home()
             with pytest.raises(DeviceTimeoutError) as err:
                 dev.run_window(0.2, from_first_contact=False)
-        text = str(err.value)
-        assert "did not end in time (2.2 s of the device's time)" in text
-        assert "the device had left the window, so its WINDOW_DONE frame was lost" in text
-        assert "last STATUS: homed" in text
-        assert re.search(r"link: [1-9]\d* frames missing, 0 failed their CRC", text), text
-    finally:
-        emu.stop()
-        server.join(timeout=5)
-        os.close(master)
-        os.close(slave)
+    text = str(err.value)
+    assert "did not end in time (2.2 s of the device's time)" in text
+    assert "the device had left the window, so its WINDOW_DONE frame was lost" in text
+    assert "last STATUS: homed" in text
+    assert re.search(r"link: [1-9]\d* frames missing, 0 failed their CRC", text), text
 
 
 def test_an_acknowledgement_is_awaited_in_the_devices_time():
@@ -676,13 +675,10 @@ def test_an_acknowledgement_is_awaited_in_the_devices_time():
     100 ms of this computer's time; the host must wait while the device's clock has not
     moved a try's length (up to ten tries' length), and still give up on a device whose
     clock runs on without answering."""
-    import os
-    import threading
 
     from device.serial import messages as M
     from device.serial.backend import DeviceTimeoutError, SerialDevice
     from device.serial.emulator import Emulator
-    from device.sim.backend import SimDevice
 
     class Stalls(Emulator):
         stalled = False
@@ -697,22 +693,12 @@ def test_an_acknowledgement_is_awaited_in_the_devices_time():
                     time.sleep(0.6)  # the whole device held up, its clock with it
             super()._handle(frame)
 
-    master, slave, path = open_pty()
-    emu = Stalls(SimDevice(seed=1), master)
-    server = threading.Thread(target=emu.serve_forever, daemon=True)
-    server.start()
-    try:
-        with SerialDevice(path, timeout=0.1) as dev:
-            assert dev.link.request(M.Zero()) == M.Status.OK
-            assert emu.stalled
-            emu.deaf = True
-            t0 = time.monotonic()
-            with pytest.raises(DeviceTimeoutError, match="after 4 tries of 100 ms"):
-                dev.link.request(M.Zero())
-            assert time.monotonic() - t0 >= 0.4  # four tries of 100 ms, of both clocks
-            emu.deaf = False
-    finally:
-        emu.stop()
-        server.join(timeout=5)
-        os.close(master)
-        os.close(slave)
+    with serving(Stalls) as (emu, path), SerialDevice(path, timeout=0.1) as dev:
+        assert dev.link.request(M.Zero()) == M.Status.OK
+        assert emu.stalled
+        emu.deaf = True
+        t0 = time.monotonic()
+        with pytest.raises(DeviceTimeoutError, match="after 4 tries of 100 ms"):
+            dev.link.request(M.Zero())
+        assert time.monotonic() - t0 >= 0.4  # four tries of 100 ms, of both clocks
+        emu.deaf = False
