@@ -541,9 +541,11 @@ class SerialDevice(HapticDevice):
         dev = ("no report of its clock" if self.last_status is None or dev_start is None else
                f"{self.last_status[1] - dev_start:.2f} s of its clock")
         st = self.link.stats
-        ended = ("the device had left the window, so its WINDOW_DONE frame was lost"
-                 if self._dev_state not in (None, M.State.WINDOW, M.State.PLAYING) else
-                 "the device was still in it")
+        ended = ("no STATUS said whether the device had left the window"
+                 if self._dev_state is None else
+                 "the device was still in it"
+                 if self._dev_state in (M.State.WINDOW, M.State.PLAYING) else
+                 "the device had left the window, so its WINDOW_DONE frame was lost")
         return (f"{ended} (last STATUS: {state}; {dev} and {wall:.2f} s of this computer's "
                 f"passed; link: {st['lost']} frames missing, {st['crc_errors']} failed their "
                 f"CRC, {st['other_errors']} other errors)")

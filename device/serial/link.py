@@ -56,8 +56,14 @@ SILENCE_S = 1.0
 #: call, and the device's watchdog trips T_wd later. Ten times the longest stall of a
 #: Python thread measured under load (`hapticlab bench link --load 4`: README)
 LEASE_S = 1.0
+#: how much longer than its timeout a try waits for an ACK while the device's clock (its
+#: STATUS) has not moved the timeout's length [s]: a device held up as a whole on a busy
+#: computer (QEMU) reports nothing meanwhile; one second, the same as :data:`SILENCE_S`
+CLOCK_GRACE_S = 1.0
 #: a write the port does not take within this long marks the device gone [s]
 WRITE_TIMEOUT_S = 0.5
+#: commands that make the output safe: their ACK is awaited in this computer's time alone
+_PROMPT = (M.EStop, M.Zero, M.StopWindow)
 
 
 _gc_lock = threading.Lock()
@@ -380,11 +386,12 @@ class Link:
         (:class:`~device.serial.contract.RangeError`, naming the field).
 
         A try lasts ``timeout`` [s] of this computer's time and of the device's (its STATUS
-        clock), at most ten times ``timeout`` of this computer's: a device simulated on a
-        busy computer (QEMU beside two CPU-bound processes) once took longer than four
-        200-ms tries to acknowledge a playback chunk while its clock had moved less. A
-        real device's clock keeps pace with this one's, and one that stops reporting is
-        gone after :data:`SILENCE_S`."""
+        clock), at most :data:`CLOCK_GRACE_S` longer: a device simulated on a busy computer
+        (QEMU beside two CPU-bound processes) once took longer than four 200-ms tries to
+        acknowledge a playback chunk, held up with its clock. A real device's clock keeps
+        pace with this one's, and one that stops reporting is gone after
+        :data:`SILENCE_S`. ESTOP, ZERO and STOP_WINDOW are judged in this computer's time
+        alone: whoever asked for a safe output learns at once that it is not confirmed."""
         try:
             msg.check(M.limit_values(self.limits, self.rating_ma))
         except RangeError as exc:
@@ -399,18 +406,19 @@ class Link:
             self.write(data)
             self.last_sent[msg.TYPE] = time.perf_counter()
             start = time.monotonic()
-            deadline, cap = start + timeout, start + 10 * timeout
+            deadline = start + timeout
+            cap = deadline + (0.0 if isinstance(msg, _PROMPT) else CLOCK_GRACE_S)
             with self.cv:
                 dev0 = self._dev_clock
-                while seq not in self._acks and self._gone is None:
-                    left = deadline - time.monotonic()
-                    if left <= 0:
-                        behind = (dev0 is not None and self._dev_clock is not None
-                                  and self._dev_clock - dev0 < timeout)
-                        if not behind or time.monotonic() >= cap:
-                            break
-                        left = min(0.01, cap - time.monotonic())
-                    self.cv.wait(left)
+                while seq not in self._acks and self._gone is None and not self.closed:
+                    now = time.monotonic()
+                    if now >= deadline:
+                        moved = (self._dev_clock - dev0 if dev0 is not None
+                                 and self._dev_clock is not None else timeout)
+                        if not 0 <= moved < timeout or now >= cap:
+                            break  # its clock has run a try's length (or went back: reset)
+                    # a STATUS wakes this wait: its clock is looked at again
+                    self.cv.wait((deadline if now < deadline else cap) - now)
                 self.check()
                 if seq in self._acks:
                     self._rtt.append(time.perf_counter() - t0)
@@ -620,6 +628,8 @@ class Link:
         the port's file open (and its exclusive lock held) after close() returns.
         """
         self.closed = True
+        with self.cv:
+            self.cv.notify_all()  # a request waiting for its ACK stops waiting
         if self._native is not None and not self._native.closed:
             self._final_report = self.heartbeat_report()
             self._native.close()  # a read waiting in the reader returns at once

@@ -668,37 +668,42 @@ def test_a_window_whose_end_is_lost_on_the_wire_says_so():
 
 
 def test_an_acknowledgement_is_awaited_in_the_devices_time():
-    """A device held up as a whole (QEMU descheduled on a busy computer) answers late,
-    and its clock stood still meanwhile. Beside two CPU-bound processes the QEMU build
-    once acknowledged a playback chunk after the host's four 200-ms tries had run out.
-    Here the emulator stalls 0.6 s before it handles a ZERO, longer than four tries of
-    100 ms of this computer's time; the host must wait while the device's clock has not
-    moved a try's length (up to ten tries' length), and still give up on a device whose
-    clock runs on without answering."""
-
+    """A device held up as a whole (QEMU descheduled on a busy computer) answers late and
+    reports nothing meanwhile. Beside two CPU-bound processes the QEMU build once
+    acknowledged a playback chunk after the host's four 200-ms tries had run out. Here
+    the emulator stalls 0.6 s before it handles a command, longer than four tries of
+    100 ms of this computer's time: the host must wait on, its first try still, while the
+    device's clock has not moved a try's length (at most CLOCK_GRACE_S longer); it must
+    still give up on a device whose clock runs on without answering; and an ESTOP, whose
+    sender must learn at once that it is not confirmed, is judged in this computer's time
+    alone."""
     from device.serial import messages as M
     from device.serial.backend import DeviceTimeoutError, SerialDevice
     from device.serial.emulator import Emulator
 
     class Stalls(Emulator):
-        stalled = False
-        deaf = False
+        stall: type | None = None
+        deaf: type | None = None
 
         def _handle(self, frame):
-            if frame.type == M.Zero.TYPE:
-                if self.deaf:
-                    return  # never answers, its clock running on
-                if not self.stalled:
-                    self.stalled = True
-                    time.sleep(0.6)  # the whole device held up, its clock with it
+            if self.stall is not None and frame.type == self.stall.TYPE:
+                self.stall = None
+                time.sleep(0.6)  # the whole device held up, its clock with it
+            elif self.deaf is not None and frame.type == self.deaf.TYPE:
+                return  # never answers, its clock running on
             super()._handle(frame)
 
     with serving(Stalls) as (emu, path), SerialDevice(path, timeout=0.1) as dev:
-        assert dev.link.request(M.Zero()) == M.Status.OK
-        assert emu.stalled
-        emu.deaf = True
-        t0 = time.monotonic()
-        with pytest.raises(DeviceTimeoutError, match="after 4 tries of 100 ms"):
-            dev.link.request(M.Zero())
-        assert time.monotonic() - t0 >= 0.4  # four tries of 100 ms, of both clocks
-        emu.deaf = False
+        stats = dev.link.stats
+        emu.stall = M.TraceConfig
+        before = stats["retries"]
+        dev.set_trace_channels(None)
+        assert emu.stall is None and stats["retries"] == before  # the first try waited
+        emu.deaf = M.TraceConfig
+        before = stats["timeouts"]
+        with pytest.raises(DeviceTimeoutError, match="TraceConfig after 4 tries of 100 ms"):
+            dev.set_trace_channels(None)
+        assert stats["timeouts"] == before + 4
+        emu.deaf, emu.stall = None, M.EStop
+        with pytest.raises(DeviceTimeoutError, match="EStop after 4 tries of 100 ms"):
+            dev.link.request(M.EStop())
