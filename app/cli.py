@@ -90,9 +90,11 @@ def _protocol_show(args: argparse.Namespace) -> int:
     p = _load_protocol(args.file)
     engine = SessionEngine(p, args.seed, args.participant, args.row)
     phases: list[dict] = []
+    no_repeat = {ph.name: ph.no_repeat for ph in p.phases}
     for item, place in zip(engine.plan(), engine.placements(), strict=True):
         if not phases or phases[-1]["name"] != item.phase:
-            phases.append({"name": item.phase, "trials": []})
+            phases.append({"name": item.phase, "no_repeat": no_repeat[item.phase],
+                           "trials": []})
         trial = {"sample": item.samples[0] if len(item.samples) == 1 else list(item.samples),
                  "item": item.key, "placement": place}
         if item.block is not None:
@@ -121,6 +123,8 @@ def _protocol_show(args: argparse.Namespace) -> int:
             f"analysed: {design['dv']}" + (f" over {' × '.join(design['within'])}"
                                            if design["within"] else "")
             + (f" per {design['by']}" if design["by"] else ""))
+        if ph["no_repeat"]:
+            what += "; never the same sample twice in a row"
         print(f"\n{ph['name']} ({_plural(len(ph['trials']), 'trial')}; {what})")
         previous = None
         for i, t in enumerate(ph["trials"], 1):

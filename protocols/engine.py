@@ -192,6 +192,52 @@ class _State:
     finished: dict[str, str] = field(default_factory=dict)
 
 
+def _can_spread(counts: Mapping[str, int], prev: str | None) -> bool:
+    """Whether items with ``counts`` per sample can follow one another with no sample twice
+    in a row, the first not ``prev``: no sample may fill more than every other place, and
+    one that fills exactly every other place of an odd count must come first."""
+    n = sum(counts.values())
+    if n == 0:
+        return True
+    half = (n + 1) // 2
+    if max(counts.values()) > half:
+        return False
+    return not (n % 2 and prev is not None and counts.get(prev, 0) == half)
+
+
+def no_repeat_order(items: Sequence[Item], rng: np.random.Generator,
+                    prev: str | None = None) -> list[Item]:
+    """``items`` (one sample each) in a random order with no sample on two in a row and the
+    first not ``prev`` (ignored when that cannot be met).
+
+    Each place is drawn among the samples that leave the rest an order (:func:`_can_spread`),
+    in proportion to how many of each are left, the lowest repetition of a sample first: a
+    sequential draw, not uniform over all admissible orders.
+
+    Raises
+    ------
+    ValueError
+        When no such order exists (one sample fills more than every other place).
+    """
+    by_sample: dict[str, list[Item]] = {}
+    for it in items:
+        by_sample.setdefault(it.samples[0], []).append(it)
+    counts = {s: len(v) for s, v in by_sample.items()}
+    if not _can_spread(counts, None):
+        raise ValueError(f"no order without repeats: counts per sample {counts}")
+    if not _can_spread(counts, prev):
+        prev = None
+    out: list[Item] = []
+    while len(out) < len(items):
+        ok = [s for s, c in counts.items() if c and s != prev
+              and _can_spread({**counts, s: c - 1}, s)]
+        weights = np.array([counts[s] for s in ok], dtype=float)
+        prev = ok[int(rng.choice(len(ok), p=weights / weights.sum()))]
+        counts[prev] -= 1
+        out.append(by_sample[prev].pop(0))
+    return out
+
+
 class SessionEngine:
     """Sequences the trials of one session.
 
@@ -227,6 +273,7 @@ class SessionEngine:
                                         f"row of phase {p.name!r}'s Williams square: rows "
                                         f"0–{n - 1} ({n} orders; a row beyond them would "
                                         "repeat one silently)")
+        self._no_repeat = {ph.name: ph.no_repeat for ph in protocol.phases}
         self._plan = self._build_plan()
 
     # ------------------------------------------------------------------ identity
@@ -256,10 +303,11 @@ class SessionEngine:
         rng = np.random.default_rng(plan_ss)
         items: list[Item] = []
         for phase in self.protocol.phases:
-            items.extend(self._phase_items(phase, rng))
+            items.extend(self._phase_items(phase, rng, items[-1] if items else None))
         return items
 
-    def _phase_items(self, phase: Phase, rng: np.random.Generator) -> list[Item]:
+    def _phase_items(self, phase: Phase, rng: np.random.Generator,
+                     before: Item | None) -> list[Item]:
         samples = self.protocol.samples
         if phase.kind == "identification":
             out = []
@@ -282,7 +330,11 @@ class SessionEngine:
             members = [s for s in phase.samples if block is None or samples[s].block == block]
             block_items = [Item(f"{phase.name}/{s}#{rep}", phase.name, phase.kind, (s,), block, rep)
                            for rep in range(1, phase.repetitions + 1) for s in members]
-            if phase.order == "random":
+            if phase.order == "random" and phase.no_repeat:
+                last = out[-1] if out else before
+                block_items = no_repeat_order(block_items, rng,
+                                              last.samples[0] if last is not None else None)
+            elif phase.order == "random":
                 block_items = [block_items[i] for i in rng.permutation(len(block_items))]
             out.extend(block_items)
         return out
@@ -347,7 +399,7 @@ class SessionEngine:
                 st.finished[head.key] = status
             elif status in ("saturated", "requeued", "timed_out"):
                 st.queue.pop(0)
-                self._reinsert(st.queue, head, rng)
+                self._reinsert(st.queue, head, rng, self._no_repeat[head.phase])
             # aborted_device, estop: the item stays first and is retried
         return st
 
@@ -362,13 +414,22 @@ class SessionEngine:
         return self.protocol.attempts.max_device_failures
 
     @staticmethod
-    def _reinsert(queue: list[Item], item: Item, rng: np.random.Generator) -> None:
-        """Put ``item`` back at a random position among the remaining items of its block."""
+    def _reinsert(queue: list[Item], item: Item, rng: np.random.Generator,
+                  no_repeat: bool = False) -> None:
+        """Put ``item`` back at a random position among the remaining items of its block;
+        with ``no_repeat``, at a position with another sample on either side (the first
+        position follows the attempt just made, of this very sample), where there is one."""
         span = 0
         while span < len(queue) and queue[span].phase == item.phase \
                 and queue[span].block == item.block:
             span += 1
-        queue.insert(int(rng.integers(0, span + 1)), item)
+        places = list(range(span + 1))
+        if no_repeat:
+            s = item.samples[0]
+            apart = [i for i in places if i > 0 and queue[i - 1].samples[0] != s
+                     and (i == len(queue) or queue[i].samples[0] != s)]
+            places = apart or places
+        queue.insert(places[int(rng.integers(0, len(places)))], item)
 
     def _placement(self, item: Item, previous: str | None) -> str | None:
         if item.kind == "identification":

@@ -461,7 +461,8 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
            rating: RatingScale | None) -> Phase:
     path = ("phases", i)
     p = cx.table(path, raw, {"name", "kind", "samples", "repetitions", "order", "blocks",
-                             "block_order", "analysis", "references"}, {"name", "samples"})
+                             "block_order", "no_repeat", "analysis", "references"},
+                 {"name", "samples"})
     name = cx.ident((*path, "name"), p["name"])
     kind = cx.string((*path, "kind"), p.get("kind", "rated"), ("rated", "free", "identification"))
     sel = p["samples"]
@@ -491,6 +492,10 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
                            "block = \"name\")")
     block_order = cx.string((*path, "block_order"), p.get("block_order", "random"),
                             ("random", "fixed", "williams"))
+    no_repeat = cx.boolean((*path, "no_repeat"), p.get("no_repeat", False))
+    if no_repeat:
+        _check_no_repeat(cx, (*path, "no_repeat"), kind, order, reps, ids,
+                         [samples[s].block for s in ids] if blocks else [None] * len(ids))
     if kind == "identification":
         if answer is None:
             raise cx.error((*path, "kind"), "an identification phase needs an [answer] table")
@@ -507,7 +512,26 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
         raise cx.error((*path, "references"), "none of the phase's samples has a 'reference' "
                        "(the real block to compare with)")
     return Phase(name=name, kind=kind, samples=ids, repetitions=reps, order=order,
-                 blocks=blocks, block_order=block_order, design=design, references=references)
+                 blocks=blocks, block_order=block_order, no_repeat=no_repeat, design=design,
+                 references=references)
+
+
+def _check_no_repeat(cx: _Ctx, path: tuple, kind: str, order: str, reps: int,
+                     ids: tuple[str, ...], blocks: list[str | None]) -> None:
+    """``no_repeat`` needs a drawn order of one-sample trials and, in every block, a
+    second sample to put between a sample's repetitions."""
+    if kind == "identification":
+        raise cx.error(path, "applies to rated and free phases (an identification trial "
+                       "shows every surface)")
+    if order != "random":
+        raise cx.error(path, "needs order = \"random\" (a fixed order is as written)")
+    if reps > 1:
+        for block in dict.fromkeys(blocks):
+            members = [s for s, b in zip(ids, blocks, strict=True) if b == block]
+            if len(members) == 1:
+                where = f"block {block!r} has" if block is not None else "the phase has"
+                raise cx.error(path, f"{where} one sample ({members[0]!r}) repeated {reps} "
+                               "times: nothing can go between its repetitions")
 
 
 def _check_references(cx: _Ctx, samples: dict[str, Sample]) -> None:

@@ -221,6 +221,10 @@ class Phase:
         ``block``: run the items block by block (each sample's ``block``).
     block_order : str
         ``random``, ``fixed`` or ``williams`` (balanced Latin square over participants).
+    no_repeat : bool
+        With ``order = "random"``: never the same sample on two trials in a row, in the
+        drawn order (also across the phase's start and its blocks' boundaries) and where a
+        redrawn trial goes back, wherever the remaining trials leave a place for it.
     design : PhaseDesign
         What the phase measures and how it is analysed.
     """
@@ -232,6 +236,7 @@ class Phase:
     order: str = "random"
     blocks: str | None = None
     block_order: str = "random"
+    no_repeat: bool = False
     design: PhaseDesign = field(default_factory=PhaseDesign)
     references: str = "none"  #: when the real reference blocks are tapped: none | block | start
 

@@ -139,6 +139,10 @@ def test_protocol_show_says_what_to_place_and_how_long():
     assert all("placement" in t for t in trials)
     est = plan["duration_estimate"]
     assert est["total_s"] == pytest.approx(est["tapping_s"] + 20.0 * len(trials))
+    # the realism protocol never shows a sample twice in a row, and says so per phase
+    assert [ph["no_repeat"] for ph in plan["phases"]] == [False, True, True]
+    assert "(the same sample again)" not in out.stdout
+    assert out.stdout.count("never the same sample twice in a row") == 2
 
 
 @pytest.mark.parametrize("old, new, fragment", [

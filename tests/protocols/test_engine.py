@@ -322,3 +322,131 @@ def test_no_saturation_cap_is_the_papers_redraw_with_a_safety_stop():
     assert statuses == ["saturated"] * (SATURATION_SAFETY_CAP - 1) + ["excluded_saturated"]
     with pytest.raises(ProtocolError, match=r"max_attempts: must be an integer >= 1 or \"none\""):
         parse_protocol(text.replace('"none"', '"never"'), "i.toml")
+
+
+# ---------------------------------------------------------------- no sample twice in a row
+REALISM = load_protocol("realism")
+
+
+def _repeats(items):
+    return [(a.key, b.key) for a, b in pairwise(items) if a.samples == b.samples]
+
+
+@settings(max_examples=200, deadline=None)
+@given(counts=st.lists(st.integers(1, 5), min_size=1, max_size=6),
+       prev=st.one_of(st.none(), st.integers(0, 6)), seed=st.integers(0, 2**32))
+def test_no_repeat_order_is_a_permutation_without_neighbours_alike(counts, prev, seed):
+    """Any counts per sample: an order with no sample twice in a row exists exactly when
+    no sample fills more than every other place (checked by brute force on small cases in
+    the test below); then the draw finds one, first not ``prev`` where that can be met."""
+    import numpy as np
+
+    from protocols.engine import Item, _can_spread, no_repeat_order
+
+    items = [Item(f"p/s{k}#{r}", "p", "rated", (f"s{k}",), None, r)
+             for k, c in enumerate(counts) for r in range(1, c + 1)]
+    before = None if prev is None else f"s{prev}"
+    n, top = sum(counts), max(counts)
+    if top > (n + 1) // 2:
+        with pytest.raises(ValueError, match="no order without repeats"):
+            no_repeat_order(items, np.random.default_rng(seed), before)
+        return
+    out = no_repeat_order(items, np.random.default_rng(seed), before)
+    assert sorted(i.key for i in out) == sorted(i.key for i in items)
+    assert _repeats(out) == []
+    if _can_spread(dict(Counter(i.samples[0] for i in items)), before):
+        assert out[0].samples[0] != before
+    for s in {i.samples[0] for i in out}:  # a sample's repetitions in their order
+        reps = [i.repetition for i in out if i.samples[0] == s]
+        assert reps == sorted(reps)
+
+
+def test_the_spread_condition_matches_brute_force():
+    """_can_spread against every ordering of every multiset of up to 7 items over three
+    samples, with each possible sample before it (an independent enumeration)."""
+    from itertools import permutations, product
+
+    from protocols.engine import _can_spread
+
+    for counts in product(range(4), repeat=3):
+        c = {k: v for k, v in zip("abc", counts, strict=True) if v}
+        items = [k for k, v in c.items() for _ in range(v)]
+        for prev in (None, "a", "b", "c"):
+            exists = any(all(x != y for x, y in pairwise(p)) and (not p or p[0] != prev)
+                         for p in set(permutations(items)))
+            assert exists == _can_spread(c, prev), (c, prev)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_realism_never_shows_the_same_sample_twice_in_a_row(seed):
+    """The bundled realism protocol (no_repeat in demonstration and testing): the whole
+    plan, across familiarization → demonstration → testing, has no sample twice in a row
+    (the test day found `protocol show` listing the same sample twice in a row)."""
+    plan = SessionEngine(REALISM, seed, "P01").plan()
+    assert _repeats(plan) == []
+    assert Counter(i.samples[0] for i in plan if i.phase == "testing") == \
+        dict.fromkeys(REALISM.phases[2].samples, 3)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32),
+       statuses=st.lists(st.sampled_from(["valid", "valid", "saturated", "requeued",
+                                          "timed_out"]), min_size=1, max_size=120))
+def test_a_redrawn_trial_does_not_come_straight_back(seed, statuses):
+    """Saturated, re-queued and timed-out trials go back between two other samples: the
+    participant meets the same sample twice in a row only when every trial left in its
+    block is of that sample."""
+    e = SessionEngine(REALISM, seed, "P01")
+    log: list[Attempt] = []
+    last = None
+    for s in statuses:
+        t = e.next_trial(log)
+        if t is DONE:
+            break
+        if last is not None and t.samples == last.samples:
+            left = [i for i in e.remaining(log) if i.phase == t.phase and i.block == t.block]
+            assert {i.samples for i in left} == {t.samples}, (last.item, t.item)
+        if s in CAPPED:
+            s = e.failure_status(s, t, log)
+        log.append(Attempt(t.item, s))
+        last = t
+
+
+def test_a_protocol_without_no_repeat_keeps_its_recorded_order():
+    """Sessions recorded before no_repeat keep their protocol copy: without the key the
+    draw is the old one. The plan below is the one the engine gave before this change
+    (realism without no_repeat, whose text is the earlier realism.toml, seed 7), and it
+    does show soft_spring twice in a row."""
+    src, text = protocol_text("realism")
+    old = parse_protocol("\n".join(line for line in text.splitlines()
+                                   if not line.startswith("no_repeat")), src)
+    plan = [i.key for i in SessionEngine(old, 7, "P01").plan()]
+    assert plan[12:20] == ["testing/soft_spring#1", "testing/soft_spring#3",
+                           "testing/pulse_firm#1", "testing/wood_on_foam#1", "testing/wood#3",
+                           "testing/matched_soft#3", "testing/pulse_soft#1", "testing/foam#3"]
+
+
+@pytest.mark.parametrize("edit, message", [
+    (("order = \"random\"\nno_repeat", "order = \"fixed\"\nno_repeat"), "needs order = \"random\""),
+    (("repetitions = 3\norder = \"random\"\nno_repeat = true",
+      "repetitions = 3\norder = \"random\"\nno_repeat = \"yes\""), "must be true or false"),
+])
+def test_no_repeat_is_checked_where_it_is_written(edit, message):
+    src, text = protocol_text("realism")
+    assert edit[0] in text
+    with pytest.raises(ProtocolError, match=message) as err:
+        parse_protocol(text.replace(edit[0], edit[1], 1), src)
+    assert "phases[" in str(err.value) and "no_repeat" in str(err.value)
+
+
+def test_no_repeat_refuses_a_sample_with_nothing_to_put_between():
+    src, text = protocol_text("realism")
+    one = text.replace("name = \"testing\"\nsamples = \"all\"",
+                       "name = \"testing\"\nsamples = [\"wood\"]", 1)
+    with pytest.raises(ProtocolError, match="one sample \\('wood'\\) repeated 3 times"):
+        parse_protocol(one, src)
+    src, text = protocol_text("identification")
+    phase = "kind = \"identification\"\n"
+    assert phase in text
+    with pytest.raises(ProtocolError, match="applies to rated and free phases"):
+        parse_protocol(text.replace(phase, phase + "no_repeat = true\n", 1), src)
