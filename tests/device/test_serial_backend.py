@@ -671,24 +671,29 @@ def test_an_acknowledgement_is_awaited_in_the_devices_time():
     """A device held up as a whole (QEMU descheduled on a busy computer) answers late and
     reports nothing meanwhile. Beside two CPU-bound processes the QEMU build once
     acknowledged a playback chunk after the host's four 200-ms tries had run out. Here
-    the emulator stalls 0.6 s before it handles a command, longer than four tries of
-    100 ms of this computer's time: the host must wait on, its first try still, while the
-    device's clock has not moved a try's length (at most CLOCK_GRACE_S longer); it must
-    still give up on a device whose clock runs on without answering; and an ESTOP, whose
-    sender must learn at once that it is not confirmed, is judged in this computer's time
-    alone."""
+    the emulator stalls (0.3 s, or until the test releases it) before it handles a
+    command, longer than a try of 100 ms of this computer's time: the host must wait on,
+    its first try still, while the device's clock has not moved a try's length (at most
+    CLOCK_GRACE_S longer); it must still give up on a device whose clock runs on without
+    answering; and an ESTOP, whose sender must learn at once that it is not confirmed, is
+    judged in this computer's time alone."""
+    import threading
+
     from device.serial import messages as M
     from device.serial.backend import DeviceTimeoutError, SerialDevice
     from device.serial.emulator import Emulator
 
+    release = threading.Event()  # ends a stall the test must outlast, whatever the load
+
     class Stalls(Emulator):
         stall: type | None = None
+        stall_s = 0.3  # past a 100-ms try, well inside its 1-s grace
         deaf: type | None = None
 
         def _handle(self, frame):
             if self.stall is not None and frame.type == self.stall.TYPE:
                 self.stall = None
-                time.sleep(0.6)  # the whole device held up, its clock with it
+                release.wait(self.stall_s)  # the whole device held up, its clock with it
             elif self.deaf is not None and frame.type == self.deaf.TYPE:
                 return  # never answers, its clock running on
             super()._handle(frame)
@@ -704,6 +709,7 @@ def test_an_acknowledgement_is_awaited_in_the_devices_time():
         with pytest.raises(DeviceTimeoutError, match="TraceConfig after 4 tries of 100 ms"):
             dev.set_trace_channels(None)
         assert stats["timeouts"] == before + 4
-        emu.deaf, emu.stall = None, M.EStop
+        emu.deaf, emu.stall, emu.stall_s = None, M.EStop, 30.0
         with pytest.raises(DeviceTimeoutError, match="EStop after 4 tries of 100 ms"):
             dev.link.request(M.EStop())
+        release.set()
