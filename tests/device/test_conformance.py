@@ -10,6 +10,8 @@ arithmetic at the encoder's extremes, which no pty can reach.
 
 from __future__ import annotations
 
+import functools
+import time
 import zlib
 
 import numpy as np
@@ -37,6 +39,22 @@ def host(request):
     stop_emulator(emu)
     bad = [line for line in emu.stderr_lines if "runtime error" in line or "Sanitizer" in line]
     assert not bad, "".join(bad)
+
+
+def deadline_kept(test):
+    """Run ``test`` again, from a fresh HELLO, when this host's heartbeat came too late
+    (``Host.attempts``): on a busy machine the pytest process can stall past the device's
+    watchdog, which then ends a window or playback the test was about to stop itself."""
+
+    @functools.wraps(test)
+    def run(host):
+        def restart():
+            host.ask(M.ClearFault())
+            assert host.ask(M.Hello(2)) == "hello"
+
+        host.attempts(lambda: test(host), restart)
+
+    return run
 
 
 def wait(host: Host, seconds: float) -> None:
@@ -73,6 +91,7 @@ def spring_homed(host: Host) -> None:
     assert host.ask(M.Home(20_000)) == S.OK
 
 
+@deadline_kept
 def test_estop_is_acted_on_whatever_its_body(host):
     """Finding 8: an ESTOP frame with a stray byte once left the output on."""
     spring_homed(host)
@@ -81,12 +100,14 @@ def test_estop_is_acted_on_whatever_its_body(host):
     assert host.ask(M.ClearFault()) == S.OK
 
 
+@deadline_kept
 def test_a_ping_or_heartbeat_that_does_not_fit_is_bad_message(host):
     """Finding 5: a PING whose body does not fit got no answer."""
     assert raw(host, M.Ping.TYPE, b"\x01\x02\x03") == S.BAD_MESSAGE
     assert raw(host, M.Heartbeat.TYPE, b"\x01") == S.BAD_MESSAGE
 
 
+@deadline_kept
 def test_fields_come_before_the_state(host):
     """Findings 3 and 7: in a window a command out of range is BAD_MESSAGE (not BUSY), and
     a refused SCENE_BEGIN leaves HOMED as it was."""
@@ -103,6 +124,7 @@ def test_fields_come_before_the_state(host):
     assert host.ask(M.StopWindow()) == S.OK
 
 
+@deadline_kept
 def test_an_upload_withdraws_the_scene_until_its_commit(host):
     """Finding 5: the state table's HOMED cells for the upload messages, one behaviour."""
     spring_homed(host)
@@ -123,6 +145,7 @@ def _force_cmd(msgs) -> np.ndarray:
     return np.concatenate([np.asarray(c.items, float) for c in chunks])
 
 
+@deadline_kept
 def test_a_second_playback_plays_the_buffer_again_and_output_is_off_after(host):
     """Findings 4 and 7: a second PLAY_START without a new upload played zeros on the
     emulator (the firmware played the buffer again); STATUS reported the last playback's
@@ -143,11 +166,11 @@ def test_a_second_playback_plays_the_buffer_again_and_output_is_off_after(host):
     assert out.state == M.State.IDLE and out.output_mn == 0
 
 
-def test_a_fault_ends_a_playback_at_once(host):
-    """Finding 4: an e-stop during a playback was reported when the whole buffer had run."""
+def _fault_ends_playback(host: Host, stall: float = 0.0) -> None:
     assert host.ask(M.TraceConfig(1 << 2, 10)) == S.OK
     assert host.ask(M.PlayStart(3, host.limits.play_items)) == S.OK  # 3.8 s or more
     collect(host, lambda m: isinstance(m, M.TraceChunk), 5.0)
+    time.sleep(stall)  # no heartbeat meanwhile, as when a busy machine stalls this process
     assert host.ask(M.EStop()) == S.OK
     msgs = collect(host, lambda m: isinstance(m, M.WindowDone), 10.0)
     done = msgs[-1]
@@ -161,6 +184,42 @@ def test_a_fault_ends_a_playback_at_once(host):
     assert host.ask(M.ClearFault()) == S.OK
 
 
+@deadline_kept
+def test_a_fault_ends_a_playback_at_once(host):
+    """Finding 4: an e-stop during a playback was reported when the whole buffer had run."""
+    _fault_ends_playback(host)
+
+
+@pytest.mark.parametrize("host", ["host"], indirect=True)
+def test_a_host_that_stalls_past_the_watchdog_is_given_another_attempt(host):
+    """What a loaded run of the suite met (issue 29): the pytest process stalled past the
+    device's 100-ms watchdog during a playback, the watchdog ended it, and the WINDOW_DONE
+    went by while the host awaited its ESTOP's ACK. That attempt proves nothing about the
+    device, so ``deadline_kept`` runs it again; anything else still fails at once."""
+    with pytest.raises(AssertionError, match="did not answer"):
+        _fault_ends_playback(host, stall=0.5)
+    assert host.watchdog
+    host.ask(M.ClearFault())
+    stalls = [0.5]
+    tries = []
+
+    def once():
+        tries.append(1)
+        _fault_ends_playback(host, stall=stalls.pop() if stalls else 0.0)
+
+    host.attempts(once, lambda: host.ask(M.ClearFault()))
+    assert len(tries) == 2
+
+    def wrong():  # a failure with no watchdog fault is the device's answer: no second try
+        tries.append(1)
+        raise AssertionError("not this host's timing")
+
+    with pytest.raises(AssertionError, match="not this host's timing"):
+        host.attempts(wrong)
+    assert len(tries) == 3
+
+
+@deadline_kept
 def test_a_from_contact_window_lasts_its_duration_and_position_is_its_tick(host):
     """Findings 5 and 6: a from-contact window lasted one tick too long on the firmware;
     every target reported a POSITION height that belonged to the tick before."""
@@ -178,6 +237,7 @@ def test_a_from_contact_window_lasts_its_duration_and_position_is_its_tick(host)
         assert round(pos[tick] * 1e6) == h, (tick, h, pos[tick - 1: tick + 2] * 1e6)
 
 
+@deadline_kept
 def test_the_enable_ramp_runs_after_home_not_in_every_window(host):
     """Finding 7: the emulator ramped output up in the first 50 ms of every window."""
     assert host.ask(M.TraceConfig(1 << 6, 1)) == S.OK  # the flags
@@ -189,6 +249,7 @@ def test_the_enable_ramp_runs_after_home_not_in_every_window(host):
     assert not (flags.astype(int) & 16).any()  # bit 4: the enable ramp
 
 
+@deadline_kept
 def test_a_hello_ends_a_window_and_nothing_of_it_follows(host):
     """Finding 5: after a HELLO during a window, the old window's chunks and WINDOW_DONE
     followed HELLO_ACK."""
@@ -204,6 +265,7 @@ def test_a_hello_ends_a_window_and_nothing_of_it_follows(host):
     assert host.settled_state() == "IDLE"
 
 
+@deadline_kept
 def test_a_half_frame_left_behind_does_not_swallow_the_next_hello(host):
     """Finding 8: after a mid-frame disconnect the next host's first HELLO was lost; a lone
     delimiter before it (as hapticlab's host sends) ends the half frame."""
@@ -216,6 +278,7 @@ def test_a_half_frame_left_behind_does_not_swallow_the_next_hello(host):
     assert ack.protocol == 2
 
 
+@deadline_kept
 def test_the_table_crc_is_the_documented_one(host):
     """A table scene over the wire, committed with zlib's CRC-32 of its i16 LE bytes."""
     items = tuple(range(-100, 100, 10))
