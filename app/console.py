@@ -131,6 +131,23 @@ class PlainConsole:
             return self.actions.popleft()
         return {"placing": "go", "reference": "go", "paused": "resume"}.get(self.view.state)
 
+    def clear_fault(self, device) -> str | None:
+        """Clear ``device``'s latched fault for the operator's c.
+
+        Returns
+        -------
+        str or None
+            None when cleared; otherwise why not, in words for the operator (a console
+            with keys refuses when an e-stop came after the c).
+
+        Raises
+        ------
+        device.DeviceFaultError
+            The device keeps its fault (its own e-stop button is held).
+        """
+        device.clear_fault()
+        return None
+
     def take_notes(self) -> list[dict]:
         """Notes typed since the last call."""
         with self._lock:  # the key reader appends under the same lock
@@ -158,6 +175,8 @@ class KeyConsole(PlainConsole):
         self._stop = threading.Event()
         self._cv = threading.Condition()
         self._note: list[str] | None = None  # characters of a note being typed
+        self._estops = 0  # e-stop keys pressed so far (only the reader counts them)
+        self._estops_at_key = 0  # ... when the queued action's key was pressed
         self._esc = ""  # an escape sequence being skipped ("", ESC, "[" or "O")
         self._live = None
         if live:
@@ -265,6 +284,7 @@ class KeyConsole(PlainConsole):
         return True
 
     def _estop(self) -> None:
+        self._estops += 1  # before the device is told: a clear on its way sees it
         try:
             self.device.estop()
         except Exception as exc:  # noqa: BLE001 — said, never swallowed: the operator acts
@@ -312,6 +332,7 @@ class KeyConsole(PlainConsole):
                 self.say(f"key '{key}' ignored: '{_NAMES[self.actions[0]]}' was pressed first")
                 return
             self.actions.append(action)
+            self._estops_at_key = self._estops
             self._cv.notify_all()
 
     def set_state(self, state: str) -> None:
@@ -330,6 +351,19 @@ class KeyConsole(PlainConsole):
                 self.view.state = "trial"
             self.actions.clear()
             return action
+
+    def clear_fault(self, device) -> str | None:
+        """Clear ``device``'s fault for the c key, unless an e-stop was pressed after it: the
+        later key wins. The e-stop never waits for this (the reader sends it at once), so
+        one pressed while the clear is on its way is sent again once the clear is done."""
+        pressed = self._estops_at_key
+        if self._estops != pressed:
+            return "an E-STOP was pressed after c"
+        device.clear_fault()
+        if self._estops != pressed:
+            self._estop()
+            return "an E-STOP was pressed while it was being cleared, and is latched again"
+        return None
 
     def close(self) -> None:
         import termios

@@ -335,9 +335,11 @@ class SessionRunner:
             a = self.console.poll(0.03)
             if a == "clear":
                 try:
-                    self.device.clear_fault()
+                    why = self.console.clear_fault(self.device)
                 except DeviceFaultError as exc:  # the device keeps it (its button is held)
-                    self.console.say(f"c: not cleared: {exc}. Press c again once it is "
+                    why = str(exc)
+                if why:
+                    self.console.say(f"c: not cleared: {why}. Press c again once it is "
                                      "safe, or q to stop and save")
                     continue
                 self.console.say("c: fault cleared by the operator; the trial runs again")

@@ -121,6 +121,62 @@ def test_non_ascii_keys_never_end_the_reader_and_estop_acts_in_every_state(tty_s
         con.close()
 
 
+def test_an_estop_after_c_is_never_cleared_by_it(tty_stdin, dev):
+    """c queued, then e before the session acts on the c, or while the clear is on its way
+    to the device: the device stays latched (the later key wins), and the operator is told
+    why; a c with no e-stop after it clears."""
+    import threading
+
+    class SlowClear:  # the clear takes a while to reach the device (a serial round trip)
+        def __init__(self, d):
+            self.d, self.fault, self.sent, self.go = d, None, threading.Event(), threading.Event()
+
+        def estop(self):
+            self.d.estop()
+
+        def clear_fault(self):
+            self.sent.set()
+            assert self.go.wait(5.0)
+            self.d.clear_fault()
+
+    slow = SlowClear(dev)
+    con = KeyConsole(slow, live=False)
+    try:
+        dev.estop()
+        con.set_state("fault")
+        os.write(tty_stdin, b"c")
+        assert _until(lambda: con.actions)
+        os.write(tty_stdin, b"e")  # the operator changed their mind before the c was acted on
+        assert _until(lambda: any("E-STOP latched" in m for m in con.view.messages))
+        assert con.poll(2.0) == "clear"
+        slow.go.set()
+        assert con.clear_fault(slow) == "an E-STOP was pressed after c"
+        assert dev.fault is not None and dev.fault.code == "estop"
+
+        slow.go.clear()
+        os.write(tty_stdin, b"c")
+        assert con.poll(2.0) == "clear"
+        done = []
+        worker = threading.Thread(target=lambda: done.append(con.clear_fault(slow)))
+        worker.start()
+        assert slow.sent.wait(5.0)
+        latched = lambda: sum("E-STOP latched" in m for m in con.view.messages)  # noqa: E731
+        n = latched()
+        os.write(tty_stdin, b"e")  # while the clear is on its way
+        assert _until(lambda: latched() > n)
+        slow.go.set()  # the clear reaches the device after the e-stop did
+        worker.join(5.0)
+        assert done == ["an E-STOP was pressed while it was being cleared, and is latched "
+                        "again"]
+        assert dev.fault is not None and dev.fault.code == "estop" and dev.output_force == 0.0
+
+        os.write(tty_stdin, b"c")  # nothing after it: cleared
+        assert con.poll(2.0) == "clear"
+        assert con.clear_fault(dev) is None and dev.fault is None
+    finally:
+        con.close()
+
+
 def test_an_estop_the_device_does_not_confirm_is_said_loudly(tty_stdin):
     """A link that fails as e is pressed: the console says the e-stop is not confirmed and
     names the device's own button, and the reader goes on."""
