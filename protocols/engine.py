@@ -48,6 +48,7 @@ tapped for comparison) does not change the order.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -400,8 +401,26 @@ class SessionEngine:
             elif status in ("saturated", "requeued", "timed_out"):
                 st.queue.pop(0)
                 self._reinsert(st.queue, head, rng, self._no_repeat[head.phase])
-            # aborted_device, estop: the item stays first and is retried
+            else:
+                continue  # aborted_device, estop: the item stays first and is retried
+            self._spread_rest(st.queue, head, rng)
         return st
+
+    def _spread_rest(self, queue: list[Item], last: Item, rng: np.random.Generator) -> None:
+        """With no_repeat, a next trial of the sample just tried (redraws and what the
+        participant finished moved things: the block's own next item, or the first of the
+        next block) is avoided by drawing the rest of its block again, where the items left
+        allow an order that begins with another sample."""
+        if not queue or not self._no_repeat[queue[0].phase] \
+                or queue[0].samples[0] != last.samples[0]:
+            return
+        span = 0
+        while span < len(queue) and (queue[span].phase, queue[span].block) == \
+                (queue[0].phase, queue[0].block):
+            span += 1
+        counts = Counter(it.samples[0] for it in queue[:span])
+        if _can_spread(counts, last.samples[0]):
+            queue[:span] = no_repeat_order(queue[:span], rng, last.samples[0])
 
     def cap(self, kind: str) -> int:
         """How many counted failures of ``kind`` (saturated, timed_out, aborted_device) end
@@ -418,7 +437,8 @@ class SessionEngine:
                   no_repeat: bool = False) -> None:
         """Put ``item`` back at a random position among the remaining items of its block;
         with ``no_repeat``, at a position with another sample on either side (the first
-        position follows the attempt just made, of this very sample), where there is one."""
+        position follows the attempt just made, of this very sample), where there is one,
+        else one with another sample before it."""
         span = 0
         while span < len(queue) and queue[span].phase == item.phase \
                 and queue[span].block == item.block:
@@ -426,9 +446,12 @@ class SessionEngine:
         places = list(range(span + 1))
         if no_repeat:
             s = item.samples[0]
-            apart = [i for i in places if i > 0 and queue[i - 1].samples[0] != s
-                     and (i == len(queue) or queue[i].samples[0] != s)]
-            places = apart or places
+            # not straight back, nor after its own sample; then, where it can, not before it
+            # either (the block's end counts as apart: a next block that would begin with
+            # this sample is drawn again when it comes, _spread_rest)
+            after = [i for i in places if i > 0 and queue[i - 1].samples[0] != s]
+            apart = [i for i in after if i == span or queue[i].samples[0] != s]
+            places = apart or after or places
         queue.insert(places[int(rng.integers(0, len(places)))], item)
 
     def _placement(self, item: Item, previous: str | None) -> str | None:
