@@ -65,6 +65,13 @@ class Participant:
         """Familiarization: another window? (default: one window)."""
         return False
 
+    def moving_on(self) -> bool:
+        """During an identification window (asked a few times a second): True once the
+        participant chose to go on — to another surface, or to answer — which ends the
+        window now; :meth:`choose_surface` then returns that choice. Default: never, each
+        window runs its duration."""
+        return False
+
     def choose_surface(self, trial, visited: set[int]) -> int | None:
         """Identification: which surface to tap next (index), or None to answer. Default:
         each surface once, in order."""

@@ -541,6 +541,7 @@ class SessionRunner:
                                          "for this trial")
             row.update(rating=int(rating), response_time=round(float(rt), 3))
         elif trial.kind == "identification":
+            self.console.set_state("rating")  # naming the surfaces: the operator's e acts
             answers, rt = self.participant_ui.identify(trial, self.protocol.answer.choices,
                                                        results, rng)
             row.update(answer=",".join(answers), response_time=round(float(rt), 3),
@@ -565,13 +566,17 @@ class SessionRunner:
         w = self.protocol.window
 
         shown = 0
+        ended = False
 
         def progress(t, partial):
-            nonlocal shown
+            nonlocal shown, ended
             for c in partial.contacts[shown:]:  # live incoming speeds for the operator
                 self.console.contact(c.velocity)
             shown = len(partial.contacts)
             self.participant_ui.progress(t, partial, w.duration)
+            if trial.kind == "identification" and not ended and self.participant_ui.moving_on():
+                ended = True  # the participant went to another surface, or to answer
+                dev.end_window()
 
         res = dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
         if res.timing:

@@ -109,6 +109,13 @@ class PsychoPyScreen(Participant):
         self._waiting: tuple | None = None  # what the "please wait" screen shows, while shown
         self.drawn_text: list[str] = []  # what the last frame said (tests read it)
         self._done = False
+        # identification: the surface being tapped, those tapped before it, and where the
+        # participant went during its window (a surface's index, or None: to answer)
+        self._surface_now: int | None = None
+        self._n_surfaces = 0
+        self._visited: set[int] = set()
+        self._moving = False
+        self._moved_to: int | None = None
         self._notice = ""  # said once on the next 'please wait' (a saturated trial)
         self._tapping = ""  # the title while tapping ('Tap', 'Tap · Surface 2')
         self._detail = ""  # and the line below it
@@ -286,9 +293,17 @@ class PsychoPyScreen(Participant):
     def before_window(self, trial, sample_id, device, rng) -> None:
         self._height = None
         self._tapping = self._tap_title(trial, sample_id)
+        self._surface_now = None
         self._detail = (self.t("reference_detail", block=trial.placement or sample_id)
                         if trial.kind == "reference" else
                         self.t("done_hint") if trial.kind == "free" else "")
+        if trial.kind == "identification" and sample_id in trial.samples:
+            self._surface_now = now = trial.samples.index(sample_id)
+            n = len(trial.samples)
+            others = ", ".join(str(i + 1) for i in range(n) if i != now)
+            self._detail = self.t("switch_hint", keys=others) + (
+                f"   — {self.t('name_hint')}" if self._visited | {now} >= set(range(n))
+                else "")
         self._frame(self._tapping, self._detail, cursor=True)
 
     def keep_tapping(self) -> bool:
@@ -303,6 +318,8 @@ class PsychoPyScreen(Participant):
             p.name == self._shown_phase and p.kind == "free" for p in self.protocol.phases)
         if free and "return" in keys:
             self._done = True
+        if self._surface_now is not None and not self._moving:
+            self._move_on(keys)
         self._height = partial.live_height
         started = partial.t_first_contact is not None or bool(partial.contacts)
         self._frame(self._tapping or self.t("tap"), self._detail, cursor=True,
@@ -409,9 +426,31 @@ class PsychoPyScreen(Participant):
         finally:
             self._slider = None
 
+    def _move_on(self, keys: list[str]) -> None:
+        """During an identification window: another surface's number key, or N once every
+        surface has been tapped, ends the window and goes there (the surface being tapped
+        and other keys do nothing)."""
+        n = self._n_surfaces
+        for k in keys:
+            k = k.removeprefix("num_")
+            if k.isdigit() and 1 <= int(k) <= n and int(k) - 1 != self._surface_now:
+                self._moving, self._moved_to = True, int(k) - 1
+                return
+            if k == "n" and self._visited | {self._surface_now} >= set(range(n)):
+                self._moving, self._moved_to = True, None
+                return
+
+    def moving_on(self) -> bool:
+        return self._moving
+
     def choose_surface(self, trial, visited: set[int]) -> int | None:
-        """Identification: number keys choose a surface to tap; N (once all were tapped)."""
-        n = len(trial.samples)
+        """Identification: number keys choose a surface to tap; N (once all were tapped).
+        A choice made during the last window is taken at once."""
+        self._visited, self._surface_now = set(visited), None
+        self._n_surfaces = n = len(trial.samples)
+        if self._moving:
+            self._moving = False
+            return self._moved_to
         keys = ", ".join(str(i + 1) for i in range(n))
         valid = [str(i + 1) for i in range(n)] + [f"num_{i + 1}" for i in range(n)] + (
             ["n"] if len(visited) == n else [])

@@ -192,6 +192,14 @@ class HapticDevice(ABC):
         return self._run_window(float(duration), bool(from_first_contact), float(timeout),
                                 on_progress, bool(heartbeats))
 
+    def end_window(self) -> None:
+        """End the running window now, before its duration is up: the participant moved on
+        (in identification, to another surface). Call it from ``on_progress`` or another
+        thread; :meth:`run_window` then returns what was recorded up to the tick the device
+        ended on, the output staying on (homed). Between windows it does nothing."""
+        self._check_open()
+        self._end_window()
+
     def play_force(self, force, *, heartbeats: bool = True) -> WindowResult:
         """Play an open-loop force command [N per servo tick] while the hand holds still.
 
@@ -342,6 +350,10 @@ class HapticDevice(ABC):
     def _run_window(self, duration: float, from_first_contact: bool, timeout: float,
                     on_progress, heartbeats: bool) -> WindowResult:
         """Run one window (arguments checked)."""
+
+    @abstractmethod
+    def _end_window(self) -> None:
+        """End the running window at the device's next tick (nothing when none runs)."""
 
     @abstractmethod
     def _play_force(self, force: np.ndarray, heartbeats: bool) -> WindowResult:

@@ -186,6 +186,32 @@ def check_estop(opener: Opener) -> str:
         return f"latched at t={res.faults[0].t:.3f} s; cleared and re-homed"
 
 
+def check_end_window(opener: Opener) -> str:
+    """A participant who moves on ends a window before its duration: the result covers the
+    ticks up to the device's end, no fault, output still on for the next window."""
+    with opener() as dev:
+        asked = 10.0
+
+        def move_on(t: float, _partial: WindowResult) -> None:
+            if t >= 0.3:
+                dev.end_window()
+
+        res = _window(dev, SUITE_SCENES["firm_spring"], asked, from_first_contact=False,
+                      on_progress=move_on)
+        _require(not res.faults and not res.timed_out,
+                 f"faults {res.faults}, timed out {res.timed_out}")
+        span = res.traces["t"][-1] - res.traces["t"][0]
+        _require(span < asked - 1.0, f"a window ended at 0.3 s ran {span:.3f} s of {asked:g}")
+        again = dev.run_window(0.2, from_first_contact=False)  # homed still: no home() here
+        _require(not again.faults and again.traces["t"].size > 0, "no window after the end")
+        dev.end_window()  # between windows: nothing
+        # ended at once, perhaps before any contact: not a window that timed out
+        now = dev.run_window(asked, timeout=30.0, on_progress=lambda t, p: dev.end_window())
+        _require(not now.timed_out and not now.faults,
+                 f"a window ended at once: timed out {now.timed_out}, faults {now.faults}")
+        return f"ended after {span:.3f} s of a {asked:g}-s window; the next ran homed"
+
+
 def check_watchdog(opener: Opener) -> str:
     with opener() as dev:
         sc = SUITE_SCENES["firm_spring"]
@@ -291,6 +317,7 @@ CHECKS: dict[str, Callable[[Opener], str]] = {
     "saturation": check_saturation,
     "window_length": check_window_length,
     "estop": check_estop,
+    "end_window": check_end_window,
     "watchdog": check_watchdog,
     "ramp": check_ramp,
     "zero_on_exit": check_zero_on_exit,

@@ -9,8 +9,9 @@ surface keys), ``{names}`` (the answer keys and names), ``{list}`` (surfaces tap
 
 The keys these texts name are the keys the screen uses: SPACE begins a phase, ENTER ends
 familiarization and confirms a typed or slider rating, R asks for the real block again,
-number keys choose surfaces and name them (and, where a phase has several real blocks, the
-block to tap again), N starts naming.
+number keys choose surfaces (also during a surface's window, which then ends) and name
+them (and, where a phase has several real blocks, the block to tap again), N starts
+naming.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ INSTRUCTIONS_BY_KIND = {
             "press ENTER.\n\nPress SPACE to begin.",
     "rated": "You will tap on a series of samples, one at a time, and rate each one.\n\n"
              "Press SPACE to begin.",
-    "identification": "One scene, {n} surfaces. Press {keys} to choose a surface and tap it.\n"
+    "identification": "One scene, {n} surfaces. Press {keys} to choose a surface and tap it;\n"
+                      "press another number at any time to go to that surface.\n"
                       "When you have tapped them all, press N to name each one.\n\n"
                       "Press SPACE to begin.",
 }
@@ -51,6 +53,7 @@ DEFAULT_TEXTS: dict[str, str] = {
     "choose": "Choose a surface: {keys}",
     "tapped": "tapped: {list}",
     "name_hint": "press N to name them",
+    "switch_hint": "another surface: {keys}",
     "name": "Surface {i} is …",
     "names": "{names}",
     "paused": "Paused",

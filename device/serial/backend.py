@@ -550,6 +550,9 @@ class SerialDevice(HapticDevice):
                 f"passed; link: {st['lost']} frames missing, {st['crc_errors']} failed their "
                 f"CRC, {st['other_errors']} other errors)")
 
+    def _end_window(self) -> None:
+        self._command(M.StopWindow())  # OK in every state; the window's WINDOW_DONE follows
+
     def _stop_window(self) -> None:
         """Best effort: end a window the host gave up on, so the device is free again."""
         try:

@@ -371,7 +371,7 @@ class SimDevice(HapticDevice):
         ss = np.random.SeedSequence(entropy)
         self.rng_tapping, self.rng_noise = (np.random.default_rng(c) for c in ss.spawn(2))
 
-    def request_stop(self) -> None:
+    def _end_window(self) -> None:
         """End the running window at the next chunk (from another thread or a callback)."""
         self._stop_requested = True
 
@@ -426,9 +426,12 @@ class SimDevice(HapticDevice):
         # the enable ramp ran from HOME in device time: a live device's clock ran meanwhile
         self._ist[K.IST_SINCE_ENABLE] = max(int(self._ist[K.IST_SINCE_ENABLE]),
                                             self._tick - self._tick_enabled)
+        tick0 = self._tick
         res = self._run(cs, plan, n_max, stop_after, _EMPTY, on_progress, heartbeats,
                         timeout if from_first_contact else None, duration + 2.0)
-        res.timed_out = from_first_contact and res.t_first_contact is None
+        # no contact within the timeout; a window ended sooner (end_window, a fault) is not
+        res.timed_out = (from_first_contact and res.t_first_contact is None
+                         and (self._tick - tick0) * dev.dt >= timeout - dev.dt / 2)
         return res
 
     def _play_force(self, f: np.ndarray, heartbeats: bool) -> WindowResult:

@@ -94,6 +94,48 @@ def test_the_participant_chooses_which_real_block_and_it_is_recorded(identificat
     assert len(set(scenes)) > 1 or len(scenes) == 1  # the scenes differ: no fixed cue
 
 
+class MovesOn(ScriptedResponder):
+    """Taps surface 1 briefly and goes to surface 2 mid-window, taps surface 2 its whole
+    window, then surface 3 briefly and goes to naming mid-window."""
+
+    def __init__(self):
+        self.asked = 0  # moving_on() calls in the window so far
+        self.plan: list[int | None] = []
+
+    def choose_surface(self, trial, visited):
+        if not visited:
+            self.plan = [0, 1, 2, None]
+        self.asked = 0
+        return self.plan.pop(0)
+
+    def moving_on(self):
+        self.asked += 1
+        return self.plan[0] != 2 and self.asked >= 3  # not during surface 2's window
+
+
+def test_identification_goes_to_another_surface_mid_window(tmp_path):
+    """Issue 30 (9): a participant who moves on ends the surface's window at once (on the
+    device: STOP_WINDOW, checked on every target by ``device selftest``'s end_window)."""
+    p = _identification(duration=3.0, repetitions=1)
+    folder, n = new_session_dir(tmp_path, "P01")
+    files = SessionFiles(folder)
+    files.start("")
+    runner = SessionRunner(p, SessionEngine(p, 7, "P01"), open_device("sim", seed=7), files,
+                           MovesOn(), "P01", n, 7, traces="full")
+    assert runner.run() == "complete"
+    rows, _ = read_trials(folder / "trials.tsv")
+    scenes = [r for r in rows if r["phase"] == "identification" and r["status"] != "reference"]
+    assert [r["status"] for r in scenes] == ["valid"]
+    for r in scenes:
+        spans = []
+        for k in range(3):
+            with np.load(folder / "traces" / f"trial-{int(r['trial_index']):04d}-{k}.npz") as z:
+                spans.append(len(z["position_counts"]) / float(z["rate_hz"]))
+        # surfaces 1 and 3 ended after three progress calls (a fraction of a second of
+        # device time); surface 2 ran its 3 s from its first contact
+        assert spans[0] < 1.0 and spans[2] < 1.0 and spans[1] >= 3.0, spans
+
+
 def test_the_recorder_never_overwrites_a_recording(tmp_path):
     folder, _ = new_session_dir(tmp_path, "P01")
     files = SessionFiles(folder)

@@ -219,6 +219,40 @@ def test_identification_surfaces_and_names_by_number_keys(xdisplay, shots):
         scr.close()
 
 
+def test_identification_switches_surface_during_a_window(xdisplay, shots):
+    """Issue 30 (9): during a surface's window another surface's number ends it and goes
+    there; the surface's own number does nothing, N only once every surface was tapped."""
+    keys = Keys([], ["1"],  # choose surface 1 before any window
+                ["1"], ["3"],  # tapping 1: its own key nothing, 3 moves on
+                ["n"], ["num_2"],  # tapping 3: N refused (2 not tapped yet), 2 moves on
+                ["n"])  # tapping 2: all tapped, N goes to naming
+    scr = make("identification", keys)
+    partial = WindowResult(10_000, 1.0, [ContactEvent(1.0, 0.1)])
+    partial.live_height = 0.004
+    try:
+        visited: set[int] = set()
+        order, moves = [], []
+        while (k := scr.choose_surface(ID_TRIAL, visited)) is not None:
+            order.append(k)
+            scr.before_window(ID_TRIAL, ID_TRIAL.samples[k], None, None)
+            if k == 2:
+                assert scr.drawn_text == ["Tap · Surface 3", "another surface: 1, 2"]
+                scr.screenshot(shots / "identification-switch.png", text=scr.drawn_text[0],
+                               small=scr.drawn_text[1], cursor=True, progress=0.4)
+            if k == 1:
+                assert scr.drawn_text[1] == "another surface: 1, 3   — press N to name them"
+            polls = 0
+            while not scr.moving_on():
+                scr.progress(1.0, partial, 20.0)
+                polls += 1
+            moves.append(polls)
+            visited.add(k)
+        assert order == [0, 2, 1]
+        assert moves == [2, 2, 1]  # the own key and an early N did not end a window
+    finally:
+        scr.close()
+
+
 def test_identification_real_block_choice_saturation_notice_and_surface_title(xdisplay,
                                                                               shots):
     """R in identification: the participant picks which real block (by number, in the

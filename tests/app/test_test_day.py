@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from analysis.session_format import read_trials
@@ -135,6 +136,56 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     assert meta["participant"]["debrief"] == "A sudden stop (100%)!?."
     assert [n["text"] for n in meta["notes"]] == ["grip steady"]
     assert meta["summary"].startswith("5 valid, 0 saturated, 0 excluded, 0 skipped")
+
+
+def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory, xdisplay,
+                                                                terminal, participant, shots,
+                                                                tmp_path):
+    """Identification as a person does it (issue 30, 9), on the reference firmware on a
+    pty: another surface's key during a 20-s window ends it at once and goes there; N ends
+    the last one and goes to naming. Without the early end the keys wait for the windows'
+    20 s each and the naming keys are refused: the session would not end in time."""
+    emu = emulator_factory(13, "--firmware", "host")
+    proto = tmp_path / "identify.toml"
+    proto.write_text((ROOT / "protocols" / "identification.toml").read_text()
+                     .replace("repetitions = 3", "repetitions = 1")
+                     .replace('references = "start"', 'references = "none"'))
+    data = tmp_path / "data"
+    t = terminal("person", [*PY, "run", str(proto), "--participant", "P05", "--device",
+                            f"serial:{emu.port}", "--no-audio", "--seed", "5", "--data",
+                            str(data)], env(xdisplay), cwd=tmp_path)
+    t.wait("placing: r ready")
+    t.keys("r")
+    time.sleep(1.0)
+    participant.press("space")  # the instructions
+    t.wait("trial: e E-STOP")
+    time.sleep(0.5)
+    t0 = time.monotonic()
+    participant.press("1")  # surface 1's window: 20 s from its first contact
+    time.sleep(2.0)
+    participant.press("3")  # to surface 3, now
+    time.sleep(1.5)
+    participant.screenshot(shots / "identification-switched.png")
+    participant.press("2")
+    time.sleep(1.5)
+    participant.press("n")  # all three tapped: to naming, now
+    t.wait("rating: e E-STOP", timeout=15)  # the windows did not run their 20 s
+    waited = time.monotonic() - t0
+    for name in ("1", "2", "3"):
+        time.sleep(0.5)
+        participant.press(name)
+    t.wait("the participant is answering the debrief question")
+    time.sleep(0.5)
+    participant.press("x", "Return")
+    assert t.exit_code(90) == 0
+    assert waited < 30, waited  # far less than the three windows' 60 s
+    folder = data / "sub-P05" / "ses-1"
+    (row,) = [r for r in rows_of(folder) if r["phase"] == "identification"]
+    assert row["status"] == "valid" and row["answer"]
+    for k in range(3):
+        with np.load(folder / "traces" / f"trial-0001-{k}.npz") as z:
+            seconds = len(z["position_counts"]) / float(z["rate_hz"])
+        assert seconds < 10.0, (k, seconds)  # each window ended when the person moved on
 
 
 def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp_path):

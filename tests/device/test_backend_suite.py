@@ -62,6 +62,10 @@ class _Lying(HapticDevice):
     def _play_force(self, force, heartbeats):
         return self.inner.play_force(force, heartbeats=heartbeats)
 
+    def _end_window(self):
+        if self.lie != "no_end":
+            self.inner.end_window()
+
     def heartbeat(self):
         self.inner.heartbeat()
 
@@ -85,6 +89,7 @@ class _Lying(HapticDevice):
     ("unclamped", "saturation"),
     ("no_fault", "watchdog"),
     ("no_estop", "estop"),
+    ("no_end", "end_window"),
 ])
 def test_checks_catch_a_device_that_breaks_its_contract(lie, check):
     with pytest.raises(CheckFailed):

@@ -42,14 +42,14 @@ def firmware_board():
 
 
 def assert_selftest_passes(port: str) -> None:
-    """`hapticlab device selftest serial:PORT --json`, as an operator runs it: 12 of 12."""
+    """`hapticlab device selftest serial:PORT --json`, as an operator runs it: 13 of 13."""
     run = subprocess.run([sys.executable, "-m", "app", "device", "selftest",
                           f"serial:{port}", "--json"],
                          capture_output=True, text=True, timeout=600)
     report = json.loads(run.stdout)
     failed = [c for c in report["checks"] if not c["ok"]]
     assert report["failed"] == 0, failed
-    assert report["passed"] == len(report["checks"]) == 12
+    assert report["passed"] == len(report["checks"]) == 13
     assert run.returncode == 0
 
 
