@@ -475,6 +475,7 @@ class SessionRunner:
                 visited: set[int] = set()
                 by_surface: dict[int, Any] = {}
                 while (k := self.participant_ui.choose_surface(trial, visited)) is not None:
+                    self.console.say(f"  surface {k + 1} of {len(trial.samples)}: tapping")
                     by_surface[k] = self._window(trial, trial.samples[k], rng)
                     visited.add(k)
                 results = [by_surface[k] for k in sorted(by_surface)]
