@@ -51,6 +51,7 @@ KEYS: dict[str, dict[str, str]] = {
     "fault": {"c": "clear", "q": "abort", "n": "note", "e": "estop"},
     "reference": {"r": "go", "n": "note", "e": "estop"},
     "idle": {"e": "estop"},
+    "clearing": {"e": "estop"},  # the c is being acted on: nothing else queues
 }
 _NAMES = {"go": "ready", "skip": "skip", "requeue": "re-queue", "pause": "pause",
           "abort": "stop and save", "note": "note", "estop": "E-STOP", "resume": "resume",
@@ -175,8 +176,10 @@ class KeyConsole(PlainConsole):
         self._stop = threading.Event()
         self._cv = threading.Condition()
         self._note: list[str] | None = None  # characters of a note being typed
-        self._estops = 0  # e-stop keys pressed so far (only the reader counts them)
-        self._estops_at_key = 0  # ... when the queued action's key was pressed
+        self._estops = 0  # e-stop keys pressed so far
+        self._counting = threading.Lock()  # the reader and a re-sent e-stop both count
+        self._marks: deque[int] = deque()  # _estops when each queued action's key came
+        self._polled_mark = 0  # ... and for the action poll() returned last
         self._esc = ""  # an escape sequence being skipped ("", ESC, "[" or "O")
         self._live = None
         if live:
@@ -284,7 +287,8 @@ class KeyConsole(PlainConsole):
         return True
 
     def _estop(self) -> None:
-        self._estops += 1  # before the device is told: a clear on its way sees it
+        with self._counting:  # before the device is told: a clear on its way sees it
+            self._estops += 1
         try:
             self.device.estop()
         except Exception as exc:  # noqa: BLE001 — said, never swallowed: the operator acts
@@ -332,13 +336,14 @@ class KeyConsole(PlainConsole):
                 self.say(f"key '{key}' ignored: '{_NAMES[self.actions[0]]}' was pressed first")
                 return
             self.actions.append(action)
-            self._estops_at_key = self._estops
+            self._marks.append(self._estops)
             self._cv.notify_all()
 
     def set_state(self, state: str) -> None:
         with self._cv:
             self.view.state = state
             self.actions.clear()  # nothing pressed in another state acts in this one
+            self._marks.clear()
 
     def poll(self, timeout: float = 0.0) -> str | None:
         with self._cv:
@@ -347,16 +352,20 @@ class KeyConsole(PlainConsole):
             if not self.actions:
                 return None
             action = self.actions.popleft()
+            self._polled_mark = self._marks.popleft()
             if action == "go":  # the trial starts now: a second r already belongs to it
                 self.view.state = "trial"
+            if action == "clear":  # keys pressed while it is acted on are said ignored
+                self.view.state = "clearing"
             self.actions.clear()
+            self._marks.clear()
             return action
 
     def clear_fault(self, device) -> str | None:
         """Clear ``device``'s fault for the c key, unless an e-stop was pressed after it: the
         later key wins. The e-stop never waits for this (the reader sends it at once), so
         one pressed while the clear is on its way is sent again once the clear is done."""
-        pressed = self._estops_at_key
+        pressed = self._polled_mark
         if self._estops != pressed:
             return "an E-STOP was pressed after c"
         device.clear_fault()

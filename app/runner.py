@@ -339,6 +339,7 @@ class SessionRunner:
                 except DeviceFaultError as exc:  # the device keeps it (its button is held)
                     why = str(exc)
                 if why:
+                    self.console.set_state("fault")
                     self.console.say(f"c: not cleared: {why}. Press c again once it is "
                                      "safe, or q to stop and save")
                     continue

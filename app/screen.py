@@ -293,7 +293,7 @@ class PsychoPyScreen(Participant):
     def before_window(self, trial, sample_id, device, rng) -> None:
         self._height = None
         self._tapping = self._tap_title(trial, sample_id)
-        self._surface_now = None
+        self._surface_now, self._moving = None, False
         self._detail = (self.t("reference_detail", block=trial.placement or sample_id)
                         if trial.kind == "reference" else
                         self.t("done_hint") if trial.kind == "free" else "")

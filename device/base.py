@@ -194,9 +194,11 @@ class HapticDevice(ABC):
 
     def end_window(self) -> None:
         """End the running window now, before its duration is up: the participant moved on
-        (in identification, to another surface). Call it from ``on_progress`` or another
-        thread; :meth:`run_window` then returns what was recorded up to the tick the device
-        ended on, the output staying on (homed). Between windows it does nothing."""
+        (in identification, to another surface). Call it from that window's
+        ``on_progress``: a request names no window, so one sent from another thread as a
+        window ends could reach the next. :meth:`run_window` then returns what was recorded
+        up to the tick the device ended on, the output staying on (homed). Between windows
+        it does nothing; a device that does not answer lets the window run its time."""
         self._check_open()
         self._end_window()
 

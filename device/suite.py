@@ -202,9 +202,11 @@ def check_end_window(opener: Opener) -> str:
                  f"faults {res.faults}, timed out {res.timed_out}")
         span = res.traces["t"][-1] - res.traces["t"][0]
         _require(span < asked - 1.0, f"a window ended at 0.3 s ran {span:.3f} s of {asked:g}")
+        dev.end_window()  # between windows: nothing, also not to the next window
         again = dev.run_window(0.2, from_first_contact=False)  # homed still: no home() here
-        _require(not again.faults and again.traces["t"].size > 0, "no window after the end")
-        dev.end_window()  # between windows: nothing
+        ran = again.traces["t"][-1] - again.traces["t"][0] if again.traces["t"].size else 0.0
+        _require(not again.faults and ran >= 0.2 - 2.0 / again.rate_hz,  # its last record
+                 f"the window after an end between windows ran {ran:.4f} s of 0.2")
         # ended at once, perhaps before any contact: not a window that timed out
         now = dev.run_window(asked, timeout=30.0, on_progress=lambda t, p: dev.end_window())
         _require(not now.timed_out and not now.faults,

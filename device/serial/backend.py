@@ -551,7 +551,13 @@ class SerialDevice(HapticDevice):
                 f"CRC, {st['other_errors']} other errors)")
 
     def _end_window(self) -> None:
-        self._command(M.StopWindow())  # OK in every state; the window's WINDOW_DONE follows
+        """STOP_WINDOW (OK in every state; the window's WINDOW_DONE follows). Best effort:
+        unanswered, the window runs its time, as it would have without the request; the
+        session is not given up for it."""
+        try:
+            self._command(M.StopWindow())
+        except DeviceError:
+            pass
 
     def _stop_window(self) -> None:
         """Best effort: end a window the host gave up on, so the device is free again."""

@@ -66,8 +66,13 @@ def wait(host: Host, seconds: float) -> None:
 
 
 def collect(host: Host, until, limit: float = 10.0) -> list[M.Message]:
-    """Every message up to and including the first for which ``until`` is true."""
+    """Every message up to and including the first for which ``until`` is true, beginning
+    with those that came while the last command awaited its ACK."""
     seen: list[M.Message] = []
+    while host.backlog:
+        seen.append(host.backlog.pop(0))
+        if until(seen[-1]):
+            return seen
 
     def pred(m):
         seen.append(m)
@@ -193,10 +198,11 @@ def test_a_fault_ends_a_playback_at_once(host):
 @pytest.mark.parametrize("host", ["host"], indirect=True)
 def test_a_host_that_stalls_past_the_watchdog_is_given_another_attempt(host):
     """What a loaded run of the suite met (issue 29): the pytest process stalled past the
-    device's 100-ms watchdog during a playback, the watchdog ended it, and the WINDOW_DONE
-    went by while the host awaited its ESTOP's ACK. That attempt proves nothing about the
-    device, so ``deadline_kept`` runs it again; anything else still fails at once."""
-    with pytest.raises(AssertionError, match="did not answer"):
+    device's 100-ms watchdog during a playback, and the watchdog ended it before the ESTOP
+    came (the host then also dropped the WINDOW_DONE that came before the ESTOP's ACK, and
+    failed with 'the device did not answer'). That attempt proves nothing about the device,
+    so ``deadline_kept`` runs it again; anything else still fails at once."""
+    with pytest.raises(AssertionError, match="FaultCode"):  # the watchdog's, not ESTOP's
         _fault_ends_playback(host, stall=0.5)
     assert host.watchdog
     host.ask(M.ClearFault())
@@ -208,7 +214,8 @@ def test_a_host_that_stalls_past_the_watchdog_is_given_another_attempt(host):
         _fault_ends_playback(host, stall=stalls.pop() if stalls else 0.0)
 
     host.attempts(once, lambda: host.ask(M.ClearFault()))
-    assert len(tries) == 2
+    assert len(tries) >= 2  # (more when this machine stalled the process again)
+    n = len(tries)
 
     def wrong():  # a failure with no watchdog fault is the device's answer: no second try
         tries.append(1)
@@ -216,7 +223,7 @@ def test_a_host_that_stalls_past_the_watchdog_is_given_another_attempt(host):
 
     with pytest.raises(AssertionError, match="not this host's timing"):
         host.attempts(wrong)
-    assert len(tries) == 3
+    assert len(tries) == n + 1
 
 
 @deadline_kept
