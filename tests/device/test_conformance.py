@@ -21,7 +21,7 @@ from device.serial import messages as M
 from device.serial.framing import encode_frame
 
 from ..conftest import start_emulator, stop_emulator
-from .test_state_table import Host
+from .test_state_table import ANSWER_S, Host
 
 TARGETS = ["python", "host", "host-board", "host-san"]
 SPRING = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
@@ -281,7 +281,7 @@ def test_a_half_frame_left_behind_does_not_swallow_the_next_hello(host):
     host.write(b"\x00")
     host.seq += 1
     host.write(M.encode(M.Hello(2), host.seq, 1))
-    ack = host._pump(lambda m: isinstance(m, M.HelloAck), 2.0)
+    ack = host._pump(lambda m: isinstance(m, M.HelloAck), ANSWER_S)
     assert ack.protocol == 2
 
 

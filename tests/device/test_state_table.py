@@ -33,6 +33,10 @@ WATCHDOG = next(code for code, name in FAULTS.items() if name == "watchdog")
 #: attempts at one cell when this host's own heartbeat came late (a watchdog fault is the
 #: loaded host's timing, not the table's answer)
 ATTEMPTS = 6
+#: the longest this host waits for an answer or a STATUS [s]: no deadline the document
+#: sets, only a bound for a dead device; generous, as the Python emulator beside two
+#: CPU-bound processes once sent nothing for over 2 s (a loaded run of the suite)
+ANSWER_S = 10.0
 
 #: one valid instance of the command each row names (the first name of a row that names
 #: several: the others share its column of statuses)
@@ -138,20 +142,20 @@ class Host:
             else:
                 raise AssertionError("no HELLO_ACK in 5 s")
             self.rating_ma, self.watchdog_ms = ack.current_limit_ma, ack.watchdog_ms
-            self.limits = self._pump(lambda m: isinstance(m, M.Limits), 2.0)
+            self.limits = self._pump(lambda m: isinstance(m, M.Limits), ANSWER_S)
             return "hello"
         self.write(M.encode(msg, self.seq, 2))
         if isinstance(msg, M.Ping):
-            self._pump(lambda m: isinstance(m, M.Pong), 2.0)
+            self._pump(lambda m: isinstance(m, M.Pong), ANSWER_S)
             return "pong"
         seq = self.seq
         # a device may send what the command set off (a FAULT after ESTOP) before its ACK:
         # kept for the next collect
         self.backlog = []
-        status = self._pump(lambda m: isinstance(m, M.Ack) and m.ack_seq == seq, 2.0,
+        status = self._pump(lambda m: isinstance(m, M.Ack) and m.ack_seq == seq, ANSWER_S,
                             self.backlog).status
         if isinstance(msg, M.LinkQuery) and status == M.Status.OK:  # the report follows
-            report = self._pump(lambda m: isinstance(m, M.LinkReport), 2.0)
+            report = self._pump(lambda m: isinstance(m, M.LinkReport), ANSWER_S)
             assert report.frames >= 1 and len(report.items) == M.LINK_GAP_BINS
             self.link_report = report
         return status
@@ -159,7 +163,8 @@ class Host:
     def settled_state(self) -> str:
         """The state a STATUS sent after now reports (two reports on: one may be in flight)."""
         n = self.status_count
-        self._pump(lambda m: isinstance(m, M.StatusReport) and self.status_count >= n + 2, 2.0)
+        self._pump(lambda m: isinstance(m, M.StatusReport) and self.status_count >= n + 2,
+                   ANSWER_S)
         return STATES[self.state]
 
     def reset(self) -> None:
