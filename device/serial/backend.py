@@ -551,18 +551,16 @@ class SerialDevice(HapticDevice):
                 f"CRC, {st['other_errors']} other errors)")
 
     def _end_window(self) -> None:
-        """STOP_WINDOW (OK in every state; the window's WINDOW_DONE follows). Best effort:
-        unanswered, the window runs its time, as it would have without the request; the
-        session is not given up for it."""
-        try:
-            self._command(M.StopWindow())
-        except DeviceError:
-            pass
+        """STOP_WINDOW with the link's usual tries (OK in every state; the window's
+        WINDOW_DONE follows). Unanswered, the window runs its time, as it would have without
+        the request; the session is not given up for it."""
+        self._stop_window(timeout=None)
 
-    def _stop_window(self) -> None:
-        """Best effort: end a window the host gave up on, so the device is free again."""
+    def _stop_window(self, timeout: float | None = 0.05) -> None:
+        """Best effort: end a window (one the host gave up on: one short try, so the device
+        is free again)."""
         try:
-            self.link.request(M.StopWindow(), timeout=0.05)
+            self.link.request(M.StopWindow(), timeout=timeout)
         except DeviceError:
             pass
 

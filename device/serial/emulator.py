@@ -234,14 +234,14 @@ class Emulator:
 
     def stop(self) -> None:
         self._stop.set()
-        self.sim.end_window()
+        self.sim.request_stop()
 
     def _stop_run(self) -> None:
         """End the running window or playback at the next block, even one whose worker has
         not reached the servo loop yet (the loop clears stale requests when it starts, so
         the worker asks again before each block: :meth:`_input_read`)."""
         self._stop_asked = True
-        self.sim.end_window()
+        self.sim.request_stop()
 
     def _input_read(self) -> None:
         """From the servo worker before each block: wait until the serve loop has read the
@@ -249,7 +249,7 @@ class Emulator:
         arrived but were not read (the worker's clock slips meanwhile); a stop asked
         before the block is passed on."""
         if self._stop_asked:
-            self.sim.end_window()
+            self.sim.request_stop()
         while time.monotonic() - self._turn > INPUT_TURN_S and not self._stop.is_set():
             time.sleep(0.0005)
 
@@ -694,7 +694,7 @@ class Emulator:
             sent = len(partial.contacts)
             if self.sim.fault is not None and self.sim.output_latched_off:
                 self._report_fault()  # output is latched off: the window is over
-                self.sim.end_window()
+                self.sim.request_stop()
 
         res = self.sim.run_window(msg.duration_ms / 1000,
                                   from_first_contact=bool(msg.from_contact),

@@ -371,9 +371,13 @@ class SimDevice(HapticDevice):
         ss = np.random.SeedSequence(entropy)
         self.rng_tapping, self.rng_noise = (np.random.default_rng(c) for c in ss.spawn(2))
 
-    def _end_window(self) -> None:
-        """End the running window at the next chunk (from another thread or a callback)."""
+    def request_stop(self) -> None:
+        """End the running window at the next chunk (from another thread or a callback);
+        unlike :meth:`end_window`, also on a closed device (an emulator shutting down)."""
         self._stop_requested = True
+
+    def _end_window(self) -> None:
+        self.request_stop()
 
     def trip_watchdog(self) -> None:
         """Latch a watchdog fault (used by an emulator when the host falls silent between
