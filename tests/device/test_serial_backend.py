@@ -308,29 +308,49 @@ class _RawHost:
         self.port.write(M.encode(msg, self.seq, v))
         return self.seq
 
-    def read_until(self, pred, limit=10.0):
+    def _read(self):
         from device.serial import messages as M
 
+        got = [M.decode(f) for f in self.dec.feed(self.port.read(4096))]
+        self.seen.extend(got)  # arrival order, whoever looks at them
+        self.pending.extend(got)
+
+    def read_until(self, pred, limit=10.0):
+        """Consume frames in arrival order up to and including the first that ``pred``
+        accepts."""
         end = time.monotonic() + limit
         while True:
             while self.pending:  # frames read but not yet looked at, in order
                 m = self.pending.popleft()
-                self.seen.append(m)
                 if pred(m):
                     return m
             if time.monotonic() >= end:
                 raise AssertionError("the device did not answer")
-            self.pending.extend(M.decode(f) for f in self.dec.feed(self.port.read(4096)))
+            self._read()
+
+    def _answer(self, pred, limit=10.0):
+        """Take the first frame ``pred`` accepts and leave every other for ``read_until``:
+        a device may send a FAULT (or WINDOW_DONE) before the ACK of the ESTOP that caused
+        it, and a host that drops frames while it awaits an ACK loses it."""
+        end = time.monotonic() + limit
+        while True:
+            for i, m in enumerate(self.pending):
+                if pred(m):
+                    del self.pending[i]
+                    return m
+            if time.monotonic() >= end:
+                raise AssertionError("the device did not answer")
+            self._read()
 
     def ask(self, msg, version=None):
         from device.serial import messages as M
 
         seq = self.send(msg, version)
         if isinstance(msg, M.Hello):
-            return self.read_until(lambda m: isinstance(m, M.HelloAck)) and "hello"
+            return self._answer(lambda m: isinstance(m, M.HelloAck)) and "hello"
         if isinstance(msg, M.Ping):
-            return self.read_until(lambda m: isinstance(m, M.Pong)) and "pong"
-        return self.read_until(lambda m: isinstance(m, M.Ack) and m.ack_seq == seq).status
+            return self._answer(lambda m: isinstance(m, M.Pong)) and "pong"
+        return self._answer(lambda m: isinstance(m, M.Ack) and m.ack_seq == seq).status
 
     def close(self):
         self.port.close()
