@@ -469,17 +469,21 @@ class SessionRunner:
         self.console.set_state("trial")
         if self.audio is not None:
             self.audio.tap_cue()
-        results = []
+        results, played = [], []  # each window's result and the sample it played
         try:
             if trial.kind == "identification":
                 # the participant switches between the surfaces before naming them
+                # every window is kept (a surface tapped again adds one); the naming is
+                # of each surface's last window
                 visited: set[int] = set()
-                by_surface: dict[int, Any] = {}
+                last: dict[int, Any] = {}
                 while (k := self.participant_ui.choose_surface(trial, visited)) is not None:
                     self.console.say(f"  surface {k + 1} of {len(trial.samples)}: tapping")
-                    by_surface[k] = self._window(trial, trial.samples[k], rng)
+                    results.append(self._window(trial, trial.samples[k], rng))
+                    played.append(trial.samples[k])
+                    last[k] = results[-1]
                     visited.add(k)
-                results = [by_surface[k] for k in sorted(by_surface)]
+                named = [last[k] for k in sorted(last)]
             elif trial.kind == "free":
                 # familiarization: windows on the sample until the participant is done
                 results.append(self._window(trial, trial.samples[0], rng))
@@ -488,6 +492,8 @@ class SessionRunner:
             else:
                 for sid in trial.samples:
                     results.append(self._window(trial, sid, rng))
+            played = played or [trial.samples[min(i, len(trial.samples) - 1)]
+                                for i in range(len(results))]
         except DeviceFaultError as exc:  # latched before the window (an e-stop between trials)
             fault = self.device.fault
             if not self.console.interactive or fault is None:
@@ -508,11 +514,11 @@ class SessionRunner:
             f = next(r.faults[0] for r in results if r.faults)
             if self.console.interactive:  # the operator is there: pause until it is cleared
                 self._record(trial, "estop", reason=f"{f.code}: {f.message}",
-                             t_start=t_start, result=res, results=results)
+                             t_start=t_start, result=res, results=results, played=played)
                 raise _FaultStop(f)
             status = self.engine.failure_status("aborted_device", trial, self.log)
             self._record(trial, status, reason=f"{f.code}: {f.message}",
-                         t_start=t_start, result=res, results=results)
+                         t_start=t_start, result=res, results=results, played=played)
             raise SessionInterrupted(f"{f.code} during trial {trial.trial_index}: output is off "
                                      f"and latched; once it is safe: {self._resume_line()}")
         if any(r.timed_out for r in results):
@@ -530,7 +536,7 @@ class SessionRunner:
             self.console.saturated()
             self.participant_ui.saturated(trial)
             status = self.engine.saturated_status(trial, self.log)
-            self._record(trial, status, t_start=t_start, result=res, results=results)
+            self._record(trial, status, t_start=t_start, result=res, results=results, played=played)
             return
         row: dict[str, Any] = {}
         if trial.kind == "rated":
@@ -545,10 +551,11 @@ class SessionRunner:
         elif trial.kind == "identification":
             self.console.set_state("rating")  # naming the surfaces: the operator's e acts
             answers, rt = self.participant_ui.identify(trial, self.protocol.answer.choices,
-                                                       results, rng)
+                                                       named, rng)
             row.update(answer=",".join(answers), response_time=round(float(rt), 3),
                        correct=int(list(answers) == list(trial.samples)))
-        self._record(trial, "valid", t_start=t_start, result=res, results=results, **row)
+        self._record(trial, "valid", t_start=t_start, result=res, results=results, played=played,
+                     **row)
         self.console.result("valid", len(velocities),
                             f"rating {row['rating']}" if "rating" in row else "")
 
@@ -588,8 +595,9 @@ class SessionRunner:
 
     # ------------------------------------------------------------------ recording
     def _record(self, trial: Trial, status: str, *, reason: str = "", t_start: str,
-                result=None, results=None, **extra) -> None:
+                result=None, results=None, played=None, **extra) -> None:
         results = results or ([result] if result is not None else [])
+        played = played or [trial.samples[0]] * len(results)
         vel = [v for r in results for v in r.velocities]
         trace_file = None
         if self._expected is not None:  # replaying: compare, do not record
@@ -608,8 +616,8 @@ class SessionRunner:
                 if not r.traces:
                     continue
                 trace_file = self.files.save_trace(
-                    f"{stem}-{k}.npz", _trace_payload(r, self.traces, self.device.info),
-                    r.contacts)
+                    f"{stem}-{k}.npz", _trace_payload(r, self.traces, self.device.info,
+                                                      played[k]), r.contacts)
             if len(results) > 1:
                 trace_file = f"traces/{stem}-*.npz"
         row = {
@@ -645,7 +653,7 @@ class SessionRunner:
                 "resumed exactly")
 
 
-def _trace_payload(res, mode: str, info) -> dict:
+def _trace_payload(res, mode: str, info, sample: str) -> dict:
     """The device's own streams, in the device's own units where they are quantized.
 
     ``t0`` [s] and ``rate_hz`` [Hz] instead of a time column; ``position_counts`` (int32,
@@ -662,7 +670,8 @@ def _trace_payload(res, mode: str, info) -> dict:
             i = int(round((c.t - tr["t"][0]) * res.rate_hz))
             keep[max(0, i - int(0.01 * res.rate_hz)): i + int(0.14 * res.rate_hz)] = True
     lsb = 2 * info.accel_range / 4096
-    out = {"t0": np.float64(tr["t"][0] if n else 0.0), "rate_hz": np.float64(res.rate_hz),
+    out = {"sample": np.str_(sample),
+           "t0": np.float64(tr["t"][0] if n else 0.0), "rate_hz": np.float64(res.rate_hz),
            "encoder_resolution": np.float64(info.encoder_resolution),
            "accel_lsb": np.float64(lsb),
            "position_counts": np.round(np.asarray(tr["position"])[keep]

@@ -136,6 +136,53 @@ def test_identification_goes_to_another_surface_mid_window(tmp_path):
         assert spans[0] < 1.0 and spans[2] < 1.0 and spans[1] >= 3.0, spans
 
 
+class GoesBack(ScriptedResponder):
+    """Taps surface 1, 2, 1 again, then 3, and names them."""
+
+    def __init__(self):
+        self.plan: list[int | None] = []
+        self.named_from = None
+
+    def choose_surface(self, trial, visited):
+        if not visited:
+            self.plan = [0, 1, 0, 2, None]
+        return self.plan.pop(0)
+
+    def identify(self, trial, choices, results, rng):
+        self.named_from = list(results)
+        return super().identify(trial, choices, results, rng)
+
+
+def test_a_surface_tapped_again_keeps_both_windows(tmp_path):
+    """A surface the participant goes back to once replaced its first window: those taps
+    and that trace were lost, and a saturation in them went unseen. Every window is kept,
+    in the order tapped, each trace naming the sample it played; the naming is of each
+    surface's last window."""
+    p = _identification(duration=1.0, repetitions=1)
+    folder, n = new_session_dir(tmp_path, "P01")
+    files = SessionFiles(folder)
+    files.start("")
+    ui = GoesBack()
+    runner = SessionRunner(p, SessionEngine(p, 3, "P01"), open_device("sim", seed=3), files,
+                           ui, "P01", n, 3, traces="full")
+    assert runner.run() == "complete"
+    rows, _ = read_trials(folder / "trials.tsv")
+    (row,) = [r for r in rows if r["phase"] == "identification" and r["status"] != "reference"]
+    surfaces = row["sample"].split("+")
+    assert len(surfaces) == 3
+    stem = folder / "traces" / f"trial-{int(row['trial_index']):04d}"
+    played, speeds = [], []
+    for k in range(4):
+        with np.load(f"{stem}-{k}.npz") as z:
+            played.append(str(z["sample"]))
+            speeds += [f"{v:.5f}" for v in z["contacts_v"]]
+    assert not Path(f"{stem}-4.npz").exists()
+    assert played == [surfaces[0], surfaces[1], surfaces[0], surfaces[2]]
+    assert row["trace_file"] == f"traces/trial-{int(row['trial_index']):04d}-*.npz"
+    assert ";".join(speeds) == row["tap_velocities"] and len(speeds) == int(row["n_taps"])
+    assert len(ui.named_from) == 3 and len(ui.named_from[0].contacts) > 0
+
+
 def test_the_recorder_never_overwrites_a_recording(tmp_path):
     folder, _ = new_session_dir(tmp_path, "P01")
     files = SessionFiles(folder)
