@@ -22,6 +22,18 @@ def _identification(duration: float = 1.0, repetitions: int = 2):
     return parse_protocol(text, source)
 
 
+def _session(tmp: Path, p, ui, seed: int) -> tuple[Path, list[dict]]:
+    """One identification session on the simulated device with full traces: (folder, rows)."""
+    folder, n = new_session_dir(tmp, "P01")
+    files = SessionFiles(folder)
+    files.start("")
+    runner = SessionRunner(p, SessionEngine(p, seed, "P01"), open_device("sim", seed=seed),
+                           files, ui, "P01", n, seed, traces="full")
+    assert runner.run() == "complete"
+    rows, _ = read_trials(folder / "trials.tsv")
+    return folder, rows
+
+
 class AsksForTheThirdBlock(ScriptedResponder):
     """Asks for a real block once before every scene and picks the third one offered."""
 
@@ -47,16 +59,8 @@ class AsksForTheThirdBlock(ScriptedResponder):
 
 @pytest.fixture(scope="module")
 def identification_session(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("ident")
-    p = _identification()
-    folder, n = new_session_dir(tmp, "P01")
-    files = SessionFiles(folder)
-    files.start("")
     ui = AsksForTheThirdBlock()
-    runner = SessionRunner(p, SessionEngine(p, 5, "P01"), open_device("sim", seed=5), files,
-                           ui, "P01", n, 5, traces="full")
-    assert runner.run() == "complete"
-    rows, _ = read_trials(folder / "trials.tsv")
+    folder, rows = _session(tmp_path_factory.mktemp("ident"), _identification(), ui, 5)
     return folder, rows, ui
 
 
@@ -116,14 +120,7 @@ class MovesOn(ScriptedResponder):
 def test_identification_goes_to_another_surface_mid_window(tmp_path):
     """Issue 30 (9): a participant who moves on ends the surface's window at once (on the
     device: STOP_WINDOW, checked on every target by ``device selftest``'s end_window)."""
-    p = _identification(duration=3.0, repetitions=1)
-    folder, n = new_session_dir(tmp_path, "P01")
-    files = SessionFiles(folder)
-    files.start("")
-    runner = SessionRunner(p, SessionEngine(p, 7, "P01"), open_device("sim", seed=7), files,
-                           MovesOn(), "P01", n, 7, traces="full")
-    assert runner.run() == "complete"
-    rows, _ = read_trials(folder / "trials.tsv")
+    folder, rows = _session(tmp_path, _identification(duration=3.0, repetitions=1), MovesOn(), 7)
     scenes = [r for r in rows if r["phase"] == "identification" and r["status"] != "reference"]
     assert [r["status"] for r in scenes] == ["valid"]
     for r in scenes:
@@ -158,15 +155,8 @@ def test_a_surface_tapped_again_keeps_both_windows(tmp_path):
     and that trace were lost, and a saturation in them went unseen. Every window is kept,
     in the order tapped, each trace naming the sample it played; the naming is of each
     surface's last window."""
-    p = _identification(duration=1.0, repetitions=1)
-    folder, n = new_session_dir(tmp_path, "P01")
-    files = SessionFiles(folder)
-    files.start("")
     ui = GoesBack()
-    runner = SessionRunner(p, SessionEngine(p, 3, "P01"), open_device("sim", seed=3), files,
-                           ui, "P01", n, 3, traces="full")
-    assert runner.run() == "complete"
-    rows, _ = read_trials(folder / "trials.tsv")
+    folder, rows = _session(tmp_path, _identification(duration=1.0, repetitions=1), ui, 3)
     (row,) = [r for r in rows if r["phase"] == "identification" and r["status"] != "reference"]
     surfaces = row["sample"].split("+")
     assert len(surfaces) == 3
