@@ -263,6 +263,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     from app.recorder import SessionFiles, new_session_dir
     from app.runner import SessionRunner, session_meta
     from protocols import SessionEngine, parse_protocol, protocol_text, seed_from_entropy
+    from protocols.texts import english_note
 
     responder = _responder(responder)
     if traces not in ("full", "contacts", "none"):
@@ -288,6 +289,8 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                              "hapticlab resume FOLDER")
         say(f"participant {participant} already has {proto.name} session(s): {listed}; "
             "this one is the next")
+    if responder == "person" and (note := english_note(proto)):
+        say(f"note: {note}")
     keys = operator_keys if operator_keys is not None else responder == "person"
     # before any device or window opens: nothing starts that cannot be kept or answered
     data_folder_ready(data, expected_session_bytes(proto, traces))

@@ -72,6 +72,10 @@ def _protocol_validate(args: argparse.Namespace) -> int:
     print(f"{p.source}: valid protocol '{p.name}' — {_plural(len(p.samples), 'sample')}, "
           f"{_plural(len(p.phases), 'phase')}, {_plural(n_items, 'trial')} without redraws"
           + (f"; checked against device '{args.device}'{libs}" if args.device else ""))
+    from protocols.texts import english_note
+
+    if note := english_note(p):
+        print(f"note: {note}")
     return 0
 
 
@@ -301,12 +305,15 @@ def _preflight(args: argparse.Namespace) -> int:
     )
     from device import DeviceError
     from protocols import parse_protocol, protocol_text
+    from protocols.texts import english_note
 
     source, text = protocol_text(args.protocol)
     proto = parse_protocol(text, source)
     checks = [Check("protocol", True, f"{source}: '{proto.name}' ({proto.sha256[:12]}…)"),
               check_data_folder(args.data, expected_session_bytes(proto, args.traces)),
               check_answers(proto)]
+    if note := english_note(proto):
+        checks.append(Check("texts", True, note))
     if args.responder == "person":
         checks += [check_terminal(), check_display()]
     try:

@@ -16,7 +16,8 @@ naming.
 
 from __future__ import annotations
 
-__all__ = ["DEFAULT_TEXTS", "INSTRUCTIONS_BY_KIND", "resolve_texts"]
+__all__ = ["DEFAULT_TEXTS", "INSTRUCTIONS_BY_KIND", "resolve_texts", "left_in_english",
+           "english_note"]
 
 #: phase kind → default instructions (a phase's own, by name, in ``[texts.instructions]``)
 INSTRUCTIONS_BY_KIND = {
@@ -69,3 +70,52 @@ def resolve_texts(overrides: dict[str, str], instructions: dict[str, str]) -> di
     out = {**DEFAULT_TEXTS, **overrides}
     out["instructions"] = dict(instructions)
     return out
+
+
+#: which screens show a text: every protocol, or only one with that phase kind ("rated",
+#: "free", "identification") or with real blocks ("references"; "several": more than one,
+#: which the participant chooses between); texts of placeholders alone need no translation
+_SHOWN_WHEN = {
+    "tap": "all", "wait": "all", "wait_detail": "all", "saturated": "all", "paused": "all",
+    "paused_detail": "all", "debrief": "all", "debrief_hint": "all", "thanks": "all",
+    "done_hint": "free", "reference_offer": "references", "reference_requested": "references",
+    "reference": "references", "reference_detail": "references",
+    "reference_which": "several", "reference_which_keys": "several",
+    "rating_keys": "rated", "rating_chosen": "rated", "rating_typed": "rated",
+    "rating_slider": "rated", "rating_confirmed": "rated", "rating_invalid": "rated",
+    "surface": "identification", "choose": "identification", "tapped": "identification",
+    "name_hint": "identification", "switch_hint": "identification", "name": "identification",
+}
+
+
+def left_in_english(protocol) -> list[str]:
+    """The texts a participant of ``protocol`` will read in English although the protocol
+    says it is in another language: each a ``[texts]`` key, or ``instructions.<phase>``.
+
+    Empty for an English protocol. A lab that translated a protocol before a text was added
+    to hapticlab learns here which ones to add (``protocol validate`` lists them).
+    """
+    texts = protocol.texts
+    if texts.get("language", "en").split("-")[0].lower() == "en":
+        return []
+    kinds = {ph.kind for ph in protocol.phases}
+    blocks = {s.reference for s in protocol.samples.values() if s.reference}
+    if not any(ph.references != "none" for ph in protocol.phases):
+        blocks = set()
+    shown = {"all", *kinds, *(("references",) if blocks else ()),
+             *(("several",) if len(blocks) > 1 else ())}
+    out = [k for k, when in _SHOWN_WHEN.items()
+           if when in shown and texts.get(k) == DEFAULT_TEXTS[k]]
+    return out + [f"instructions.{ph.name}" for ph in protocol.phases
+                  if ph.name not in texts.get("instructions", {})]
+
+
+def english_note(protocol) -> str:
+    """One sentence on :func:`left_in_english`, or "" when nothing is."""
+    english = left_in_english(protocol)
+    if not english:
+        return ""
+    n = len(english)
+    return (f"the protocol is in language '{protocol.texts['language']}', but its participants "
+            f"will read {n} text{'' if n == 1 else 's'} in English (not in its [texts]): "
+            f"{', '.join(english)}")

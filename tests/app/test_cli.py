@@ -158,3 +158,39 @@ def test_protocol_validate_refuses_what_no_session_can_run(tmp_path, old, new, f
     f.write_text(text.replace(old, new, 1))
     out = run("protocol", "validate", str(f), "--device", "sim")
     assert out.returncode != 0 and fragment in (out.stdout + out.stderr), out
+
+
+def test_a_translated_protocol_is_told_which_texts_are_still_english(tmp_path):
+    """Issue 30: texts added to hapticlab after a lab translated its protocol appeared in
+    English beside the translation without a word. ``protocol validate`` and ``preflight``
+    name them (only those the protocol's screens show); an English protocol gets no note."""
+    from protocols import parse_protocol, protocol_text
+    from protocols.texts import DEFAULT_TEXTS, left_in_english
+
+    _, text = protocol_text("identification")
+    german = text.replace("[saturation]", '[texts]\nlanguage = "de"\nwait = "Bitte warten"\n'
+                          "switch_hint = \"andere Fläche: {keys}\"\n[texts.instructions]\n"
+                          'identification = "Drei Flächen."\n\n[saturation]', 1)
+    f = tmp_path / "de.toml"
+    f.write_text(german)
+    left = left_in_english(parse_protocol(german, str(f)))
+    assert "wait" not in left and "switch_hint" not in left and "name_hint" in left
+    assert "reference_which" in left  # three real blocks to choose between
+    assert "rating_keys" not in left and "done_hint" not in left  # no rated or free phase
+    assert not any(k.startswith("instructions.") for k in left)
+    out = run("protocol", "validate", str(f))
+    assert out.returncode == 0, out.stderr
+    assert f"will read {len(left)} texts in English (not in its [texts]): " in out.stdout
+    assert ", ".join(left) in out.stdout
+    out = run("preflight", str(f), "--device", "sim", "--responder", "scripted", "--no-audio",
+              "--data", str(tmp_path / "d"))
+    assert f"ok   texts: the protocol is in language 'de', but its participants will read " \
+           f"{len(left)} texts" in out.stdout, out.stdout + out.stderr
+    # translated in full: nothing to say
+    full = "\n".join(f"{k} = {json.dumps('de: ' + v)}" for k, v in DEFAULT_TEXTS.items()
+                     if k != "language")
+    whole = german.replace('wait = "Bitte warten"\n', "").replace(
+        "switch_hint = \"andere Fläche: {keys}\"\n", full + "\n")
+    assert left_in_english(parse_protocol(whole, "whole.toml")) == []
+    assert left_in_english(parse_protocol(text, "en.toml")) == []
+    assert "note:" not in run("protocol", "validate", "identification").stdout
