@@ -92,6 +92,31 @@ def test_a_hung_interpreter_still_trips_the_watchdog(own_emulator):
     assert float(line.group(1)) <= 100.0 + 0.1  # T_wd of device time after the last frame
 
 
+def test_the_lease_ends_the_heartbeats_after_its_stated_second(own_emulator):
+    """The bound the test above cannot give (it waits for the fault, however late): the
+    interpreter held for 3 s, three times the lease. The device must fault during the hold,
+    and the frames it received meanwhile are at most what the native thread sends in one
+    lease: a HEARTBEAT per T_wd/4 of silence, so LEASE_S / (T_wd/4) of them (40), plus the
+    LINK_QUERY that asks and a few frames around the hold. A count, not a time: a slower
+    native thread sends fewer, never more; a 1.2-s lease would send 48 (a 20-s lease sent
+    121 and kept the device fed)."""
+    from device.serial.link import LEASE_S
+
+    with open_device(f"serial:{own_emulator.port}") as dev:
+        assert dev.link.native
+        dev.load_scene(FIRM)
+        dev.home()
+        t_wd = dev.info.watchdog_s
+        dev.device_link_report(reset=True)
+        _hold_the_interpreter(3.0)
+        seen = dev.device_link_report()
+        # 41–42 measured: 40 heartbeats of the lease, the LINK_QUERY, one around the reset
+        assert seen["frames"] <= LEASE_S / (t_wd / 4) + 5, seen
+        _wait_for(lambda: dev.fault is not None, what="the watchdog fault")
+        assert dev.fault.code == "watchdog"
+        dev.clear_fault()
+
+
 def test_the_device_reports_what_it_saw_of_the_host(own_emulator):
     """LINK_REPORT: frames and the gaps between them in device time; a reset starts afresh
     and HELLO does too."""
