@@ -24,8 +24,11 @@ Formats
     the codebook, value labels for low/high factors and for ``correct``.
 
 Every format writes ``codebook.csv``: column, type (text or number), unit, meaning (and,
-for renamed columns, the original name). CSV files quote every text cell, so a reader that
-honours quotes keeps a participant id ``001`` as typed; ``load.R`` reads text as text.
+for renamed columns, the original name). CSV files quote every text cell, but quotes do not
+stop pandas, R's ``read.csv`` or JASP from reading a participant id ``001`` as the number 1:
+only a reader told the column is text keeps it. So the CSV formats also write ``load.py``
+(pandas: each CSV with the codebook's text columns read as text), and ``r`` writes
+``load.R``; in JASP, set the participant column to nominal text by hand.
 """
 
 from __future__ import annotations
@@ -288,6 +291,10 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written, book = [], []
+    if fmt != "spss":  # CSV files: a reader that keeps text as text
+        p = out / "load.py"
+        p.write_text(_PY_LOADER)
+        written.append(p)
     if fmt in ("long-csv", "r"):
         long = _long(parts)
         p = out / "long.csv"
@@ -328,6 +335,33 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
         wr.writerows(book)
     written.append(p)
     return written
+
+
+#: load.py, written beside the CSV files: pandas alone, no hapticlab needed
+_PY_LOADER = '''"""Read this export's CSV files with pandas, each column as codebook.csv types it.
+
+A participant id 001 stays the text "001" (pandas reads it as the number 1 unless told the
+column is text). Run ``python -i load.py``, or from another script::
+
+    tables = runpy.run_path("load.py")["tables"]   # file name -> DataFrame
+"""
+
+from pathlib import Path
+
+import pandas as pd
+
+HERE = Path(__file__).resolve().parent
+book = pd.read_csv(HERE / "codebook.csv", dtype=str, keep_default_na=False)
+tables = {}
+for name, columns in book.groupby("file", sort=False):
+    if not name.endswith(".csv"):
+        continue
+    text = list(columns.loc[columns["type"] == "text", "column"])
+    header = pd.read_csv(HERE / name, nrows=0).columns
+    tables[name] = pd.read_csv(HERE / name, dtype={c: str for c in text},
+                               keep_default_na=False, na_values={c: [""] for c in header})
+long = tables.get("long.csv")
+'''
 
 
 def _r_name(column: str) -> str:

@@ -2,6 +2,7 @@
 real block to tap again, and what a session says about the device it ran on."""
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -227,8 +228,9 @@ def _run_with(tmp_path, pid, device_spec, **kw):
 
 
 def test_ids_that_look_like_numbers_survive_every_export_as_text(tmp_path):
-    """001 and 1e5 are kept as typed by pandas (quoted, codebook type text), by R through
-    load.R, and in the SPSS file; nan and NA are refused at entry."""
+    """001 and 1e5 are kept as typed by pandas told the codebook's types (load.py, written
+    beside every CSV export: quotes alone do not keep them), by R through load.R, and in
+    the SPSS file; nan and NA are refused at entry."""
     import subprocess
 
     import pandas as pd
@@ -251,6 +253,19 @@ def test_ids_that_look_like_numbers_survive_every_export_as_text(tmp_path):
                        keep_default_na=False)
     assert set(long["participant"]) == {"001", "1e5"}
     assert (out / "long.csv").read_text().count('"001"') > 0  # quoted on disk
+    # quotes alone do not keep them: pandas reads the column as numbers
+    assert set(pd.read_csv(out / "long.csv")["participant"]) == {1.0, 1e5}
+    # load.py, beside every CSV export, reads each file with the codebook's types
+    for fmt in ("r", "wide-csv", "jasp"):
+        folder = tmp_path / f"py-{fmt}"
+        export(tmp_path / "data", folder, fmt, kind="dry-run")
+        read = ("import json, runpy; t = runpy.run_path('load.py')['tables']; "
+                "print(json.dumps({n: sorted(set(d['participant'])) for n, d in t.items()}))")
+        got = subprocess.run([sys.executable, "-c", read], cwd=folder, capture_output=True,
+                             text=True, timeout=120)
+        assert got.returncode == 0, got.stderr
+        tables = json.loads(got.stdout)
+        assert tables and all(ids == ["001", "1e5"] for ids in tables.values()), (fmt, tables)
     r = subprocess.run(["Rscript", "-e", 'source("load.R"); cat(levels(d$participant), '
                         'sep = ",")'], cwd=out, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
