@@ -49,8 +49,10 @@ class Participant:
     def reference(self, trial, sample) -> None:
         """A real reference block is about to be tapped (``sample``)."""
 
-    def saturated(self, trial) -> None:
-        """The trial saturated: it is redrawn later (a screen says so, also without sound)."""
+    def saturated(self, trial, comes_back: bool = True) -> None:
+        """The trial saturated: it comes back later, or (``comes_back`` False) it saturated
+        as often as the protocol allows and is left out (a screen says which, also without
+        sound)."""
 
     def before_window(self, trial, sample_id: str, device, rng: np.random.Generator) -> None:
         """Just before a tapping window on ``sample_id``."""

@@ -534,9 +534,10 @@ class SessionRunner:
             if self.audio is not None and self.protocol.saturation.tone:
                 self.audio.low_tone()
             self.console.saturated()
-            self.participant_ui.saturated(trial)
             status = self.engine.saturated_status(trial, self.log)
-            self._record(trial, status, t_start=t_start, result=res, results=results, played=played)
+            self.participant_ui.saturated(trial, comes_back=status == "saturated")
+            self._record(trial, status, t_start=t_start, result=res, results=results,
+                         played=played)
             return
         row: dict[str, Any] = {}
         if trial.kind == "rated":

@@ -244,10 +244,10 @@ class PsychoPyScreen(Participant):
             return "reference"
         return None
 
-    def saturated(self, trial) -> None:
+    def saturated(self, trial, comes_back: bool = True) -> None:
         """Said on the next 'please wait' screen: the participant sees why the sample will
-        come back, with or without the tone."""
-        self._notice = self.t("saturated")
+        come back (or, at the protocol's cap, will not), with or without the tone."""
+        self._notice = self.t("saturated" if comes_back else "saturated_last")
 
     def choose_reference(self, trial, blocks: list[tuple[str, str]]) -> str | None:
         """Several real blocks (identification): the participant picks one with its number

@@ -42,6 +42,7 @@ DEFAULT_TEXTS: dict[str, str] = {
     "reference_which": "Which real block would you like to tap again?",
     "reference_which_keys": "{names}      (ESC: none)",
     "saturated": "That tap was too hard for the device: this sample comes back later.",
+    "saturated_last": "That tap was too hard for the device. Please tap more gently.",
     "surface": "Surface {i}",
     "reference": "Tap the real block",
     "reference_detail": "Compare the next samples with this one: {block}.",
@@ -76,7 +77,8 @@ def resolve_texts(overrides: dict[str, str], instructions: dict[str, str]) -> di
 #: "free", "identification") or with real blocks ("references"; "several": more than one,
 #: which the participant chooses between); texts of placeholders alone need no translation
 _SHOWN_WHEN = {
-    "tap": "all", "wait": "all", "wait_detail": "all", "saturated": "all", "paused": "all",
+    "tap": "all", "wait": "all", "wait_detail": "all", "saturated": "all",
+    "saturated_last": "all", "paused": "all",
     "paused_detail": "all", "debrief": "all", "debrief_hint": "all", "thanks": "all",
     "done_hint": "free", "reference_offer": "references", "reference_requested": "references",
     "reference": "references", "reference_detail": "references",

@@ -13,7 +13,16 @@ from app.participants import ScriptedResponder
 from app.recorder import SessionFiles, new_session_dir, read_trials
 from app.runner import SessionRunner
 from device import open_device
-from protocols import Attempt, SessionEngine, parse_protocol, protocol_text, reference_item
+from protocols import (
+    Attempt,
+    SessionEngine,
+    load_protocol,
+    parse_protocol,
+    protocol_text,
+    reference_item,
+)
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "protocols"
 
 
 def _identification(duration: float = 1.0, repetitions: int = 2):
@@ -24,12 +33,16 @@ def _identification(duration: float = 1.0, repetitions: int = 2):
 
 
 def _session(tmp: Path, p, ui, seed: int) -> tuple[Path, list[dict]]:
-    """One identification session on the simulated device with full traces: (folder, rows)."""
+    """One session on the simulated device (its current limited as the protocol says) with
+    full traces: (folder, rows)."""
     folder, n = new_session_dir(tmp, "P01")
     files = SessionFiles(folder)
     files.start("")
-    runner = SessionRunner(p, SessionEngine(p, seed, "P01"), open_device("sim", seed=seed),
-                           files, ui, "P01", n, seed, traces="full")
+    dev = open_device("sim", seed=seed)
+    if p.limits.max_current is not None:
+        dev.set_current_limit(p.limits.max_current)
+    runner = SessionRunner(p, SessionEngine(p, seed, "P01"), dev, files, ui, "P01", n, seed,
+                           traces="full")
     assert runner.run() == "complete"
     rows, _ = read_trials(folder / "trials.tsv")
     return folder, rows
@@ -174,6 +187,34 @@ def test_a_surface_tapped_again_keeps_both_windows(tmp_path):
     assert len(ui.named_from) == 3 and len(ui.named_from[0].contacts) > 0
 
 
+class SeesTheNotice(ScriptedResponder):
+    """Records what the 'please wait' screen is told after each saturated attempt."""
+
+    def __init__(self):
+        self.notices: list[tuple[str, bool]] = []
+
+    def saturated(self, trial, comes_back=True):
+        self.notices.append((trial.item, comes_back))
+
+
+def test_the_participant_is_told_of_every_saturation_and_whether_it_comes_back(tmp_path):
+    """Issue 30 (8): without sound the participant saw nothing when a tap saturated; the
+    screen says so on the next 'please wait', and at the protocol's cap (here the second
+    saturation of an item) it no longer says 'this sample comes back later', since the
+    item is left out. One notice per saturated row, in order, each matching its status."""
+    ui = SeesTheNotice()
+    hard = load_protocol(str(DATA / "two_springs_low_current.toml"))
+    folder, rows = _session(tmp_path, hard, ui, 2)
+    sat = [(r["item"], r["status"] == "saturated") for r in rows
+           if r["status"] in ("saturated", "excluded_saturated")]
+    assert ui.notices == sat
+    assert any(back for _, back in sat) and any(not back for _, back in sat), sat
+    from protocols.texts import DEFAULT_TEXTS
+
+    assert "comes back" in DEFAULT_TEXTS["saturated"]
+    assert "comes back" not in DEFAULT_TEXTS["saturated_last"]
+
+
 def test_the_recorder_never_overwrites_a_recording(tmp_path):
     folder, _ = new_session_dir(tmp_path, "P01")
     files = SessionFiles(folder)
@@ -216,7 +257,7 @@ def test_an_estop_while_a_real_block_is_tapped_does_not_break_the_log():
     assert again.item == first.item and again.trial_index == first.trial_index
 
 
-SIX = Path(__file__).resolve().parents[1] / "data" / "protocols" / "six_on_nine.toml"
+SIX = DATA / "six_on_nine.toml"
 
 
 def _run_with(tmp_path, pid, device_spec, **kw):

@@ -277,6 +277,9 @@ def test_identification_real_block_choice_saturation_notice_and_surface_title(xd
                        small=scr.drawn_text[1])
         scr.waiting(ID_TRIAL)  # said once
         assert "too hard" not in scr.drawn_text[1]
+        scr.saturated(ID_TRIAL, comes_back=False)  # the protocol's last attempt at the item
+        scr.waiting(ID_TRIAL)
+        assert "tap more gently" in scr.drawn_text[1] and "comes back" not in scr.drawn_text[1]
         scr.before_window(ID_TRIAL, "rubber", None, None)
         assert scr.drawn_text[0] == "Tap · Surface 2"
         assert not any("rubber" in t for t in scr.drawn_text)
