@@ -1,5 +1,6 @@
 """The operator console's keys, through a real pseudo-terminal."""
 
+import io
 import json
 import os
 import subprocess
@@ -250,3 +251,22 @@ def test_familiarization_runs_until_the_participant_is_done(tmp_path):
     rows, _ = read_trials(folder / "trials.tsv")
     assert rows[0]["phase"] == "familiarization" and rows[0]["status"] == "valid"
     assert int(rows[0]["n_taps"]) > 15  # three 5-s windows of taps
+
+
+def test_the_counter_counts_items_never_past_their_number(tty_stdin, dev):
+    """Issue 30 (7): after redraws the panel read '50 of 45' (attempts against items). It
+    counts finished items, the attempt's number in brackets; at the last item, and after
+    it, never more than the items there are."""
+    from rich.console import Console
+
+    con = KeyConsole(dev, live=False)
+    try:
+        for done, shown in ((44, "item 45 of 45"), (45, "item 45 of 45")):
+            con.view.phase, con.view.total, con.view.done, con.view.trial = "testing", 45, \
+                done, 50
+            out = Console(record=True, width=160, file=io.StringIO())
+            out.print(con._render())
+            text = out.export_text()
+            assert f"testing · {shown} (trial #50)" in text, text
+    finally:
+        con.close()

@@ -1,6 +1,7 @@
 """Test day, round three: recordings that keep their data, a participant who chooses which
 real block to tap again, and what a session says about the device it ran on."""
 
+import io
 import json
 import sys
 from pathlib import Path
@@ -8,11 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.console import PlainConsole
 from app.errors import SessionFileError
 from app.participants import ScriptedResponder
 from app.recorder import SessionFiles, new_session_dir, read_trials
 from app.runner import SessionRunner
-from device import open_device
+from device import Scene, open_device
 from protocols import (
     Attempt,
     SessionEngine,
@@ -32,7 +34,7 @@ def _identification(duration: float = 1.0, repetitions: int = 2):
     return parse_protocol(text, source)
 
 
-def _session(tmp: Path, p, ui, seed: int) -> tuple[Path, list[dict]]:
+def _session(tmp: Path, p, ui, seed: int, console=None) -> tuple[Path, list[dict]]:
     """One session on the simulated device (its current limited as the protocol says) with
     full traces: (folder, rows)."""
     folder, n = new_session_dir(tmp, "P01")
@@ -42,7 +44,7 @@ def _session(tmp: Path, p, ui, seed: int) -> tuple[Path, list[dict]]:
     if p.limits.max_current is not None:
         dev.set_current_limit(p.limits.max_current)
     runner = SessionRunner(p, SessionEngine(p, seed, "P01"), dev, files, ui, "P01", n, seed,
-                           traces="full")
+                           traces="full", **({"console": console} if console else {}))
     assert runner.run() == "complete"
     rows, _ = read_trials(folder / "trials.tsv")
     return folder, rows
@@ -215,6 +217,41 @@ def test_the_participant_is_told_of_every_saturation_and_whether_it_comes_back(t
     assert "comes back" not in DEFAULT_TEXTS["saturated_last"]
 
 
+class SeenByTheOperator(PlainConsole):
+    """The operator's panel at every placing: (PLACE, its detail, the block line)."""
+
+    def __init__(self):
+        super().__init__(stream=io.StringIO())
+        self.panels: list[tuple[str, str, str]] = []
+
+    def place(self, trial, total, done, what="", detail=""):
+        super().place(trial, total, done, what, detail)
+        self.panels.append((what, detail, self.view.block))
+
+
+def test_the_operator_panel_says_what_to_remove_and_never_cues_the_scene():
+    """Issue 30 (7): in identification the panel said 'PLACE real rubber block', then
+    'block — its real block: real aluminum block' (surface 1's block, the scene's answer),
+    and 'PLACE nothing' where the real block had to come off. A scene now says to remove the
+    block tapped just before it (and 'nothing' after a scene), and names no block."""
+    import tempfile
+
+    con = SeenByTheOperator()
+    with tempfile.TemporaryDirectory() as tmp:
+        _session(Path(tmp), _identification(repetitions=2), AsksForTheThirdBlock(), 5, con)
+    is_ref = [p[1].startswith("real reference block") for p in con.panels]
+    assert sum(is_ref) == 5  # three at the start, one asked for before each scene
+    for k, (what, detail, block) in enumerate(con.panels):
+        if is_ref[k]:
+            assert block == f"real reference block: {what}"
+            continue
+        # after a real block: take it off; after a scene: nothing is on the device
+        assert what == ("nothing: remove the real aluminum block (the scene's surfaces are "
+                        "virtual)" if is_ref[k - 1] else "nothing (the scene's surfaces are "
+                        "virtual)"), (k, what)
+        assert block == "" and "real" not in detail  # names the surfaces, never a block
+
+
 def test_the_recorder_never_overwrites_a_recording(tmp_path):
     folder, _ = new_session_dir(tmp_path, "P01")
     files = SessionFiles(folder)
@@ -375,3 +412,19 @@ def test_a_persons_second_session_of_a_protocol_needs_new_session(tmp_path, monk
         _run_with(tmp_path, "P01", "sim", seed=5, responder="person")
     assert sorted(f.name for f in (tmp_path / "data" / "sub-P01").iterdir()) == ["ses-1",
                                                                                   "ses-2"]
+
+
+def test_a_person_on_the_simulated_device_is_paced_by_the_wall_clock():
+    """Issue 30 (10): unpaced, a person's familiarization on `sim` produced 910 taps in 13 s.
+    The session opens the simulator live when a person sits at it (its windows then report
+    their pacing, which session.json keeps as `timing`), and unpaced for a program."""
+    from app.api import _open
+
+    for person, paced in ((True, True), (False, False)):
+        with _open("sim", 1, person=person) as dev:
+            dev.load_scene(Scene("firm", spring=680.0))
+            dev.home()
+            res = dev.run_window(0.1, from_first_contact=False)
+            assert bool(res.timing) is paced, res.timing
+            if paced:
+                assert res.timing["achieved_rate_hz"] > 0

@@ -88,7 +88,7 @@ def test_realism_screens_are_text_only_and_say_the_keys_they_use(xdisplay, shots
 
 
 def test_between_trials_please_wait_until_the_operator_starts(xdisplay, shots):
-    scr = make("factorial", Keys([], ["x"], ["r"], [], [], [], ["space"]))
+    scr = make("factorial", Keys([], ["x"], ["r"], [], [], [], ["space"], []))
     trial = SimpleNamespace(phase="rating", samples=("wood-HHH",), trial_index=4, attempt=1,
                             kind="rated")
     try:
@@ -111,6 +111,15 @@ def test_between_trials_please_wait_until_the_operator_starts(xdisplay, shots):
         scr.screenshot(shots / "reference-block.png", text=scr.drawn_text[0],
                        small=scr.drawn_text[1], cursor=True)
         assert image_stats(shots / "reference-block.png")[0] > 1.0
+        # during its window too: the real block's title stays (it once flashed to 'Tap')
+        rtrial = SimpleNamespace(**{**vars(trial), "kind": "reference",
+                                    "samples": ("wood-real",), "placement": "real wood block"})
+        scr.before_window(rtrial, "wood-real", None, None)
+        partial = WindowResult(10_000, 0.2, [ContactEvent(0.2, 0.1)])
+        partial.live_height = 0.01
+        scr.progress(0.5, partial, 5.0)
+        assert scr.drawn_text[0] == "Tap the real block" and "real wood block" in \
+            scr.drawn_text[1]
     finally:
         scr.close()
 

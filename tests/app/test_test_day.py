@@ -132,6 +132,7 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     assert ratings == [10, 4, 5, 6]
     meta = json.loads((folder / "session.json").read_text())
     assert meta["kind"] == "human" and meta["responder"] == "person"
+    assert meta["timing"]["achieved_rate_hz_median"] > 0  # paced: a person on sim is live
     assert meta["participant"]["info"] == {"age": "31", "handedness": "right"}
     assert meta["participant"]["debrief"] == "A sudden stop (100%)!?."
     assert [n["text"] for n in meta["notes"]] == ["grip steady"]
