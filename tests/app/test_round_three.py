@@ -395,6 +395,28 @@ def test_the_device_is_on_the_record_and_a_person_on_sim_is_not_pooled(tmp_path)
     export(tmp_path / "data", wide, "wide-csv", kind="human", sim_device=True)
     w = pd.read_csv(next(wide.glob("wide_*.csv")), keep_default_na=False)
     assert dict(zip(w["participant"], w["device_backend"], strict=True)) == devs
+    # the analyst's command: S01 is listed with its reason and its device, and left out
+    # unless --sim-device asks for it
+    import subprocess
+
+    for extra, included in (([], {"P01"}), (["--sim-device"], {"P01", "S01"})):
+        rep = tmp_path / f"rep{len(extra)}"
+        out = subprocess.run([sys.executable, "-m", "app", "analyze", str(tmp_path / "data"),
+                              "--out", str(rep), "--kind", "human", *extra],
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        sessions = json.loads((rep / "report.json").read_text())["selection"]["sessions"]
+        got = {x["participant"]: x for x in sessions}
+        assert {p for p, x in got.items() if x["included"]} == included
+        assert got["P01"]["device_id"] == "hapticlab stylus #0042"
+        assert got["P01"]["firmware"] == "hl-2.1" and got["S01"]["device_backend"] == "sim"
+        md = (rep / "report.md").read_text()
+        table = md[md.index("## Sessions included and excluded"):]
+        assert "| device_backend | device_id | firmware |" in table
+        assert "hapticlab stylus #0042" in table and "| sim |" in table
+        assert "hapticlab stylus #0042" in (rep / "report.html").read_text()
+        if not extra:
+            assert "simulated device" in got["S01"]["reason"]
 
 
 def test_a_persons_second_session_of_a_protocol_needs_new_session(tmp_path, monkeypatch):
