@@ -53,9 +53,17 @@ class Audio:
             self._cue = sound.Sound(str(wav), volume=cue_volume)
             self._noise.play()
         except Exception as exc:
-            raise AudioUnavailable(f"audio output failed on {outputs or 'an unknown number of'} "
-                                   f"output device(s) ({type(exc).__name__}: {exc}); run "
-                                   "with --no-audio, or fix the sound setup") from None
+            detail = f"(PsychoPy said: {type(exc).__name__}: {exc})"
+            if outputs is None:
+                raise AudioUnavailable(
+                    "no audio output could be opened, and the sound system (PortAudio) could "
+                    "not be asked which output devices exist — is PortAudio installed and a "
+                    "sound server (PulseAudio, PipeWire) running for this user? Or run with "
+                    f"--no-audio {detail}") from None
+            raise AudioUnavailable(
+                f"the sound system lists {outputs} output device(s) but none could be opened "
+                "— check the default output device in the system's sound settings, or run "
+                f"with --no-audio {detail}") from None
 
     def tap_cue(self) -> None:
         self._cue.play()

@@ -267,3 +267,35 @@ def test_a_real_device_without_its_library_is_refused_with_the_command(emulator,
     assert (f"hapticlab library build --device serial:{emulator.port} --protocol realism "
             "--source wood_on_foam") in out.stderr
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("outputs, says", [
+    (0, "PortAudio) lists none"),
+    (None, "could not be asked which output devices exist"),
+    (2, "lists 2 output device(s) but none could be opened"),
+])
+def test_an_audio_failure_says_what_to_check_first(monkeypatch, outputs, says):
+    """Issue 30 (16): the preflight's audio failure read 'no audio output device: list index
+    out of range'. Each failure starts with what is wrong and what to check, names
+    --no-audio, and keeps PsychoPy's own words only as a detail at the end."""
+    import types
+
+    import psychopy
+
+    from app import audio
+
+    class Broken:
+        def __init__(self, *a, **kw):
+            raise IndexError("list index out of range")
+
+    fake = types.SimpleNamespace(Sound=Broken)
+    monkeypatch.setattr(psychopy, "sound", fake, raising=False)
+    monkeypatch.setitem(sys.modules, "psychopy.sound", fake)
+    monkeypatch.setattr(audio, "_outputs", lambda: outputs)
+    with pytest.raises(audio.AudioUnavailable) as err:
+        audio.Audio()
+    msg = str(err.value)
+    assert says in msg and "--no-audio" in msg, msg
+    assert not msg.startswith(("list index", "IndexError")), msg
+    if outputs != 0:
+        assert msg.endswith("(PsychoPy said: IndexError: list index out of range)"), msg
