@@ -129,6 +129,32 @@ def test_device_list_opens_nothing_and_names_the_simulator(tmp_path):
     assert text.returncode == 0 and "simulated: sim" in text.stdout
 
 
+def test_device_list_names_each_serial_port_as_a_spec(monkeypatch, capsys):
+    """This machine has no USB serial device, so the ports pyserial finds are given: each
+    is listed as the spec that opens it, with what the system says it is."""
+    from serial.tools import list_ports
+    from serial.tools.list_ports_common import ListPortInfo
+
+    from app import guards
+    from app.cli import main
+
+    monkeypatch.setattr(guards, "install_signal_guards", lambda: None)  # pytest's own signals
+    acm = ListPortInfo("/dev/ttyACM0", skip_link_detection=True)
+    acm.description, acm.hwid = "hapticlab stylus", "USB VID:PID=0483:5740 SER=0042"
+    usb = ListPortInfo("/dev/ttyUSB3", skip_link_detection=True)
+    usb.description, usb.hwid = "FT232R USB UART", "USB VID:PID=0403:6001"
+    monkeypatch.setattr(list_ports, "comports", lambda: [usb, acm])
+    assert main(["device", "list", "--json"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert [p["spec"] for p in found["ports"]] == ["serial:/dev/ttyACM0", "serial:/dev/ttyUSB3"]
+    assert found["ports"][0]["hwid"].endswith("SER=0042")
+    assert main(["device", "list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert any(ln.startswith("serial:/dev/ttyACM0") and "hapticlab stylus" in ln
+               for ln in lines), lines
+    assert lines[-1] == "check one with: hapticlab device selftest SPEC (it opens the port)"
+
+
 def test_protocol_show_says_what_to_place_and_how_long():
     out = run("protocol", "show", "realism", "--seed", "3")
     assert out.returncode == 0, out.stderr

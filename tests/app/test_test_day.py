@@ -144,8 +144,7 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
                                                                 tmp_path):
     """Identification as a person does it (issue 30, 9), on the reference firmware on a
     pty: another surface's key during a 20-s window ends it at once and goes there; N ends
-    the last one and goes to naming. Without the early end the keys wait for the windows'
-    20 s each and the naming keys are refused: the session would not end in time."""
+    the last one and goes to naming. Each window's trace is far shorter than its 20 s."""
     emu = emulator_factory(13, "--firmware", "host")
     proto = tmp_path / "identify.toml"
     proto.write_text((ROOT / "protocols" / "identification.toml").read_text()
@@ -171,7 +170,6 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
         raise AssertionError(f"{key}: no {shows!r}")
 
     until("space", "trial: e E-STOP")  # the instructions, then the scene
-    t0 = time.monotonic()
     until("1", "surface 1 of 3: tapping")  # its window: 20 s from its first contact
     time.sleep(1.0)
     until("3", "surface 3 of 3: tapping")  # to surface 3, now
@@ -180,7 +178,6 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
     until("2", "surface 2 of 3: tapping")
     time.sleep(1.0)
     until("n", "rating: e E-STOP")  # all three tapped: to naming, now
-    waited = time.monotonic() - t0
     for name in ("1", "2", "3"):
         time.sleep(0.5)
         participant.press(name)
@@ -188,14 +185,15 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
     time.sleep(0.5)
     participant.press("x", "Return")
     assert t.exit_code(90) == 0
-    assert waited < 40, waited  # far less than the three windows' 60 s
     folder = data / "sub-P05" / "ses-1"
     (row,) = [r for r in rows_of(folder) if r["phase"] == "identification"]
     assert row["status"] == "valid" and row["answer"]
     for k in range(3):
         with np.load(folder / "traces" / f"trial-0001-{k}.npz") as z:
             seconds = len(z["position_counts"]) / float(z["rate_hz"])
-        assert seconds < 10.0, (k, seconds)  # each window ended when the person moved on
+        # each window ended when the person moved on (device time, not the host's: a
+        # window left alone runs 20 s from its first contact)
+        assert seconds < 10.0, (k, seconds)
 
 
 def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp_path):
