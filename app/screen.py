@@ -171,7 +171,8 @@ class PsychoPyScreen(Participant):
         if self._scale_stims is None:
             h = self.H
             self._scale_stims = (
-                visual.TextStim(self.win, text="", height=0.042 * h, pos=(0, 0), color="white"),
+                visual.TextStim(self.win, text="", height=0.042 * h, pos=(0, 0), color="white",
+                                wrapWidth=0.96 * self.W),  # one line, up to 11 points
                 *(visual.TextStim(self.win, text="", height=0.026 * h, color=(0.5, 0.5, 0.5),
                                   wrapWidth=0.24 * self.W) for _ in range(2)))
         line, lo, hi = self._scale_stims
@@ -340,18 +341,15 @@ class PsychoPyScreen(Participant):
         ENTER confirms; the response time runs to the confirming ENTER (PsychoPy's rating
         scale counts to its accept the same way)."""
         keymap = scale.key_map()
-        ends = (scale.anchors.get(scale.min, ""), scale.anchors.get(scale.max, ""))
-        inner = "   ".join(f"{k} = {v}" for k, v in sorted(scale.anchors.items())
-                           if k not in (scale.min, scale.max))  # anchors between the ends
+        inner = self._inner_anchors(scale)
         chosen: int | None = None
         self._flush()
         t0 = self._clock()
         while True:
-            line = "     ".join(f"[{v}]" if v == chosen else f" {v} " for v in scale.values)
+            drawn = self._scale_line(scale, chosen)
             hint = (self.t("rating_chosen", value=chosen) if chosen is not None
                     else self.t("rating_keys"))
-            self._frame(scale.question, f"{inner}\n{hint}" if inner else hint,
-                        scale=(line, *ends))
+            self._frame(scale.question, f"{inner}\n{hint}" if inner else hint, scale=drawn)
             for k in self._names():
                 if k in keymap:
                     chosen = keymap[k]
@@ -360,19 +358,40 @@ class PsychoPyScreen(Participant):
                 elif k in ("return", "num_enter") and chosen is not None:
                     rt = self._clock() - t0
                     self._frame(scale.question, self.t("rating_confirmed", value=chosen),
-                                scale=(line, *ends))
+                                scale=self._scale_line(scale, chosen))
                     return chosen, rt
             time.sleep(0.005)
 
+    def _scale_line(self, scale, chosen: int | None) -> tuple[str, str, str]:
+        """The scale's points (``chosen`` in brackets) and the anchors of its two ends."""
+        gap = "     " if len(scale.values) <= 7 else "  "
+        line = gap.join(f"[{v}]" if v == chosen else f" {v} " for v in scale.values)
+        return line, scale.anchors.get(scale.min, ""), scale.anchors.get(scale.max, "")
+
+    def _inner_anchors(self, scale) -> str:
+        """Anchors of points between the ends (the ends' own are drawn under them)."""
+        return "   ".join(f"{k} = {v}" for k, v in sorted(scale.anchors.items())
+                          if k not in (scale.min, scale.max))
+
     def _rate_typed(self, scale, anchors: str) -> tuple[int, float]:
-        """Digits typed, ENTER confirms; BACKSPACE deletes; a number off the scale is said so."""
+        """Digits typed, ENTER confirms; BACKSPACE deletes; a number off the scale is said so.
+        The scale's points are drawn (up to 11 of them) with its end anchors under its ends,
+        the number typed so far marked on it."""
         typed, note = "", ""
+        inner = self._inner_anchors(scale)
+        drawn = len(scale.values) <= 11
         self._flush()
         t0 = self._clock()
         while True:
             shown = typed or "_"
             hint = note or self.t("rating_typed", min=scale.min, max=scale.max)
-            self._frame(f"{scale.question}\n\n{shown}", f"{anchors}\n{hint}")
+            value = int(typed) if typed not in ("", "-") else None
+            if drawn:
+                self._frame(f"{scale.question}\n\n{shown}",
+                            f"{inner}\n{hint}" if inner else hint,
+                            scale=self._scale_line(scale, value))
+            else:
+                self._frame(f"{scale.question}\n\n{shown}", f"{anchors}\n{hint}")
             for k in self._names():
                 k = _NUM.get(k, k)
                 if k.isdigit() and len(k) == 1 and len(typed) < 6:
@@ -386,7 +405,8 @@ class PsychoPyScreen(Participant):
                     if scale.min <= value <= scale.max:
                         rt = self._clock() - t0
                         self._frame(f"{scale.question}\n\n{value}",
-                                    self.t("rating_confirmed", value=value))
+                                    self.t("rating_confirmed", value=value),
+                                    scale=self._scale_line(scale, value) if drawn else None)
                         return value, rt
                     note = self.t("rating_invalid", value=value, min=scale.min, max=scale.max)
                     typed = ""

@@ -153,12 +153,22 @@ def test_ratings_above_nine_are_typed_and_confirmed(xdisplay, shots):
     typed and confirmed with ENTER; off the scale is said so and asked again."""
     scr = make("factorial", Keys([], ["0"], ["return"], ["1", "0"], ["return"]))
     try:
-        assert scr.protocol.rating.entry_mode == "typed"
-        rating, _ = scr.rate(TRIAL, scr.protocol.rating, None, None)
+        scale = scr.protocol.rating
+        assert scale.entry_mode == "typed"
+        rating, _ = scr.rate(TRIAL, scale, None, None)
         assert rating == 10
-        scr.screenshot(shots / "factorial-rating.png", text=f"{scr.protocol.rating.question}"
-                       "\n\n10", small="1 = least realistic   10 = most realistic\nType a "
-                       "number from 1 to 10, then press ENTER.")
+        # the scale's ten points are drawn, 10 marked, each end's anchor under its end
+        # (they were one grey line): placed left and right of the centre, at the line's ends
+        assert scr.drawn_text[3:] == [scale.anchors[1], scale.anchors[10]]
+        assert scr.drawn_text[2].rstrip().endswith("[10]")
+        line, low, high = scr._scale_stims
+        assert line.boundingBox[1] < 1.6 * line.height  # one line: ten points wrapped once
+        half = line.boundingBox[0] / 2
+        assert low.pos[0] == pytest.approx(-half) and high.pos[0] == pytest.approx(half)
+        assert low.pos[1] < line.pos[1] and high.pos[1] < line.pos[1]
+        scr.screenshot(shots / "factorial-rating.png", text=f"{scale.question}\n\n10",
+                       small="Type a number from 1 to 10, then press ENTER.",
+                       scale=scr._scale_line(scale, 10))
     finally:
         scr.close()
     p = edited("realism", "min = 1\nmax = 7", "min = 0\nmax = 100")
