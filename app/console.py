@@ -263,6 +263,10 @@ class KeyConsole(PlainConsole):
                          "device's own e-stop button still acts")
                 return
             for ch in decoder.decode(data):  # a multibyte key may end in the next read
+                if ch == "\ufffd":  # bytes that are no character in the terminal's encoding
+                    self.say(f"a key that is not {enc} text was ignored (is the terminal's "
+                             "encoding set?); the keys still act")
+                    continue
                 if self._escape(ch):
                     continue
                 try:
@@ -381,7 +385,10 @@ class KeyConsole(PlainConsole):
         self._reader.join(timeout=1.0)  # it wakes every 0.1 s; never read a closed terminal
         if self._live is not None:
             self._live.stop()  # its last frame stays on the terminal, summary included
-        termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+        try:
+            termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+        except (termios.error, OSError):  # the terminal is gone: nothing left to restore
+            pass
 
 
 def make_console(kind: str = "plain", quiet: bool = False, device=None,

@@ -270,3 +270,44 @@ def test_the_counter_counts_items_never_past_their_number(tty_stdin, dev):
             assert f"testing · {shown} (trial #50)" in text, text
     finally:
         con.close()
+
+
+def test_bytes_that_are_no_character_are_said_and_the_keys_still_act(tty_stdin, dev):
+    """A terminal whose encoding is not the one it sends (Latin-1 'ü' into a UTF-8 reader)
+    was replaced silently; it is said, dropped from a note, and e still stops at once."""
+    con = KeyConsole(dev, live=False)
+    try:
+        con.set_state("placing")
+        os.write(tty_stdin, b"nM\xfcller\r")  # 'Müller' from a Latin-1 terminal
+        assert _until(lambda: con.notes)
+        assert con.notes[0]["text"] == "Mller"
+        assert any("not utf-8 text was ignored" in m.lower() for m in con.view.messages)
+        os.write(tty_stdin, b"\xff\xfee")
+        assert _until(lambda: dev.fault is not None) and dev.fault.code == "estop"
+    finally:
+        con.close()
+
+
+def test_a_terminal_that_goes_away_is_said_and_the_session_goes_on(dev):
+    """The operator's terminal closed (an ssh session dropped, the window closed): the key
+    reader says so and ends (the device's own button still acts); the console keeps
+    answering the runner, which never hangs on it."""
+    master, slave = os.openpty()
+    f = os.fdopen(slave, "r", buffering=1)
+    old = sys.stdin
+    sys.stdin = f
+    try:
+        con = KeyConsole(dev, live=False)
+        try:
+            con.set_state("placing")
+            os.write(master, b"r")
+            assert con.poll(2.0) == "go"
+            os.close(master)
+            assert _until(lambda: any("terminal" in m and "no longer read" in m
+                                      for m in con.view.messages))
+            assert con.poll(0.1) is None  # the runner's poll still returns
+        finally:
+            con.close()
+    finally:
+        sys.stdin = old
+        f.close()
