@@ -153,6 +153,8 @@ class SessionRunner:
     _durations: list[float] = field(default_factory=list)
     _windows_in_attempt: int = 0
     _on_device: str | None = None  # the real block last placed on the device, if any
+    #: id of a window result whose traces were written when it ended → the file's name
+    _spilled: dict = field(default_factory=dict)
 
     def load_log(self) -> None:
         rows, torn = self.files.read_rows()
@@ -462,6 +464,7 @@ class SessionRunner:
     # ------------------------------------------------------------------ one attempt
     def _attempt(self, trial: Trial) -> None:
         self._windows_in_attempt = 0
+        self._spilled.clear()  # its results are alive until recorded: no id is reused
         self._on_device = trial.placement if trial.kind != "identification" else None
         rng = self._rng(trial)
         t_start = utc_now()
@@ -485,10 +488,14 @@ class SessionRunner:
                     visited.add(k)
                 named = [last[k] for k in sorted(last)]
             elif trial.kind == "free":
-                # familiarization: windows on the sample until the participant is done
-                results.append(self._window(trial, trial.samples[0], rng))
-                while self.participant_ui.keep_tapping():
-                    results.append(self._window(trial, trial.samples[0], rng))
+                # familiarization: windows on the sample until the participant is done, each
+                # window's traces on disk as it ends (held in memory, a long familiarization
+                # grew by megabytes a window)
+                while True:
+                    results.append(self._spill(trial, len(results),
+                                               self._window(trial, trial.samples[0], rng)))
+                    if not self.participant_ui.keep_tapping():
+                        break
             else:
                 for sid in trial.samples:
                     results.append(self._window(trial, sid, rng))
@@ -560,6 +567,17 @@ class SessionRunner:
         self.console.result("valid", len(velocities),
                             f"rating {row['rating']}" if "rating" in row else "")
 
+    def _spill(self, trial: Trial, k: int, res):
+        """Window ``k`` of ``trial`` with its traces written now (as ``_record`` would name
+        them) and dropped from memory; ``res`` itself when nothing is recorded."""
+        if self._expected is not None or self.traces == "none" or not res.traces:
+            return res
+        name = self.files.save_trace(
+            f"trial-{trial.trial_index:04d}-{k}.npz",
+            _trace_payload(res, self.traces, self.device.info, trial.samples[0]), res.contacts)
+        self._spilled[id(kept := dataclasses.replace(res, traces={}))] = name
+        return kept
+
     def _window(self, trial: Trial, sample_id: str, rng: np.random.Generator,
                 reseed: list | None = None):
         sample = self.protocol.samples[sample_id]
@@ -605,7 +623,8 @@ class SessionRunner:
             self._meet(trial, status, vel, extra)
             self.log.append(Attempt(trial.item, status, reason))
             return
-        if results and self.traces != "none" and any(len(r.traces) for r in results):
+        if results and self.traces != "none" and any(len(r.traces) or id(r) in self._spilled
+                                                     for r in results):
             # every recording its own name: a trial's windows by its index (unique per
             # attempt), a real block's tapping by its place among the session's references
             # (several may come before one trial); the recorder refuses to overwrite
@@ -614,11 +633,12 @@ class SessionRunner:
             else:
                 stem = f"trial-{trial.trial_index:04d}"
             for k, r in enumerate(results):
-                if not r.traces:
-                    continue
-                trace_file = self.files.save_trace(
-                    f"{stem}-{k}.npz", _trace_payload(r, self.traces, self.device.info,
-                                                      played[k]), r.contacts)
+                if id(r) in self._spilled:  # written when its window ended
+                    trace_file = self._spilled.pop(id(r))
+                elif r.traces:
+                    trace_file = self.files.save_trace(
+                        f"{stem}-{k}.npz", _trace_payload(r, self.traces, self.device.info,
+                                                          played[k]), r.contacts)
             if len(results) > 1:
                 trace_file = f"traces/{stem}-*.npz"
         row = {

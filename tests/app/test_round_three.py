@@ -461,3 +461,43 @@ def test_a_person_on_the_simulated_device_is_paced_by_the_wall_clock():
             assert bool(res.timing) is paced, res.timing
             if paced:
                 assert res.timing["achieved_rate_hz"] > 0
+
+
+class TapsFourTimes(ScriptedResponder):
+    """Familiarization: four windows; counts the trace files on disk before each."""
+
+    def __init__(self, traces: Path | None = None):
+        self.traces, self.on_disk, self.more = traces, [], 3
+
+    def before_window(self, trial, sample_id, device, rng):
+        if trial.kind == "free":
+            self.on_disk.append(len(list(self.traces.glob("trial-*.npz"))))
+
+    def keep_tapping(self):
+        self.more -= 1
+        return self.more >= 0
+
+
+def test_familiarization_writes_each_window_as_it_ends(tmp_path):
+    """Issue 30 (10): familiarization kept every window's traces in memory until the
+    participant was done (megabytes a window, without bound). Each window's file is on
+    disk before the next window starts, and the row names them all."""
+    p = load_protocol(str(DATA / "six_with_practice.toml"))  # familiarization first
+    folder, _ = new_session_dir(tmp_path, "P01")
+    ui = TapsFourTimes(folder / "traces")
+    files = SessionFiles(folder)
+    files.start("")
+    runner = SessionRunner(p, SessionEngine(p, 4, "P01"), open_device("sim", seed=4), files,
+                           ui, "P01", 1, 4, traces="full")
+    trial = runner.engine.next_trial([])
+    assert trial.kind == "free"
+    runner._attempt(trial)
+    assert ui.on_disk == [0, 1, 2, 3]
+    rows, _ = read_trials(folder / "trials.tsv")
+    assert rows[-1]["trace_file"] == f"traces/trial-{trial.trial_index:04d}-*.npz"
+    speeds = []
+    for k in range(4):
+        with np.load(folder / "traces" / f"trial-{trial.trial_index:04d}-{k}.npz") as z:
+            assert str(z["sample"]) == trial.samples[0]
+            speeds += [f"{v:.5f}" for v in z["contacts_v"]]
+    assert ";".join(speeds) == rows[-1]["tap_velocities"]
