@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shlex
 import sys
 from collections.abc import Callable, Sequence
 
@@ -288,6 +289,12 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _preflight_again(args: argparse.Namespace) -> str:
+    """The preflight's command line again, clearing the device's latched fault (quoted)."""
+    return shlex.join(["hapticlab", "preflight", str(args.protocol), "--device", args.device,
+                       "--data", str(args.data), "--clear-fault"])
+
+
 def _preflight(args: argparse.Namespace) -> int:
     """Every check a session makes before it starts, each on its own line."""
     from app.preflight import (
@@ -318,8 +325,7 @@ def _preflight(args: argparse.Namespace) -> int:
         checks += [check_terminal(), check_display()]
     try:
         with _opener(args)(args.device) as dev:
-            again = (f"hapticlab preflight {args.protocol} --device {args.device} --data "
-                     f"{args.data} --clear-fault")
+            again = _preflight_again(args)
             checks += [check_device(dev, args.device, again),
                        check_protocol_on(text, source, dev),
                        check_limit(proto, dev), check_libraries(proto, dev, args.device,

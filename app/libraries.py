@@ -13,6 +13,7 @@ started session.
 from __future__ import annotations
 
 import dataclasses
+import shlex
 from collections.abc import Callable
 
 from device import LibraryTransient, open_device
@@ -20,14 +21,20 @@ from device.matching.library import LibraryError, TransientLibrary, build_into_s
 
 from .errors import MissingLibraryError
 
-__all__ = ["prepare_libraries", "with_libraries", "check_recorded", "LIBRARY_SEED",
-           "BUILD_SECONDS"]
+__all__ = ["prepare_libraries", "with_libraries", "check_recorded", "build_line",
+           "LIBRARY_SEED", "BUILD_SECONDS"]
 
 #: seed of the fresh simulated device a simulated library is built on (reproducible builds)
 LIBRARY_SEED = 20_260_001
 #: measured time to build one library on the simulated device (8 windows, identification,
 #: 12 inversions), for the announcement
 BUILD_SECONDS = 5
+
+
+def build_line(spec: str, protocol: str, source: str) -> str:
+    """The command that builds the library of ``source`` for ``protocol`` on ``spec``."""
+    return shlex.join(["hapticlab", "library", "build", "--device", spec, "--protocol",
+                       protocol, "--source", source])
 
 
 def _matched(protocol) -> dict[str, tuple[LibraryTransient, list[str]]]:
@@ -102,8 +109,8 @@ def prepare_libraries(protocol, device, spec: str, say: Callable[[str], None] = 
             out[sid] = {"source": tr.source, "path": str(path), "sha256": lib.sha256}
     problems = [f"{', '.join(samples)} need(s) a library reproducing '{src}' built on this "
                 f"device ({info.model}, serial {info.serial_number}); build it with: "
-                f"hapticlab library build --device {spec} --protocol {ref or protocol.source} "
-                f"--source {src}" for src, samples in missing] + broken
+                + build_line(spec, str(ref or protocol.source), src)
+                for src, samples in missing] + broken
     if problems:
         raise MissingLibraryError("; ".join(problems))
     return out

@@ -27,6 +27,21 @@ def _agg():
     return plt
 
 
+def _sysid_again(args: argparse.Namespace) -> str:
+    """The command line that runs this identification again, with every option the user
+    gave, once a fault is cleared (quoted for the shell)."""
+    cmd = ["hapticlab", "device", "sysid", "--device", args.device, "--order", str(args.order),
+           "--relative-degree", str(args.relative_degree), "--levels",
+           *(f"{v:g}" for v in args.levels), "--repeats", str(args.repeats)]
+    if args.delay is not None:
+        cmd += ["--delay", f"{args.delay:g}"]
+    if args.png:
+        cmd += ["--png", str(args.png)]
+    if args.json:
+        cmd.append("--json")
+    return shlex.join([*cmd, "--clear-fault"])
+
+
 def device_sysid(args: argparse.Namespace, open_spec) -> int:
     from device.matching.library import usable_band
     from device.matching.measure import MeasurementFault, Pace
@@ -44,8 +59,7 @@ def device_sysid(args: argparse.Namespace, open_spec) -> int:
                                                  "done"), pace=pace)
         except MeasurementFault as exc:
             raise DeviceError(f"{exc}; {pace.done} of {n} sweeps were done. Once it is safe, "
-                              f"run it again: hapticlab device sysid --device {args.device} "
-                              "--clear-fault") from None
+                              f"run it again: {_sysid_again(args)}") from None
     m = idn.model
     e = idn.etfe.in_band(band)
     report = {"device": args.device, "rate_hz": idn.rate_hz, "levels_n": list(idn.levels),

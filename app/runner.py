@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import platform
+import shlex
 import subprocess
 import sys
 import time
@@ -353,7 +354,7 @@ class SessionRunner:
 
     def _resume_line(self) -> str:
         """The command that continues this session after a fault, once it is safe."""
-        return f"hapticlab resume {self.files.folder} --clear-fault"
+        return shlex.join(["hapticlab", "resume", str(self.files.folder), "--clear-fault"])
 
     def _save_notes(self) -> None:
         notes = self.console.take_notes()

@@ -176,3 +176,42 @@ def test_every_command_that_opens_a_device_can_clear_its_fault():
                  "run realism --participant P1 --dry-run", "resume d", "simulate realism"):
         args = parser.parse_args([*line.split(), "--clear-fault"])
         assert args.clear_fault is True, line
+
+
+def test_commands_built_from_values_parse_with_spaces_in_them():
+    """The scan above sees string constants only; these commands are built from the user's
+    own values (a data folder or a plot path may hold a space, which an unquoted
+    suggestion split in two). Each parses back to the values it was built from, and the
+    identification's keeps every option the user gave (it kept only --device)."""
+    from types import SimpleNamespace
+
+    from app.cli import _preflight_again
+    from app.libraries import build_line
+    from app.matching_cli import _sysid_again
+    from app.runner import SessionRunner
+
+    parser = build_parser()
+    folder = "/lab data/sub-P1/ses-1"
+    line = SessionRunner._resume_line(SimpleNamespace(files=SimpleNamespace(folder=folder)))
+    args = parser.parse_args(shlex.split(line)[1:])
+    assert args.session_dir == folder and args.clear_fault
+
+    given = parser.parse_args(["preflight", "my protocols/r.toml", "--device", "serial:/dev/x",
+                               "--data", "/lab data"])
+    again = parser.parse_args(shlex.split(_preflight_again(given))[1:])
+    assert (again.protocol, again.device, str(again.data)) == ("my protocols/r.toml",
+                                                               "serial:/dev/x", "/lab data")
+    assert again.clear_fault
+
+    built = parser.parse_args(shlex.split(build_line("serial:/dev/ttyACM0", "my r.toml",
+                                                     "wood_on_foam"))[1:])
+    assert (built.device, built.protocol, built.source) == ("serial:/dev/ttyACM0",
+                                                            "my r.toml", "wood_on_foam")
+
+    given = parser.parse_args(["device", "sysid", "--device", "serial:/dev/x", "--levels",
+                               "0.5", "2", "--repeats", "3", "--order", "5", "--delay", "1.5",
+                               "--png", "/tmp/my plots/fit.png", "--json"])
+    again = parser.parse_args(shlex.split(_sysid_again(given))[1:])
+    keep = ("device", "levels", "repeats", "order", "relative_degree", "delay", "png", "json")
+    assert {k: getattr(again, k) for k in keep} == {k: getattr(given, k) for k in keep}
+    assert again.clear_fault and not given.clear_fault
