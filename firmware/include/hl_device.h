@@ -18,10 +18,14 @@
 #define HL_FORCE_CONSTANT_MN_A 2150u  /* [mN/A] */
 #define HL_CURRENT_RATING_MA 1400u    /* [mA] */
 #define HL_EFFECTIVE_MASS_MG 55000u   /* [mg] */
-/* the watchdog [ms]: 100 on the board, where the host's heartbeats (a native thread at
- * real-time priority) arrived at most 40 ms apart on a loaded computer; the QEMU build
- * serving sessions takes 500 (Makefile): there QEMU's I/O thread hands the board each byte
- * from the host, and on a loaded computer it delivered heartbeats up to 230 ms late */
+/* the watchdog [ms]: 100 on the board. The rule: at least twice the longest gap between
+ * the host's frames the device saw beside 2 x cores CPU-bound processes (README, `bench
+ * link`): 45 ms from hapticlab's native heartbeat thread, 56 ms from its Python-thread
+ * fallback (1.8 x; the host's frames are sent every 25 ms, T_wd/4), and short enough that
+ * a host that dies stops the output within a tenth of a second. The QEMU builds take 500
+ * (Makefile): QEMU's I/O thread hands the emulated board each byte from the host, and on a
+ * loaded computer it delivered heartbeats up to 230 ms late, an emulator's delay that a
+ * board does not have */
 #ifndef HL_WATCHDOG_MS
 #define HL_WATCHDOG_MS 100u
 #endif
