@@ -230,8 +230,11 @@ def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
         errs = lib.meta["inversion"]["in_window_error"]
         print(f"wrote {path}: {len(lib.velocities)} transients for {args.source} on "
               f"{args.device} ({lib.velocities.min():.3f}–{lib.velocities.max():.3f} m/s), "
-              f"{args.method} inversion, in-window error median {np.median(errs):.2f} (the "
-              f"inversion's own check through the model); sha256 {lib.sha256[:16]}…")
+              f"{args.method} inversion, in-window error median {np.median(errs):.2f} (through "
+              "the identified model, ‖reply − tap‖ / ‖tap‖ over the window: 0 reproduces each "
+              "tap's acceleration exactly, 1 is no better than playing nothing; the "
+              f"verification below says how close it comes on the device); sha256 "
+              f"{lib.sha256[:16]}…")
         if args.verify:
             _verify(dev, protocol, args, path, record.windows)
     record.discard()

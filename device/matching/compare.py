@@ -83,13 +83,19 @@ class Verification:
         """Against the distance scale: ≤ 3 dB is close (within a factor √2 in amplitude on
         average over 10–500 Hz), ≤ 6 dB fair (within a factor two), far above. The spring
         alone is the baseline measured the same way (on a sample whose low band the spring
-        already matches, wood on foam, it can be the closer of the two)."""
+        already matches, wood on foam, it can be the closer of the two): when it is no
+        farther than the library, the verdict says the library gains nothing here."""
         if self.matched_db <= 3.0:
-            return "close (≤ 3 dB: within a factor √2 on average)"
-        if self.matched_db <= 6.0:
-            return "fair (≤ 6 dB: within a factor two on average)"
-        return ("far (> 6 dB): check the identification (hapticlab device sysid --png "
-                "sysid.png) and rebuild with more --windows")
+            grade = "close (≤ 3 dB: within a factor √2 on average)"
+        elif self.matched_db <= 6.0:
+            grade = "fair (≤ 6 dB: within a factor two on average)"
+        else:
+            grade = ("far (> 6 dB): check the identification (hapticlab device sysid --png "
+                     "sysid.png) and rebuild with more --windows")
+        if self.spring_db <= self.matched_db:
+            grade += (f", and no closer than the spring alone ({self.spring_db:.1f} dB): the "
+                      "library gains nothing measurable on this device")
+        return grade
 
 
 def verify_library(device, real_results, matched: Scene, spring: Scene, windows: int = 2,

@@ -398,3 +398,15 @@ def test_identification_refuses_a_device_that_thins_its_accelerometer_out():
                                           "servo tick \\(10000 Hz\\)"):
         identify(narrow)
     assert asked == [("accel",), None]
+
+
+def test_the_verdict_weighs_the_library_against_its_spring_alone():
+    """The README's own example was called 'fair' at 3.0 dB while the spring alone scored
+    2.3 dB: a verdict that ignored its baseline. It says when the library gains nothing."""
+    from device.matching.compare import Verification
+
+    fair = Verification(3.04, 2.3, 16, 15).verdict()  # printed as 3.0
+    assert fair.startswith("fair") and "no closer than the spring alone (2.3 dB)" in fair
+    better = Verification(2.0, 4.5, 16, 15).verdict()
+    assert better.startswith("close") and "spring alone" not in better
+    assert Verification(7.0, 9.0, 10, 10).verdict().startswith("far")
