@@ -177,3 +177,16 @@ def test_gap_percentiles_are_bin_edges_never_above_the_largest_gap():
     assert got == {"gap_p50_ms": 4.0, "gap_p99_ms": 6.5, "gap_p999_ms": 6.5, "gaps": 4}
     assert gap_percentiles([0, 3, 0, 1], 2.0)["gap_p999_ms"] == 8.0
     assert gap_percentiles([0, 0], 2.0, max_ms=None)["gap_p50_ms"] is None
+
+
+def test_the_bench_bounds_a_fault_rate_it_did_not_see():
+    """`bench link` printed 0 faults per hour after 20 s without one; it now gives the
+    one-sided 95 % upper bound too. Poisson bounds, as tabled (Garwood 1936): none seen,
+    -ln 0.05 = 2.996 per exposure (the rule of three); one, 4.744; five, 10.51."""
+    from benchmarks.link_load import _per_hour, faults_upper95
+
+    assert faults_upper95(0, 3600) == pytest.approx(2.996, abs=1e-3)
+    assert faults_upper95(1, 3600) == pytest.approx(4.744, abs=1e-3)
+    assert faults_upper95(5, 3600) == pytest.approx(10.513, abs=1e-3)
+    assert faults_upper95(0, 20) == pytest.approx(2.996 * 180, rel=1e-3)
+    assert _per_hour(0, 20) == "0 (≤ 539)"
