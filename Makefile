@@ -61,7 +61,7 @@ lint: $(STAMP)
 test: $(STAMP) system-deps
 	$(VENV)/bin/ruff check .
 	$(MAKE) -C firmware test
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=15
 
 # The wire contract (device/serial/contract.py) into the files made from it: the firmware's
 # include/hl_contract.h and the tables of docs/wire-protocol.md, then the test vectors
