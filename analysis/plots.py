@@ -59,7 +59,7 @@ def rating_means(a: dict, out: Path) -> list[str]:
             ax.text(xi, 1.01, text, transform=ax.get_xaxis_transform(), ha="center",
                     va="bottom", fontsize=9)
     ax.set_ylabel("rating (mean ± 95 % CI)")
-    ax.set_title(f"{a['id']}: ratings of the samples (n = {r['n_subjects']} participants; "
+    ax.set_title(f"{a['id']}: ratings of the samples (n = {r['n_subjects']}; "
                  "samples sharing a letter do not differ, Holm)", pad=18, fontsize=10)
     return _save(fig, out, f"{_name(a)}_means")
 

@@ -49,6 +49,11 @@ DRY_RUN_NOTE = ("These data come from a dry run: a scripted responder answered a
 P_FLOOR = 2.3e-308
 
 
+
+def _people(n) -> str:
+    """'1 participant', '9 participants'."""
+    return f"{n} participant{'' if n == 1 else 's'}"
+
 def _clean(v, where: str = "report"):
     """JSON-safe, finite, rounded (12 significant digits) values; a non-finite number is an
     error naming where it is."""
@@ -110,7 +115,7 @@ def methods_text(a: dict, design: dict) -> str:
         elif k == 2:
             sph = "two levels, so sphericity holds by construction"
         else:
-            sph = (f"Mauchly's test is undefined with {n_anova} participants for {k} samples "
+            sph = (f"Mauchly's test is undefined with {_people(n_anova)} for {k} samples "
                    "(singular covariance), so the Greenhouse–Geisser-corrected p is reported")
         pairs = k * (k - 1) // 2
         const = len(res["constant_pairs"])
@@ -127,7 +132,7 @@ def methods_text(a: dict, design: dict) -> str:
                          if res.get("missing", "listwise") == "listwise" else
                          "(listwise) and of the t-tests of the pairs they miss (pairwise, "
                          "on request)."))
-        return (f"{title}: {n} participants rated {k} samples on a {_scale_text(design)} scale, "
+        return (f"{title}: {_people(n)} rated {k} samples on a {_scale_text(design)} scale, "
                 f"{res['repetitions']} time(s) each (median); ratings were averaged per "
                 f"participant and sample. One-way repeated-measures ANOVA on {n_anova} "
                 f"participants with every sample (sample within subjects; {sph}); effect sizes "
@@ -172,7 +177,7 @@ def methods_text(a: dict, design: dict) -> str:
                                     phase.get("normalize") or "none", "")
         per = f" Per block ({', '.join(groups)}), a" if phase.get("by") else " A"
         n = max(v["n_subjects"] for v in res.values())
-        return (f"{title}: {n} participants rated {len(first['sets'])} sets per "
+        return (f"{title}: {_people(n)} rated {len(first['sets'])} sets per "
                 f"{'block' if phase.get('by') else 'design'} ({shape} levels of "
                 f"{', '.join(factors)}) on a {_scale_text(design)} scale.{norm}{per} "
                 f"{shape} repeated-measures ANOVA ({', '.join(factors)} within subjects; "
@@ -185,7 +190,7 @@ def methods_text(a: dict, design: dict) -> str:
     rule = (f"a repetition counts as correct only when all {k} surfaces are named right "
             f"(chance 1/{k}! = {chance:.1f} %)" if res["scoring"] == "all_correct" else
             f"each surface counts on its own (chance 1/{k} = {chance:.1f} %)")
-    return (f"{title}: {res['n_subjects']} participants named {k} surfaces per repetition; "
+    return (f"{title}: {_people(res['n_subjects'])} named {k} surfaces per repetition; "
             f"{rule}; percent correct is tested against chance with a one-sided exact "
             "binomial test over all answers, which treats a person's repeated answers as "
             "independent, and, with each participant as the unit, by a one-sided exact sign "
@@ -449,7 +454,7 @@ def _oneway_md(a: dict) -> tuple[list[str], list[str]]:
              "mean_z": r["mean_z"]} for r in a["samples"]]
     n_tests = a["anova"][0]["n"]
     left = a["n_subjects"] - n_tests
-    out = [f"{a['n_subjects']} participants"
+    out = [f"{_people(a['n_subjects'])}"
            + (f"; {n_tests} rated every sample and are the n of the ANOVA, the t-tests and "
               f"the Wilcoxon tests ({left} left out listwise; the mixed models keep them)"
               if left else "") + ".\n\n#### Samples (mean rating, 95 % CI; letters: "
@@ -474,7 +479,7 @@ def _oneway_md(a: dict) -> tuple[list[str], list[str]]:
                       if g["only_wilcoxon"] else "") + ".")
         floor = o.get("wilcoxon_floor", 0.0)
         if floor >= 0.05:
-            out.append(f" With {a['anova'][0]['n']} participants the smallest Holm-adjusted "
+            out.append(f" With {_people(a['anova'][0]['n'])} the smallest Holm-adjusted "
                        f"Wilcoxon p any pair can reach is {_p_digits(min(floor, 1.0))} "
                        f"({g['pairs']} pairs × the smallest p of a signed-rank test with "
                        "that many differences, tied or not): no pair can reach .05 by Wilcoxon "
@@ -531,11 +536,11 @@ def _summary(a: dict) -> str:
         return f"**{_md_text(a['id'])}**: {_md_text(a['result'])}"
     n = a.get("n_subjects") or max((v["n_subjects"] for v in a.get("groups", {}).values()
                                     if isinstance(v, dict)), default=0)
-    head = f"**{_md_text(a['id'])}** ({n} participants): "
+    head = f"**{_md_text(a['id'])}** ({_people(n)}): "
     if a["type"] == "oneway":
         n_tests = a["anova"][0]["n"]
         if n_tests != n:  # every count printed is the n of the test beside it
-            head = (f"**{_md_text(a['id'])}** ({n} participants, {n_tests} with every sample "
+            head = (f"**{_md_text(a['id'])}** ({_people(n)}, {n_tests} with every sample "
                     "in the ANOVA and paired tests): ")
         aov = a["anova"][0]
         eps = aov.get("eps_gg")
@@ -636,7 +641,7 @@ def _identification_md(a: dict) -> tuple[list[str], list[str]]:
     out.append(f"{pp}\n" if isinstance(pp, str) or pp is None else _table(pp))
     gc = a.get("groups_compared")
     if gc:
-        out.append(f"\n{gc['group_a']} ({gc['n_a']} participants, {gc['mean_percent_a']:.1f} % "
+        out.append(f"\n{gc['group_a']} ({_people(gc['n_a'])}, {gc['mean_percent_a']:.1f} % "
                    f"correct) against {gc['group_b']} ({gc['n_b']}, {gc['mean_percent_b']:.1f} "
                    f"%): Mann–Whitney U = {gc['U']:g}, {_p(gc['p_mwu'])} (two-sided, each "
                    "participant's proportion correct as one observation).\n")
