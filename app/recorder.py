@@ -162,11 +162,24 @@ class SessionFiles:
         own, and nothing recorded is lost."""
         rows, _ = self.read_rows()
         named = [r["trace_file"] for r in rows if r.get("trace_file")]
+        moved = self.set_aside(f"{TRACES}/{f.name}" for f in sorted(self.traces.glob("*.npz"))
+                               if not any(fnmatch.fnmatchcase(f"{TRACES}/{f.name}", pat)
+                                          for pat in named))
+        if not moved:
+            return []
+        return [f"moved {len(moved)} trace file(s) no row names (the session stopped between "
+                f"trace and row) to {TRACES}/unrecorded/: {', '.join(moved)}"]
+
+    def set_aside(self, names) -> list[str]:
+        """Move trace files (``traces/<name>``, as :meth:`save_trace` returns them) that no
+        row names to ``traces/unrecorded/`` (a name taken there gets a number): an attempt
+        that ended without its row runs again under the same names. Returns where they went.
+        """
         moved = []
         try:
-            for f in sorted(self.traces.glob("*.npz")):
-                rel = f"{TRACES}/{f.name}"
-                if any(fnmatch.fnmatchcase(rel, pat) for pat in named):
+            for rel in names:
+                f = self.folder / rel
+                if not f.exists():
                     continue
                 aside = self.traces / "unrecorded"
                 aside.mkdir(exist_ok=True)
@@ -179,10 +192,7 @@ class SessionFiles:
                 moved.append(f"{TRACES}/{target.relative_to(self.traces)}")
         except OSError as exc:
             raise io_error(exc, "cannot set an unrecorded trace aside") from None
-        if not moved:
-            return []
-        return [f"moved {len(moved)} trace file(s) no row names (the session stopped between "
-                f"trace and row) to {TRACES}/unrecorded/: {', '.join(moved)}"]
+        return moved
 
     def write_meta(self, meta: dict) -> None:
         try:

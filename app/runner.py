@@ -154,8 +154,9 @@ class SessionRunner:
     _durations: list[float] = field(default_factory=list)
     _windows_in_attempt: int = 0
     _on_device: str | None = None  # the real block last placed on the device, if any
-    #: id of a window result whose traces were written when it ended → the file's name
-    _spilled: dict = field(default_factory=dict)
+    #: (window result, file) of the attempt's windows whose traces were written when they
+    #: ended; _record names them, and what no row named is set aside when the attempt ends
+    _spilled: list = field(default_factory=list)
 
     def load_log(self) -> None:
         rows, torn = self.files.read_rows()
@@ -465,7 +466,14 @@ class SessionRunner:
     # ------------------------------------------------------------------ one attempt
     def _attempt(self, trial: Trial) -> None:
         self._windows_in_attempt = 0
-        self._spilled.clear()  # its results are alive until recorded: no id is reused
+        try:
+            self._attempt_windows(trial)
+        finally:  # what the attempt wrote early and no row names goes aside, never reused
+            if self._spilled:
+                self.files.set_aside([name for _, name in self._spilled])
+                self._spilled.clear()
+
+    def _attempt_windows(self, trial: Trial) -> None:
         self._on_device = trial.placement if trial.kind != "identification" else None
         rng = self._rng(trial)
         t_start = utc_now()
@@ -473,7 +481,9 @@ class SessionRunner:
         self.console.set_state("trial")
         if self.audio is not None:
             self.audio.tap_cue()
-        results, played = [], []  # each window's result and the sample it played
+        # the sample of each window begun (one more than results while a window runs, so a
+        # window a device error cut short is named too), and each finished window's result
+        results, played = [], []
         try:
             if trial.kind == "identification":
                 # the participant switches between the surfaces before naming them
@@ -483,8 +493,8 @@ class SessionRunner:
                 last: dict[int, Any] = {}
                 while (k := self.participant_ui.choose_surface(trial, visited)) is not None:
                     self.console.say(f"  surface {k + 1} of {len(trial.samples)}: tapping")
-                    results.append(self._window(trial, trial.samples[k], rng))
                     played.append(trial.samples[k])
+                    results.append(self._window(trial, trial.samples[k], rng))
                     last[k] = results[-1]
                     visited.add(k)
                 named = [last[k] for k in sorted(last)]
@@ -493,15 +503,15 @@ class SessionRunner:
                 # window's traces on disk as it ends (held in memory, a long familiarization
                 # grew by megabytes a window)
                 while True:
+                    played.append(trial.samples[0])
                     results.append(self._spill(trial, len(results),
                                                self._window(trial, trial.samples[0], rng)))
                     if not self.participant_ui.keep_tapping():
                         break
             else:
                 for sid in trial.samples:
+                    played.append(sid)
                     results.append(self._window(trial, sid, rng))
-            played = played or [trial.samples[min(i, len(trial.samples) - 1)]
-                                for i in range(len(results))]
         except DeviceFaultError as exc:  # latched before the window (an e-stop between trials)
             fault = self.device.fault
             if not self.console.interactive or fault is None:
@@ -510,8 +520,9 @@ class SessionRunner:
             raise _FaultStop(fault) from exc
         except DeviceError as exc:
             status = self.engine.failure_status("aborted_device", trial, self.log)
+            cut = [exc.partial] if exc.partial is not None else []  # the window it cut short
             self._record(trial, status, reason=str(exc)[:200], t_start=t_start,
-                         result=exc.partial)
+                         results=[*results, *cut], played=played)
             excluded = (f"; item {trial.item} failed {self.engine.cap('aborted_device')} times "
                         "and is left out" if status == "excluded_device" else "")
             raise SessionInterrupted(f"device error during trial {trial.trial_index}: "
@@ -532,7 +543,7 @@ class SessionRunner:
         if any(r.timed_out for r in results):
             status = self.engine.failure_status("timed_out", trial, self.log)
             self._record(trial, status, reason="no contact before the timeout",
-                         t_start=t_start, result=res)
+                         t_start=t_start, result=res, results=results, played=played)
             self.console.say(f"  no contact within {self.protocol.window.timeout:g} s: "
                              + ("left out (timed out too often)" if status == "excluded_timeout"
                                 else "the item goes back into the pool"))
@@ -576,7 +587,8 @@ class SessionRunner:
         name = self.files.save_trace(
             f"trial-{trial.trial_index:04d}-{k}.npz",
             _trace_payload(res, self.traces, self.device.info, trial.samples[0]), res.contacts)
-        self._spilled[id(kept := dataclasses.replace(res, traces={}))] = name
+        kept = dataclasses.replace(res, traces={})
+        self._spilled.append((kept, name))
         return kept
 
     def _window(self, trial: Trial, sample_id: str, rng: np.random.Generator,
@@ -624,7 +636,8 @@ class SessionRunner:
             self._meet(trial, status, vel, extra)
             self.log.append(Attempt(trial.item, status, reason))
             return
-        if results and self.traces != "none" and any(len(r.traces) or id(r) in self._spilled
+        spilled = {id(r): name for r, name in self._spilled}  # alive in the list: ids hold
+        if results and self.traces != "none" and any(len(r.traces) or id(r) in spilled
                                                      for r in results):
             # every recording its own name: a trial's windows by its index (unique per
             # attempt), a real block's tapping by its place among the session's references
@@ -634,8 +647,9 @@ class SessionRunner:
             else:
                 stem = f"trial-{trial.trial_index:04d}"
             for k, r in enumerate(results):
-                if id(r) in self._spilled:  # written when its window ended
-                    trace_file = self._spilled.pop(id(r))
+                if id(r) in spilled:  # written when its window ended: named by this row
+                    trace_file = spilled[id(r)]
+                    self._spilled = [(o, n) for o, n in self._spilled if o is not r]
                 elif r.traces:
                     trace_file = self.files.save_trace(
                         f"{stem}-{k}.npz", _trace_payload(r, self.traces, self.device.info,

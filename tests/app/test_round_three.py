@@ -501,3 +501,90 @@ def test_familiarization_writes_each_window_as_it_ends(tmp_path):
             assert str(z["sample"]) == trial.samples[0]
             speeds += [f"{v:.5f}" for v in z["contacts_v"]]
     assert ";".join(speeds) == rows[-1]["tap_velocities"]
+
+
+class StopsAfterTwo(TapsFourTimes):
+    """Familiarization that goes on after its second window while ``interrupt(device)``
+    breaks the device (an e-stop latched, a device error during the third window)."""
+
+    def __init__(self, traces, interrupt):
+        super().__init__(traces)
+        self.interrupt, self.device = interrupt, None
+
+    def before_window(self, trial, sample_id, device, rng):
+        super().before_window(trial, sample_id, device, rng)
+        self.device = device
+
+    def keep_tapping(self):
+        more = super().keep_tapping()
+        if self.more == 1:  # after the second window
+            self.interrupt(self.device)
+        return more
+
+
+def _familiarization(tmp_path, ui_of):
+    from app.runner import SessionInterrupted
+
+    p = load_protocol(str(DATA / "six_with_practice.toml"))
+    folder, _ = new_session_dir(tmp_path, "P01")
+    files = SessionFiles(folder)
+    files.start("")
+    dev = open_device("sim", seed=4)
+    ui = ui_of(folder / "traces")
+    runner = SessionRunner(p, SessionEngine(p, 4, "P01"), dev, files, ui, "P01", 1, 4,
+                           traces="full")
+    trial = runner.engine.next_trial([])
+    with pytest.raises(SessionInterrupted):
+        runner._attempt(trial)
+    return folder, runner, trial, dev
+
+
+def test_an_estop_during_familiarization_sets_its_early_traces_aside(tmp_path):
+    """Writing familiarization's windows as they end made an e-stop between two of them
+    fatal: the attempt ended without a row, ran again under the same trial number and
+    found its own files ('a recording never overwrites another'). What no row names goes
+    to traces/unrecorded/ (kept, as a resume keeps such files) and the attempt runs again."""
+    folder, runner, trial, dev = _familiarization(
+        tmp_path, lambda traces: StopsAfterTwo(traces, lambda d: d.estop()))
+    stem = f"trial-{trial.trial_index:04d}"
+    assert sorted(f.name for f in (folder / "traces" / "unrecorded").iterdir()) == [
+        f"{stem}-0.npz", f"{stem}-1.npz"]
+    assert not list((folder / "traces").glob("trial-*.npz"))
+    dev.clear_fault()
+    runner.participant_ui = TapsFourTimes(folder / "traces")
+    runner._attempt(trial)  # the same trial again: its own files, its row
+    rows, _ = read_trials(folder / "trials.tsv")
+    assert rows[-1]["trace_file"] == f"traces/{stem}-*.npz" and rows[-1]["status"] == "valid"
+    assert len(list((folder / "traces").glob(f"{stem}-*.npz"))) == 4
+
+
+def test_a_device_error_in_familiarization_records_every_window(tmp_path):
+    """A device error during the third window: the row (aborted) names the two windows on
+    disk and the one cut short, each its own file; nothing collides, nothing is lost."""
+    from device import DeviceError
+
+    def break_link(dev):
+        real = dev.run_window
+
+        def failing(*a, **kw):
+            err = DeviceError("the link went away")
+            err.partial = real(*a, **kw)
+            raise err
+
+        dev.run_window = failing
+
+    folder, _, trial, _ = _familiarization(
+        tmp_path, lambda traces: StopsAfterTwo(traces, break_link))
+    rows, _ = read_trials(folder / "trials.tsv")
+    (row,) = rows
+    stem = f"trial-{trial.trial_index:04d}"
+    assert row["status"] == "aborted_device" and "link went away" in row["reason"]
+    assert row["trace_file"] == f"traces/{stem}-*.npz"
+    files = sorted(f.name for f in (folder / "traces").glob(f"{stem}-*.npz"))
+    assert files == [f"{stem}-{k}.npz" for k in range(3)]
+    speeds = []
+    for name in files:
+        with np.load(folder / "traces" / name) as z:
+            speeds += [f"{v:.5f}" for v in z["contacts_v"]]
+    assert ";".join(speeds) == row["tap_velocities"]
+    assert not (folder / "traces" / "unrecorded").exists()
