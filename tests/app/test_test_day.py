@@ -196,6 +196,67 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
         assert seconds < 10.0, (k, seconds)
 
 
+def test_a_person_chooses_which_real_block_to_tap_again(xdisplay, terminal, participant,
+                                                        shots, tmp_path):
+    """Issue 30 (4), as a person does it: in identification R asks which real block (the
+    protocol's order, never the scene's), the number key chooses, the operator is told to
+    place that block, and its row records it. Keys are X events into the PsychoPy window; a
+    person on the simulated device (2-s windows)."""
+    proto = tmp_path / "identify.toml"
+    proto.write_text((ROOT / "protocols" / "identification.toml").read_text()
+                     .replace("repetitions = 3", "repetitions = 1")
+                     .replace("duration = 20.0", "duration = 2.0"))
+    data = tmp_path / "data"
+    t = terminal("person", [*PY, "run", str(proto), "--participant", "P06", "--device", "sim",
+                            "--no-audio", "--seed", "6", "--data", str(data)],
+                 env(xdisplay), cwd=tmp_path)
+
+    def until(key: str, shows: str, tries: int = 20) -> str:
+        """Press ``key`` until the operator's view shows ``shows`` (a screen drops keys
+        pressed before it is up)."""
+        for _ in range(tries):
+            participant.press(key)
+            try:
+                return t.wait(shows, timeout=2.0)
+            except AssertionError:
+                continue
+        raise AssertionError(f"{key}: no {shows!r}")
+
+    for block in ("rubber", "wood", "aluminum"):  # references = "start": each real block
+        t.wait(f"real {block} block   real reference block")  # PLACE, and what it is
+        t.wait("reference: r ready")
+        t.keys("r")
+        if block == "rubber":
+            until("space", "trial: e E-STOP")  # the phase's instructions come first
+    t.wait("placing: r ready")  # the scene is next: the participant asks first
+    participant.press("r")
+    time.sleep(1.0)
+    participant.screenshot(shots / "identification-which-block-x.png")
+    until("2", "the participant asks for the real block: wood-real")
+    screen = t.wait("reference: r ready")
+    assert "real wood block" in screen
+    t.keys("r")
+    t.wait("placing: r ready")
+    assert "remove the real wood block" in t.screen()
+    t.keys("r")
+    until("1", "surface 1 of 3: tapping")
+    until("2", "surface 2 of 3: tapping")
+    until("3", "surface 3 of 3: tapping")
+    until("n", "rating: e E-STOP")
+    for name in ("1", "2", "3"):
+        time.sleep(0.5)
+        participant.press(name)
+    t.wait("the participant is answering the debrief question")
+    time.sleep(0.5)
+    participant.press("x", "Return")
+    assert t.exit_code(90) == 0
+    rows = rows_of(data / "sub-P06" / "ses-1")
+    asked = [r for r in rows if r["reason"] == "participant asked"]
+    assert [(r["status"], r["sample"]) for r in asked] == [("reference", "wood-real")]
+    assert [r["status"] for r in rows if r["phase"] == "identification"
+            and r["status"] != "reference"] == ["valid"]
+
+
 def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp_path):
     """Over the serial emulator (windows in real time): an s during a trial is discarded (it
     used to skip the next trial), a double r starts one trial, un-pausing needs r, and s, u,
