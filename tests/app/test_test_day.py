@@ -41,6 +41,21 @@ def rows_of(folder: Path) -> list[dict]:
     return rows
 
 
+def press_until(participant, t, tries: int = 20):
+    """``until(key, shows)``: press ``key`` in the participant's window until the operator's
+    terminal ``t`` shows ``shows`` (a screen drops the keys pressed before it is up, and a
+    busy machine may put it up late); returns that screen."""
+    def until(key: str, shows: str) -> str:
+        for _ in range(tries):
+            participant.press(key)
+            try:
+                return t.wait(shows, timeout=2.0)
+            except AssertionError:
+                continue
+        raise AssertionError(f"{key}: no {shows!r}")
+    return until
+
+
 def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp_path):
     """The participant's details in a dialog; familiarization ended with ENTER; the real
     block at the start of the block and again when the participant asks (R); 'please wait'
@@ -157,18 +172,7 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
     t.wait("placing: r ready")
     t.keys("r")
 
-    def until(key: str, shows: str) -> None:
-        """Press ``key`` until the operator's view shows ``shows``: a screen drops the keys
-        pressed before it is up, and a busy machine may put it up late."""
-        for _ in range(20):
-            participant.press(key)
-            try:
-                t.wait(shows, timeout=2.0)
-                return
-            except AssertionError:
-                continue
-        raise AssertionError(f"{key}: no {shows!r}")
-
+    until = press_until(participant, t)
     until("space", "trial: e E-STOP")  # the instructions, then the scene
     until("1", "surface 1 of 3: tapping")  # its window: 20 s from its first contact
     time.sleep(1.0)
@@ -211,17 +215,7 @@ def test_a_person_chooses_which_real_block_to_tap_again(xdisplay, terminal, part
                             "--no-audio", "--seed", "6", "--data", str(data)],
                  env(xdisplay), cwd=tmp_path)
 
-    def until(key: str, shows: str, tries: int = 20) -> str:
-        """Press ``key`` until the operator's view shows ``shows`` (a screen drops keys
-        pressed before it is up)."""
-        for _ in range(tries):
-            participant.press(key)
-            try:
-                return t.wait(shows, timeout=2.0)
-            except AssertionError:
-                continue
-        raise AssertionError(f"{key}: no {shows!r}")
-
+    until = press_until(participant, t)
     for block in ("rubber", "wood", "aluminum"):  # references = "start": each real block
         t.wait(f"real {block} block   real reference block")  # PLACE, and what it is
         t.wait("reference: r ready")
