@@ -186,6 +186,11 @@ def test_a_surface_tapped_again_keeps_both_windows(tmp_path):
     assert len(ui.named_from) == 3 and len(ui.named_from[0].contacts) > 0
 
 
+def _items_in(protocol) -> int:
+    """Items in the plan of a protocol of rated phases (samples × repetitions)."""
+    return sum(len(ph.samples) * ph.repetitions for ph in protocol.phases)
+
+
 class SeesTheNotice(ScriptedResponder):
     """Records what the 'please wait' screen is told after each saturated attempt."""
 
@@ -201,13 +206,17 @@ def test_the_participant_is_told_of_every_saturation_and_whether_it_comes_back(t
     screen says so on the next 'please wait', and at the protocol's cap (here the second
     saturation of an item) it no longer says 'this sample comes back later', since the
     item is left out. One notice per saturated row, in order, each matching its status."""
-    ui = SeesTheNotice()
+    ui, con = SeesTheNotice(), SeenByTheOperator()
     hard = load_protocol(str(DATA / "two_springs_low_current.toml"))
-    folder, rows = _session(tmp_path, hard, ui, 2)
+    folder, rows = _session(tmp_path, hard, ui, 2, con)
     sat = [(r["item"], r["status"] == "saturated") for r in rows
            if r["status"] in ("saturated", "excluded_saturated")]
     assert ui.notices == sat
     assert any(back for _, back in sat) and any(not back for _, back in sat), sat
+    # item 7's counter, from the runner: attempts outnumber items, the count of items done
+    # never reaches past them ('item done+1 of n' in the live view)
+    assert max(t for *_, t in con.counts) > _items_in(hard)
+    assert all(done < total == _items_in(hard) for done, total, _ in con.counts), con.counts
     from protocols.texts import DEFAULT_TEXTS
 
     assert "comes back" in DEFAULT_TEXTS["saturated"]
@@ -220,10 +229,12 @@ class SeenByTheOperator(PlainConsole):
     def __init__(self):
         super().__init__(stream=io.StringIO())
         self.panels: list[tuple[str, str, str]] = []
+        self.counts: list[tuple[int, int, int]] = []  # (items done, items, trial #)
 
     def place(self, trial, total, done, what="", detail=""):
         super().place(trial, total, done, what, detail)
         self.panels.append((what, detail, self.view.block))
+        self.counts.append((done, total, trial.trial_index))
 
 
 def test_the_operator_panel_says_what_to_remove_and_never_cues_the_scene():
