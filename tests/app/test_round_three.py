@@ -207,7 +207,7 @@ def test_the_participant_is_told_of_every_saturation_and_whether_it_comes_back(t
     saturation of an item) it no longer says 'this sample comes back later', since the
     item is left out. One notice per saturated row, in order, each matching its status."""
     ui, con = SeesTheNotice(), SeenByTheOperator()
-    hard = load_protocol(str(DATA / "two_springs_low_current.toml"))
+    hard = load_protocol(str(DATA.parent / "two_springs_low_current.toml"))  # not a variant
     folder, rows = _session(tmp_path, hard, ui, 2, con)
     sat = [(r["item"], r["status"] == "saturated") for r in rows
            if r["status"] in ("saturated", "excluded_saturated")]
