@@ -154,8 +154,9 @@ class SessionRunner:
     _durations: list[float] = field(default_factory=list)
     _windows_in_attempt: int = 0
     _on_device: str | None = None  # the real block last placed on the device, if any
-    #: (window result, file) of the attempt's windows whose traces were written when they
-    #: ended; _record names them, and what no row named is set aside when the attempt ends
+    #: (window result, file or None, peak current [A]) of the attempt's windows whose traces
+    #: left memory when they ended; _record names the files, and what no row named is set
+    #: aside when the attempt ends
     _spilled: list = field(default_factory=list)
 
     def load_log(self) -> None:
@@ -470,7 +471,7 @@ class SessionRunner:
             self._attempt_windows(trial)
         finally:  # what the attempt wrote early and no row names goes aside, never reused
             if self._spilled:
-                self.files.set_aside([name for _, name in self._spilled])
+                self.files.set_aside([name for _, name, _ in self._spilled if name])
                 self._spilled.clear()
 
     def _attempt_windows(self, trial: Trial) -> None:
@@ -506,8 +507,8 @@ class SessionRunner:
                     played.append(trial.samples[0])
                     results.append(self._spill(trial, len(results),
                                                self._window(trial, trial.samples[0], rng)))
-                    if not self.participant_ui.keep_tapping():
-                        break
+                    if results[-1].faults or not self.participant_ui.keep_tapping():
+                        break  # a fault ends it: the e-stop's row names its windows
             else:
                 for sid in trial.samples:
                     played.append(sid)
@@ -540,7 +541,8 @@ class SessionRunner:
                          t_start=t_start, result=res, results=results, played=played)
             raise SessionInterrupted(f"{f.code} during trial {trial.trial_index}: output is off "
                                      f"and latched; once it is safe: {self._resume_line()}")
-        if any(r.timed_out for r in results):
+        # a surface left without a tap, then tapped on a later visit, did not time out
+        if any(r.timed_out for r in (named if trial.kind == "identification" else results)):
             status = self.engine.failure_status("timed_out", trial, self.log)
             self._record(trial, status, reason="no contact before the timeout",
                          t_start=t_start, result=res, results=results, played=played)
@@ -580,15 +582,19 @@ class SessionRunner:
                             f"rating {row['rating']}" if "rating" in row else "")
 
     def _spill(self, trial: Trial, k: int, res):
-        """Window ``k`` of ``trial`` with its traces written now (as ``_record`` would name
-        them) and dropped from memory; ``res`` itself when nothing is recorded."""
-        if self._expected is not None or self.traces == "none" or not res.traces:
+        """Window ``k`` of ``trial`` with its traces written now when the session records
+        them (as ``_record`` would name them) and dropped from memory either way; its peak
+        current is kept for the row."""
+        if not res.traces:
             return res
-        name = self.files.save_trace(
-            f"trial-{trial.trial_index:04d}-{k}.npz",
-            _trace_payload(res, self.traces, self.device.info, trial.samples[0]), res.contacts)
+        name = None
+        if self._expected is None and self.traces != "none":
+            name = self.files.save_trace(
+                f"trial-{trial.trial_index:04d}-{k}.npz",
+                _trace_payload(res, self.traces, self.device.info, trial.samples[0]),
+                res.contacts)
         kept = dataclasses.replace(res, traces={})
-        self._spilled.append((kept, name))
+        self._spilled.append((kept, name, res.peak_current))
         return kept
 
     def _window(self, trial: Trial, sample_id: str, rng: np.random.Generator,
@@ -636,7 +642,8 @@ class SessionRunner:
             self._meet(trial, status, vel, extra)
             self.log.append(Attempt(trial.item, status, reason))
             return
-        spilled = {id(r): name for r, name in self._spilled}  # alive in the list: ids hold
+        spilled = {id(r): name for r, name, _ in self._spilled if name}  # alive: ids hold
+        peaks = {id(r): peak for r, _, peak in self._spilled}
         if results and self.traces != "none" and any(len(r.traces) or id(r) in spilled
                                                      for r in results):
             # every recording its own name: a trial's windows by its index (unique per
@@ -649,7 +656,7 @@ class SessionRunner:
             for k, r in enumerate(results):
                 if id(r) in spilled:  # written when its window ended: named by this row
                     trace_file = spilled[id(r)]
-                    self._spilled = [(o, n) for o, n in self._spilled if o is not r]
+                    self._spilled = [e for e in self._spilled if e[0] is not r]
                 elif r.traces:
                     trace_file = self.files.save_trace(
                         f"{stem}-{k}.npz", _trace_payload(r, self.traces, self.device.info,
@@ -666,7 +673,8 @@ class SessionRunner:
             "placement": trial.placement or "",
             "status": status, "n_taps": len(vel),
             "tap_velocities": ";".join(f"{v:.5f}" for v in vel),
-            "peak_current": round(max((r.peak_current for r in results), default=0.0), 4),
+            "peak_current": round(max((peaks.get(id(r), r.peak_current) for r in results),
+                                      default=0.0), 4),
             "reason": reason, "t_start": t_start, "t_end": utc_now(), "trace_file": trace_file,
             **extra,
         }

@@ -493,7 +493,7 @@ def test_familiarization_writes_each_window_as_it_ends(tmp_path):
     """Issue 30 (10): familiarization kept every window's traces in memory until the
     participant was done (megabytes a window, without bound). Each window's file is on
     disk before the next window starts, and the row names them all."""
-    p = load_protocol(str(DATA / "six_with_practice.toml"))  # familiarization first
+    p = load_protocol(str(DATA.parent / "free_spring.toml"))  # on a spring: force commanded
     folder, _ = new_session_dir(tmp_path, "P01")
     ui = TapsFourTimes(folder / "traces")
     files = SessionFiles(folder)
@@ -506,12 +506,15 @@ def test_familiarization_writes_each_window_as_it_ends(tmp_path):
     assert ui.on_disk == [0, 1, 2, 3]
     rows, _ = read_trials(folder / "trials.tsv")
     assert rows[-1]["trace_file"] == f"traces/trial-{trial.trial_index:04d}-*.npz"
-    speeds = []
+    speeds, peak = [], 0.0
     for k in range(4):
         with np.load(folder / "traces" / f"trial-{trial.trial_index:04d}-{k}.npz") as z:
             assert str(z["sample"]) == trial.samples[0]
             speeds += [f"{v:.5f}" for v in z["contacts_v"]]
+            peak = max(peak, float(np.abs(z["current"]).max()))
     assert ";".join(speeds) == rows[-1]["tap_velocities"]
+    # the row's peak current is the windows' own (it read 0 once their traces had left)
+    assert float(rows[-1]["peak_current"]) == pytest.approx(peak, abs=1e-3) and peak > 0
 
 
 class StopsAfterTwo(TapsFourTimes):
@@ -598,4 +601,36 @@ def test_a_device_error_in_familiarization_records_every_window(tmp_path):
         with np.load(folder / "traces" / name) as z:
             speeds += [f"{v:.5f}" for v in z["contacts_v"]]
     assert ";".join(speeds) == row["tap_velocities"]
+    assert not (folder / "traces" / "unrecorded").exists()
+
+
+class EstopsInTheSecondWindow(TapsFourTimes):
+    """Familiarization whose second window the operator e-stops (the participant would
+    have gone on tapping)."""
+
+    def __init__(self, traces):
+        super().__init__(traces)
+        self.windows, self.device = 0, None
+
+    def before_window(self, trial, sample_id, device, rng):
+        super().before_window(trial, sample_id, device, rng)
+        self.windows, self.device = self.windows + 1, device
+
+    def progress(self, t, partial, duration):
+        if self.windows == 2 and self.device.fault is None and partial.contacts:
+            self.device.estop()
+
+
+def test_an_estop_in_a_familiarization_window_is_recorded_with_its_windows(tmp_path):
+    """A fault during a familiarization window went on to the next window (the participant
+    had not pressed ENTER), whose HOME then failed: no row, the faulted window's trace set
+    aside. The fault now ends familiarization at that window, and its row names both."""
+    folder, _, trial, dev = _familiarization(tmp_path, EstopsInTheSecondWindow)
+    rows, _ = read_trials(folder / "trials.tsv")
+    (row,) = rows
+    assert row["status"] == "aborted_device" and row["reason"].startswith("estop"), row
+    stem = f"trial-{trial.trial_index:04d}"
+    assert row["trace_file"] == f"traces/{stem}-*.npz"
+    assert sorted(f.name for f in (folder / "traces").glob("*.npz")) == [
+        f"{stem}-0.npz", f"{stem}-1.npz"]
     assert not (folder / "traces" / "unrecorded").exists()
