@@ -383,11 +383,11 @@ class KeyConsole(PlainConsole):
 
         self._stop.set()
         self._reader.join(timeout=1.0)  # it wakes every 0.1 s; never read a closed terminal
-        if self._live is not None:
-            self._live.stop()  # its last frame stays on the terminal, summary included
         try:
+            if self._live is not None:
+                self._live.stop()  # its last frame stays on the terminal, summary included
             termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
-        except (termios.error, OSError):  # the terminal is gone: nothing left to restore
+        except (termios.error, OSError):  # the terminal is gone: nothing to draw or restore
             pass
 
 

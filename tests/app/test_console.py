@@ -311,3 +311,16 @@ def test_a_terminal_that_goes_away_is_said_and_the_session_goes_on(dev):
     finally:
         sys.stdin = old
         f.close()
+
+
+def test_close_survives_a_live_view_that_cannot_draw_any_more(tty_stdin, dev):
+    """With the live view on (a real session), close() draws a last frame: on a terminal
+    that went away that raised EIO in the session's finally, replacing its result."""
+    con = KeyConsole(dev, live=False)
+
+    class GoneTerminal:
+        def stop(self):
+            raise OSError(5, "Input/output error")
+
+    con._live = GoneTerminal()
+    con.close()  # no exception
