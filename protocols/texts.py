@@ -74,17 +74,19 @@ def resolve_texts(overrides: dict[str, str], instructions: dict[str, str]) -> di
 
 
 #: which screens show a text: every protocol, or only one with that phase kind ("rated",
-#: "free", "identification") or with real blocks ("references"; "several": more than one,
-#: which the participant chooses between); texts of placeholders alone need no translation
+#: "free", "identification"), rating entry ("keys", "typed", "slider"), saturated trials
+#: redrawn ("redraw") or real blocks ("references"; "several": an identification phase
+#: offering more than one, which the participant chooses between); texts of placeholders
+#: alone need no translation
 _SHOWN_WHEN = {
-    "tap": "all", "wait": "all", "wait_detail": "all", "saturated": "all",
-    "saturated_last": "all", "paused": "all",
+    "tap": "all", "wait": "all", "wait_detail": "all", "saturated": "redraw",
+    "saturated_last": "redraw", "paused": "all",
     "paused_detail": "all", "debrief": "all", "debrief_hint": "all", "thanks": "all",
     "done_hint": "free", "reference_offer": "references", "reference_requested": "references",
     "reference": "references", "reference_detail": "references",
     "reference_which": "several", "reference_which_keys": "several",
-    "rating_keys": "rated", "rating_chosen": "rated", "rating_typed": "rated",
-    "rating_slider": "rated", "rating_confirmed": "rated", "rating_invalid": "rated",
+    "rating_keys": "keys", "rating_chosen": "keys", "rating_typed": "typed",
+    "rating_slider": "slider", "rating_confirmed": "rated", "rating_invalid": "typed",
     "surface": "identification", "choose": "identification", "tapped": "identification",
     "name_hint": "identification", "switch_hint": "identification", "name": "identification",
 }
@@ -97,15 +99,20 @@ def left_in_english(protocol) -> list[str]:
     Empty for an English protocol. A lab that translated a protocol before a text was added
     to hapticlab learns here which ones to add (``protocol validate`` lists them).
     """
+    import re
+
     texts = protocol.texts
-    if texts.get("language", "en").split("-")[0].lower() == "en":
+    if re.split(r"[-_]", texts.get("language", "en"))[0].lower() == "en":
         return []
     kinds = {ph.kind for ph in protocol.phases}
-    blocks = {s.reference for s in protocol.samples.values() if s.reference}
-    if not any(ph.references != "none" for ph in protocol.phases):
-        blocks = set()
-    shown = {"all", *kinds, *(("references",) if blocks else ()),
-             *(("several",) if len(blocks) > 1 else ())}
+    offered = [ph for ph in protocol.phases if ph.references != "none"]
+    several = any(ph.kind == "identification" and len(
+        {protocol.samples[s].reference for s in ph.samples} - {None}) > 1 for ph in offered)
+    shown = {"all", *kinds, *(("references",) if offered and any(
+        s.reference for s in protocol.samples.values()) else ()),
+        *(("several",) if several else ()),
+        *((protocol.rating.entry_mode,) if protocol.rating is not None else ()),
+        *(("redraw",) if protocol.saturation.action == "redraw" else ())}
     out = [k for k, when in _SHOWN_WHEN.items()
            if when in shown and texts.get(k) == DEFAULT_TEXTS[k]]
     return out + [f"instructions.{ph.name}" for ph in protocol.phases

@@ -219,4 +219,14 @@ def test_a_translated_protocol_is_told_which_texts_are_still_english(tmp_path):
         "switch_hint = \"andere Fläche: {keys}\"\n", full + "\n")
     assert left_in_english(parse_protocol(whole, "whole.toml")) == []
     assert left_in_english(parse_protocol(text, "en.toml")) == []
+    assert left_in_english(parse_protocol(german.replace('"de"', '"en_GB"'), "gb.toml")) == []
+    # only what the screens show: one-key ratings, saturations kept, no block to choose
+    _, realism = protocol_text("realism")
+    de = parse_protocol(realism.replace("[saturation]", '[texts]\nlanguage = "de"\n\n'
+                                        "[saturation]", 1)
+                        .replace('action = "redraw"', 'action = "keep"'), "r.toml")
+    left = left_in_english(de)
+    assert "rating_keys" in left and "rating_confirmed" in left
+    assert not {"rating_typed", "rating_slider", "rating_invalid", "saturated",
+                "reference_which", "switch_hint"} & set(left), left
     assert "note:" not in run("protocol", "validate", "identification").stdout
