@@ -329,7 +329,7 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
             written.append(p)
             book += _write_codebook(long, entries, p.name)
     p = out / "codebook.csv"
-    with p.open("w", newline="") as fh:
+    with p.open("w", newline="", encoding="utf-8") as fh:  # as load.py and load.R read it
         wr = csv.DictWriter(fh, fieldnames=["file", "column", "type", "unit", "meaning"])
         wr.writeheader()
         wr.writerows(book)

@@ -292,7 +292,9 @@ def _simulate(args: argparse.Namespace) -> int:
 def _preflight_again(args: argparse.Namespace) -> str:
     """The preflight's command line again, clearing the device's latched fault (quoted)."""
     return shlex.join(["hapticlab", "preflight", str(args.protocol), "--device", args.device,
-                       "--data", str(args.data), "--clear-fault"])
+                       "--data", str(args.data), "--responder", args.responder, "--traces",
+                       args.traces, *(["--no-audio"] if args.no_audio else []),
+                       "--clear-fault"])
 
 
 def _preflight(args: argparse.Namespace) -> int:

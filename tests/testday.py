@@ -17,6 +17,7 @@ with a correction (another digit) before ENTER, R once to ask for the real block
 import json
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -203,11 +204,13 @@ def protocol(name: str, rating, ask_ref_at: str, limit_s: float, seed: str) -> N
     if fail:
         command = fail[0].split("build it with: ")[1].split(";")[0].strip()
         note(f"{name}: preflight names: {command}")
-        cli(*command.split()[1:])
+        cli(*shlex.split(command)[1:])
         cli("preflight", name, *common)
     folder = DATA / "sub-T04"
-    left = [f for f in sorted(folder.glob("ses-*")) if json.loads(
-        (f / "session.json").read_text()).get("status") == "interrupted"] if folder.exists() else []
+    metas = {f: json.loads((f / "session.json").read_text())
+             for f in sorted(folder.glob("ses-*"))} if folder.exists() else {}
+    left = [f for f, m in metas.items() if m.get("status") == "interrupted"
+            and m.get("protocol", {}).get("name") == name]
     if left:  # as a lab continues a session that stopped: resume it
         note(f"{name}: resuming {left[-1]}")
         day = Day(name, ["resume", str(left[-1]), "--device", spec, "--no-audio"])

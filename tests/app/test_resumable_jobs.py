@@ -197,10 +197,11 @@ def test_commands_built_from_values_parse_with_spaces_in_them():
     assert args.session_dir == folder and args.clear_fault
 
     given = parser.parse_args(["preflight", "my protocols/r.toml", "--device", "serial:/dev/x",
-                               "--data", "/lab data"])
+                               "--data", "/lab data", "--responder", "scripted", "--traces",
+                               "none", "--no-audio"])
     again = parser.parse_args(shlex.split(_preflight_again(given))[1:])
-    assert (again.protocol, again.device, str(again.data)) == ("my protocols/r.toml",
-                                                               "serial:/dev/x", "/lab data")
+    keep = ("protocol", "device", "data", "responder", "traces", "no_audio")
+    assert {k: getattr(again, k) for k in keep} == {k: getattr(given, k) for k in keep}
     assert again.clear_fault
 
     built = parser.parse_args(shlex.split(build_line("serial:/dev/ttyACM0", "my r.toml",
