@@ -80,15 +80,15 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     assert "real wood block" in screen and "placing: r ready" in screen
     t.save_png(shots / "operator-view.png", "operator terminal — hapticlab run (live view)")
     t.keys("r")
-    time.sleep(1.0)
-    participant.press("space")  # the instructions: SPACE begins
-    time.sleep(1.5)
-    participant.press("Return")  # familiarization: ENTER when done
-    t.wait("reference: r ready")  # the block's real block, before its first trial
+    # each key until the operator's view shows it acted: a screen drops the keys pressed
+    # before it is up, which a loaded machine delays (fixed sleeps failed under load)
+    until = press_until(participant, t)
+    until("space", "trial: e E-STOP")  # the instructions: SPACE begins familiarization
+    until("Return", "reference: r ready")  # ENTER when done; then the block's real block
     t.keys("r")
-    time.sleep(1.0)
-    participant.press("space")  # the rating phase's instructions come before its real block
-    t.wait("placing: r ready")  # the real block tapped (paced: a person on sim is live)
+    # the rating phase's instructions come before its real block; the real block tapped
+    # (paced: a person on sim is live)
+    until("space", "placing: r ready")
     assert "rating #2" in t.screen()
     time.sleep(0.8)
     participant.screenshot(shots / "between-trials-session.png")
