@@ -56,6 +56,18 @@ def press_until(participant, t, tries: int = 20):
     return until
 
 
+def name_three_and_finish(participant, t) -> None:
+    """Identification's end as a person does it: surfaces named 1, 2, 3, a one-letter
+    debrief, and the session exits cleanly."""
+    for name in ("1", "2", "3"):
+        time.sleep(0.5)
+        participant.press(name)
+    t.wait("the participant is answering the debrief question")
+    time.sleep(0.5)
+    participant.press("x", "Return")
+    assert t.exit_code(90) == 0
+
+
 def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp_path):
     """The participant's details in a dialog; familiarization ended with ENTER; the real
     block at the start of the block and again when the participant asks (R); 'please wait'
@@ -183,13 +195,7 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
     until("2", "surface 2 of 3: tapping")
     time.sleep(1.0)
     until("n", "rating: e E-STOP")  # all three tapped: to naming, now
-    for name in ("1", "2", "3"):
-        time.sleep(0.5)
-        participant.press(name)
-    t.wait("the participant is answering the debrief question")
-    time.sleep(0.5)
-    participant.press("x", "Return")
-    assert t.exit_code(90) == 0
+    name_three_and_finish(participant, t)
     folder = data / "sub-P05" / "ses-1"
     (row,) = [r for r in rows_of(folder) if r["phase"] == "identification"]
     assert row["status"] == "valid" and row["answer"]
@@ -238,13 +244,7 @@ def test_a_person_chooses_which_real_block_to_tap_again(xdisplay, terminal, part
     until("2", "surface 2 of 3: tapping")
     until("3", "surface 3 of 3: tapping")
     until("n", "rating: e E-STOP")
-    for name in ("1", "2", "3"):
-        time.sleep(0.5)
-        participant.press(name)
-    t.wait("the participant is answering the debrief question")
-    time.sleep(0.5)
-    participant.press("x", "Return")
-    assert t.exit_code(90) == 0
+    name_three_and_finish(participant, t)
     rows = rows_of(data / "sub-P06" / "ses-1")
     asked = [r for r in rows if r["reason"] == "participant asked"]
     assert [(r["status"], r["sample"]) for r in asked] == [("reference", "wood-real")]
