@@ -159,14 +159,29 @@ def check_window_length(opener: Opener) -> str:
 
 
 def check_estop(opener: Opener) -> str:
+    """An ESTOP during a window latches an estop fault and zeroes output; a device that
+    reports what it saw (LINK_REPORT) did so within its stated bound from the frame's
+    arrival (``estop_bound_s``), traces streaming meanwhile."""
     with opener() as dev:
         def stop(t: float, _partial: WindowResult) -> None:
             if t >= 0.3:
                 dev.estop()
 
+        seen = getattr(dev, "device_link_report", None)
+        took = ""
         try:
+            if seen is not None:
+                seen(reset=True)
             res = _window(dev, SUITE_SCENES["pulse_firm"], 1.5, on_progress=stop)
             _require(bool(res.faults) and res.faults[0].code == "estop", f"faults: {res.faults}")
+            report = seen() if seen is not None else None
+            if report is not None:  # (None: a device that does not know LINK_QUERY)
+                bound = dev.estop_bound_s() * 1e3
+                ms = report["estop_max_ms"]
+                _require(ms is not None, "the device counted no ESTOP in its LINK_REPORT")
+                _require(ms <= bound + 1e-6, f"output zeroed {ms:.3f} ms after the ESTOP "
+                         f"arrived, over the device's bound of {bound:.3f} ms")
+                took = f"; zeroed within {ms:.3f} ms of its arrival (bound {bound:.3f} ms)"
             tr = res.traces
             after = tr["t"] >= res.faults[0].t
             _require(bool(np.all(tr["current"][after] == 0)), "current not zero after the e-stop")
@@ -183,7 +198,7 @@ def check_estop(opener: Opener) -> str:
         dev.home()
         again = dev.run_window(0.5)
         _require(not again.faults, "fault came back after clearing")
-        return f"latched at t={res.faults[0].t:.3f} s; cleared and re-homed"
+        return f"latched at t={res.faults[0].t:.3f} s{took}; cleared and re-homed"
 
 
 def check_end_window(opener: Opener) -> str:

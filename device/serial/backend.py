@@ -306,6 +306,27 @@ class SerialDevice(HapticDevice):
                 out["device_saw"] = None
         return out
 
+    def estop_bound_s(self) -> float:
+        """The longest an ESTOP may take to zero this device's output, from the frame's
+        arrival [s of device time], as its LINK_REPORT counts it (docs §3 and §6): the
+        reference firmware looks at every byte as it arrives (the UART's interrupt) and
+        an ESTOP's zeroes output at the next servo tick, so one tick and the frame's own
+        time on the link, plus one tick because the device counts from when it last found
+        its input empty. The Python emulator computes its servo in 1-ms blocks and runs on
+        only while its port was found empty within
+        :data:`~device.serial.emulator.INPUT_TURN_S`: that wait and two blocks, × its
+        speed (in its HELLO_ACK firmware text)."""
+        fw = self._info.firmware
+        if fw.startswith("emulator"):
+            from .emulator import INPUT_TURN_S
+
+            speed = float(fw.rsplit(" x", 1)[1]) if " x" in fw else 1.0
+            return (INPUT_TURN_S + 2e-3) * speed
+        lim = self.link.limits
+        frame = len(M.encode(M.EStop(), 0, self.link.version))
+        link = frame / lim.link_bytes_s if lim is not None and lim.link_bytes_s > 0 else 0.0
+        return 2 / self._info.servo_rate_hz + link
+
     def device_link_report(self, reset: bool = False) -> dict | None:
         """The device's view of this host's frames (:meth:`Link.device_report`)."""
         self._check_open()

@@ -55,10 +55,12 @@ TX_ROOM = 8192
 #: bytes of control frames kept for a host that does not read (a dead one); beyond, the
 #: oldest are dropped and counted
 TX_MAX = 1 << 20
-#: the servo's device time runs on only while the serve loop has looked at the port
-#: within this long [wall s]: the loop turns every 2 ms when idle, so a longer wait means
-#: the emulator's own process was held up (its other thread, a loaded machine), and the
-#: host's frames wait unread in the port
+#: the servo's device time runs on only while the serve loop has found the port empty
+#: within this long [s of wall time at ×1; × speed of device time]: the loop turns every
+#: 2 ms when idle, so a longer wait means the emulator's own process was held up (its
+#: other thread, a loaded machine), and the host's frames wait unread in the port. An
+#: ESTOP is so acted on within this, the block being computed and the next one (1 ms each
+#: at ×1): 7 ms × speed of device time from its arrival, however busy the computer
 INPUT_TURN_S = 0.005
 
 
@@ -92,6 +94,9 @@ class Emulator:
     def __init__(self, sim: SimDevice, fd: int, status_hz: float = 40.0,
                  limits: M.Limits = LIMITS):
         self.limits = limits
+        #: HELLO_ACK's firmware text: the emulator's version, and its speed when not ×1 (a
+        #: host scales the emulator's e-stop bound by it: SerialDevice.estop_bound_s)
+        self.firmware = b"emulator-2" + (f" x{sim.speed:g}".encode() if sim.speed != 1 else b"")
         self._limit_values = M.limit_values(limits, int(round(sim.info.current_limit * 1000)))
         sim.live = True
         sim.trace_sink = self._stream
@@ -121,7 +126,10 @@ class Emulator:
         self._clock0 = time.monotonic()  # power-up: the device clock counts from here
         self._ran = False  # a window or playback ran at the last clock sync
         self._turn = self._clock0  # when the serve loop last read the port [wall s]
-        self._estop_rx: float | None = None  # device time the pending ESTOP was read at
+        self._estop_rx: float | None = None  # the pending ESTOP arrived after this [s]
+        # device time [s] the port was last seen empty: whatever is read later arrived after
+        # it, so an ESTOP's wait is counted from there (an upper bound from its arrival)
+        self._rx_empty_at = 0.0
         self.frames_in = 0
         self._link_reset(None)
         self._trace_config(limits.channels, 1)
@@ -206,6 +214,11 @@ class Emulator:
                     for frame in self.decoder.feed(data):
                         self.frames_in += 1
                         self._handle(frame)
+            # the device time before a look that finds the port empty: whatever comes
+            # later arrived after it (the servo worker may move the clock meanwhile)
+            t = self.sim.time
+            if not select.select([self.fd], [], [], 0)[0]:
+                self._rx_empty_at = t
             self._turn = time.monotonic()
             self._commit_done()
             for _ in range(OUTBOX_PER_TURN):
@@ -244,13 +257,15 @@ class Emulator:
         self.sim.request_stop()
 
     def _input_read(self) -> None:
-        """From the servo worker before each block: wait until the serve loop has read the
-        port lately (:data:`INPUT_TURN_S`), so device time never runs past frames that
-        arrived but were not read (the worker's clock slips meanwhile); a stop asked
-        before the block is passed on."""
+        """From the servo worker before each block: wait until the serve loop has found
+        the port empty within :data:`INPUT_TURN_S` of device time (× speed), so device
+        time never runs far past frames that arrived but were not read, however late
+        either thread runs (the worker's clock slips meanwhile); a stop asked before the
+        block is passed on."""
         if self._stop_asked:
             self.sim.request_stop()
-        while time.monotonic() - self._turn > INPUT_TURN_S and not self._stop.is_set():
+        turn = INPUT_TURN_S * self.sim.speed
+        while self.sim.time - self._rx_empty_at >= turn and not self._stop.is_set():
             time.sleep(0.0005)
 
     def _state(self) -> int:
@@ -295,7 +310,7 @@ class Emulator:
         self._gap_frames = 0 if now is None else 1
         self._gap_bad0 = sum(self.decoder.errors.values())
         self._gap_since = 0.0 if now is None else now
-        self._estop_max: float | None = None  # ESTOP read → zeroing tick [s of device time]
+        self._estop_max: float | None = None  # ESTOP arrival → zeroing tick [device s]
 
     def _link_note(self, now: float) -> None:
         """An intact host frame at device time ``now`` [s]: the gap since the last one."""
@@ -379,7 +394,7 @@ class Emulator:
             int(round(i.force_constant * 1000)), int(round(i.effective_mass * 1e6)),
             int(round(i.watchdog_s * 1000)), int(round(i.encoder_resolution * 1e9)),
             int(round(i.accel_range * 1000)), b"hapticlab emulator (sim plant)",
-            i.serial_number.encode(), b"emulator-2"))
+            i.serial_number.encode(), self.firmware))
         self.send(self.limits)
 
     def _busy(self) -> bool:
@@ -480,7 +495,7 @@ class Emulator:
         running = self._busy() and self._running in ("window", "play")
         if isinstance(msg, M.EStop):
             if sim.fault is None:
-                self._estop_rx = sim.time  # read now: the latency runs to the zeroing tick
+                self._estop_rx = self._rx_empty_at  # it arrived after: to the zeroing tick
             sim.estop()  # the servo loop zeroes output at its next tick
             self._rehome = False
             if not running:  # in a window the loop reports it, timed at the zeroing tick

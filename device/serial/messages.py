@@ -527,8 +527,9 @@ LINK_GAP_BINS = C.GAP_BINS  # LinkReport.ITEMS
 class LinkReport(Message):
     """Version 2, answering LINK_QUERY: what the device saw of the host since ``since_us``
     [µs, device clock] — intact frames, frames that failed a check, the longest gap between
-    two intact frames [µs of device time], the longest an ESTOP took from the frame read to
-    the tick that zeroed output [µs of device time; 0xFFFFFFFF: no ESTOP] and the gaps'
+    two intact frames [µs of device time], the longest an ESTOP took from its arrival to
+    the tick that zeroed output (from when the device last found its input empty before
+    it) [µs of device time; 0xFFFFFFFF: no ESTOP] and the gaps'
     histogram (``items``: 64 u16 counts, bin k for gaps in [2k, 2k + 2) ms, the last bin
     ≥ 126 ms; a count saturates at 65,535). The gaps are what the device's watchdog
     judges."""

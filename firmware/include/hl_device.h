@@ -68,6 +68,14 @@ enum { HL_FLAG_CONTACT = 1, HL_FLAG_SATURATED = 2, HL_FLAG_TRANSIENT = 4, HL_FLA
 void hl_device_init(const char *serial_number);
 void hl_servo_tick(void);
 void hl_device_poll(void);
+/* The e-stop's own path, for the HAL's receive side (the UART's interrupt on a board):
+ * every byte received, as it arrives, before it waits for the main loop. An intact ESTOP
+ * frame of up to 64 encoded bytes sets the request the next servo tick acts on, however
+ * busy the main loop is (building trace chunks, checking an upload); the main loop then
+ * only acknowledges it. hl_device_rx_idle: the receive side found no more input (an
+ * ESTOP's wait is counted from the last such tick before it: LINK_REPORT). */
+void hl_device_rx_byte(uint8_t b);
+void hl_device_rx_idle(void);
 /* host build only: the device runs at `speed` x real time, so the watchdog (a limit on
  * the host's wall-clock silence) counts `speed` x as many ticks */
 void hl_device_pace(float speed);

@@ -23,6 +23,9 @@
 #define TX_RESERVE 2200u /* UART room kept for control frames while traces stream */
 #define GAP_BINS 64u      /* LINK_REPORT: gaps between host frames in 2-ms bins */
 #define GAP_BIN_US 2000u
+/* the longest frame the e-stop's own path looks into [encoded bytes]: an ESTOP with stray
+ * bytes in its body; a longer one is acted on by the main loop, as every other command */
+#define SNIFF_MAX 64u
 
 static const float ENC_M = (float)HL_ENCODER_NM * 1e-9f;
 static const float KF = (float)HL_FORCE_CONSTANT_MN_A * 1e-3f;
@@ -108,9 +111,20 @@ static struct {
     /* what the watchdog saw of the host since HELLO or a LINK_QUERY reset (LINK_REPORT) */
     uint16_t gap_hist[GAP_BINS];
     uint32_t gap_frames, gap_bad0, gap_max_ticks;
-    volatile uint64_t estop_rx_tick; /* the tick an ESTOP frame was read at */
+    /* when the main loop (rx_empty_tick) and the UART's receive path (rx_mark) last found
+     * the input empty: every byte taken later arrived after it, so an ESTOP's wait is
+     * counted from there, an upper bound on its time from arrival */
+    volatile uint64_t rx_empty_tick, rx_mark;
+    volatile uint64_t estop_rx_tick; /* the pending ESTOP's count starts here ... */
+    volatile uint8_t estop_timed;    /* ... when set (cleared by the tick that zeroes) */
     volatile uint32_t estop_max_ticks; /* the longest from such a tick to the zeroing one */
     volatile uint8_t estop_seen;
+    /* the e-stop's own path (hl_device_rx_byte): the frame arriving, and the sequence
+     * number of the ESTOP it took (the main loop does not ask again for that one) */
+    uint8_t sn_buf[SNIFF_MAX];
+    uint8_t sn_len, sn_over;
+    volatile uint16_t sn_seq;
+    volatile uint8_t sn_armed;
     uint64_t gap_since;
     uint64_t next_status;
     /* the window whose traces and WINDOW_DONE are being sent */
@@ -340,11 +354,14 @@ void hl_servo_tick(void)
     /* requests from the link: acted on at this tick, whatever else is in flight */
     if (D.req_estop) {
         D.req_estop = 0;
-        uint64_t lat = D.ticks - D.estop_rx_tick; /* this tick zeroes output */
-        if (!D.estop_seen || lat > D.estop_max_ticks) {
-            D.estop_max_ticks = lat > UINT32_MAX ? UINT32_MAX : (uint32_t)lat;
+        if (D.estop_timed) {
+            D.estop_timed = 0;
+            uint64_t lat = D.ticks - D.estop_rx_tick; /* this tick zeroes output */
+            if (!D.estop_seen || lat > D.estop_max_ticks) {
+                D.estop_max_ticks = lat > UINT32_MAX ? UINT32_MAX : (uint32_t)lat;
+            }
+            D.estop_seen = 1;
         }
-        D.estop_seen = 1;
         latch_fault(HL_FAULT_ESTOP);
     }
     if (hal_estop_pressed()) {
@@ -752,9 +769,14 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
     case HL_MSG_SET_LIMIT:
         D.limit = clamp_of(get_u16(b));
         return HL_OK;
-    case HL_MSG_ESTOP:
-        D.estop_rx_tick = D.ticks; /* before the request: the tick reads it after */
+    case HL_MSG_ESTOP: /* one the e-stop's own path did not take (longer than it looks) */
+        hal_lock();
+        if (!D.estop_timed) {
+            D.estop_rx_tick = D.rx_empty_tick; /* the frame arrived after it */
+            D.estop_timed = 1;
+        }
         D.req_estop = 1;
+        hal_unlock();
         return HL_OK;
     case HL_MSG_CLEAR_FAULT:
         if (hal_estop_pressed()) {
@@ -878,7 +900,13 @@ static void handle(const hl_frame *f, uint8_t version)
     }
     if (f->type == HL_MSG_ESTOP) { /* acted on whatever its body and frame version: a
                                       * stray byte must not leave the output on (docs 3) */
-        send_ack(f->seq, execute(f->type, f->body, 0));
+        hal_lock();
+        int taken = D.sn_armed && D.sn_seq == f->seq; /* asked for as it arrived */
+        if (taken) {
+            D.sn_armed = 0;
+        }
+        hal_unlock();
+        send_ack(f->seq, taken ? (uint8_t)HL_OK : execute(f->type, f->body, 0));
         return;
     }
     if (version != 2) {
@@ -1050,11 +1078,62 @@ void hl_device_pace(float speed)
     D.wd_ticks = (uint32_t)((float)WATCHDOG_TICKS * speed + 0.5f);
 }
 
+void hl_device_rx_idle(void)
+{
+    hal_lock();
+    D.rx_mark = D.ticks;
+    hal_unlock();
+}
+
+void hl_device_rx_byte(uint8_t b)
+{
+    if (b != 0) { /* inside a frame: kept while it may still be an ESTOP */
+        if (D.sn_len < SNIFF_MAX) {
+            D.sn_buf[D.sn_len++] = b;
+        } else {
+            D.sn_over = 1;
+        }
+        return;
+    }
+    uint8_t len = D.sn_len, over = D.sn_over;
+    D.sn_len = 0;
+    D.sn_over = 0;
+    uint8_t p[SNIFF_MAX];
+    long n = over || len == 0 ? -1 : hl_cobs_decode(D.sn_buf, len, p, sizeof p);
+    /* the type first: only an ESTOP's check is computed here */
+    if (n < (long)(HL_HEADER_SIZE + HL_CRC_SIZE) || p[1] != HL_MSG_ESTOP ||
+        p[0] < HL_PROTOCOL_MIN || p[0] > HL_PROTOCOL_VERSION) {
+        return;
+    }
+    size_t end = (size_t)n - HL_CRC_SIZE;
+    if (hl_crc32(p, end) != get_u32(p + end)) {
+        return;
+    }
+    hal_lock();
+    if (!D.estop_timed) {
+        D.estop_rx_tick = D.rx_mark; /* its last byte arrived after it */
+        D.estop_timed = 1;
+    }
+    D.req_estop = 1; /* the next servo tick zeroes output */
+    D.sn_seq = (uint16_t)(p[2] | (p[3] << 8));
+    D.sn_armed = 1;
+    hal_unlock();
+}
+
 void hl_device_poll(void)
 {
     uint8_t buf[256];
-    size_t n;
-    while ((n = hal_uart_read(buf, sizeof buf)) > 0) {
+    for (;;) {
+        /* the tick before a read that finds the input empty: what comes later arrived
+         * after it (the servo tick may run between the two) */
+        hal_lock();
+        uint64_t t = D.ticks;
+        hal_unlock();
+        size_t n = hal_uart_read(buf, sizeof buf);
+        if (n == 0) {
+            D.rx_empty_tick = t;
+            break;
+        }
         for (size_t i = 0; i < n; i++) {
             hl_frame f;
             if (hl_receiver_push(&D.rx, buf[i], D.payload, &f)) {

@@ -156,7 +156,9 @@ void usart1_handler(void)
             rx_ring[rx_head % RX_BYTES] = b;
             rx_head++;
         }
+        hl_device_rx_byte(b); /* an ESTOP acts at the next tick, not at the main loop's */
     }
+    hl_device_rx_idle();
 #if HL_QEMU
     /* QEMU's USART sends each byte synchronously and keeps TXE set; reading SR costs a
      * wake-up of QEMU's I/O thread per byte, which halves the emulated board's speed */

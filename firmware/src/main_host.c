@@ -44,6 +44,19 @@ static void on_signal(int sig)
 static volatile sig_atomic_t button; /* the e-stop button, pressed by SIGUSR1 */
 static void on_button(int sig) { button = sig == SIGUSR1; }
 
+/* everything waiting on the pty into the device's input, until the port is empty: the
+ * device takes its input as seen empty when hl_device_poll finds nothing more (device.c
+ * counts an ESTOP's wait from there), so the port is read before every poll */
+static void take_input(int master)
+{
+    static uint8_t in[4096];
+    ssize_t r;
+    while ((r = read(master, in, sizeof in)) > 0) {
+        sim_uart_to_device(in, (size_t)r);
+    }
+    hl_device_rx_idle(); /* the port is empty at this tick */
+}
+
 static uint64_t now_ns(void)
 {
     struct timespec ts;
@@ -115,7 +128,7 @@ int main(int argc, char **argv)
      * stall in which the device itself was not reading the host's frames */
     const uint64_t slip = (uint64_t)(0.020 * HL_SERVO_HZ * speed) + 1u;
     uint64_t start = now_ns(), done = 0, late = 0;
-    static uint8_t out[65536], in[4096];
+    static uint8_t out[65536];
     size_t out_len = 0;
     while (!stop_flag) {
         uint64_t due = (uint64_t)((double)(now_ns() - start) / period);
@@ -127,14 +140,12 @@ int main(int argc, char **argv)
         sim_estop_button(button);
         /* input first, then at most one tick: the device reads what arrived between ticks,
          * as the Cortex-M main loop does, also while it catches up */
-        ssize_t r;
-        while ((r = read(master, in, sizeof in)) > 0) {
-            sim_uart_to_device(in, (size_t)r);
-        }
+        take_input(master);
         hl_device_poll();
         if (done < due) {
             hl_servo_tick();
             done++;
+            take_input(master);
             hl_device_poll();
         }
         if (out_len == 0) {

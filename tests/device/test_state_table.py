@@ -98,8 +98,9 @@ class Host:
         self.limits: M.Limits | None = None  # from the last HELLO
         self.rating_ma: int | None = None
         self.watchdog_ms: int | None = None  # from the last HELLO_ACK
+        self.servo_hz: int | None = None
         self.link_report: M.LinkReport | None = None  # the last LINK_REPORT
-        self.watchdog = False  # a STATUS reported a watchdog fault since it was last reset
+        self.watchdog = False  # a watchdog fault was reported since it was last reset
 
     def _pump(self, pred, limit: float, keep: list | None = None):
         """The first message ``pred`` accepts; those passed over on the way go to ``keep``
@@ -115,6 +116,10 @@ class Host:
                 if isinstance(m, M.StatusReport):
                     self.state, self.status_count = m.state, self.status_count + 1
                     self.watchdog |= m.fault == WATCHDOG
+                # the FAULT frame and the run's WINDOW_DONE come before the next STATUS:
+                # a test that fails on them has met the watchdog too
+                self.watchdog |= (isinstance(m, M.Fault) and m.code == WATCHDOG
+                                  or isinstance(m, M.WindowDone) and m.fault == WATCHDOG)
                 if pred(m):
                     return m
                 if keep is not None and not isinstance(m, M.StatusReport):
@@ -142,6 +147,7 @@ class Host:
             else:
                 raise AssertionError("no HELLO_ACK in 5 s")
             self.rating_ma, self.watchdog_ms = ack.current_limit_ma, ack.watchdog_ms
+            self.servo_hz = ack.servo_rate_hz
             self.limits = self._pump(lambda m: isinstance(m, M.Limits), ANSWER_S)
             return "hello"
         self.write(M.encode(msg, self.seq, 2))
