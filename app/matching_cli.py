@@ -32,7 +32,7 @@ def _sysid_again(args: argparse.Namespace) -> str:
     gave, once a fault is cleared (quoted for the shell)."""
     cmd = ["hapticlab", "device", "sysid", "--device", args.device, "--order", str(args.order),
            "--relative-degree", str(args.relative_degree), "--levels",
-           *(f"{v:g}" for v in args.levels), "--repeats", str(args.repeats)]
+           *(str(v) for v in args.levels), "--repeats", str(args.repeats)]
     if args.delay is not None:
         cmd += ["--delay", f"{args.delay:g}"]
     if args.png:
@@ -42,24 +42,54 @@ def _sysid_again(args: argparse.Namespace) -> str:
     return shlex.join([*cmd, "--clear-fault"])
 
 
+def _opened(record, what: str):
+    """``record`` after saying whether it resumes an earlier run (``what``: the kept
+    measurements' noun, "measurements" or "of 12 sweeps")."""
+    if record.set_aside:
+        print(f"hapticlab: not resuming from {record.path} ({record.set_aside}): "
+              "measuring afresh", file=sys.stderr)
+    elif record.resumed:
+        print(f"hapticlab: resuming: {record.resumed} {what} kept from an earlier run "
+              f"({record.path}; --restart measures everything again)", file=sys.stderr)
+    return record
+
+
 def device_sysid(args: argparse.Namespace, open_spec) -> int:
-    from device.matching.library import usable_band
+    from device.matching.library import (
+        PIPELINE_VERSION,
+        BuildRecord,
+        sysid_record_path,
+        usable_band,
+    )
     from device.matching.measure import MeasurementFault, Pace
     from device.matching.sysid import identify, sweep_seconds
 
     with open_spec(args.device) as dev:
         band = usable_band(dev.info.servo_rate_hz)
         n = len(args.levels) * args.repeats
-        pace = Pace([sweep_seconds(dev.info.servo_rate_hz, band)] * n, 0, _step_line)
+        # finished sweeps are kept until the model is fitted, so a fault (cleared at the
+        # prompt, or by running the command again) costs one sweep, never the others
+        info = dev.info
+        key = {"sysid": 1, "pipeline": PIPELINE_VERSION,
+               "device": [info.model, info.serial_number, info.servo_rate_hz],
+               "levels": [float(v) for v in args.levels], "repeats": args.repeats,
+               "band_hz": [float(v) for v in band],
+               "sweep_s": sweep_seconds(info.servo_rate_hz, band)}
+        record = _opened(BuildRecord.open(sysid_record_path(info), key, restart=args.restart),
+                         f"of {n} sweeps")
+        pace = Pace([sweep_seconds(info.servo_rate_hz, band)] * n, record.count, _step_line)
+
+        def kept() -> str:
+            return f"{record.count} of {n} sweeps are kept in {record.path}"
+
         try:
             idn = identify(dev, levels=tuple(args.levels), repeats=args.repeats, band=band,
                            order=args.order, relative_degree=args.relative_degree,
                            delay=None if args.delay is None else args.delay * 1e-3,
-                           on_fault=fault_prompt(dev, lambda: f"{pace.done} of {n} sweeps "
-                                                 "done"), pace=pace)
+                           record=record, on_fault=fault_prompt(dev, kept), pace=pace)
         except MeasurementFault as exc:
-            raise DeviceError(f"{exc}; {pace.done} of {n} sweeps were done. Once it is safe, "
-                              f"run it again: {_sysid_again(args)}") from None
+            raise DeviceError(f"{exc}; {kept()}. Once it is safe, continue with: "
+                              f"{_sysid_again(args)}") from None
     m = idn.model
     e = idn.etfe.in_band(band)
     report = {"device": args.device, "rate_hz": idn.rate_hz, "levels_n": list(idn.levels),
@@ -97,6 +127,7 @@ def device_sysid(args: argparse.Namespace, open_spec) -> int:
               f"{band[0]:g}–{band[1]:g} Hz: {m.err_db_rms:.2f} dB rms ({m.err_db_max:.2f} max), "
               f"{m.err_deg_rms:.1f}° rms ({m.err_deg_max:.1f}° max); resonance "
               f"{report['resonance_hz']:.0f} Hz; coherence ≥ {report['coherence']['min']:.2f}")
+    record.discard()  # the model is out: the sweeps are no longer needed
     return 0
 
 
@@ -200,14 +231,8 @@ def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
     with open_spec(args.device) as dev:
         out = args.out or library_path(dev.info, source)
         key = build_key(dev.info, source, entries=args.entries, windows=args.windows)
-        record = BuildRecord.open(record_path(out), key, restart=args.restart)
-        if record.set_aside:
-            print(f"hapticlab: not resuming from {record.path} ({record.set_aside}): "
-                  "measuring afresh", file=sys.stderr)
-        elif record.resumed:
-            print(f"hapticlab: resuming: {record.resumed} measurements kept from an earlier "
-                  f"run of this build ({record.path}; --restart measures everything again)",
-                  file=sys.stderr)
+        record = _opened(BuildRecord.open(record_path(out), key, restart=args.restart),
+                         "measurements")
 
         def kept() -> str:
             return f"{record.count} finished measurements are kept in {record.path}"
@@ -336,6 +361,8 @@ def add_parsers(device_sub, sub, func, clear_fault) -> None:
                     "(default 4)")
     di.add_argument("--png", type=Path, help="plot the fit to this PNG file")
     di.add_argument("--json", action="store_true", help="print the model as JSON")
+    di.add_argument("--restart", action="store_true", help="measure every sweep again "
+                    "(default: keep those an interrupted run finished)")
     clear_fault(di)
     di.set_defaults(action="sysid", func=func)
 

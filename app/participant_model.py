@@ -280,6 +280,7 @@ class SimulatedParticipant(Participant):
             dev.load_scene(scene)
             dev.home()
             felt = felt_features(dev.run_window(3.0, timeout=30.0))
+            dev.zero()  # off again, as the runner leaves it between windows
             self.memory[key] = self._perceive(felt, self._mem_rng)
         return self.memory.get(key, _VOID)
 

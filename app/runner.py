@@ -626,6 +626,14 @@ class SessionRunner:
                 dev.end_window()
 
         res = dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
+        try:
+            # output off while the participant answers, switches surfaces or rests: only
+            # a window keeps it on, and the device's watchdog then guards a host that hangs
+            # (the link's lease is renewed by this loop alone: device.serial.link)
+            dev.zero()
+        except DeviceError as exc:
+            exc.partial = res  # the window ended whole: its row names it
+            raise
         if res.timing:
             self.timing.append(res.timing)
         self.participant_ui.after_window(trial, sample_id, res)  # what a simulated person felt

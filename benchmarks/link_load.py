@@ -15,8 +15,9 @@ window and a playback. Measured:
 * e-stop latency in three parts: on the host, from the moment the e-stop was due to the
   ESTOP frame written (another thread calls ``estop()``, as the console's key reader does,
   so it first waits for the interpreter); across the link, bounded by the PING round trip
-  measured after each window; on the device, from the ESTOP frame read to the servo tick
-  that zeroed output, as the device measured it (LINK_REPORT);
+  measured after each window; on the device, from its arrival to the servo tick that
+  zeroed output, as the device measured it (LINK_REPORT: counted from the last time it
+  found its input empty before the frame, an upper bound);
 * the longest stall of a Python thread in the host (how long the interpreter kept a
   thread from running: what a heartbeat in Python would have waited).
 
@@ -209,6 +210,7 @@ def _cell(port: str, seconds: float, screen: _Screen, native: bool) -> dict:
                 faults.append("e-stop not reported")
             if dev.fault is not None:
                 dev.clear_fault()
+            dev.zero()  # as the session runner: output off while the rating is shown
             rtt.append(dev.ping())
             screen.rating(0.5)
         seen.add(dev.device_link_report())
@@ -305,13 +307,13 @@ def main(args) -> int:
     print_table(f"heartbeat gaps the device saw, faults and e-stop latency under load "
                 f"({os.cpu_count()} cores; {payload['window']}; {args.seconds:g} s per row)",
                 ["target", "load", "link", "gap p50", "p99", "p99.9", "max [ms]", "faults/h",
-                 "e-stop due→sent", "PING RTT", "read→zeroed", "host stall"], table)
+                 "e-stop due→sent", "PING RTT", "arrived→zeroed", "host stall"], table)
     print("gaps: between the host's frames as the device saw them (2-ms bins; max exact); "
           "e-stop [ms, p50 / max]: due→sent on the host (the key reader's thread waits for "
-          "the interpreter), the link bounded by the PING round trip, read→zeroed on the "
-          "device (its own count of ticks); host stall: the longest a Python thread of the "
-          "host was kept from running; faults/h as measured (≤ the one-sided 95 % upper "
-          "bound the run's length allows)")
+          "the interpreter), the link bounded by the PING round trip, arrived→zeroed on "
+          "the device (its own count of ticks, from when it last found its input empty); "
+          "host stall: the longest a Python thread of the host was kept from running; "
+          "faults/h as measured (≤ the one-sided 95 % upper bound the run's length allows)")
     for native in modes:
         cells = [r for r in rows if r["native"] is native]
         k, secs = sum(r["spurious_faults"] for r in cells), sum(r["seconds"] for r in cells)

@@ -47,6 +47,7 @@ from .sysid import TFModel, accel_at_every_tick, identify, sweep_seconds
 __all__ = ["TransientLibrary", "LibraryError", "build_library", "usable_band", "record_taps",
            "segment_taps", "even_spread", "library_dir", "library_path", "find_library",
            "build_into_store", "build_key", "BuildRecord", "MeasurementFault", "record_path",
+           "sysid_record_path",
            "FORMAT_VERSION", "Tap", "SWEEP_LEVELS", "SWEEP_REPEATS"]
 
 FORMAT_VERSION = 1
@@ -190,7 +191,9 @@ def record_taps(device, scene: Scene, windows: int = 8, duration: float = 5.0, *
 
             def tap() -> WindowResult:
                 device.home()
-                return device.run_window(duration)
+                res = device.run_window(duration)
+                device.zero()  # off while this host computes: the link's lease may lapse
+                return res
 
             t0 = time.perf_counter()
             res = measured(device, tap, what, on_fault)
@@ -365,14 +368,25 @@ def library_path(info: DeviceInfo, source: Scene) -> Path:
     """
     key = hashlib.sha256(json.dumps({"pipeline": PIPELINE_VERSION, "source": source.to_dict()},
                                     sort_keys=True).encode()).hexdigest()[:12]
-    device = f"{_slug(info.model)}-{_slug(info.serial_number)}-{info.servo_rate_hz:g}Hz"
-    return library_dir() / device / f"{_slug(source.name)}-{key}.npz"
+    return _device_dir(info) / f"{_slug(source.name)}-{key}.npz"
+
+
+def _device_dir(info: DeviceInfo) -> Path:
+    """The store's folder for device ``info`` (model, serial number, servo rate)."""
+    name = f"{_slug(info.model)}-{_slug(info.serial_number)}-{info.servo_rate_hz:g}Hz"
+    return library_dir() / name
 
 
 def record_path(library: Path) -> Path:
     """Where a build keeps its finished measurements until ``library`` is written."""
     library = Path(library)
     return library.with_name(library.stem + ".partial.npz")
+
+
+def sysid_record_path(info: DeviceInfo) -> Path:
+    """Where ``device sysid`` keeps its finished sweeps on device ``info`` until the model
+    is fitted (one per device, in the library store)."""
+    return _device_dir(info) / "sysid.partial.npz"
 
 
 def build_into_store(device, source: Scene, **options: Any) -> Path:

@@ -11,12 +11,17 @@ and into an event queue the device layer takes from.
 **What a busy host cannot hold up.** On a port it opened itself, the link hands reading
 and heartbeats to a native thread (:mod:`device.serial.native`): bytes leave the port as
 they arrive and a HEARTBEAT goes out whenever no frame went for T_wd/4, whatever the
-interpreter is doing, for as long as this process renews its lease (``LEASE_S``; the
-reader renews it at every turn). Where the native library is missing, both run in Python
-threads, and while heartbeats run the process's automatic full garbage collections are held
-off (:func:`hold_full_collections`): a full pass over a host that has imported scipy and
-statsmodels stops every thread for 90–110 ms on a loaded 2-core machine (measured), long
-enough to starve the device's 100-ms watchdog.
+interpreter is doing, for as long as the thread that drives the device renews its lease
+(``LEASE_S``): every command and every wait for the device's events renews it
+(:meth:`Link.renew`), and the reader thread never does, so a main loop that hangs (a
+deadlock, a wait that never ends, even one that holds no interpreter lock) stops the
+heartbeats and trips the device's watchdog. A program that keeps the output on while it
+does something else for longer than the lease must zero it first (the session runner
+does, as each window ends). Where the native library is missing, both run in Python
+threads under the same lease, and while heartbeats run the process's automatic full
+garbage collections are held off (:func:`hold_full_collections`): a full pass over a
+host that has imported scipy and statsmodels stops every thread for 90–110 ms on a loaded
+2-core machine (measured), long enough to starve the device's 100-ms watchdog.
 """
 
 from __future__ import annotations
@@ -50,11 +55,12 @@ HELLO_WAIT_S = 3.0
 #: watchdog are), so the host waits long enough for a device simulated on the same busy
 #: computer (an emulator, QEMU) that the operating system held up for a moment
 SILENCE_S = 1.0
-#: how long the native thread heartbeats for a host that stopped calling it [s]: a host
-#: whose interpreter hangs (a deadlock, a call that never returns while holding the
+#: how long the heartbeats go on for a host that stopped driving the device [s]: a host
+#: whose main loop hangs (a deadlock, a call that never returns, with or without the
 #: interpreter lock, a stopped process) stops feeding the device this long after its last
-#: call, and the device's watchdog trips T_wd later. Ten times the longest stall of a
-#: Python thread measured under load (`hapticlab bench link --load 4`: README)
+#: command or wait for events, and the device's watchdog trips T_wd later. Ten times the
+#: longest stall of a Python thread measured under load (`hapticlab bench link --load 4`:
+#: README)
 LEASE_S = 1.0
 #: how much longer than its timeout a try waits for an ACK while the device's clock (its
 #: STATUS) has not moved the timeout's length [s]: a device held up as a whole on a busy
@@ -194,6 +200,8 @@ class Link:
         self._gone: DeviceGoneError | None = None
         self.closed = False
         self._last_rx = time.monotonic()
+        self._lease_until = time.monotonic() + LEASE_S  # the Python heartbeats' lease
+        self.lease_lapses = 0  # turns the Python heartbeat skipped for a lapsed lease
         self._dev_seq: int | None = None
         self._hb_pause = threading.Event()
         self._hb: threading.Thread | None = None
@@ -255,8 +263,21 @@ class Link:
                 self._gone = cls(why)
             self.cv.notify_all()
 
+    def renew(self) -> None:
+        """Renew the heartbeats' lease for :data:`LEASE_S`: the thread that drives the
+        device is alive. Every command and every wait for events calls it; the reader
+        thread never does."""
+        self._lease_until = time.monotonic() + LEASE_S
+        if self._native is not None and not self._native.closed:
+            self._native.renew()
+
     def write(self, data: bytes) -> None:
-        """Send encoded bytes; a failing port marks the device gone and raises."""
+        """Send encoded bytes (renewing the lease: see :meth:`renew`); a failing port marks
+        the device gone and raises."""
+        self._lease_until = time.monotonic() + LEASE_S
+        self._send(data)
+
+    def _send(self, data: bytes) -> None:
         self.check()
         try:
             if self._native is not None:
@@ -272,7 +293,7 @@ class Link:
     # ------------------------------------------------------------------ reader
     def _read(self) -> bytes:
         if self._native is not None:
-            return self._native.read(0.05)  # renews the lease at every turn
+            return self._native.read(0.05)  # a read renews no lease (see :meth:`renew`)
         # pyserial's read(n) waits for n bytes or its timeout: ask for one byte (returns as
         # soon as it arrives), then for whatever else is already waiting
         data = self._ser.read(1)
@@ -344,6 +365,7 @@ class Link:
     # ------------------------------------------------------------------ events
     def take_events(self, timeout: float = 0.05) -> tuple[list, DeviceGoneError | None]:
         """Wait up to ``timeout`` [s] for events; take them all, with the gone error."""
+        self.renew()
         with self.cv:
             self.cv.wait_for(lambda: self._events or self._gone is not None, timeout=timeout)
             items = list(self._events)
@@ -361,6 +383,7 @@ class Link:
 
     def wait_for(self, predicate: Callable[[deque], bool], timeout: float) -> bool:
         """Wait until ``predicate(events)`` holds (True) or ``timeout`` [s] passes (False)."""
+        self.renew()
         with self.cv:
             ok = self.cv.wait_for(lambda: predicate(self._events) or self._gone is not None,
                                   timeout=timeout)
@@ -417,6 +440,7 @@ class Link:
                                  and self._dev_clock is not None else timeout)
                         if not 0 <= moved < timeout or now >= cap:
                             break  # its clock has run a try's length (or went back: reset)
+                    self.renew()  # waiting for an answer is driving the device
                     # a STATUS wakes this wait: its clock is looked at again
                     self.cv.wait((deadline if now < deadline else cap) - now)
                 self.check()
@@ -505,9 +529,11 @@ class Link:
         def loop() -> None:
             slept = time.monotonic() - period  # when the last sleep began
             while not self.closed and self._gone is None:
-                if not self._hb_pause.is_set():
+                leased = time.monotonic() < self._lease_until
+                self.lease_lapses += not leased
+                if leased and not self._hb_pause.is_set():
                     try:
-                        self.write(M.encode(M.Heartbeat(), 0, self.version))
+                        self._send(M.encode(M.Heartbeat(), 0, self.version))
                     except DeviceError:
                         return
                 now = time.monotonic()
@@ -582,7 +608,8 @@ class Link:
         between frames written while heartbeating (p50, p99, p99.9, max [ms], from 1-ms
         bins: a percentile is its bin's upper edge), lease lapses and ring waits."""
         if self._native is None:
-            return {"native": False, "why_not": self.native_why}
+            return {"native": False, "why_not": self.native_why,
+                    "lease_lapses": self.lease_lapses}
         if self._native.closed:
             return dict(self._final_report or {"native": True})
         st = self._native.stats(reset)
@@ -598,8 +625,9 @@ class Link:
         """What the device saw of this host (LINK_QUERY → LINK_REPORT): intact frames and
         frames that failed a check since ``since_s`` [s, device clock], the gaps between
         intact frames its watchdog judged (p50, p99, p99.9 from 2-ms bins, and the exact
-        max [ms of device time]) and the longest an ESTOP took from the frame read to the
-        zeroing tick (``estop_max_ms``, None: none since); ``reset`` starts afresh. None
+        max [ms of device time]) and the longest an ESTOP took from its arrival to the
+        zeroing tick (``estop_max_ms``, counted from when the device last found its input
+        empty before it: an upper bound; None: none since); ``reset`` starts afresh. None
         when the device does not know LINK_QUERY (it answers BAD_MESSAGE).
 
         Raises

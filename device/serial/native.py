@@ -6,8 +6,10 @@ window, decoding a trace stream, a garbage collection. On a loaded 2-core machin
 wait reached the device's 100-ms watchdog. :class:`NativeLink` hands the two jobs that must
 not wait — taking bytes off the port as they arrive, and heartbeats — to a thread in C
 that holds no interpreter lock, asks for real-time scheduling and locks its memory where
-the system allows it, and heartbeats only while this process renews its lease (every
-call renews it), so a host whose interpreter stopped still trips the device's watchdog.
+the system allows it, and heartbeats only while the host renews its lease (:meth:`renew`,
+and every write; reads and statistics do not, so the link's reader thread cannot keep a
+hung main loop alive), so a host whose main loop stopped still trips the device's
+watchdog.
 
 The library is built by setuptools with the package (``setup.py``; a plain C library, not
 an extension module). Where it is missing — no compiler at install time, not POSIX — or
@@ -125,8 +127,8 @@ class NativeLink:
     def heartbeat(self, frame: bytes, period_s: float, lease_s: float,
                   silence_s: float) -> None:
         """Heartbeat with ``frame`` after ``period_s`` [s] without a frame, while the lease
-        (``lease_s`` [s] from this process's last call) holds; the device counts as silent
-        after ``silence_s`` [s] without a byte (0: never)."""
+        (``lease_s`` [s] from the host's last renewal: :meth:`renew` or a write) holds;
+        the device counts as silent after ``silence_s`` [s] without a byte (0: never)."""
         rc = self._lib.hl_link_heartbeat(self.slot, frame, len(frame),
                                          max(1, int(period_s * 1e6)), max(1, int(lease_s * 1e6)),
                                          max(0, int(silence_s * 1e6)))

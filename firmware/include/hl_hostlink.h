@@ -14,10 +14,12 @@
  *
  * The threads ask for real-time scheduling (SCHED_FIFO) and lock their memory where the
  * operating system grants it, and say what they got (hl_link_stats). They heartbeat only
- * while the host renews its lease (every call into this library renews it): a host
- * whose interpreter stopped (hung, deadlocked, stopped by a signal) stops feeding the
- * device within the lease, and a killed host at once, so the device's watchdog still
- * catches a host that died.
+ * while the host renews its lease: hl_link_renew, hl_link_write, hl_link_heartbeat and
+ * hl_link_pause renew it; hl_link_read and hl_link_stats_get do not, so a helper thread
+ * that only reads (or watches the figures) cannot keep a hung host alive. A host whose
+ * main loop stopped (hung, deadlocked, stopped by a signal) stops feeding the device
+ * within the lease, and a killed host at once, so the device's watchdog still catches a
+ * host that died.
  *
  * Writes from the host go through hl_link_write, under the same lock as the heartbeats,
  * so frames never interleave. C11 and POSIX; no dynamic allocation (a fixed number of
@@ -77,7 +79,8 @@ long hl_link_write(int slot, const uint8_t *buf, size_t len, int timeout_ms);
  * -EBADF after hl_link_close. */
 long hl_link_read(int slot, uint8_t *buf, size_t cap, int timeout_ms);
 
-/* Renew the host's lease (every other call does too). */
+/* Renew the host's lease (writes, hl_link_heartbeat and hl_link_pause do too; reads and
+ * statistics do not). */
 int hl_link_renew(int slot);
 
 /* A copy of the link's statistics; reset != 0 clears the gap histogram and maxima. */

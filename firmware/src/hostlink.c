@@ -515,7 +515,6 @@ long hl_link_read(int slot, uint8_t *buf, size_t cap, int timeout_ms)
     if (k == NULL) {
         return -EBADF;
     }
-    renew(k);
     int64_t deadline = now_ns() + (int64_t)(timeout_ms < 0 ? 0 : timeout_ms) * 1000000LL;
     pthread_mutex_lock(&k->m);
     k->readers++;
@@ -567,7 +566,6 @@ int hl_link_stats_get(int slot, hl_link_stats *out, int reset)
     if (k == NULL) {
         return -EBADF;
     }
-    renew(k);
     pthread_mutex_lock(&k->m);
     *out = k->st;
     if (reset) {

@@ -10,6 +10,8 @@ as what they wait for happens; nothing depends on the host keeping a deadline.
 from __future__ import annotations
 
 import ast
+import json
+import os
 import re
 import shlex
 import signal
@@ -49,19 +51,25 @@ def firmware():
     stop_emulator(emu)
 
 
+def _stopped(firmware, cmd: list[str], step: str, env=None) -> str:
+    """Run ``cmd`` with no terminal until its progress shows ``step``, press the device's
+    e-stop button (SIGUSR1) and return what it said as it stopped (exit status 2)."""
+    err: list[str] = []
+    job = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, env=env)
+    pump = _lines(job.stderr, err)
+    wait_for(lambda: any(step in ln for ln in err), 120, step)
+    firmware.proc.send_signal(signal.SIGUSR1)  # the device's e-stop button
+    assert job.wait(timeout=120) == 2
+    pump.join(timeout=10)
+    return "".join(err)
+
+
 def test_a_library_build_stopped_by_a_fault_keeps_its_work_and_resumes(firmware, tmp_path):
     out = tmp_path / "wood.npz"
-    cmd = [sys.executable, "-m", "app", "library", "build", "--device",
-           f"serial:{firmware.port}", "--windows", "2", "--out", str(out)]
-    err: list[str] = []
-    build = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)
-    pump = _lines(build.stderr, err)
-    wait_for(lambda: any("[ 5/14]" in ln for ln in err), 120, "five measurements")
-    firmware.proc.send_signal(signal.SIGUSR1)  # the device's e-stop button
-    assert build.wait(timeout=120) == 2
-    pump.join(timeout=10)
-    text = "".join(err)
+    text = _stopped(firmware, [sys.executable, "-m", "app", "library", "build", "--device",
+                               f"serial:{firmware.port}", "--windows", "2", "--out", str(out)],
+                    "[ 5/14]")
     done = max(int(m) for m in re.findall(r"\[\s*(\d+)/14\]", text))
     m = re.search(r"estop fault during (.+?) \(.*?\)\. (\d+) finished measurements are kept "
                   r"in (\S+); once it is safe, continue with: (hapticlab library build .+)$",
@@ -80,6 +88,29 @@ def test_a_library_build_stopped_by_a_fault_keeps_its_work_and_resumes(firmware,
     # then it taps the matched sample and its spring alone and says how close each came
     assert re.search(r"with the library [\d.]+ dB — (close|fair|far) .*; the spring alone, the "
                      r"baseline, [\d.]+ dB \(\d+ and \d+ taps\)", again.stdout), again.stdout
+
+
+def test_an_identification_stopped_by_a_fault_keeps_its_sweeps_and_resumes(firmware, tmp_path):
+    """`device sysid` kept nothing across a fault without a terminal (an audit of issue
+    29); its finished sweeps now wait in the library store until the model is fitted."""
+    env = {**os.environ, "HAPTICLAB_LIBRARIES": str(tmp_path / "store")}
+    text = _stopped(firmware, [sys.executable, "-m", "app", "device", "sysid", "--device",
+                               f"serial:{firmware.port}", "--json"], "[ 2/12]", env)
+    done = max(int(m) for m in re.findall(r"\[\s*(\d+)/12\]", text))
+    m = re.search(r"estop fault during sweep at .+?; (\d+) of 12 sweeps are kept in (\S+)\. "
+                  r"Once it is safe, continue with: (hapticlab device sysid .+)$", text, re.M)
+    assert m, text
+    assert int(m.group(1)) == done >= 2 and Path(m.group(2)).exists()
+    firmware.proc.send_signal(signal.SIGUSR2)  # released
+
+    again = subprocess.run(_cli(m.group(3)), capture_output=True, text=True, timeout=300,
+                           env=env)
+    assert again.returncode == 0, again.stderr
+    assert f"resuming: {done} of 12 sweeps kept" in again.stderr
+    steps = [int(x) for x in re.findall(r"\[\s*(\d+)/12\]", again.stderr)]
+    assert steps == list(range(done + 1, 13))  # nothing measured twice
+    assert json.loads(again.stdout)["repeats"] == 4
+    assert not Path(m.group(2)).exists()  # fitted: the record is gone
 
 
 def test_a_person_clears_a_fault_and_the_build_measures_again(firmware, terminal, tmp_path,

@@ -13,12 +13,18 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 
 import pytest
 
+from app.participants import ScriptedResponder
+from app.recorder import SessionFiles, new_session_dir, read_trials
+from app.runner import SessionRunner
 from device import Scene, open_device
 from device.serial.native import load
+from protocols import SessionEngine, parse_protocol
 
+from ..app.test_faults import MINI
 from ..conftest import wait_for as _wait_for
 
 FIRM = Scene("firm", spring=680.0)
@@ -43,6 +49,7 @@ def test_a_host_whose_interpreter_is_held_keeps_the_device_fed(own_emulator):
         dev.device_link_report(reset=True)
         for _ in range(3):
             _hold_the_interpreter(0.5)
+            dev.heartbeat()  # a main loop that stalls, then goes on: it renews the lease
         seen = dev.device_link_report()
         assert dev.fault is None, dev.fault
         res = dev.run_window(0.2, from_first_contact=False)
@@ -115,6 +122,69 @@ def test_the_lease_ends_the_heartbeats_after_its_stated_second(own_emulator):
         _wait_for(lambda: dev.fault is not None, what="the watchdog fault")
         assert dev.fault.code == "watchdog"
         dev.clear_fault()
+
+
+@pytest.mark.parametrize("native", [True, False], ids=["native", "python-threads"])
+def test_a_main_loop_that_hangs_without_the_interpreter_lock_trips_the_watchdog(
+        own_emulator, native):
+    """The hang the reader thread used to hide (an audit of issue 29): the thread that
+    drives the device waits forever (a deadlock, a wait on the participant that never
+    returns: here a sleep, which lets every other Python thread run) while the link's
+    reader thread goes on reading. Reads renew no lease, so the heartbeats stop LEASE_S
+    after the last command, native or in Python threads, and the device zeroes its output.
+    The same count as above bounds the frames it got meanwhile (the native reader renewed
+    at every turn before, and the device got a heartbeat every 25 ms for the whole hang)."""
+    from device.serial.link import LEASE_S
+
+    with open_device(f"serial:{own_emulator.port}", native=native) as dev:
+        assert dev.link.native == native
+        dev.load_scene(FIRM)
+        dev.home()
+        t_wd = dev.info.watchdog_s
+        dev.device_link_report(reset=True)
+        time.sleep(3 * LEASE_S)  # the main loop hangs; the reader thread reads on
+        assert dev.link._reader.is_alive()
+        seen = dev.device_link_report()
+        assert seen["frames"] <= LEASE_S / (t_wd / 4) + 5, seen
+        _wait_for(lambda: dev.fault is not None, what="the watchdog fault")
+        assert dev.fault.code == "watchdog"
+        assert dev.link_stats()["heartbeats"]["lease_lapses"] > 0
+        dev.clear_fault()
+
+
+class SlowToAnswer(ScriptedResponder):
+    """Takes longer than the lease and the watchdog together to rate each trial, and notes
+    what the device reported meanwhile."""
+
+    def __init__(self, dev, seconds: float):
+        self.dev, self.seconds, self.seen = dev, seconds, []
+
+    def rate(self, trial, scale, result, rng):
+        time.sleep(self.seconds)  # nothing drives the device meanwhile
+        self.seen.append((self.dev.fault, self.dev.output_force))
+        return super().rate(trial, scale, result, rng)
+
+
+def test_a_participant_who_takes_long_to_answer_meets_no_watchdog(own_emulator, tmp_path):
+    """The other half of the lease: a session's main loop legitimately leaves the device
+    alone while the participant answers. The runner zeroes the output as each window ends,
+    so the lapsed lease stops heartbeats to a device whose watchdog is not armed (docs §3:
+    armed while output is enabled), and the next window homes it again."""
+    from device.serial.link import LEASE_S
+
+    p = parse_protocol(MINI.replace("repetitions = 2", "repetitions = 1"), "mini.toml")
+    folder, n = new_session_dir(tmp_path, "P01")
+    files = SessionFiles(folder)
+    files.start("")
+    with open_device(f"serial:{own_emulator.port}") as dev:
+        ui = SlowToAnswer(dev, LEASE_S + 4 * dev.info.watchdog_s)
+        runner = SessionRunner(p, SessionEngine(p, 3, "P01"), dev, files, ui, "P01", n, 3)
+        assert runner.run() == "complete"
+        assert dev.link_stats()["heartbeats"]["lease_lapses"] > 0  # the lease did lapse
+    rows, _ = read_trials(folder / "trials.tsv")
+    assert [r["status"] for r in rows] == ["valid"] * 2
+    assert ui.seen == [(None, 0.0)] * 2  # output off, no fault, while each answer came
+    assert "FAULT" not in own_emulator.stderr()
 
 
 def test_the_device_reports_what_it_saw_of_the_host(own_emulator):
