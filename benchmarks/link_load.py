@@ -332,5 +332,5 @@ def _line(r: dict) -> str:
             f"device saw gaps p99.9 {_f(d.get('gap_p999_ms'))} ms, max "
             f"{_f(d.get('gap_max_ms'))} ms; {r['spurious_faults']} spurious fault(s) in "
             f"{r['windows']} windows; e-stop call→frame max "
-            f"{_f(r['estop']['call_to_frame_ms']['max'])} ms, read→zero max "
+            f"{_f(r['estop']['call_to_frame_ms']['max'])} ms, arrived→zeroed max "
             f"{_f(r['estop']['device_reaction_ms']['max'])} ms")
