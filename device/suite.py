@@ -175,13 +175,17 @@ def check_estop(opener: Opener) -> str:
             res = _window(dev, SUITE_SCENES["pulse_firm"], 1.5, on_progress=stop)
             _require(bool(res.faults) and res.faults[0].code == "estop", f"faults: {res.faults}")
             report = seen() if seen is not None else None
-            if report is not None:  # (None: a device that does not know LINK_QUERY)
-                bound = dev.estop_bound_s() * 1e3
-                ms = report["estop_max_ms"]
+            bound = dev.estop_bound_s() if report is not None else None
+            ms = report["estop_max_ms"] if report is not None else None
+            if bound is not None:  # hapticlab's firmware or emulator: a stated bound
                 _require(ms is not None, "the device counted no ESTOP in its LINK_REPORT")
-                _require(ms <= bound + 1e-6, f"output zeroed {ms:.3f} ms after the ESTOP "
-                         f"arrived, over the device's bound of {bound:.3f} ms")
-                took = f"; zeroed within {ms:.3f} ms of its arrival (bound {bound:.3f} ms)"
+                # 1 µs: the report's resolution
+                _require(ms <= bound * 1e3 + 1e-3, f"output zeroed {ms:.3f} ms after the "
+                         f"ESTOP arrived, over the device's bound of {bound * 1e3:.3f} ms")
+                took = (f"; zeroed within {ms:.3f} ms of its arrival (bound "
+                        f"{bound * 1e3:.3f} ms)")
+            elif ms is not None:  # another device: its own figure, not judged
+                took = f"; zeroed within {ms:.3f} ms of its arrival, as the device counts it"
             tr = res.traces
             after = tr["t"] >= res.faults[0].t
             _require(bool(np.all(tr["current"][after] == 0)), "current not zero after the e-stop")

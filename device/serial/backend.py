@@ -306,7 +306,7 @@ class SerialDevice(HapticDevice):
                 out["device_saw"] = None
         return out
 
-    def estop_bound_s(self) -> float:
+    def estop_bound_s(self) -> float | None:
         """The longest an ESTOP may take to zero this device's output, from the frame's
         arrival [s of device time], as its LINK_REPORT counts it (docs §3 and §6): the
         reference firmware looks at every byte as it arrives (the UART's interrupt) and
@@ -315,13 +315,16 @@ class SerialDevice(HapticDevice):
         its input empty. The Python emulator computes its servo in 1-ms blocks and runs on
         only while its port was found empty within
         :data:`~device.serial.emulator.INPUT_TURN_S`: that wait and two blocks, × its
-        speed (in its HELLO_ACK firmware text)."""
-        fw = self._info.firmware
-        if fw.startswith("emulator"):
+        speed (in its HELLO_ACK firmware text). None for any other device: its LINK_REPORT
+        figure is reported, not judged."""
+        fw, model = self._info.firmware, self._info.model
+        if model.startswith("hapticlab emulator") and fw.startswith("emulator-2"):
             from .emulator import INPUT_TURN_S
 
-            speed = float(fw.rsplit(" x", 1)[1]) if " x" in fw else 1.0
+            speed = float(fw[len("emulator-2x"):]) if fw.startswith("emulator-2x") else 1.0
             return (INPUT_TURN_S + 2e-3) * speed
+        if model != "hapticlab reference firmware":
+            return None  # another maker's device states no bound that we know of
         lim = self.link.limits
         frame = len(M.encode(M.EStop(), 0, self.link.version))
         link = frame / lim.link_bytes_s if lim is not None and lim.link_bytes_s > 0 else 0.0

@@ -94,9 +94,10 @@ class Emulator:
     def __init__(self, sim: SimDevice, fd: int, status_hz: float = 40.0,
                  limits: M.Limits = LIMITS):
         self.limits = limits
-        #: HELLO_ACK's firmware text: the emulator's version, and its speed when not ×1 (a
-        #: host scales the emulator's e-stop bound by it: SerialDevice.estop_bound_s)
-        self.firmware = b"emulator-2" + (f" x{sim.speed:g}".encode() if sim.speed != 1 else b"")
+        #: HELLO_ACK's firmware text (16 bytes at most): the emulator's version, and its
+        #: speed when not ×1, as "emulator-2x3" (a host scales the emulator's e-stop bound
+        #: by it: SerialDevice.estop_bound_s)
+        self.firmware = b"emulator-2" + (f"x{sim.speed:.3g}".encode() if sim.speed != 1 else b"")
         self._limit_values = M.limit_values(limits, int(round(sim.info.current_limit * 1000)))
         sim.live = True
         sim.trace_sink = self._stream
@@ -215,7 +216,9 @@ class Emulator:
                         self.frames_in += 1
                         self._handle(frame)
             # the device time before a look that finds the port empty: whatever comes
-            # later arrived after it (the servo worker may move the clock meanwhile)
+            # later arrived after it (the servo worker may move the clock meanwhile;
+            # between runs the clock is brought up to now first)
+            self._sync()
             t = self.sim.time
             if not select.select([self.fd], [], [], 0)[0]:
                 self._rx_empty_at = t
@@ -265,7 +268,8 @@ class Emulator:
         if self._stop_asked:
             self.sim.request_stop()
         turn = INPUT_TURN_S * self.sim.speed
-        while self.sim.time - self._rx_empty_at >= turn and not self._stop.is_set():
+        while (self.sim.time - self._rx_empty_at >= turn and not self._stop.is_set()
+               and not self._stop_asked):
             time.sleep(0.0005)
 
     def _state(self) -> int:

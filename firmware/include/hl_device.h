@@ -72,10 +72,12 @@ void hl_device_poll(void);
  * every byte received, as it arrives, before it waits for the main loop. An intact ESTOP
  * frame of up to 64 encoded bytes sets the request the next servo tick acts on, however
  * busy the main loop is (building trace chunks, checking an upload); the main loop then
- * only acknowledges it. hl_device_rx_idle: the receive side found no more input (an
- * ESTOP's wait is counted from the last such tick before it: LINK_REPORT). */
+ * asks again in order and acknowledges it. hl_device_rx_idle(t): the receive side found
+ * no more input at a look that began at tick t (from hl_device_ticks, taken before the
+ * look); an ESTOP's wait is counted from the last such tick before it (LINK_REPORT). */
 void hl_device_rx_byte(uint8_t b);
-void hl_device_rx_idle(void);
+void hl_device_rx_idle(uint64_t tick);
+uint64_t hl_device_ticks(void); /* the device clock [servo ticks], read whole */
 /* host build only: the device runs at `speed` x real time, so the watchdog (a limit on
  * the host's wall-clock silence) counts `speed` x as many ticks */
 void hl_device_pace(float speed);

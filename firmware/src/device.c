@@ -119,12 +119,11 @@ static struct {
     volatile uint8_t estop_timed;    /* ... when set (cleared by the tick that zeroes) */
     volatile uint32_t estop_max_ticks; /* the longest from such a tick to the zeroing one */
     volatile uint8_t estop_seen;
-    /* the e-stop's own path (hl_device_rx_byte): the frame arriving, and the sequence
-     * number of the ESTOP it took (the main loop does not ask again for that one) */
+    /* the e-stop's own path (hl_device_rx_byte, in the UART's receive interrupt on a
+     * board; it and the main loop share rx_mark and the estop_ fields under hal_lock):
+     * the frame arriving */
     uint8_t sn_buf[SNIFF_MAX];
     uint8_t sn_len, sn_over;
-    volatile uint16_t sn_seq;
-    volatile uint8_t sn_armed;
     uint64_t gap_since;
     uint64_t next_status;
     /* the window whose traces and WINDOW_DONE are being sent */
@@ -769,9 +768,12 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
     case HL_MSG_SET_LIMIT:
         D.limit = clamp_of(get_u16(b));
         return HL_OK;
-    case HL_MSG_ESTOP: /* one the e-stop's own path did not take (longer than it looks) */
+    case HL_MSG_ESTOP:
+        /* in order with the frames before it, whether or not the e-stop's own path asked
+         * already (a CLEAR_FAULT queued before it must not undo it); timed here only when
+         * that path did not see it (longer than it looks) and output is not off yet */
         hal_lock();
-        if (!D.estop_timed) {
+        if (!D.estop_timed && D.fault == HL_FAULT_NONE) {
             D.estop_rx_tick = D.rx_empty_tick; /* the frame arrived after it */
             D.estop_timed = 1;
         }
@@ -824,7 +826,7 @@ static void link_reset(void)
     D.gap_frames = 1;
     D.gap_max_ticks = 0;
     D.gap_bad0 = rx_errors();
-    D.gap_since = D.ticks;
+    D.gap_since = hl_device_ticks();
     hal_lock();
     D.estop_seen = 0;
     D.estop_max_ticks = 0;
@@ -833,10 +835,10 @@ static void link_reset(void)
 
 /* an intact host frame at this tick: the gap since the one before (what the watchdog
  * judges), before it feeds the watchdog */
-static void link_note(void)
+static void link_note(uint64_t now)
 {
     if (D.gap_frames > 0) {
-        uint64_t gap = D.ticks - D.last_rx_tick;
+        uint64_t gap = now - D.last_rx_tick;
         uint64_t us = ticks_to_us(gap);
         uint64_t bin = us / GAP_BIN_US;
         bin = bin < GAP_BINS ? bin : GAP_BINS - 1u;
@@ -869,9 +871,12 @@ static void send_link_report(void)
 
 static void handle(const hl_frame *f, uint8_t version)
 {
-    link_note();
+    uint64_t now = hl_device_ticks(); /* 64 bits the servo tick writes: read whole */
+    link_note(now);
     D.frames_in++;
-    D.last_rx_tick = D.ticks; /* every intact frame feeds the watchdog */
+    hal_lock();
+    D.last_rx_tick = now; /* every intact frame feeds the watchdog */
+    hal_unlock();
     if (f->type == 0x01) { /* HELLO: any header version */
         if (f->body_len != 1) {
             send_ack(f->seq, HL_BAD_MESSAGE); /* as any command that does not fit */
@@ -900,13 +905,7 @@ static void handle(const hl_frame *f, uint8_t version)
     }
     if (f->type == HL_MSG_ESTOP) { /* acted on whatever its body and frame version: a
                                       * stray byte must not leave the output on (docs 3) */
-        hal_lock();
-        int taken = D.sn_armed && D.sn_seq == f->seq; /* asked for as it arrived */
-        if (taken) {
-            D.sn_armed = 0;
-        }
-        hal_unlock();
-        send_ack(f->seq, taken ? (uint8_t)HL_OK : execute(f->type, f->body, 0));
+        send_ack(f->seq, execute(f->type, f->body, 0));
         return;
     }
     if (version != 2) {
@@ -1078,10 +1077,20 @@ void hl_device_pace(float speed)
     D.wd_ticks = (uint32_t)((float)WATCHDOG_TICKS * speed + 0.5f);
 }
 
-void hl_device_rx_idle(void)
+uint64_t hl_device_ticks(void)
 {
     hal_lock();
-    D.rx_mark = D.ticks;
+    uint64_t t = D.ticks;
+    hal_unlock();
+    return t;
+}
+
+void hl_device_rx_idle(uint64_t tick)
+{
+    hal_lock();
+    if (tick > D.rx_mark) {
+        D.rx_mark = tick;
+    }
     hal_unlock();
 }
 
@@ -1110,13 +1119,12 @@ void hl_device_rx_byte(uint8_t b)
         return;
     }
     hal_lock();
-    if (!D.estop_timed) {
+    if (!D.estop_timed && D.fault == HL_FAULT_NONE) {
         D.estop_rx_tick = D.rx_mark; /* its last byte arrived after it */
         D.estop_timed = 1;
     }
-    D.req_estop = 1; /* the next servo tick zeroes output */
-    D.sn_seq = (uint16_t)(p[2] | (p[3] << 8));
-    D.sn_armed = 1;
+    D.req_estop = 1; /* the next servo tick zeroes output; the main loop asks again in
+                      * order when it reads the frame, and acknowledges it */
     hal_unlock();
 }
 
@@ -1126,9 +1134,7 @@ void hl_device_poll(void)
     for (;;) {
         /* the tick before a read that finds the input empty: what comes later arrived
          * after it (the servo tick may run between the two) */
-        hal_lock();
-        uint64_t t = D.ticks;
-        hal_unlock();
+        uint64_t t = hl_device_ticks();
         size_t n = hal_uart_read(buf, sizeof buf);
         if (n == 0) {
             D.rx_empty_tick = t;

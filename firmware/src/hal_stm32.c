@@ -150,7 +150,12 @@ uint32_t hal_link_bytes_s(void)
 void usart1_handler(void);
 void usart1_handler(void)
 {
-    while (USART1_SR & SR_RXNE) {
+    for (;;) {
+        uint64_t t = hl_device_ticks(); /* before the look: a byte found later came after */
+        if (!(USART1_SR & SR_RXNE)) {
+            hl_device_rx_idle(t);
+            break;
+        }
         uint8_t b = (uint8_t)USART1_DR;
         if (rx_head - rx_tail < RX_BYTES) {
             rx_ring[rx_head % RX_BYTES] = b;
@@ -158,7 +163,6 @@ void usart1_handler(void)
         }
         hl_device_rx_byte(b); /* an ESTOP acts at the next tick, not at the main loop's */
     }
-    hl_device_rx_idle();
 #if HL_QEMU
     /* QEMU's USART sends each byte synchronously and keeps TXE set; reading SR costs a
      * wake-up of QEMU's I/O thread per byte, which halves the emulated board's speed */
@@ -302,7 +306,6 @@ int main(void)
     USART1_CR1 = CR1_BASE;
     SHPR3 = (SHPR3 & 0x00FFFFFFu);      /* SysTick (the servo) at the highest priority */
     NVIC_IPR(USART1_IRQ) = 0x40u;       /* the link below it: the servo preempts it */
-    NVIC_ISER1 = 1u << (USART1_IRQ - 32u);
     DEMCR |= 1u << 24;        /* trace enable, for the cycle counter */
     DWT_CYCCNT = 0;
     DWT_CTRL |= 1u;
@@ -310,6 +313,8 @@ int main(void)
     static char serial[16];
     serial_number(serial);
     hl_device_init(serial);
+    NVIC_ISER1 = 1u << (USART1_IRQ - 32u); /* after the device's state exists: its receive
+                                            * interrupt feeds the e-stop's own path */
     iwdg_start();
     SYST_RVR = CPU_HZ / HL_SERVO_HZ - 1u;
     SYST_CVR = 0;

@@ -51,10 +51,12 @@ static void take_input(int master)
 {
     static uint8_t in[4096];
     ssize_t r;
+    uint64_t t = hl_device_ticks(); /* before the read that finds the port empty */
     while ((r = read(master, in, sizeof in)) > 0) {
         sim_uart_to_device(in, (size_t)r);
+        t = hl_device_ticks();
     }
-    hl_device_rx_idle(); /* the port is empty at this tick */
+    hl_device_rx_idle(t);
 }
 
 static uint64_t now_ns(void)

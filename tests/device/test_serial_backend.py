@@ -596,8 +596,17 @@ def test_full_collections_do_not_starve_the_watchdog(own_emulator, native):
         if phase == "stop" and info["generation"] == 2:
             full.append(info["collected"])
 
-    def allocate():  # enough long-lived containers to bring full passes at the defaults
-        keep = [[] for _ in range(300_000)]
+    def allocate(turn=None):
+        """Enough long-lived containers to bring full passes at the defaults, in ten
+        parts; ``turn`` between them: a main loop that goes on driving the device (each
+        turn renews the heartbeats' lease, as a window's loop does every 50 ms; the whole
+        took 0.33 s quiet here and over a second, longer than the lease, beside two
+        CPU-bound processes)."""
+        keep = []
+        for _ in range(10):
+            keep.extend([] for _ in range(30_000))
+            if turn is not None:
+                turn()
         return len(keep)
 
     gc.collect()
@@ -610,8 +619,8 @@ def test_full_collections_do_not_starve_the_watchdog(own_emulator, native):
             assert dev.link.native is native
             dev.load_scene(FIRM)
             dev.home()
-            allocate()
-            allocate()
+            allocate(dev.heartbeat)
+            allocate(dev.heartbeat)
             assert (len(full) >= 1) if native else (full == [])
             dev.run_window(0.2, from_first_contact=False)
             assert dev.fault is None
