@@ -161,6 +161,12 @@ void usart1_handler(void)
             rx_ring[rx_head % RX_BYTES] = b;
             rx_head++;
         }
+        /* this interrupt runs as each byte arrives (masked only for hal_lock's few
+         * instructions), so the tick before the look that found the byte is its arrival:
+         * a frame's bytes may come ticks apart where something else delivers them (QEMU's
+         * I/O thread on a busy computer), and the look that found the input empty before
+         * its last byte is then ticks older than the frame's arrival */
+        hl_device_rx_idle(t);
         hl_device_rx_byte(b); /* an ESTOP acts at the next tick, not at the main loop's */
     }
 #if HL_QEMU
