@@ -173,6 +173,9 @@ def _drive(runner, files, meta, console) -> SessionResult:
         meta["timing"] = {"achieved_rate_hz_median": float(np.median(rates)),
                           "lateness_p99_s_max": max(t["lateness_p99_s"] for t in runner.timing),
                           "slipped_s_total": sum(t.get("slipped_s", 0.0) for t in runner.timing)}
+    if runner.warnings:  # what the device could not do as asked, once each
+        meta["warnings"] = list(dict.fromkeys([*meta.get("warnings", []),
+                                               *runner.warnings.values()]))
     files.write_meta(meta)  # the trials are complete and durable before the debrief
     if runner.console.interactive or runner.participant_ui.name == "person":
         console.say(f"trials complete: {summary} — the participant is answering the "

@@ -63,7 +63,8 @@ def _protocol_validate(args: argparse.Namespace) -> int:
         from app.libraries import prepare_libraries
 
         with _opener(args)(args.device) as dev:
-            sim = dev.info.backend == "sim"
+            info = dev.info
+            sim = info.backend == "sim"
             found = prepare_libraries(p, dev, args.device, build=False, ref=args.file) \
                 if not sim else {}
         if sim and any(s.scene.kind == "library" for s in p.samples.values()):
@@ -73,6 +74,11 @@ def _protocol_validate(args: argparse.Namespace) -> int:
     print(f"{p.source}: valid protocol '{p.name}' — {_plural(len(p.samples), 'sample')}, "
           f"{_plural(len(p.phases), 'phase')}, {_plural(n_items, 'trial')} without redraws"
           + (f"; checked against device '{args.device}'{libs}" if args.device else ""))
+    if args.device:
+        from app.preflight import rendering_notes
+
+        for warning in rendering_notes(p, info):  # the device was opened above
+            print(f"warning: {warning}")
     from protocols.texts import english_note
 
     if note := english_note(p):

@@ -20,7 +20,7 @@ from .errors import DataFolderError, DiskFullError, HapticlabError, NotAFolderEr
 __all__ = ["Check", "check_data_folder", "expected_session_bytes", "data_folder_ready",
            "PER_WINDOW_BYTES", "PreflightError", "check_terminal", "check_display",
            "check_device", "check_protocol_on", "check_limit", "check_libraries",
-           "check_answers", "check_audio", "failed"]
+           "check_answers", "check_audio", "failed", "rendering_notes"]
 
 #: bytes one tapping window's traces take on disk (compressed NumPy), by ``--traces`` mode;
 #: measured on realism sessions (15 MB full, 5 MB contacts over 49 windows)
@@ -162,8 +162,21 @@ def check_protocol_on(text: str, source: str, dev) -> Check:
             dev.check_scene(scene)
         except SceneError as exc:
             return Check("protocol on this device", False, f"sample '{sample.id}': {exc}")
+    notes = rendering_notes(proto, dev.info)
     return Check("protocol on this device", True, "every transient can be played and the "
-                 "limits are within the device's rating")
+                 "limits are within the device's rating"
+                 + "".join(f"; warning: {n}" for n in notes))
+
+
+def rendering_notes(protocol, info) -> list[str]:
+    """What a device described by ``info`` plays less faithfully than a protocol asks, one
+    sentence per sample (a transient whose peaks fall between its samples); empty: none."""
+    out = []
+    for sample in protocol.samples.values():
+        tr = sample.scene.transient
+        if tr is not None and (note := tr.rendering_note(info.servo_rate_hz)):
+            out.append(f"sample '{sample.id}': {note}")
+    return out
 
 
 def check_limit(protocol, dev) -> Check:

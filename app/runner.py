@@ -149,6 +149,9 @@ class SessionRunner:
     traces: str = "full"
     log: list[Attempt] = field(default_factory=list)
     timing: list[dict] = field(default_factory=list)
+    #: what the device could not do as asked (a simulated contact that chattered), by its
+    #: first words: each is said to the operator once and kept in session.json
+    warnings: dict[str, str] = field(default_factory=dict)
     meta: dict | None = None  # session.json's content (notes are added to it)
     _expected: list[dict] | None = None  # while replaying: the recorded rows still to meet
     _durations: list[float] = field(default_factory=list)
@@ -636,6 +639,10 @@ class SessionRunner:
             raise
         if res.timing:
             self.timing.append(res.timing)
+        for text in res.warnings:  # what the device could not do as asked: said once
+            if (said := text.split(" (")[0]) not in self.warnings:
+                self.warnings[said] = text
+                self.console.say(f"warning: {text}")
         self.participant_ui.after_window(trial, sample_id, res)  # what a simulated person felt
         return res
 

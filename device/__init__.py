@@ -5,6 +5,7 @@ the backend it is asked for.
 """
 
 from .base import (
+    MAX_WINDOW_TICKS,
     DeviceInfo,
     HapticDevice,
     SimulatedHand,
@@ -46,6 +47,7 @@ from .scene import (
 )
 
 __all__ = [
+    "MAX_WINDOW_TICKS",
     "AccelSinusoid",
     "Blend",
     "HapticlabError",

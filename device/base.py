@@ -29,7 +29,14 @@ from .info import DeviceInfo
 from .scene import Scene, Transient, TransientTable
 
 __all__ = ["DeviceInfo", "HapticDevice", "SimulatedHand", "register_backend", "open_device",
-           "backends", "max_spring"]
+           "backends", "max_spring", "MAX_WINDOW_TICKS"]
+
+#: most servo ticks one window or playback may span (its wait for a first contact
+#: included): every tick is recorded, and the simulator's buffers and traces peak at 176
+#: bytes of host memory a tick (measured over 120-s windows, spring and block alike), so 2²³
+#: ticks stay near 1.5 GB: 839 s at 10 kHz, 419 s at 20 kHz. A window of 10⁷ s ran for hours
+#: and filled the memory before this bound
+MAX_WINDOW_TICKS = 2**23
 
 
 @dataclass(frozen=True)
@@ -189,8 +196,22 @@ class HapticDevice(ABC):
         for name, v in (("duration", duration), ("timeout", timeout)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"window {name} must be finite and > 0 s, got {v!r}")
+        span = duration + timeout if from_first_contact else duration
+        if span > self.max_window_s:
+            what = (f"duration {duration:g} s + wait for a first contact {timeout:g} s"
+                    if from_first_contact else f"duration {duration:g} s")
+            raise ValueError(f"a window of {span:g} s ({what}) is longer than this device "
+                             f"records in one window: {self.max_window_s:g} s "
+                             f"({MAX_WINDOW_TICKS} ticks at {self.info.servo_rate_hz:g} Hz, "
+                             "each kept in memory); split it into shorter windows")
         return self._run_window(float(duration), bool(from_first_contact), float(timeout),
                                 on_progress, bool(heartbeats))
+
+    @property
+    def max_window_s(self) -> float:
+        """Longest window [s] this device records, its wait for a first contact included
+        (:data:`MAX_WINDOW_TICKS` servo ticks)."""
+        return MAX_WINDOW_TICKS / self.info.servo_rate_hz
 
     def end_window(self) -> None:
         """End the running window now, before its duration is up: the participant moved on
@@ -214,6 +235,10 @@ class HapticDevice(ABC):
         f = np.ascontiguousarray(force, dtype=float).reshape(-1)
         if f.size == 0 or not np.all(np.isfinite(f)):
             raise ValueError("force command must be a non-empty array of finite values [N]")
+        if f.size > MAX_WINDOW_TICKS:
+            raise ValueError(f"a force command of {f.size} ticks is longer than this device "
+                             f"plays in one go: {MAX_WINDOW_TICKS} ticks "
+                             f"({self.max_window_s:g} s); split it")
         self._homed = False
         return self._play_force(f, bool(heartbeats))
 

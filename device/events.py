@@ -119,6 +119,8 @@ class WindowResult:
         Work across the stylus's ports over the window [J], from backends that can know it
         (the simulator): ``in`` the stylus did on the actuator and on a real sample, ``out``
         they did on the stylus. A passive sample never gives out more than it took in.
+    warnings : list of str
+        What the backend could not do as asked, in words (see :attr:`warnings`).
     """
 
     rate_hz: float
@@ -131,6 +133,9 @@ class WindowResult:
     timing: dict[str, float] = field(default_factory=dict)
     energy: dict[str, float] = field(default_factory=dict)
     live_height: float | None = None  #: in progress callbacks: stylus above the surface [m]
+    #: what the backend could not do as asked, one sentence each (the simulator: a contact
+    #: that chattered, contact changes it could not locate)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def velocities(self) -> np.ndarray:

@@ -32,6 +32,12 @@ __all__ = [
     "Material",
     "Support",
     "MAX_BLOCK_KG",
+    "MAX_STIFFNESS",
+    "MAX_DAMPING",
+    "MAX_RINGING_HZ",
+    "MAX_SLOPE",
+    "MAX_DECAY",
+    "MAX_GAIN",
     "Ringing",
     "Transient",
     "Pulse",
@@ -44,25 +50,62 @@ __all__ = [
 
 
 def _finite(where: str, name: str, value: Any, *, minimum: float | None = None,
-            strict: bool = False, maximum: float | None = None) -> float:
-    """Return ``value`` as a float after checking it is a finite number in range."""
+            strict: bool = False, maximum: float | None = None, why: str = "") -> float:
+    """Return ``value`` as a float after checking it is a finite number in range (``why``:
+    the reason for the range, said when it is broken)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(f"must be a number, got {value!r}", name, where=where)
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an integer beyond any float (10**400)
+        raise SceneError("must be finite, got an integer of about 10^"
+                         f"{int(abs(value).bit_length() * math.log10(2))}", name,
+                         where=where) from None
     if not math.isfinite(v):
         raise SceneError(f"must be finite, got {value!r}", name, where=where)
     if minimum is not None and (v <= minimum if strict else v < minimum):
         op = ">" if strict else ">="
         raise SceneError(f"must be {op} {minimum:g}, got {v:g}", name, where=where)
     if maximum is not None and v > maximum:
-        raise SceneError(f"must be <= {maximum:g}, got {v:g}", name, where=where)
+        raise SceneError(f"must be <= {maximum:g}, got {v:g}" + (f" ({why})" if why else ""),
+                         name, where=where)
     return v
 
 
+#: stiffest contact or spring a scene may state [N/m]: a 5-mm steel tip pressed on steel at
+#: 10 N is about 1.2·10⁷ N/m (Hertz: 2·E*·a, E* = 110 GPa, a = 55 µm), the hardest contact a
+#: stylus meets; ten times that leaves
+#: room, and keeps every matrix exponential of the simulated contact finite (10³⁰⁰ N/m raised
+#: numpy's LinAlgError, 10²⁰ N/m never finished). How fast a given contact may ring on the
+#: masses it joins is bounded when a device compiles it (:data:`device.sim.plant.MAX_CONTACT_HZ`)
+MAX_STIFFNESS = 1.0e8
+#: most damping a contact or support may state [N·s/m]: twice the critical damping of the
+#: stiffest contact on the heaviest block (2·√(k·m) = 2·√(10⁸ · 5) = 4.5·10⁴)
+MAX_DAMPING = 1.0e5
+#: fastest a material may be stated to ring [Hz]: ten times the top of the vibrotactile range
+#: (~1 kHz, SPEC §4); the papers' fastest, aluminum, rings at 1,153 Hz
+MAX_RINGING_HZ = 10_000.0
+#: largest acceleration slope A of a vibration model [1/s]: a hundred times aluminum's
+#: (−1·10⁵ 1/s, Table 1); at a 0.11-m/s tap it is already ~10⁵ g
+MAX_SLOPE = 1.0e7
+#: fastest decay rate B of a vibration model [1/s]: 1/e within 10 µs, a tick of the 100-kHz
+#: reference servo (aluminum's is 1,500 1/s)
+MAX_DECAY = 1.0e5
+#: largest force gain of a pulse or sinusoid [N·s/m]: at a 0.11-m/s tap, 10⁴ N·s/m asks
+#: 1.1 kN, hundreds of times any desktop device's peak force (the study's: 15.9 N·s/m)
+MAX_GAIN = 1.0e4
+
 # range rules for _set_checked
-_ANY: dict[str, Any] = {}
 _NONNEG: dict[str, Any] = {"minimum": 0.0}
 _POS: dict[str, Any] = {"minimum": 0.0, "strict": True}
+_STIFFNESS: dict[str, Any] = {"minimum": 0.0, "strict": True, "maximum": MAX_STIFFNESS,
+                              "why": "steel pressed on steel by a stylus is ~1.2e7 N/m"}
+_DAMPING: dict[str, Any] = {"minimum": 0.0, "maximum": MAX_DAMPING,
+                            "why": "twice critical damping of the stiffest contact on a 5-kg block"}
+_GAIN: dict[str, Any] = {"minimum": 0.0, "maximum": MAX_GAIN,
+                         "why": "1.1 kN at a 0.11-m/s tap, beyond any desktop device"}
+_DECAY: dict[str, Any] = {"minimum": 0.0, "strict": True, "maximum": MAX_DECAY,
+                          "why": "1/e within a 100-kHz tick"}
 _FRACTION: dict[str, Any] = {"minimum": 0.0, "strict": True, "maximum": 1.0}
 _FRACTION_2: dict[str, Any] = {"minimum": 0.0, "strict": True, "maximum": 2.0}
 
@@ -71,6 +114,15 @@ def _set_checked(obj: Any, where: str, **rules: dict[str, Any]) -> None:
     """Validate fields of a frozen dataclass in place: ``field=rule`` for :func:`_finite`."""
     for name, rule in rules.items():
         object.__setattr__(obj, name, _finite(where, name, getattr(obj, name), **rule))
+
+
+def _check_slope(obj: Any, where: str) -> None:
+    """A vibration model's slope A [1/s]: finite, |A| <= :data:`MAX_SLOPE` (either sign)."""
+    a = _finite(where, "slope", obj.slope)
+    if abs(a) > MAX_SLOPE:
+        raise SceneError(f"must be within ±{MAX_SLOPE:g}, got {a:g} (a hundred times "
+                         "aluminum's slope)", "slope", where=where)
+    object.__setattr__(obj, "slope", a)
 
 
 def unknown_key(key: str, allowed) -> str:
@@ -114,7 +166,9 @@ class Ringing:
     frequency: float
 
     def __post_init__(self) -> None:
-        _set_checked(self, "ringing", slope=_ANY, decay=_POS, frequency=_POS)
+        _check_slope(self, "ringing")
+        _set_checked(self, "ringing", decay=_DECAY, frequency={
+            **_POS, "maximum": MAX_RINGING_HZ, "why": "ten times the vibrotactile range"})
 
     def acceleration(self, t, speed: float):
         """Model acceleration [m/s²] at times ``t`` [s] after a contact at ``speed`` [m/s]."""
@@ -141,7 +195,7 @@ class Support:
     damping: float = 0.0
 
     def __post_init__(self) -> None:
-        _set_checked(self, "support", stiffness=_POS, damping=_NONNEG)
+        _set_checked(self, "support", stiffness=_STIFFNESS, damping=_DAMPING)
 
 
 #: heaviest block a sample may be [kg] (a 3.5-cm cube of steel is 0.34 kg)
@@ -192,7 +246,7 @@ class Material:
     support: Support | None = None
 
     def __post_init__(self) -> None:
-        _set_checked(self, "material", stiffness=_POS, damping=_NONNEG)
+        _set_checked(self, "material", stiffness=_STIFFNESS, damping=_DAMPING)
         if self.mass is not None:
             object.__setattr__(self, "mass", _finite("material", "mass", self.mass, minimum=0.0,
                                                      strict=True, maximum=MAX_BLOCK_KG))
@@ -218,6 +272,15 @@ class Material:
 BLENDS = tuple(b.label for b in Blend)
 #: longest contact transient a device is asked to play [s] (the papers' last ≤ 0.1 s)
 MAX_TRANSIENT_S = 1.0
+#: a transient a device renders at less than this share of its peak is refused
+#: (:meth:`Transient.rendered_share`; a frequency near Nyquist: at 0.499 × the servo rate
+#: a sinusoid's table reached 4–14 % of its peak, and the hold passes 64 % of that)
+MIN_RENDERED = 0.5
+#: ... and one rendered at less than this is warned of (``protocol validate --device``,
+#: the preflight): a fifth of the rate renders ~89 %, a quarter ~90 %, a third ~72 %
+WARN_RENDERED = 0.85
+#: how much finer than the servo the transient's true peak is sampled for that comparison
+OVERSAMPLE = 64
 #: farthest a surface may be from the device's origin [m]: a desktop stylus reaches a few
 #: centimetres, and a surface beyond reach would make every window time out
 MAX_REACH_M = 0.5
@@ -323,14 +386,48 @@ class Transient:
         """The vibration frequency [Hz] the table must carry (None: none)."""
         return None
 
+    def rendered_share(self, rate_hz: float) -> float | None:
+        """Share [1] of the transient's peak that a device at ``rate_hz`` [Hz] renders.
+
+        Two losses, both worse towards the Nyquist frequency: the table's samples miss the
+        transient's crests (its largest sample against the transient sampled
+        :data:`OVERSAMPLE` times finer), and the device holds each sample for a tick, which
+        passes a frequency f with the gain sin(πf/R)/(πf/R) (64 % at Nyquist). At 0.499 ×
+        the rate a decaying sinusoid renders 7 % (5-ms decay) to 41 % (50 ms) of its peak;
+        at a quarter of the rate 90 %. None: the transient has no frequency, or nothing to play.
+        """
+        import numpy as np
+
+        f = self.frequency_hz()
+        if f is None:
+            return None
+        fine = float(np.max(np.abs(self.unit_table(rate_hz * OVERSAMPLE, 1.0))))
+        if not fine > 0:
+            return None
+        crests = float(np.max(np.abs(self.unit_table(rate_hz, 1.0)))) / fine
+        return crests * float(np.sinc(f / rate_hz))  # numpy's sinc is sin(πx)/(πx)
+
+    def rendering_note(self, rate_hz: float) -> str | None:
+        """A warning, in words, when a device at ``rate_hz`` [Hz] plays less than
+        :data:`WARN_RENDERED` of the transient's peak (None: it renders it faithfully)."""
+        share = self.rendered_share(rate_hz)
+        if share is None or share >= WARN_RENDERED:
+            return None
+        f = self.frequency_hz()
+        return (f"a device at {rate_hz:g} Hz renders {share:.0%} of its peak ({f:g} Hz is "
+                f"{f / rate_hz:.3g} × the servo rate: its samples miss the crests and each "
+                f"is held a tick); keep it below about {rate_hz / 5:g} Hz, or use a faster "
+                "servo")
+
     def check_for(self, rate_hz: float) -> None:
         """Refuse a transient a device at ``rate_hz`` [Hz] cannot play as written.
 
         A frequency at or above half the servo rate would alias (at exactly the rate it
-        samples to zeros); a table shorter than one tick is nothing, and a time constant
-        shorter than one tick is a single sample; a table longer than
-        :data:`MAX_TRANSIENT_S` is not a contact transient (and would fill the device's
-        memory).
+        samples to zeros), and one the device renders at less than :data:`MIN_RENDERED` of
+        its peak is not the transient asked for (:meth:`rendered_share`); a table shorter
+        than one tick is nothing, and a time constant shorter than one tick is a single
+        sample; a table longer than :data:`MAX_TRANSIENT_S` is not a contact transient (and
+        would fill the device's memory).
 
         Raises
         ------
@@ -354,6 +451,13 @@ class Transient:
         if not d >= tick:
             raise SceneError(f"the table would last {d:.3g} s, less than one servo tick "
                              f"({tick:g} s at {rate_hz:g} Hz)", self._length_field, where=where)
+        share = self.rendered_share(rate_hz)
+        if share is not None and share < MIN_RENDERED:
+            raise SceneError(f"a device at {rate_hz:g} Hz renders only {share:.0%} of its "
+                             f"peak ({f:g} Hz is {f / rate_hz:.3f} × the servo rate: its "
+                             "samples miss the crests and each is held a tick); keep it "
+                             f"below about {rate_hz / 5:g} Hz, or use a faster servo",
+                             self._frequency_field, where=where)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"kind": self.kind}
@@ -398,7 +502,7 @@ class Pulse(Transient):
     duration: float
 
     def __post_init__(self) -> None:
-        _set_checked(self, "transient 'pulse'", gain=_NONNEG, duration=_POS)
+        _set_checked(self, "transient 'pulse'", gain=_GAIN, duration=_POS)
 
     def length_s(self) -> float:
         return self.duration
@@ -438,7 +542,7 @@ class ForceSinusoid(Transient):
     cutoff: float = 0.01
 
     def __post_init__(self) -> None:
-        _set_checked(self, "transient 'sinusoid'", gain=_NONNEG, decay_time=_POS,
+        _set_checked(self, "transient 'sinusoid'", gain=_GAIN, decay_time=_POS,
                      frequency=_POS, cutoff=_FRACTION)
 
     def length_s(self) -> float:
@@ -490,7 +594,8 @@ class AccelSinusoid(Transient):
     cutoff: float = 0.01
 
     def __post_init__(self) -> None:
-        _set_checked(self, "transient 'q_sinusoid'", slope=_ANY, decay=_POS, frequency=_POS,
+        _check_slope(self, "transient 'q_sinusoid'")
+        _set_checked(self, "transient 'q_sinusoid'", decay=_DECAY, frequency=_POS,
                      cutoff=_FRACTION)
 
     def length_s(self) -> float:
@@ -725,8 +830,8 @@ class Scene:
                              "'transient'; real samples are touched, not rendered",
                              "spring" if self.spring is not None else "transient", where=where)
         if self.spring is not None:
-            object.__setattr__(self, "spring",
-                               _finite(where, "spring", self.spring, minimum=0.0))
+            object.__setattr__(self, "spring", _finite(where, "spring", self.spring,
+                                                       **{**_STIFFNESS, "strict": False}))
 
     @property
     def is_real(self) -> bool:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from device import DeviceInfo, LibraryTransient, Scene, SceneError, max_spring
+from device import MAX_WINDOW_TICKS, DeviceInfo, LibraryTransient, Scene, SceneError, max_spring
 from device.errors import HapticlabError
 from device.scene import AccelSinusoid, unknown_key
 
@@ -645,6 +645,15 @@ def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: str, ids: tuple[str, ..
 
 
 def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:
+    w = proto.window
+    most = MAX_WINDOW_TICKS / device.servo_rate_hz
+    if w.duration + w.timeout > most:
+        raise cx.error(("window", "timeout"),
+                       f"a window of {w.duration:g} s after a wait of up to {w.timeout:g} s "
+                       f"spans {w.duration + w.timeout:g} s, longer than the device "
+                       f"'{device.backend}' records in one window at "
+                       f"{device.servo_rate_hz:g} Hz: {most:g} s ({MAX_WINDOW_TICKS} ticks, "
+                       "each kept in memory)")
     limit = device.current_limit
     if proto.limits.max_current is not None:
         if proto.limits.max_current > limit:

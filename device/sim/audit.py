@@ -88,7 +88,8 @@ def energy_audit(scene: Scene, rate_hz: float = 10_000.0, window_s: float = 30.0
     v2 = res.traces["true_velocity"]
     v_max = float(-v2.min()) if v2.size and np.all(np.isfinite(v2)) else math.inf
     v_back = _rebound(res.traces["t"], v2, [c.t for c in res.contacts])
-    # the port integral is a trapezoid sum: allow its rounding, scaled to what went through
+    # the port integrals are exact quadratic forms: allow their rounding, scaled to what
+    # went through
     gives_back_less = e_out <= e_in * (1 + 1e-6) + 1e-12
     bounces_slower = not e_max >= 1.0  # nan (never left the surface) counts as no bounce
     # the stylus follows the intention through the hand's impedance: a little overshoot

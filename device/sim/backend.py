@@ -18,7 +18,7 @@ from ..events import ContactEvent, FaultEvent, Flags, SaturationEvent, WindowRes
 from ..scene import MAX_REACH_M, Scene, TransientTable
 from . import kernel as K
 from .params import DeviceParams, HandParams
-from .plant import N_INPUTS, Plant, build_plant, piece_propagators, zoh
+from .plant import N_INPUTS, Plant, build_plant, piece_propagators, port_forms, work_forms, zoh
 from .tapper import HoldPlan, Tapper
 
 __all__ = ["SimDevice", "CompiledScene", "compile_scene"]
@@ -28,6 +28,9 @@ _CHUNK_S = 0.1  # device time between progress callbacks / heartbeats in virtual
 #: device (``speed`` > 1) still sleeps most of each chunk instead of spinning through it
 _LIVE_CHUNK_S = 0.001
 _SPIN_S = 0.0002  # live mode: the end of each wait is spun, not slept [s]
+#: contact events a window's buffers first hold; they grow before a chunk could fill them,
+#: so no contact is ever dropped (the kernel stores a contact only while there is room)
+_EVENTS = 4096
 #: live mode: a servo loop that finds itself this far behind the wall clock (its process
 #: was stopped: a garbage collection, a loaded machine) lets its clock slip instead of
 #: racing to catch up [wall s]. Racing would run device time past heartbeats the link has
@@ -50,12 +53,22 @@ class CompiledScene:
         dt = dev.dt
         ns = p.n_states
         self.tick_prop = np.stack([zoh(p.A[m], p.B[m], dt) for m in range(p.n_modes)])
+        n = ns + N_INPUTS
+        free = port_forms(ns, None, p.surface_height)  # the actuator's port alone
         if p.n_modes > 1:
             h = dt / p.n_sub
             self.pieces = np.stack([piece_propagators(p.A[m], p.B[m], h)
                                     for m in range(p.n_modes)])
+            touching = port_forms(ns, (p.contact_stiffness, p.contact_damping),
+                                  p.surface_height)
+            self.work = np.stack([work_forms(p.A[0], p.B[0], free, h),
+                                  work_forms(p.A[1], p.B[1], touching, h)])
+            self.tick_work = np.zeros((n, n))
         else:
-            self.pieces = np.zeros((1, 1, ns, ns + N_INPUTS))
+            self.pieces = np.zeros((1, 1, ns, n))
+            self.work = np.zeros((1, 2, 1, n, n))
+            self.tick_work = np.ascontiguousarray(
+                work_forms(p.A[0], p.B[0], free, dt, levels=0)[0, 0])
         if scene.is_real:
             self.render = 0
         elif scene.transient is None:
@@ -76,7 +89,8 @@ class CompiledScene:
         self.attenuation = float(tt.attenuation)
         p = self.plant
         #: what the servo loop needs of this scene (:func:`device.sim.kernel.run_ticks`)
-        self.kernel_args = (self.tick_prop, self.pieces, int(p.n_sub), p.accel_row,
+        self.kernel_args = (self.tick_prop, self.pieces, self.work, self.tick_work,
+                            int(p.n_sub), p.accel_row,
                             float(p.surface_height), float(p.contact_stiffness),
                             float(p.contact_damping), int(self.render), self.spring,
                             self.table, self.table_v, self.blend, self.attenuation)
@@ -465,12 +479,12 @@ class SimDevice(HapticDevice):
         dt = dev.dt
         self._ist[K.IST_STOP] = -1 if stop_after >= 0 else n_max
         self._ist[K.IST_FIRST] = -1
-        self._ist[K.IST_NEV] = 0
+        self._ist[K.IST_NEV] = self._ist[K.IST_SWITCHES] = self._ist[K.IST_UNRESOLVED] = 0
         self._fst[K.FST_EIN] = self._fst[K.FST_EOUT] = 0.0
         tick0 = self._tick
         buf = _Buffers(min(n_max, int(round(initial_s / dt))), plan, self._pull_gains, dt)
-        ev_tick = np.zeros(4096, dtype=np.int64)
-        ev_vel = np.zeros(4096)
+        ev_tick = np.zeros(_EVENTS, dtype=np.int64)
+        ev_vel = np.zeros(_EVENTS)
         chunk_s = _LIVE_CHUNK_S * self.speed if self.live else _CHUNK_S  # [device s]
         chunk = max(1, int(round(chunk_s / dt)))
         state = (self._x, self._ist, self._fst, self._rb)
@@ -487,6 +501,11 @@ class SimDevice(HapticDevice):
                 self.heartbeat()
             n1 = min(n + chunk, n_max)
             buf.ensure(n1)
+            nev = int(self._ist[K.IST_NEV])
+            if nev + (n1 - n) > ev_tick.size:  # room for a contact at every tick of the chunk
+                grow = max(2 * ev_tick.size, nev + (n1 - n))
+                ev_tick = np.concatenate([ev_tick, np.zeros(grow - ev_tick.size, np.int64)])
+                ev_vel = np.concatenate([ev_vel, np.zeros(grow - ev_vel.size)])
             wd = (self._t_heartbeat + self._watchdog_device_s - tick0 * dt) / dt
             zero_from = int(math.ceil(wd - 1e-9)) if wd < 2**62 else 2**62
             if self._estop_requested:
@@ -532,6 +551,8 @@ class SimDevice(HapticDevice):
             self.trace_sink(pieces.done, pieces.take(n))
         res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True, pieces=pieces)
         res.energy = {"in": float(self._fst[K.FST_EIN]), "out": float(self._fst[K.FST_EOUT])}
+        res.warnings = _contact_warnings(cs.scene.name, int(self._ist[K.IST_SWITCHES]),
+                                         int(self._ist[K.IST_UNRESOLVED]), n, cs.plant.n_sub)
         if self.live:
             wall = time.perf_counter() - start
             self.slipped_s += slipped
@@ -661,6 +682,29 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
         return []
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
+
+
+#: contact changes per servo tick above which a window is said to have chattered: a tap
+#: makes two (touch and release) in a few thousand ticks; a stiff lossless contact on a
+#: light block bounces many times a tick, and each change is located by bisection
+CHATTER_PER_TICK = 0.05
+
+
+def _contact_warnings(name: str, switches: int, unresolved: int, ticks: int,
+                      n_sub: int) -> list[str]:
+    """What a window's contact changes say about the simulation, in words (none: none)."""
+    out = []
+    if ticks and switches > CHATTER_PER_TICK * ticks:
+        out.append(f"scene '{name}': the contact chattered ({switches} contact changes in "
+                   f"{ticks} ticks, {switches / ticks:.2g} a tick, each located by "
+                   "bisection): the simulation runs many times slower than usual; contact "
+                   "damping, or a heavier block, stops a stiff lossless contact chattering")
+    if unresolved:
+        out.append(f"scene '{name}': contact changes passed unlocated ({unresolved} pieces "
+                   f"of a tick came after {K.MAX_SWITCHES} changes in one of its {n_sub} "
+                   "substeps): the contact's physics there is approximate (its energy account "
+                   "may not balance)")
+    return out
 
 
 class _Buffers:

@@ -18,8 +18,10 @@ One call advances the simulation over a range of servo ticks. Per tick, in order
    a real contact does not depend on the servo rate;
 6. account the energy through the two ports where something acts on the stylus — the
    actuator (force on the motor side) and a real sample's contact (force on the tip) —
-   as work the stylus did on them (in) and they did on the stylus (out), by the
-   trapezoid rule over each propagated piece;
+   as work the stylus did on them (in) and they did on the stylus (out), exactly over
+   each propagated piece (a quadratic form of the state, :func:`device.sim.plant.work_forms`);
+   a contact's pieces are cut where the tip turns, so its in and its out are each exact
+   (the actuator's are split per tick, or per piece: their sum is exact);
 7. guard: a tip farther than :data:`DIVERGED_M` from the surface, faster than
    :data:`DIVERGED_MPS`, or not finite zeroes output, latches a ``diverged`` fault and
    ends the window, so a blow-up can never pass silently.
@@ -41,8 +43,12 @@ __all__ = ["run_ticks", "propagate_linear", "IST", "FST"]
 
 # integer state slots
 IST_MODE, IST_ARMED, IST_PLAY, IST_SINCE_ENABLE, IST_FIRST, IST_NEV, IST_RB, IST_FAULT, \
-    IST_STOP, IST_FAULT_TICK, IST_ROW1, IST_ROW2, IST_FAULT_CODE = range(13)
-IST = 13
+    IST_STOP, IST_FAULT_TICK, IST_ROW1, IST_ROW2, IST_FAULT_CODE, IST_SWITCHES, \
+    IST_UNRESOLVED = range(15)
+IST = 15
+#: contact switches located within one substep; past them a crossing is let pass unlocated
+#: (counted in ``IST_UNRESOLVED``: the contact's physics in that piece is approximate)
+MAX_SWITCHES = 64
 # why the loop latched output off (IST_FAULT_CODE)
 FAULT_DEADLINE, FAULT_NAN, FAULT_DIVERGED = 1, 2, 3  # the watchdog/e-stop deadline; a
 # non-finite command; a state beyond any physical bound
@@ -114,31 +120,65 @@ def _account(w, fst):
 
 
 @lazy_njit
-def _advance_switching(pieces, x, u, ist, fst, h, ks, bs, has_body, tmp):
+def _work(G, x, u, z):
+    """zᵀ·G·z for z = [x; u]: the work [J] through a port over a piece (``z`` scratch)."""
+    ns = x.shape[0]
+    n = ns + u.shape[0]
+    for i in range(ns):
+        z[i] = x[i]
+    for i in range(ns, n):
+        z[i] = u[i - ns]
+    s = 0.0
+    for i in range(n):
+        zi = z[i]
+        if zi == 0.0:
+            continue
+        row = 0.0
+        for j in range(n):
+            row += G[i, j] * z[j]
+        s += zi * row
+    return s
+
+
+@lazy_njit
+def _advance_switching(pieces, work, x, u, ist, fst, h, ks, bs, has_body, tmp, z):
     """Advance one substep in a two-mode (real contact) plant, locating switches and
-    accounting the work across the contact."""
+    accounting, exactly, the work across the actuator and the contact over each piece."""
     levels = pieces.shape[1] - 1
     remaining = np.int64(1) << levels
     j = levels
     switches = 0
+    turns = 0
     while remaining > 0:
         while (np.int64(1) << j) > remaining:
             j -= 1
         mode = ist[IST_MODE]
         _apply(pieces[mode, j], x, u, tmp)
-        crossed = _crossed(mode, tmp, h, ks, bs, has_body) and switches < 64
-        if crossed and j > 0:  # a switch inside this piece: try a finer one
+        real = _crossed(mode, tmp, h, ks, bs, has_body)
+        crossed = real and switches < MAX_SWITCHES
+        # the contact's power −F·v₂ (F > 0) changes sign where v₂ does: that piece is cut
+        # finer too, so the work in and the work out are each exact, not only their sum
+        # (at most MAX_SWITCHES turns a substep are located: a stylus resting on the sample
+        # may jitter about v₂ = 0 at rounding level, where no work goes through anyway)
+        turned = mode == 1 and x[V2] * tmp[V2] < 0.0 and turns < MAX_SWITCHES
+        if (crossed or turned) and j > 0:  # a switch or a turn inside: try a finer piece
             j -= 1
             continue
-        if mode == 1:  # the piece is accepted: the work across the contact
-            _account(-0.5 * (_sample_force(x, h, ks, bs, has_body)
-                             + _sample_force(tmp, h, ks, bs, has_body))
-                     * (tmp[Z2] - x[Z2]), fst)
+        if real and not crossed:
+            ist[IST_UNRESOLVED] += 1
+        # the piece is accepted: the work across the actuator, and the contact in contact
+        _account(_work(work[mode, 0, j], x, u, z), fst)
+        if mode == 1:
+            _account(_work(work[1, 1, j], x, u, z), fst)
         x[:] = tmp
         remaining -= np.int64(1) << j
         if crossed:  # the finest piece holds the switch: change mode
             switches += 1
+            ist[IST_SWITCHES] += 1
             ist[IST_MODE] = 1 - mode
+            j = levels
+        elif turned:  # past the turn: back to whole pieces
+            turns += 1
             j = levels
 
 
@@ -196,8 +236,8 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
         ``(x, ist, fst, rb)``: plant state, integer and float loop state, encoder ring
         buffer (all updated in place).
     scene : tuple
-        ``(tick_prop, pieces, n_sub, accel_row, h, ks, bs, render, K, table, tbl_v,
-        blend, atten)`` from :class:`~device.sim.backend.CompiledScene`.
+        ``(tick_prop, pieces, work, tick_work, n_sub, accel_row, h, ks, bs, render, K,
+        table, tbl_v, blend, atten)`` from :class:`~device.sim.backend.CompiledScene`.
     device : tuple
         ``(enc_res, vel_w, hyst, kt, i_max, ramp_ticks, rate)`` from the device parameters.
     u_hand : ndarray
@@ -214,12 +254,13 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
     Returns the first tick not simulated (n1, or earlier when ``ist[IST_STOP]`` is reached).
     """
     x, ist, fst, rb = state
-    (tick_prop, pieces, n_sub, accel_row, h, ks, bs, render, K, table, tbl_v,
-     blend, atten) = scene
+    (tick_prop, pieces, work, tick_work, n_sub, accel_row, h, ks, bs, render, K, table,
+     tbl_v, blend, atten) = scene
     enc_res, vel_w, hyst, kt, i_max, ramp_ticks, rate = device
     ns = x.shape[0]
     u = np.zeros(3)
     tmp = np.empty(ns)
+    z = np.empty(ns + 3)
     n_rb = rb.shape[0]
     has_body = ns > ZB
     n_modes = tick_prop.shape[0]
@@ -316,16 +357,14 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
         for j in range(3):
             a2 += accel_row[mode, ns + j] * u[j]
         out[OUT_A2, n] = a2
-        # 5. propagate (6. the contact's work inside)
-        fa0, z10 = x[FA], x[Z1]
+        # 5. propagate, and 6. the work through the ports over the tick (or each piece)
         if n_modes == 1:
+            _account(_work(tick_work, x, u, z), fst)
             _apply(tick_prop[0], x, u, tmp)
             x[:] = tmp
         else:
             for _ in range(n_sub):
-                _advance_switching(pieces, x, u, ist, fst, h, ks, bs, has_body, tmp)
-        # 6. the actuator's work over the tick
-        _account(-0.5 * (fa0 + x[FA]) * (x[Z1] - z10), fst)
+                _advance_switching(pieces, work, x, u, ist, fst, h, ks, bs, has_body, tmp, z)
         # 7. guard
         if not (abs(x[Z2] - h) < DIVERGED_M and abs(x[V2]) < DIVERGED_MPS
                 and abs(x[V1]) < DIVERGED_MPS):

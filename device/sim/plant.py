@@ -36,21 +36,28 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg import expm
 
 from ..errors import SceneError
-from ..scene import BLOCK_HINT, Material, Support
+from ..scene import BLOCK_HINT, MAX_STIFFNESS, Material, Support
 from .params import DeviceParams, HandParams
 
 __all__ = ["Plant", "build_plant", "zoh", "piece_propagators", "N_INPUTS", "block_model",
-           "BlockModel", "contact_modes", "SUPPORT_ZETA", "MAX_CONTACT_ZETA", "tip_share"]
+           "BlockModel", "contact_modes", "SUPPORT_ZETA", "MAX_CONTACT_ZETA", "MAX_CONTACT_HZ",
+           "tip_share", "port_forms", "work_forms"]
 
 Z1, V1, Z2, V2, FA, Y, YD, FH, ZB, VB = range(10)
 U_CMD, U_HAND_RATE, U_ONE = range(3)
 N_INPUTS = 3
 N_LEVELS = 30  # bisection depth for locating a contact switch inside a substep
+#: fastest a real sample's contact may ring on the masses it joins [Hz]: a 1-g block on a
+#: 10⁷-N/m contact rings at ~16 kHz; a servo tick is cut into 8 pieces per period of it, so
+#: at 100 kHz a 1-kHz servo takes 800 pieces a tick (10¹⁵ N/m on the stylus, ~15 MHz, took
+#: 33 s per 3-s window; 10²⁰ N/m would take days)
+MAX_CONTACT_HZ = 100_000.0
 
 
 @dataclass
@@ -157,10 +164,19 @@ def contact_modes(contact: tuple[float, float], block: tuple[float, Support] | N
         The block's mass [kg] and what it rests on; None: the sample does not move.
     """
     dev, hand = dev or DeviceParams(), hand or HandParams()
-    A, _ = _mode_matrices(dev, hand, Material(*contact), block, 0.0)
+    A, _ = _mode_matrices(dev, hand, _Spring(*contact), block, 0.0)
     keep = [Z1, V1, Z2, V2] + ([ZB, VB] if block is not None else [])
     lam = np.linalg.eigvals(A[np.ix_(keep, keep)])
     return lam[np.argsort(np.abs(lam.imag))]
+
+
+class _Spring(NamedTuple):
+    """A contact or support while a block is solved for: unchecked, as the solver's trials
+    may pass the limits a scene states (:data:`device.scene.MAX_STIFFNESS`); only the block
+    it settles on is checked."""
+
+    stiffness: float
+    damping: float
 
 
 #: damping ratio of a derived support (a block alone on it rings down in ~3 periods / 0.05)
@@ -227,7 +243,7 @@ def block_model(material: Material) -> BlockModel:
     def unpack(p) -> BlockModel:
         ks = K * (1.0 + abs(p[0]))  # stiffer than the series, so the support is finite
         kb = 1.0 / (1.0 / K - 1.0 / ks)
-        sup = Support(kb, 2.0 * SUPPORT_ZETA * math.sqrt(kb * mb))
+        sup = _Spring(kb, 2.0 * SUPPORT_ZETA * math.sqrt(kb * mb))
         return BlockModel(ks, abs(p[1]) * mb * r.decay, mb, sup)
 
     def nearest(b: BlockModel) -> complex:
@@ -255,14 +271,22 @@ def block_model(material: Material) -> BlockModel:
                          "contact on this stylus; a heavier block or another stiffness may",
                          "ringing",
                          part=("material",), where="material")
-    return max(found, key=lambda t: t[0])[1]
+    b = max(found, key=lambda t: t[0])[1]
+    if not max(b.contact_stiffness, b.support.stiffness) <= MAX_STIFFNESS:
+        raise SceneError(f"the block of {mb:g} kg that rings so needs a contact of "
+                         f"{b.contact_stiffness:.3g} N/m on a support of "
+                         f"{b.support.stiffness:.3g} N/m, stiffer than any a stylus meets "
+                         f"(<= {MAX_STIFFNESS:g} N/m); a heavier block or a lower frequency",
+                         "ringing", part=("material",), where="material")
+    return BlockModel(b.contact_stiffness, b.contact_damping, b.mass,
+                      Support(b.support.stiffness, b.support.damping))
 
 
 def tip_share(b: BlockModel, target: complex) -> float:
     """How much the mode nearest ``target`` moves the tip after an impact (modal
     amplitude of the tip's velocity per unit incoming velocity)."""
     dev, hand = DeviceParams(), HandParams()
-    A, _ = _mode_matrices(dev, hand, Material(b.contact_stiffness, b.contact_damping),
+    A, _ = _mode_matrices(dev, hand, _Spring(b.contact_stiffness, b.contact_damping),
                           (b.mass, b.support), 0.0)
     keep = [Z1, V1, Z2, V2, ZB, VB]
     lam, V = np.linalg.eig(A[np.ix_(keep, keep)])
@@ -301,6 +325,15 @@ def build_plant(dev: DeviceParams, hand: HandParams, material: Material | None =
         lam = np.linalg.eigvals(modes[1][0])
         fastest = max(fastest, float(np.max(np.abs(lam[np.abs(lam.imag) > 0].imag),
                                             initial=0.0)))
+        f_max = fastest / (2 * math.pi)
+        if not f_max <= MAX_CONTACT_HZ:
+            what = (f"a {block[0]:g}-kg block and the stylus" if block is not None
+                    else "the stylus")
+            raise SceneError(f"{what} would ring on this contact at {f_max:.3g} Hz, above "
+                             f"the {MAX_CONTACT_HZ:g} Hz the simulator resolves (each servo "
+                             "tick is cut into 8 pieces per period, so the cost grows with "
+                             "it): give a softer contact or a heavier block", "stiffness",
+                             part=("material",), where="material")
         # substep <= 1/8 of the fastest contact period: a contact cannot begin and end unseen
         n_sub = max(1, math.ceil(dev.dt / (2 * math.pi / fastest / 8)))
     A = np.stack([m[0] for m in modes])
@@ -359,4 +392,86 @@ def piece_propagators(A: np.ndarray, B: np.ndarray, h: float, levels: int = N_LE
             E[:ns, :] = out[j - 1]
             P = (E @ E)[:ns, :]
         out[j] = P
+    return out
+
+
+def port_forms(n_states: int, contact: tuple[float, float] | None, surface_height: float
+               ) -> np.ndarray:
+    """Quadratic forms of the power through the stylus's two ports, on z = [x; u].
+
+    Row 0, the actuator: the stylus does work −f_a·v₁ on it. Row 1, a real sample's
+    contact (``contact`` = (k_s [N/m], b_s [N·s/m]); zero without one): −F·v₂ with
+    F = k_s·(h + z_b − z₂) − b_s·(v₂ − v_b) the sample's force on the tip (z_b, v_b when the
+    plant has a block's states). Each P = zᵀ·Q·z with Q symmetric.
+
+    Returns
+    -------
+    ndarray, shape (2, n, n), n = n_states + :data:`N_INPUTS`
+    """
+    n = n_states + N_INPUTS
+    Q = np.zeros((2, n, n))
+    e = np.eye(n)
+
+    def power(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # P = −(aᵀz)(bᵀz)
+        return -0.5 * (np.outer(a, b) + np.outer(b, a))
+
+    Q[0] = power(e[FA], e[V1])
+    if contact is not None:
+        ks, bs = contact
+        c = ks * surface_height * e[n_states + U_ONE] - ks * e[Z2] - bs * e[V2]
+        if n_states > ZB:
+            c = c + ks * e[ZB] + bs * e[VB]
+        Q[1] = power(c, e[V2])
+    return Q
+
+
+def work_forms(A: np.ndarray, B: np.ndarray, Q: np.ndarray, h: float,
+               levels: int = N_LEVELS) -> np.ndarray:
+    """Exact work through each port over pieces of h·2^(j−levels), j = 0..levels.
+
+    With z = [x; u] moving as e^(M·t)·z₀ (M = [[A, B], [0, 0]]: the input held), the work
+    over a piece of length τ is z₀ᵀ·G(τ)·z₀ with G(τ) = ∫₀^τ e^(Mᵀs)·Q·e^(Ms) ds. G is read
+    off one matrix exponential (Van Loan 1978: e^([[−Mᵀ, Q], [0, M]]·τ) = [[·, F₁₂], [0, F₂₂]]
+    and G = F₂₂ᵀ·F₁₂) at every (:data:`SQUARINGS` + 1)-th level whose span is short enough
+    that e^(−Mᵀτ) stays small (τ·ρ(M) <= 1/2: over a whole 1-kHz tick it grows as e^31 and
+    the subtraction loses every digit); the levels between, and those above, double the
+    one below, G(2τ) = G(τ) + e^(Mᵀτ)·G(τ)·e^(Mτ), with e^(Mτ) an exponential of its own
+    (squaring it would double its rounding each time). A trapezoid
+    over a piece 1/8 of a damped stiff contact's period read 4–6 % off at 1 kHz; this is
+    exact up to rounding in the terms it sums (which grow with k_s·h: ~1e-14 of a piece's
+    work with the surface at 0, ~1e-6 at 0.5 m on 1e8 N/m).
+
+    Returns
+    -------
+    ndarray, shape (n_ports, levels + 1, n, n)
+    """
+    ns, nu = B.shape
+    n = ns + nu
+    M = np.zeros((n, n))
+    M[:ns, :ns] = A
+    M[:ns, ns:] = B
+    rho = float(np.max(np.abs(np.linalg.eigvals(M))))
+    tau0 = h * 2.0 ** (-levels)
+    finer = max(0, math.ceil(math.log2(tau0 * rho / 0.5))) if tau0 * rho > 0.5 else 0
+    ports = Q.shape[0]
+    out = np.zeros((ports, levels + 1, n, n))
+    for p in range(ports):
+        if not np.any(Q[p]):
+            continue
+        C = np.zeros((2 * n, 2 * n))
+        C[:n, :n] = -M.T
+        C[:n, n:] = Q[p]
+        C[n:, n:] = M
+        tau = tau0 / 2.0**finer
+        G = np.zeros((n, n))
+        for j in range(-finer, levels + 1):
+            if j == -finer or (j % (SQUARINGS + 1) == 0 and tau * rho <= 0.5):
+                F = expm(C * tau)  # Van Loan, where e^(−Mᵀτ) stays small
+                G = F[n:, n:].T @ F[:n, n:]
+            else:  # double the piece before: G(2τ) = G(τ) + E(τ)ᵀ·G(τ)·E(τ)
+                E = expm(M * (tau / 2.0))
+                G = G + E.T @ G @ E
+            if j >= 0:
+                out[p, j] = 0.5 * (G + G.T)
+            tau *= 2.0
     return out

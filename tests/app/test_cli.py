@@ -173,7 +173,9 @@ def test_protocol_show_says_what_to_place_and_how_long():
 
 @pytest.mark.parametrize("old, new, fragment", [
     ("duration = 5.0 ", "duration = 1e9 ", "window.duration: must be <= 600"),
-    ("scene.spring = 680.0", "scene.spring = 1e12", "above the stiffest spring the device"),
+    ("scene.spring = 680.0", "scene.spring = 1e7", "above the stiffest spring the device"),
+    ("scene.spring = 680.0", "scene.spring = 1e12", "spring: must be <= 1e+08"),
+    ("timeout = 30.0", "timeout = 3600.0", "records in one window at 10000 Hz"),
 ])
 def test_protocol_validate_refuses_what_no_session_can_run(tmp_path, old, new, fragment):
     from protocols import protocol_text
@@ -184,6 +186,25 @@ def test_protocol_validate_refuses_what_no_session_can_run(tmp_path, old, new, f
     f.write_text(text.replace(old, new, 1))
     out = run("protocol", "validate", str(f), "--device", "sim")
     assert out.returncode != 0 and fragment in (out.stdout + out.stderr), out
+
+
+def test_protocol_validate_warns_of_a_transient_the_device_renders_poorly(tmp_path):
+    """Issue 34: a transient near the Nyquist frequency was accepted silently. A third of
+    the servo rate is played at 72 % of its peak (warned); 0.499 of it at 42 % (refused)."""
+    from protocols import protocol_text
+
+    _, text = protocol_text("realism")
+    f = tmp_path / "p.toml"
+    f.write_text(text.replace("frequency = 36.2 }", "frequency = 3333.0 }", 1))
+    out = run("protocol", "validate", str(f), "--device", "sim")
+    assert out.returncode == 0, out
+    assert "warning: sample 'sinusoid_firm': a device at 10000 Hz renders 72% of its peak" \
+        in out.stdout, out.stdout
+    assert "sinusoid_soft" not in out.stdout  # its frequency was left alone
+    assert "warning" not in run("protocol", "validate", "realism", "--device", "sim").stdout
+    f.write_text(text.replace("frequency = 36.2 }", "frequency = 4990.0 }", 1))
+    out = run("protocol", "validate", str(f), "--device", "sim")
+    assert out.returncode != 0 and "renders only" in out.stdout + out.stderr, out
 
 
 def test_a_translated_protocol_is_told_which_texts_are_still_english(tmp_path):

@@ -7,6 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from device import AccelSinusoid, ForceSinusoid, Material, Pulse, Ringing, Scene, SceneError
+from device.scene import MAX_DAMPING, MAX_DECAY, MAX_GAIN, MAX_RINGING_HZ
 
 
 def test_real_and_virtual_from_dict():
@@ -88,8 +89,14 @@ def test_accel_sinusoid_is_mass_times_q():
 finite = st.floats(min_value=1e-3, max_value=1e6, allow_nan=False)
 
 
-@given(name=st.text(min_size=1, max_size=12), h=st.floats(-0.5, 0.5), k=finite, b=finite,
-       ring=st.one_of(st.none(), st.tuples(st.floats(-1e5, 1e5), finite, finite)))
+def upto(bound):
+    """Positive values up to a scene's stated bound (device.scene.MAX_*), the bound included."""
+    return st.floats(min_value=1e-3, max_value=bound, allow_nan=False)
+
+
+@given(name=st.text(min_size=1, max_size=12), h=st.floats(-0.5, 0.5), k=finite,
+       b=upto(MAX_DAMPING), ring=st.one_of(st.none(), st.tuples(
+           st.floats(-1e5, 1e5), upto(MAX_DECAY), upto(MAX_RINGING_HZ))))
 def test_real_scene_round_trip(name, h, k, b, ring):
     mat = {"stiffness": k, "damping": b}
     if ring is not None:
@@ -99,7 +106,7 @@ def test_real_scene_round_trip(name, h, k, b, ring):
 
 
 @given(k=st.floats(0, 1e5), kind=st.sampled_from(["pulse", "sinusoid", "q_sinusoid"]),
-       a=finite, d=st.floats(1e-3, 1.0), f=st.floats(1.0, 2000.0))
+       a=upto(MAX_GAIN), d=st.floats(1e-3, 1.0), f=st.floats(1.0, 2000.0))
 def test_virtual_scene_round_trip(k, kind, a, d, f):
     tr = {"pulse": {"kind": "pulse", "gain": a, "duration": d},
           "sinusoid": {"kind": "sinusoid", "gain": a, "decay_time": d, "frequency": f},
