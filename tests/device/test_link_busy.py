@@ -179,7 +179,12 @@ def test_a_participant_who_takes_long_to_answer_meets_no_watchdog(own_emulator, 
     with open_device(f"serial:{own_emulator.port}") as dev:
         ui = SlowToAnswer(dev, LEASE_S + 4 * dev.info.watchdog_s)
         runner = SessionRunner(p, SessionEngine(p, 3, "P01"), dev, files, ui, "P01", n, 3)
-        assert runner.run() == "complete"
+        try:
+            status = runner.run()
+        except Exception as exc:  # what the link saw, for a failure under load to explain
+            raise AssertionError(f"{exc}\nlink: {dev.link_stats()}\nemulator: "
+                                 f"{own_emulator.stderr()[-1500:]}") from exc
+        assert status == "complete", dev.link_stats()
         assert dev.link_stats()["heartbeats"]["lease_lapses"] > 0  # the lease did lapse
     rows, _ = read_trials(folder / "trials.tsv")
     assert [r["status"] for r in rows] == ["valid"] * 2
