@@ -61,8 +61,8 @@ class CompiledScene:
                                     for m in range(p.n_modes)])
             touching = port_forms(ns, (p.contact_stiffness, p.contact_damping),
                                   p.surface_height)
-            self.work = np.stack([work_forms(p.A[0], p.B[0], free, h),
-                                  work_forms(p.A[1], p.B[1], touching, h)])
+            self.work = np.stack([work_forms(p.A[m], p.B[m], q, h, pieces=self.pieces[m])
+                                  for m, q in enumerate((free, touching))])
             self.tick_work = np.zeros((n, n))
         else:
             self.pieces = np.zeros((1, 1, ns, n))

@@ -426,7 +426,7 @@ def port_forms(n_states: int, contact: tuple[float, float] | None, surface_heigh
 
 
 def work_forms(A: np.ndarray, B: np.ndarray, Q: np.ndarray, h: float,
-               levels: int = N_LEVELS) -> np.ndarray:
+               levels: int = N_LEVELS, pieces: np.ndarray | None = None) -> np.ndarray:
     """Exact work through each port over pieces of h·2^(j−levels), j = 0..levels.
 
     With z = [x; u] moving as e^(M·t)·z₀ (M = [[A, B], [0, 0]]: the input held), the work
@@ -435,11 +435,12 @@ def work_forms(A: np.ndarray, B: np.ndarray, Q: np.ndarray, h: float,
     and G = F₂₂ᵀ·F₁₂) at every (:data:`SQUARINGS` + 1)-th level whose span is short enough
     that e^(−Mᵀτ) stays small (τ·ρ(M) <= 1/2: over a whole 1-kHz tick it grows as e^31 and
     the subtraction loses every digit); the levels between, and those above, double the
-    one below, G(2τ) = G(τ) + e^(Mᵀτ)·G(τ)·e^(Mτ), with e^(Mτ) an exponential of its own
-    (squaring it would double its rounding each time). A trapezoid
-    over a piece 1/8 of a damped stiff contact's period read 4–6 % off at 1 kHz; this is
-    exact up to rounding in the terms it sums (which grow with k_s·h: ~1e-14 of a piece's
-    work with the surface at 0, ~1e-6 at 0.5 m on 1e8 N/m).
+    one below, G(2τ) = G(τ) + e^(Mᵀτ)·G(τ)·e^(Mτ), with e^(Mτ) the level's propagator
+    (``pieces``, from :func:`piece_propagators` over the same ``h``, when given: it keeps
+    their rounding bounded; otherwise an exponential of its own). A trapezoid over a piece
+    1/8 of a damped stiff contact's period read 4–6 % off at 1 kHz; this is exact up to
+    rounding in the terms it sums (which grow with k_s·h: ~1e-14 of a piece's work with the
+    surface at 0, ~1e-6 at 0.5 m on 1e8 N/m).
 
     Returns
     -------
@@ -453,25 +454,33 @@ def work_forms(A: np.ndarray, B: np.ndarray, Q: np.ndarray, h: float,
     rho = float(np.max(np.abs(np.linalg.eigvals(M))))
     tau0 = h * 2.0 ** (-levels)
     finer = max(0, math.ceil(math.log2(tau0 * rho / 0.5))) if tau0 * rho > 0.5 else 0
+
+    def propagator(j: int) -> np.ndarray:  # e^(M·τ_j), τ_j = τ₀·2^j
+        if pieces is not None and j >= 0:
+            E = np.zeros((n, n))
+            E[:ns, :] = pieces[j]
+            E[ns:, ns:] = np.eye(nu)
+            return E
+        return expm(M * (tau0 * 2.0**j))
+
     ports = Q.shape[0]
     out = np.zeros((ports, levels + 1, n, n))
-    for p in range(ports):
-        if not np.any(Q[p]):
-            continue
-        C = np.zeros((2 * n, 2 * n))
-        C[:n, :n] = -M.T
-        C[:n, n:] = Q[p]
-        C[n:, n:] = M
-        tau = tau0 / 2.0**finer
-        G = np.zeros((n, n))
-        for j in range(-finer, levels + 1):
-            if j == -finer or (j % (SQUARINGS + 1) == 0 and tau * rho <= 0.5):
-                F = expm(C * tau)  # Van Loan, where e^(−Mᵀτ) stays small
-                G = F[n:, n:].T @ F[:n, n:]
+    live = [p for p in range(ports) if np.any(Q[p])]
+    G = {p: np.zeros((n, n)) for p in live}
+    for j in range(-finer, levels + 1):
+        tau = tau0 * 2.0**j
+        fresh = j == -finer or (j % (SQUARINGS + 1) == 0 and tau * rho <= 0.5)
+        E = None if fresh else propagator(j - 1)
+        for p in live:
+            if fresh:  # Van Loan, where e^(−Mᵀτ) stays small
+                C = np.zeros((2 * n, 2 * n))
+                C[:n, :n] = -M.T
+                C[:n, n:] = Q[p]
+                C[n:, n:] = M
+                F = expm(C * tau)
+                G[p] = F[n:, n:].T @ F[:n, n:]
             else:  # double the piece before: G(2τ) = G(τ) + E(τ)ᵀ·G(τ)·E(τ)
-                E = expm(M * (tau / 2.0))
-                G = G + E.T @ G @ E
+                G[p] = G[p] + E.T @ G[p] @ E
             if j >= 0:
-                out[p, j] = 0.5 * (G + G.T)
-            tau *= 2.0
+                out[p, j] = 0.5 * (G[p] + G[p].T)
     return out

@@ -315,9 +315,11 @@ static void *read_port(void *arg)
             fail(k, p[0].revents & POLLNVAL ? EBADF : EIO);
         }
         /* the device's silence, judged only on a turn that slept to its end on time (a
-         * reader held up was not reading) and read nothing */
+         * reader held up was not reading), read nothing, and had room to read: with the
+         * ring full this host is behind, and what the device sent waits in the port (the
+         * Python reader's rule too: never while bytes wait) */
         int on_time = rc == 0 && t - t0 < IDLE_NS + IDLE_NS / 2;
-        if (silence > 0 && !got && !failed && on_time) {
+        if (silence > 0 && !got && !failed && on_time && room > 0) {
             pthread_mutex_lock(&k->m);
             int64_t quiet = k->st.last_rx_ns ? t - k->st.last_rx_ns : 0;
             if (quiet > silence) {

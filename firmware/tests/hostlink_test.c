@@ -355,6 +355,42 @@ static void test_silence_is_reported_and_ends_with_the_next_byte(void)
     close(p.master);
 }
 
+static void test_a_full_ring_is_this_host_behind_not_the_device_silent(void)
+{
+    /* the host reads nothing: the ring fills, the device's bytes wait in the port, and the
+     * reader has no room to take them; six silences later it must not call the device
+     * silent (it did: a Python side held up for a second read as a device gone) */
+    pty_t p = open_pty();
+    int s = hl_link_open(p.slave, 0);
+    hl_link_heartbeat(s, HB, sizeof HB, 5000, 5000000, 50000);
+    uint8_t chunk[4096], buf[4096];
+    memset(chunk, 7, sizeof chunk);
+    hl_link_stats st = {0};
+    double end = now_s() + 60.0;
+    while (st.rx_waits == 0 && now_s() < end) {
+        if (write(p.master, chunk, sizeof chunk) <= 0) {
+            sleep_s(0.0005);
+        }
+        drain(p.master, buf, sizeof buf, 0.001, 0); /* the heartbeats */
+        hl_link_stats_get(s, &st, 0);
+    }
+    CHECK(st.rx_waits > 0, "the ring never filled (the test did not test a full ring)");
+    for (int i = 0; i < 4; i++) {
+        (void)!write(p.master, chunk, sizeof chunk); /* more waits in the port */
+    }
+    int worst = 0;
+    double until = now_s() + 0.3;
+    while (now_s() < until) {
+        drain(p.master, buf, sizeof buf, 0.01, 0);
+        hl_link_stats_get(s, &st, 0);
+        worst = st.silent_ms > worst ? st.silent_ms : worst;
+    }
+    CHECK(worst == 0, "called the device silent for %d ms while its bytes waited", worst);
+    hl_link_close(s);
+    close(p.slave);
+    close(p.master);
+}
+
 static void test_a_port_that_takes_nothing_times_out(void)
 {
     pty_t p = open_pty();
@@ -475,6 +511,7 @@ int main(void)
     test_a_device_that_hangs_up_is_an_error_not_a_hang();
     test_close_wakes_a_waiting_reader();
     test_silence_is_reported_and_ends_with_the_next_byte();
+    test_a_full_ring_is_this_host_behind_not_the_device_silent();
     test_a_port_that_takes_nothing_times_out();
     printf("hostlink: %d failure(s)\n", failures);
     return failures != 0;
