@@ -220,7 +220,8 @@ def _device_emulate(args: argparse.Namespace) -> int:
             raise UsageError("the firmware's servo runs at its own 10 kHz: --rate applies to "
                              "--firmware python only")
         if args.firmware == "qemu" and args.speed != 1.0:
-            raise UsageError("the firmware under QEMU runs in real time: --speed applies to "
+            raise UsageError("the firmware under QEMU runs at the pace of its counted "
+                             "instructions, at most real time: --speed applies to "
                              "--firmware python, host and host-board")
         return serve(args.firmware, args.seed, args.speed)
     from device.serial.emulator import main as emulate

@@ -33,6 +33,15 @@ _CC = ("cc", "build-essential")
 _TOOLS = {"host": _CC, "host-board": _CC, "host-san": _CC, "qemu": _ARM, "board-qemu": _ARM}
 #: the builds that run on this machine (paced to its clock, at any speed)
 HOST_KINDS = ("host", "host-board", "host-san")
+#: QEMU's clock for the Cortex-M builds: it counts the emulated board's instructions, 8 ns
+#: each (2**3; the STM32F405 runs ~130 M instructions/s at 168 MHz), and runs at wall-clock
+#: pace while the board sleeps (WFI). Without it the emulated clock is this computer's, so
+#: a QEMU thread descheduled between two of the board's instructions let servo ticks pass
+#: that the board never had: CI measured an e-stop 4 ticks after its frame on a path of a
+#: few hundred instructions. With it a busy computer slows the emulated board down (0.72x
+#: wall time while it streams 7 channels at decimation 4, 0.4-0.6x beside two CPU-bound
+#: processes) instead of taking its time away.
+QEMU_ICOUNT = "shift=3,sleep=on"
 #: what qemu-system-arm prints when it puts a serial port on a pty
 QEMU_PTY = re.compile(r"char device redirected to (/dev/pts/\d+)")
 
@@ -83,12 +92,14 @@ def qemu_command(kind: str = "qemu", *extra: str) -> list[str]:
                           "(`make test` does)")
     monitor = () if "-monitor" in extra else ("-monitor", "none")
     return ["qemu-system-arm", "-M", "netduinoplus2", "-accel", "tcg,thread=single",
-            "-nographic", *monitor, "-serial", "pty", *extra, "-kernel", str(binary(kind))]
+            "-icount", QEMU_ICOUNT, "-nographic", *monitor, "-serial", "pty", *extra,
+            "-kernel", str(binary(kind))]
 
 
 def serve(kind: str, seed: int = 0, speed: float = 1.0) -> int:
     """Run firmware build ``kind`` until SIGINT/SIGTERM, printing its pty first (the host
-    build at ``speed`` × real time; QEMU always in real time)."""
+    build at ``speed`` × real time; QEMU at its counted instructions' pace, at most real
+    time: :data:`QEMU_ICOUNT`)."""
     import os
     import signal
     import sys

@@ -75,7 +75,10 @@ static volatile uint32_t lock_depth;
  * of the time starves QEMU's delivery of the host's bytes (heartbeats reached the board
  * 100-270 ms late at 72 kB/s). A board's UART sends at its line rate at no cost. So the
  * QEMU build times its sending and offers the host, in LIMITS, the rate it can send while
- * spending at most TX_SHARE of its time on it (never more than the line's). */
+ * spending at most TX_SHARE of its time on it (never more than the line's). hapticlab runs
+ * QEMU with -icount (device/serial/firmware.py): the board's clock then counts its
+ * instructions, a byte written costs one store whatever the host's pty takes, and the
+ * measurement finds the line's rate; it stays for QEMU run on the computer's clock. */
 #define TX_SHARE_DIV 4u           /* a quarter of the device's time */
 #define TX_CHUNK 128u
 #define TX_PROBE 2048u            /* bytes timed per measurement: 5-20 ms, long enough to

@@ -247,12 +247,13 @@ def test_selftest_passes_against_the_cortex_m_build_under_qemu():
             assert dev.link.version == 2
             assert dev.info.firmware == "hlfw-2.0 stm32"
             lim = dev.link.limits
-            # the link's capacity as the build measured it: the 1-Mbaud line's 100,000
-            # B/s, or less while sending costs the emulated board more than a quarter of
-            # its time (a loaded computer); the host decimates to fit 80 % of it
-            assert lim.ring_records == 1024 and 0 < lim.link_bytes_s <= 100_000
+            # the link's capacity as the build measured it: under QEMU's instruction
+            # count a byte written costs the board one store, as a DMA'd byte would, so
+            # it finds the 1-Mbaud line's 100,000 B/s on a busy computer too; the host
+            # decimates 7 channels to fit 80 % of it
+            assert lim.ring_records == 1024 and lim.link_bytes_s == 100_000
             d = stream_decimation(lim, 7, 10_000.0)
-            assert d >= 4
+            assert d == 4
             dev.load_scene(SUITE_SCENES["firm_spring"])
             dev.home()
             res = dev.run_window(0.2, from_first_contact=False)
@@ -406,9 +407,9 @@ def test_the_servo_tick_fits_its_budget_on_the_cortex_m4():
 
 
 def test_emulate_refuses_a_pace_the_firmware_cannot_keep():
-    """--speed paces the host build only; QEMU runs in real time, --rate is the Python
-    emulator's; a speed outside (0, 20] is refused before anything starts."""
-    cases = {("--firmware", "qemu", "--speed", "2"): "runs in real time",
+    """--speed paces the host build only; QEMU keeps its instructions' pace, --rate is the
+    Python emulator's; a speed outside (0, 20] is refused before anything starts."""
+    cases = {("--firmware", "qemu", "--speed", "2"): "at most real time",
              ("--firmware", "host", "--rate", "5000"): "--rate applies to --firmware python",
              ("--firmware", "host", "--speed", "0"): "--speed must be in (0, 20]",
              ("--firmware", "host", "--speed", "30"): "--speed must be in (0, 20]"}
