@@ -181,6 +181,10 @@ class SimDevice(HapticDevice):
         self._x: np.ndarray | None = None
         self._ist = np.zeros(K.IST, dtype=np.int64)
         self._fst = np.zeros(K.FST)
+        #: the last window's first bounce on a real sample: the tip's speed into it and out
+        #: of it, moving away [m/s], at the switches the kernel located inside ticks (NaN:
+        #: none)
+        self.first_bounce = (math.nan, math.nan)
         self._rb = np.zeros(len(self._vel_w))
         self._tick = 0  # device time in ticks
         self._tick_enabled = 0  # the tick output was last enabled at (home)
@@ -481,6 +485,7 @@ class SimDevice(HapticDevice):
         self._ist[K.IST_FIRST] = -1
         self._ist[K.IST_NEV] = self._ist[K.IST_SWITCHES] = self._ist[K.IST_UNRESOLVED] = 0
         self._fst[K.FST_EIN] = self._fst[K.FST_EOUT] = 0.0
+        self._fst[K.FST_VIN] = self._fst[K.FST_VOUT] = np.nan
         tick0 = self._tick
         buf = _Buffers(min(n_max, int(round(initial_s / dt))), plan, self._pull_gains, dt)
         ev_tick = np.zeros(_EVENTS, dtype=np.int64)
@@ -551,6 +556,7 @@ class SimDevice(HapticDevice):
             self.trace_sink(pieces.done, pieces.take(n))
         res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True, pieces=pieces)
         res.energy = {"in": float(self._fst[K.FST_EIN]), "out": float(self._fst[K.FST_EOUT])}
+        self.first_bounce = (-float(self._fst[K.FST_VIN]), float(self._fst[K.FST_VOUT]))
         res.warnings = _contact_warnings(cs.scene.name, int(self._ist[K.IST_SWITCHES]),
                                          int(self._ist[K.IST_UNRESOLVED]), n, cs.plant.n_sub)
         if self.live:

@@ -53,9 +53,12 @@ MAX_SWITCHES = 64
 FAULT_DEADLINE, FAULT_NAN, FAULT_DIVERGED = 1, 2, 3  # the watchdog/e-stop deadline; a
 # non-finite command; a state beyond any physical bound
 # float state slots: the two table rows' coefficients of the transient playing; the energy
-# the stylus gave to (in) and received from (out) the actuator and the sample [J]
-FST_C1, FST_C2, FST_EIN, FST_EOUT = 0, 1, 2, 3
-FST = 4
+# the stylus gave to (in) and received from (out) the actuator and the sample [J]; the tip's
+# velocity [m/s] where it first met a real sample and where it first left it moving away
+# after that (a parting while the tip still moves in is the sample falling away from it, not
+# a bounce), at the located switches (NaN until then; the caller sets NaN to start looking)
+FST_C1, FST_C2, FST_EIN, FST_EOUT, FST_VIN, FST_VOUT = range(6)
+FST = 6
 #: the divergence guard's bounds: tip distance from the surface [m] and speed [m/s]
 DIVERGED_M = 1.0
 DIVERGED_MPS = 10.0
@@ -177,6 +180,12 @@ def _advance_switching(pieces, work, x, u, ist, fst, h, ks, bs, has_body, tmp, z
             ist[IST_SWITCHES] += 1
             ist[IST_MODE] = 1 - mode
             j = levels
+            # the first bounce, at its switches (the finest piece is h·2^-levels long)
+            if mode == 0 and np.isnan(fst[FST_VIN]):
+                fst[FST_VIN] = x[V2]
+            elif (mode == 1 and x[V2] > 0.0 and np.isnan(fst[FST_VOUT])
+                  and not np.isnan(fst[FST_VIN])):
+                fst[FST_VOUT] = x[V2]
         elif turned:  # past the turn: back to whole pieces
             turns += 1
             j = levels

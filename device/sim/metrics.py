@@ -55,24 +55,27 @@ def passivity_margin(scene: Scene, dev: DeviceParams, hand: HandParams) -> float
     return b - float(scene.spring or 0.0) * dev.dt / 2.0
 
 
-#: sampling of a real sample's bounce [Hz]: its physics does not depend on the servo rate
-#: (contacts are located inside ticks), but a bounce shorter than a tick between two 1-kHz
-#: samples would be missed by the measurement
-REAL_SAMPLING_HZ = 20_000.0
-
-
 def restitution(scene: Scene, rate_hz: float = 10_000.0, speed: float = 0.11,
                 device: DeviceParams | None = None, hand: HandParams | None = None
                 ) -> Restitution:
-    """Bounce of one tap at ``speed`` [m/s] on ``scene`` at servo rate ``rate_hz`` [Hz]
-    (a real sample's at :data:`REAL_SAMPLING_HZ`, whatever the servo rate)."""
-    if scene.is_real:
-        rate_hz = max(rate_hz, REAL_SAMPLING_HZ)
+    """Bounce of one tap at ``speed`` [m/s] on ``scene`` at servo rate ``rate_hz`` [Hz].
+
+    A real sample's bounce is read where the kernel located the tip's first meeting with
+    it and its first parting from it, inside ticks (:attr:`SimDevice.first_bounce`), so a
+    bounce shorter than a tick is measured at any rate; a virtual scene's where the true
+    tip position crosses the surface between the recorded ticks."""
     tapper = Tapper(velocity_mean=speed, velocity_sd=0.0, press_depth=0.0, dwell=(2.0, 2.0))
     dev = SimDevice(device=device, hand=hand, tapper=tapper, rate_hz=rate_hz, noise=False)
     dev.load_scene(scene)
     dev.home()
     res = dev.run_window(0.3)
+    if scene.is_real:
+        v_in, v_out = dev.first_bounce
+        if not v_in > 0:
+            return Restitution(math.nan, math.nan, math.nan)
+        if math.isnan(v_out):
+            return Restitution(v_in, 0.0, math.nan)
+        return Restitution(v_in, v_out, v_out / v_in)
     tr = res.traces
     z = tr["true_position"] - scene.surface_height
     below = z < 0

@@ -40,9 +40,39 @@ def test_stiff_wall_is_active_at_1khz_and_passive_at_10khz():
     assert passivity_margin(wall, dev.with_rate(10_000), hand) == pytest.approx(4.3 - 0.5)
 
 
-def test_real_samples_are_passive_and_rate_independent():
-    e = [restitution(WOOD, r).e for r in (1_000, 10_000)]
-    assert 0 < e[0] < 1 and e[0] == pytest.approx(e[1], abs=1e-9)  # the same physics
+def test_a_real_bounce_is_measured_at_the_servo_rate_asked_and_barely_depends_on_it():
+    """Each rate is its own run (restitution once ran every real sample at 20 kHz, so its
+    "rate independence" compared 20 kHz with itself: issue 34). The contact is exact at any
+    rate; what the rate changes is the hand's pull, computed at each tick and linear between
+    (its corners smear over a tick): measured, wood's e moves 1.3 % from 20 to 1 kHz and
+    0.05 % from 20 to 10 kHz, so 3 % and 0.2 % are the bounds, and the runs must differ."""
+    e = {r: restitution(WOOD, r).e for r in (1_000, 10_000, 20_000)}
+    assert all(0 < x < 1 for x in e.values()), e
+    assert abs(e[10_000] - e[20_000]) <= 2e-3 * e[20_000], e
+    assert abs(e[1_000] - e[20_000]) <= 3e-2 * e[20_000], e
+    assert abs(e[1_000] - e[20_000]) > 1e-6, "the 1-kHz bounce is not its own run"
+
+
+def test_a_bounce_shorter_than_a_tick_is_located_inside_it():
+    """A 10-MN/m contact parts from the tip ~0.3 ms after it meets it, inside one 1-kHz
+    tick: the located switches still measure it, and the arrival speed agrees with the
+    one read off a 100-kHz trace's free flight (`_at_crossing`, an independent route, whose
+    quadratic extrapolation is good to the jerk × τ²: 1.6e-4 off at 20 kHz, measured)."""
+    from device.sim.metrics import _at_crossing
+
+    hard = Scene("hard", material=Material(1e7, 40.0))
+    r1 = restitution(hard, 1_000, speed=0.11)
+    assert 0 < r1.e < 1 and r1.v_in == pytest.approx(0.11, rel=0.1), r1
+    tapper = Tapper(velocity_mean=0.11, velocity_sd=0.0, press_depth=0.0, dwell=(2.0, 2.0))
+    dev = SimDevice(device=DeviceParams().with_rate(100_000), tapper=tapper, noise=False)
+    dev.load_scene(hard)
+    dev.home()
+    tr = dev.run_window(0.3).traces
+    z = tr["true_position"] - hard.surface_height
+    i = int(np.argmax(z < 0)) - 1
+    v_trace = -_at_crossing(z, tr["true_velocity"], tr["true_accel"], i, dev.params.dt)
+    assert dev.first_bounce[0] == pytest.approx(v_trace, rel=2e-5)
+    assert dev.first_bounce[0] > 0 and 0 < dev.first_bounce[1] < dev.first_bounce[0]
 
 
 def test_wood_rings_at_its_measured_frequency():
