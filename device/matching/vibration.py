@@ -10,9 +10,11 @@ and the slope A from the amplitude against incoming speed.
    refined by a parabola, samples the envelope. A narrow band-pass and a Hilbert
    envelope instead smear short decays (−10 % to −35 % on B in tests).
 3. B: one straight line ln(|extremum| / v) = c_i − B·t fitted jointly over all taps
-   (a common decay, one intercept per tap), from each tap's largest extremum down to
-   ``floor`` of it, stopping where the extrema grow again (another motion — the
-   contact's own oscillation, a bounce — has taken over).
+   (a common decay, one intercept per tap), from each tap's first extremum above ``floor``
+   of its largest down to the floor, stopping where the extrema grow again (another
+   motion — the contact's own oscillation, a bounce — has taken over); a tap whose
+   envelope grows first is left out, unless fewer than two taps are left, when every tap
+   is taken from its largest extremum (``VibrationFit.start``).
 4. A: each tap's amplitude at contact from its intercept, undoing (i) the extrema
    sitting at sin = ω/√(ω² + B²) rather than 1, and, when the accelerometer's bandwidth
    is given, (ii) its gain |H(f)| and (iii) its phase delay τ at f (the envelope read at
@@ -48,6 +50,11 @@ class VibrationFit:
         f.
     amplitudes, velocities : ndarray
         Per-tap amplitude at contact [m/s²] and incoming speed [m/s].
+    start : str
+        Where each tap's ring-down was taken from: ``"first"``, its first extremum above
+        the floor (taps whose envelope grows first are left out); ``"peak"``, its largest,
+        when fewer than two taps decay from the first (B then includes the contact's own
+        decay after the peak: +12 % on wood tapped at one speed, measured).
     """
 
     slope: float
@@ -55,6 +62,7 @@ class VibrationFit:
     frequency: float
     amplitudes: np.ndarray
     velocities: np.ndarray
+    start: str = "first"
 
     def as_dict(self) -> dict:
         return {"slope": self.slope, "decay": self.decay, "frequency": self.frequency}
@@ -93,6 +101,30 @@ def _extrema(x: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(ts), np.asarray(vs)
 
 
+def _ringdown(ts: np.ndarray, vs: np.ndarray, floor: float, start: str):
+    """A tap's decaying extrema (times [s], values) and the sign of its first push, from
+    its first extremum above ``floor`` of its largest, or from its largest (``start``
+    ``"peak"``), to where they fall below the floor or grow again; None when fewer than
+    two are left."""
+    if ts.size == 0:
+        return None
+    big = np.abs(vs) >= floor * np.max(np.abs(vs))
+    first = int(np.argmax(big))
+    sign0 = float(np.sign(vs[first]))  # the first push's direction
+    i = first if start == "first" else int(np.argmax(np.abs(vs)))
+    ts, vs = ts[i:], vs[i:]
+    keep = np.abs(vs) >= floor * np.max(np.abs(vs))
+    last = int(np.flatnonzero(keep)[-1]) + 1
+    # the vibration's envelope only decays: where an extremum grows again, another motion
+    # (the contact's own oscillation, a bounce) has taken over
+    grows = np.flatnonzero(np.abs(vs[1:last]) > 1.05 * np.abs(vs[:last - 1]))
+    if grows.size:
+        last = int(grows[0]) + 1
+    if last < 2:
+        return None
+    return ts[:last], vs[:last], sign0
+
+
 def fit_vibration(taps: list[Tap], rate_hz: float, band: tuple[float, float] = (20.0, 2000.0),
                   accel_bandwidth: float | None = None, floor: float = 0.1,
                   nfft: int = 8192) -> VibrationFit:
@@ -125,34 +157,32 @@ def fit_vibration(taps: list[Tap], rate_hz: float, band: tuple[float, float] = (
 
     sos = signal.butter(2, (0.4 * f, min(3 * f, 0.45 * rate_hz)), btype="bandpass", fs=rate_hz,
                         output="sos")
+    # each tap's ring-down from its first extremum above the floor; if fewer than two taps
+    # decay from there (taps at one speed, all alike, whose ringing builds up over the first
+    # cycle: each ended where it grew, and none was left, issue 34), from each tap's largest
+    # extremum instead, which the fit then says (``start``)
+    filtered = [(tap, *_extrema(signal.sosfiltfilt(sos, tap.accel), rate_hz))
+                for tap in taps if tap.velocity > 0]
+    for start in ("first", "peak"):
+        picked = [(tap, r) for tap, ts, vs in filtered
+                  if (r := _ringdown(ts, vs, floor, start)) is not None]
+        if len(picked) >= 2:
+            break
+    else:
+        raise ValueError(
+            f"{len(picked)} of {len(taps)} taps hold a vibration that decays over at least two "
+            f"half cycles inside {band[0]:g}–{hi:g} Hz (the strongest at {f:.0f} Hz; "
+            f"{len(taps) - len(filtered)} without an incoming speed; in the others the "
+            f"band-passed acceleration grows again, or falls below {floor:g} of its largest, "
+            f"one half cycle after it); a slope needs 2")
     rows, cols, vals, first_sign, vels = [], [], [], [], []
-    for tap in taps:
-        x = signal.sosfiltfilt(sos, tap.accel)
-        ts, vs = _extrema(x, rate_hz)
-        if ts.size == 0:
-            continue
-        big = np.abs(vs) >= floor * np.max(np.abs(vs))
-        start = int(np.argmax(big))
-        ts, vs = ts[start:], vs[start:]
-        keep = np.abs(vs) >= floor * np.max(np.abs(vs))
-        last = int(np.flatnonzero(keep)[-1]) + 1
-        # the vibration's envelope only decays: where an extremum grows again, another
-        # motion (the contact's own oscillation, a bounce) has taken over
-        grows = np.flatnonzero(np.abs(vs[1:last]) > 1.05 * np.abs(vs[:last - 1]))
-        if grows.size:
-            last = int(grows[0]) + 1
-        ts, vs = ts[:last], vs[:last]
-        if ts.size < 2 or tap.velocity <= 0:
-            continue
-        first_sign.append(np.sign(vs[0]))
-        j = len(vels)
+    for j, (tap, (ts, vs, sign0)) in enumerate(picked):
+        first_sign.append(sign0)
         vels.append(tap.velocity)
         for t, v in zip(ts, vs, strict=True):
             rows.append(j)
             cols.append(t)
             vals.append(math.log(abs(v) / tap.velocity))
-    if len(vels) < 2:
-        raise ValueError("the taps hold no decaying vibration inside the band")
     m = len(vels)
     # joint least squares: ln|x|/v = c_j − B·t
     M = np.zeros((len(vals), m + 1))
@@ -169,4 +199,4 @@ def fit_vibration(taps: list[Tap], rate_hz: float, band: tuple[float, float] = (
         amp = amp * math.exp(-B * delay) / gain
     magnitude = float(np.sum(amp * v) / np.sum(v * v))
     sign = -1.0 if np.median(first_sign) >= 0 else 1.0
-    return VibrationFit(sign * magnitude, B, f, amp, v)
+    return VibrationFit(sign * magnitude, B, f, amp, v, start)

@@ -410,3 +410,16 @@ def test_the_verdict_weighs_the_library_against_its_spring_alone():
     better = Verification(2.0, 4.5, 16, 15).verdict()
     assert better.startswith("close") and "spring alone" not in better
     assert Verification(7.0, 9.0, 10, 10).verdict().startswith("far")
+
+
+def test_a_vibration_fit_that_finds_no_ring_down_says_what_it_found():
+    """Silent taps (an accelerometer that is not connected) or taps with no incoming speed:
+    the error counts the taps kept, names the band and why taps were left out, instead of
+    "the taps hold no decaying vibration" alone."""
+    silent = np.zeros(1000)
+    taps = [Tap(0.1, silent, 0.0), Tap(0.1, silent.copy(), 1.0), Tap(0.0, silent, 2.0)]
+    with pytest.raises(ValueError) as err:
+        fit_vibration(taps, 10_000, band=(300, 1200))
+    msg = str(err.value)
+    assert msg.startswith("0 of 3 taps hold a vibration that decays") and "300–1200 Hz" in msg
+    assert "1 without an incoming speed" in msg and "a slope needs 2" in msg
