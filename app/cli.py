@@ -262,8 +262,8 @@ def _bench(args: argparse.Namespace) -> int:
         module = importlib.import_module(f"benchmarks.{args.what}")
     except ModuleNotFoundError:
         raise UsageError(f"no benchmark named {args.what!r}; "
-                         "available: sim, matching, link, crash, analysis, demo, energy, "
-                         "orderings, tick") from None
+                         "available: sim, accuracy, matching, link, crash, analysis, demo, "
+                         "energy, orderings, tick") from None
     return module.main(args)
 
 
@@ -712,8 +712,9 @@ def build_parser() -> argparse.ArgumentParser:
     ps.set_defaults(func=_protocol_show)
 
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
-    b.add_argument("what", help="which benchmark: sim, matching, link, crash, analysis, demo, "
-                   "energy, orderings, tick (the firmware's servo tick on the Cortex-M4)")
+    b.add_argument("what", help="which benchmark: sim, accuracy (every scene, tap and servo "
+                   "rate against 100 kHz), matching, link, crash, analysis, demo, energy, "
+                   "orderings, tick (the firmware's servo tick on the Cortex-M4)")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
     b.add_argument("--fuzz", type=int, default=100_000,

@@ -2,13 +2,31 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import statistics
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["median_time", "print_table", "emit"]
+__all__ = ["median_time", "print_table", "emit", "library_store"]
+
+
+@contextlib.contextmanager
+def library_store(prefix: str):
+    """Matched-sample libraries built during a benchmark go to a temporary store, removed
+    afterwards, unless ``HAPTICLAB_LIBRARIES`` names one already."""
+    if "HAPTICLAB_LIBRARIES" in os.environ:
+        yield
+        return
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+        os.environ["HAPTICLAB_LIBRARIES"] = tmp
+        try:
+            yield
+        finally:
+            os.environ.pop("HAPTICLAB_LIBRARIES", None)
 
 
 def median_time(fn: Callable[[], Any], repeats: int) -> float:

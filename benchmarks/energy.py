@@ -17,11 +17,9 @@ temporary store, unless ``HAPTICLAB_LIBRARIES`` is set).
 
 from __future__ import annotations
 
-import os
-import tempfile
 import time
 
-from ._common import emit, print_table
+from ._common import emit, library_store, print_table
 
 RATES = (1_000, 10_000, 20_000)
 WINDOW_S = 30.0
@@ -41,13 +39,15 @@ def samples() -> list[tuple[str, object]]:
     return out
 
 
-def _with_libraries(scenes, rate: float) -> list:
-    """The scenes, with each library transient's library built on this rate's device."""
+def with_libraries(scenes, rate: float) -> list:
+    """The scenes, with each library transient's library built on this rate's simulated
+    device (any rate :class:`~device.sim.params.DeviceParams` allows, 100 kHz included)."""
     from device import LibraryTransient
     from device.matching.library import build_into_store, find_library
     from device.sim.backend import SimDevice
+    from device.sim.params import DeviceParams
 
-    dev = SimDevice(rate_hz=rate)
+    dev = SimDevice(device=DeviceParams().with_rate(rate))
     for _, sc in scenes:
         t = sc.transient
         if isinstance(t, LibraryTransient) and find_library(dev.info, t) is None:
@@ -61,17 +61,13 @@ def main(args) -> int:
     from device import Material, Scene
     from device.sim.audit import energy_audit
 
-    own_store = "HAPTICLAB_LIBRARIES" not in os.environ
-    tmp = tempfile.TemporaryDirectory(prefix="hapticlab-energy-") if own_store else None
-    if tmp is not None:
-        os.environ["HAPTICLAB_LIBRARIES"] = tmp.name
-    try:
+    with library_store("hapticlab-energy-"):
         scenes = samples()
         lossless = Scene("lossless_contact", material=Material(70_000.0, 0.0))
         rows, base = [], {}
         t0 = time.perf_counter()
         for rate in RATES:
-            _with_libraries(scenes, rate)
+            with_libraries(scenes, rate)
             b = energy_audit(lossless, rate, WINDOW_S)
             base[rate] = b.energy_out_j / b.energy_in_j
             for name, sc in scenes:
@@ -81,10 +77,6 @@ def main(args) -> int:
                 d["lossless_out_over_in"] = base[rate]
                 rows.append(d)
         wall = time.perf_counter() - t0
-    finally:
-        if tmp is not None:
-            os.environ.pop("HAPTICLAB_LIBRARIES", None)
-            tmp.cleanup()
     real = [r for r in rows if r["kind"] == "real"]
     payload = {"rows": rows, "baseline": {"what": "lossless real contact, 70 kN/m",
                                           "out_over_in": base},
