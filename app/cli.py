@@ -221,7 +221,7 @@ def _device_emulate(args: argparse.Namespace) -> int:
                              "--firmware python only")
         if args.firmware == "qemu" and args.speed != 1.0:
             raise UsageError("the firmware under QEMU runs at the pace of its counted "
-                             "instructions, at most real time: --speed applies to "
+                             "instructions and its sleeps: --speed applies to "
                              "--firmware python, host and host-board")
         return serve(args.firmware, args.seed, args.speed)
     from device.serial.emulator import main as emulate

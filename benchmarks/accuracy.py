@@ -64,6 +64,7 @@ def _window(scene, rate: float, tap):
     span = PEOPLE_S if tap == "people" else ONE_TAP_S
 
     def once():
+        dev.reseed(dev.seed)  # every repeat the same taps: the timed windows are the same
         dev.home()
         return dev.run_window(span)
 

@@ -98,8 +98,8 @@ def qemu_command(kind: str = "qemu", *extra: str) -> list[str]:
 
 def serve(kind: str, seed: int = 0, speed: float = 1.0) -> int:
     """Run firmware build ``kind`` until SIGINT/SIGTERM, printing its pty first (the host
-    build at ``speed`` × real time; QEMU at its counted instructions' pace, at most real
-    time: :data:`QEMU_ICOUNT`)."""
+    build at ``speed`` × real time; QEMU at the pace of its counted instructions and its
+    sleeps, :data:`QEMU_ICOUNT`)."""
     import os
     import signal
     import sys
