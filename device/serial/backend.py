@@ -25,7 +25,7 @@ from ..base import DeviceInfo, HapticDevice
 from ..codes import Blend, SceneKind
 from ..errors import DeviceError, DeviceFaultError, SceneError
 from ..events import ContactEvent, FaultEvent, SaturationEvent, WindowResult
-from ..scene import Scene, TransientTable
+from ..scene import Material, Scene, TransientTable
 from . import messages as M
 from .link import (
     CRCStormError,
@@ -97,6 +97,28 @@ def device_clock_on_host(pairs) -> Callable[[float], float]:
 
 #: the largest force a table item carries [N] (``i16``, 1 mN per LSB)
 TABLE_FORCE_MAX = 32.767
+
+
+def _sample_on_wire(material: Material | None) -> Material | None:
+    """A real sample as the device's simulated plant takes it.
+
+    A block that rings as measured goes as the passive block that rings so: its contact's
+    stiffness and damping, its mass and the support it rests on
+    (:func:`device.sim.plant.block_model`, derived here because a device's firmware has no
+    eigensolver; the same block whichever device simulates it). A ringing no passive block
+    reproduces goes as described, for a device to refuse if it simulates it; a device with
+    a real sample under its stylus ignores all of it.
+    """
+    if material is None or material.ringing is None or not material.is_block \
+            or material.support is not None:
+        return material
+    from ..sim.plant import block_model
+
+    try:
+        b = block_model(material)
+    except SceneError:
+        return material
+    return Material(b.contact_stiffness, b.contact_damping, mass=b.mass, support=b.support)
 
 
 def _wire_table(table: TransientTable, where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -377,8 +399,8 @@ class SerialDevice(HapticDevice):
         wire = self._wire_scene(scene, table)
         self._scene_id = (self._scene_id + 1) & 0xFFFF
         sid = self._scene_id
-        m = scene.material
-        ring = m.ringing if m is not None else None
+        ring = scene.material.ringing if scene.material is not None else None
+        m = _sample_on_wire(scene.material)
         kind = (SceneKind.REAL if m is not None else
                 SceneKind.TABLE if table is not None else SceneKind.SPRING)
         velocities, q = wire if wire is not None else (None, np.zeros((0, 0), "<i2"))

@@ -597,8 +597,10 @@ class Emulator:
         h = b.surface_um * 1e-6
         name = f"scene-{b.scene_id}"
         if b.kind == SceneKind.REAL:
-            ring = (Ringing(b.ring_slope, b.ring_decay, b.ring_freq) if b.ring_freq > 0 else None)
             sup = sc.get("support")
+            # a block on a given support is simulated on it; its ringing only describes it
+            ring = (Ringing(b.ring_slope, b.ring_decay, b.ring_freq)
+                    if b.ring_freq > 0 and sup is None else None)
             return Scene(name, surface_height=h, material=Material(
                 b.stiffness, b.damping, ring, mass=b.block_mass if b.block_mass > 0 else None,
                 support=Support(sup.stiffness, sup.damping) if sup is not None else None))

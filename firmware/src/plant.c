@@ -8,10 +8,17 @@
 
 #define PI_F 3.14159265f
 
-static const float MASS = 0.155f;     /* device 0.055 + hand 0.100 [kg] */
+/* the mechanics of hapticlab's Python simulator (device/sim/params.py, its defaults) */
+static const float M_MOTOR = 0.045f;  /* motor side, where the encoder sits [kg] */
+static const float M_TIP = 0.110f;    /* tip 0.010 + hand 0.100, where the accelerometer sits */
+static const float MASS = 0.155f;     /* all that moves: the hand's model of it [kg] */
+static const float K_LINK = 21000.0f; /* the linkage between motor and tip [N/m] */
+static const float B_LINK = 4.0f;     /* [N*s/m] */
 static const float K_HAND = 300.0f;   /* [N/m] */
 static const float B_HAND = 4.0f;     /* [N*s/m] */
-static const float B_MOTOR = 0.3f;    /* [N*s/m] */
+static const float B_MOTOR = 0.3f;    /* motor friction [N*s/m] */
+static const float AMP_HZ = 5000.0f;  /* the amplifier's first-order bandwidth */
+static const float ACCEL_HZ = 1000.0f; /* the accelerometer's 2nd-order Butterworth */
 static const float TOP = 0.02f;       /* stroke start above the surface [m] */
 static const float PRESS = 0.004f;    /* intended depth below it [m] */
 static const float T_ACCEL = 0.06f, T_RISE = 0.20f;
@@ -22,7 +29,12 @@ enum { P_ACCEL, P_CRUISE, P_DWELL, P_RISE, P_PAUSE };
 typedef struct {
     uint64_t rng;
     float dt, enc_m, kf;
-    float z, v, a;             /* stylus height, velocity, acceleration */
+    float z1, v1;              /* motor side: height, velocity */
+    float z, v;                /* tip and hand: height, velocity */
+    float fa;                  /* force the amplifier delivers [N] */
+    float a;                   /* the accelerometer's output before noise [m/s^2] */
+    float lp_b0, lp_a1, lp_a2, lp_s1, lp_s2; /* its filter (bilinear) and state */
+    float amp_keep;            /* exp(-w_amp h): the amplifier's lag over one sub-step */
     float zr, vr, ar;          /* intended motion */
     float surface, k, b;
     int real;
@@ -62,6 +74,8 @@ static float normal(void)
     return (float)sum / 65536.0f - 6.0f;
 }
 
+static void substeps(void);
+
 void plant_init(uint64_t seed, float rate_hz, float encoder_m, float force_constant)
 {
     P = (plant_state){0};
@@ -69,49 +83,59 @@ void plant_init(uint64_t seed, float rate_hz, float encoder_m, float force_const
     P.dt = 1.0f / rate_hz;
     P.enc_m = encoder_m;
     P.kf = force_constant;
-    P.z = P.zr = TOP;
-    P.sub = 1;
+    P.z = P.z1 = P.zr = TOP;
     P.task = HAL_TASK_REST;
+    /* the accelerometer's Butterworth by the bilinear transform, its corner pre-warped (and
+     * kept below Nyquist): stable at any servo rate, exact in gain at the corner */
+    float kw = tanf(PI_F * fminf(ACCEL_HZ * P.dt, 0.45f));
+    float norm = 1.0f / (1.0f + 1.41421356f * kw + kw * kw);
+    P.lp_b0 = kw * kw * norm;
+    P.lp_a1 = 2.0f * (kw * kw - 1.0f) * norm;
+    P.lp_a2 = (1.0f - 1.41421356f * kw + kw * kw) * norm;
+    substeps();
 }
-
-static void substeps(void);
 
 void plant_scene(float surface_m, int real_sample, float stiffness, float damping)
 {
     P.surface = surface_m;
     P.real = real_sample;
     P.k = stiffness > 0 ? stiffness : 0.0f;
-    /* a sample given without damping gets 10 % of critical on the held stylus, so that it
-     * does not chatter forever (wood's derived contact damping is of that size) */
-    P.b = damping > 0 ? damping : 0.2f * sqrtf(P.k * MASS);
+    P.b = damping > 0 ? damping : 0.0f; /* as given: 0 is a lossless contact, as simulated */
     P.mb = P.ks = P.bs = P.xb = P.vb = 0.0f;
     substeps();
 }
 
-/* Semi-implicit Euler is stable for w*h < 2 and, damped, for c*h/m < 2: keep w*h <= 0.25
- * and c*h/m <= 0.5 on the contact (its frequency set by the reduced mass of stylus and
- * block) and on the block's support. A sample the servo's tick cannot integrate in
- * SUB_MAX steps (a 0.1-mg block on 70 kN/m, a 10^6 N*s/m damper: any value SCENE_BEGIN
- * allows) is simulated at the stiffness and damping SUB_MAX steps hold, so that the
- * simulated plant never diverges; a board has no plant. */
+/* Semi-implicit Euler is stable for w*h < 2 and, damped, for c*h/m < 2. The fastest mode
+ * is bounded by the sum over the springs of each one's k*(1/m_a + 1/m_b) (the stiffness
+ * matrix is their sum; Weyl), and likewise for the dampers: sub-steps keep that w*h <= 0.25
+ * and c*h/m <= 0.5. A sample the servo's tick cannot integrate in SUB_MAX steps (a 0.1-mg
+ * block on 70 kN/m, a 10^6 N*s/m damper: any value SCENE_BEGIN allows) is simulated at the
+ * stiffness and damping SUB_MAX steps hold, so that the simulated plant never diverges; a
+ * board has no plant. The amplifier's lag is integrated exactly. */
 #define SUB_MAX 256
 static void substeps(void)
 {
-    float inv_m = 1.0f / MASS + (P.mb > 0.0f ? 1.0f / P.mb : 0.0f);
+    float inv_tip = 1.0f / M_TIP, inv_block = P.mb > 0.0f ? 1.0f / P.mb : 0.0f;
+    float inv_c = inv_tip + inv_block; /* the contact joins the tip to the block */
     float hmin = P.dt / (float)SUB_MAX;
-    float k_max = (0.25f / hmin) * (0.25f / hmin) / inv_m, c_max = 0.5f / hmin / inv_m;
-    P.k = fminf(P.k, k_max);
-    P.b = fminf(P.b, c_max);
+    float w2_max = (0.25f / hmin) * (0.25f / hmin), c_max = 0.5f / hmin;
+    float w2 = K_LINK * (1.0f / M_MOTOR + inv_tip) + K_HAND * inv_tip;
+    float c = B_LINK * (1.0f / M_MOTOR + inv_tip) + B_HAND * inv_tip + B_MOTOR / M_MOTOR;
     if (P.mb > 0.0f) {
-        P.ks = fminf(P.ks, (0.25f / hmin) * (0.25f / hmin) * P.mb);
-        P.bs = fminf(P.bs, 0.5f / hmin * P.mb);
+        P.ks = fminf(P.ks, 0.5f * w2_max * P.mb);
+        P.bs = fminf(P.bs, 0.5f * c_max * P.mb);
+        w2 += P.ks * inv_block;
+        c += P.bs * inv_block;
     }
-    float need = fmaxf(sqrtf(P.k * inv_m) * P.dt / 0.25f, P.b * inv_m * P.dt / 0.5f);
-    if (P.mb > 0.0f) {
-        need = fmaxf(need, fmaxf(sqrtf(P.ks / P.mb) * P.dt / 0.25f, P.bs / P.mb * P.dt / 0.5f));
+    if (P.real) {
+        P.k = fminf(P.k, (w2_max - w2) / inv_c);
+        P.b = fminf(P.b, (c_max - c) / inv_c);
+        w2 += P.k * inv_c;
+        c += P.b * inv_c;
     }
-    int sub = 1 + (int)need;
-    P.sub = P.real ? (sub < SUB_MAX ? sub : SUB_MAX) : 1;
+    float need = fmaxf(sqrtf(w2) * P.dt / 0.25f, c * P.dt / 0.5f);
+    P.sub = need < (float)(SUB_MAX - 1) ? 1 + (int)need : SUB_MAX;
+    P.amp_keep = expf(-2.0f * PI_F * AMP_HZ * P.dt / (float)P.sub);
 }
 
 void plant_block(float mass, float support_k, float support_b)
@@ -128,8 +152,8 @@ void plant_block(float mass, float support_k, float support_b)
 
 void plant_home(float height_m)
 {
-    P.z = P.zr = height_m;
-    P.v = P.vr = P.ar = 0.0f;
+    P.z = P.z1 = P.zr = height_m;
+    P.v = P.v1 = P.vr = P.ar = 0.0f;
     P.xb = P.vb = 0.0f;
 }
 
@@ -222,34 +246,46 @@ void plant_step(float current_a)
     intend();
     const int sub = P.sub;
     const float h = P.dt / (float)sub;
-    float motor = current_a * P.kf;
-    float f_sum = 0.0f;
+    const float cmd = current_a * P.kf;
+    /* the hand: its impedance towards the intended motion, and its model of what moves */
+    const float ff = (B_HAND + B_MOTOR) * P.vr + K_HAND * P.zr + MASS * P.ar;
+    float a_sum = 0.0f;
     for (int i = 0; i < sub; i++) {
-        float f = motor + K_HAND * (P.zr - P.z) + B_HAND * (P.vr - P.v) + MASS * P.ar -
-                  B_MOTOR * P.v;
-        float fc = 0.0f; /* the contact's force on the stylus (up) */
+        P.fa = cmd + (P.fa - cmd) * P.amp_keep;
+        float fl = K_LINK * (P.z - P.z1) + B_LINK * (P.v - P.v1); /* on the motor; -fl on the tip */
+        float fc = 0.0f; /* the contact's force on the tip (up) */
         if (P.real && P.z < P.surface + P.xb) {
             fc = P.k * (P.surface + P.xb - P.z) + P.b * (P.vb - P.v);
             fc = fc > 0.0f ? fc : 0.0f; /* a sample pushes, never pulls */
         }
-        f += fc;
+        float a2 = (ff - K_HAND * P.z - B_HAND * P.v - fl + fc) / M_TIP;
+        float a1 = (P.fa + fl - B_MOTOR * P.v1) / M_MOTOR;
         if (P.mb > 0.0f) { /* the block: pushed down by the contact, held by its support */
             P.vb += (-fc - P.ks * P.xb - P.bs * P.vb) / P.mb * h;
             P.xb += P.vb * h;
         }
-        P.v += f / MASS * h;
+        P.v1 += a1 * h;
+        P.z1 += P.v1 * h;
+        P.v += a2 * h;
         P.z += P.v * h;
-        f_sum += f;
+        a_sum += a2;
     }
-    P.a = f_sum / (float)sub / MASS;
-    P.enc = (int32_t)floorf(P.z / P.enc_m + 0.5f);
+    /* the accelerometer on the tip: the tick's mean acceleration through its filter */
+    float x = a_sum / (float)sub;
+    float y = P.lp_b0 * x + P.lp_s1;
+    P.lp_s1 = 2.0f * P.lp_b0 * x - P.lp_a1 * y + P.lp_s2;
+    P.lp_s2 = P.lp_b0 * x - P.lp_a2 * y;
+    P.a = y;
+    P.enc = (int32_t)floorf(P.z1 / P.enc_m + 0.5f);
 }
 
 int32_t plant_encoder(void) { return P.enc; }
 
 float plant_energy(void)
 {
-    float e = 0.5f * MASS * P.v * P.v + 0.5f * K_HAND * (P.zr - P.z) * (P.zr - P.z);
+    float e = 0.5f * M_MOTOR * P.v1 * P.v1 + 0.5f * M_TIP * P.v * P.v +
+              0.5f * K_LINK * (P.z - P.z1) * (P.z - P.z1) +
+              0.5f * K_HAND * (P.zr - P.z) * (P.zr - P.z);
     float d = P.surface + P.xb - P.z;
     if (P.real && d > 0.0f) {
         e += 0.5f * P.k * d * d;
@@ -263,4 +299,3 @@ float plant_accel(void)
     a = fmaxf(-ACCEL_RANGE, fminf(ACCEL_RANGE, a));
     return roundf(a / ACCEL_LSB) * ACCEL_LSB;
 }
-

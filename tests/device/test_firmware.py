@@ -272,17 +272,35 @@ def test_selftest_passes_against_the_cortex_m_build_under_qemu():
             assert set(res.traces) == {"t", "accel"} and res.rate_hz == 10_000.0
             a = res.traces["accel"]
             assert a.size == sweep.force.size
-            # in free air above the hand's 7-Hz resonance the stylus (55 g) and the hand
-            # (100 g) move as one mass: |a/F| = 1 / 0.155 kg = 6.45 (m/s²)/N, by hand
+            # the board's plant is the simulator's stylus and hand: its response is the
+            # simulator's known plant (the command's hold included), resonance and all.
+            # One sweep with the accelerometer's noise; measured on the host build: median
+            # ratio 1.024, 98 % of 50–400 Hz within 1.5 dB, the peak on the same bin (128
+            # Hz). The one-mass plant before it read |a/F| = 1/0.155 kg flat: ratio 0.51.
             est = etfe(sweep.force, a[None, :] - a[:10].mean(), 10_000.0)
             band = (est.freq >= 50) & (est.freq <= 400)
-            gain = np.abs(est.H[band])  # one sweep, with the accelerometer's noise
-            assert np.median(gain) == pytest.approx(1 / 0.155, rel=0.03)
-            np.testing.assert_allclose(gain, 1 / 0.155, rtol=0.10)
+            ratio = np.abs(est.H[band] / _simulators_response(est.freq[band]))
+            assert np.median(ratio) == pytest.approx(1.0, rel=0.05)
+            assert np.mean(np.abs(20 * np.log10(ratio)) < 1.5) > 0.9
+            peak = est.freq[band][np.argmax(np.abs(est.H[band]))]
+            assert peak == pytest.approx(128.0, abs=4.0)
             assert dev.set_trace_channels(None) == 10_000.0 / stream_decimation(
                 dev.link.limits, 7, 10_000.0)
     finally:
         stop_emulator(emu)
+
+
+def _simulators_response(freq: np.ndarray) -> np.ndarray:
+    """Force command → accelerometer of the simulator's stylus held by its hand, with the
+    servo's zero-order hold [(m/s²)/N]."""
+    from device.matching.sysid import true_response
+    from device.sim.backend import SimDevice
+
+    from .test_matching import true_plant
+
+    sim = SimDevice()
+    p, row = true_plant(sim)
+    return true_response(p.A[0], p.B[0], row, freq, sim.params.servo_rate_hz)
 
 
 def _qemu_monitor(path: str, command: str) -> str:
@@ -438,3 +456,70 @@ def _spring():
     from device import Scene
 
     return Scene("spring", spring=680.0)
+
+
+def _real_samples():
+    """Every real sample of the realism and factorial protocols, each once."""
+    from protocols import load_protocol
+
+    out = {}
+    for name in ("realism", "factorial"):
+        for sid, s in load_protocol(name).samples.items():
+            if s.scene.is_real and s.scene.material not in {x.material for x in out.values()}:
+                out[sid] = s.scene
+    return out
+
+
+def _tap_physics(device, scene) -> dict:
+    """What tapping ``scene`` feels like, from 3 five-second windows: a ringing block's
+    frequency and decay (fitted as Table 1 was), and any sample's peak acceleration in
+    the 20 ms after a contact per m/s of incoming speed (median over taps)."""
+    from device.matching.library import record_taps, segment_taps
+    from device.matching.vibration import fit_vibration
+
+    results = record_taps(device, scene, 3)
+    rate = results[0].rate_hz
+    taps = segment_taps(results)
+    n = int(0.02 * rate)
+    out = {"taps": len(taps),
+           "gain": float(np.median([np.max(np.abs(t.accel[:n])) / t.velocity for t in taps]))}
+    ring = scene.material.ringing
+    if ring is not None:
+        fit = fit_vibration(taps, rate, band=(0.5 * ring.frequency, 2 * ring.frequency),
+                            accel_bandwidth=1000)
+        out.update(f=fit.frequency, B=fit.decay)
+    return out
+
+
+@pytest.mark.parametrize("firmware", ["host", "python"])
+def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
+    """The same protocol gives the same physics over the wire as on `sim`: each real sample
+    tapped through the emulated device (at twice real time, a clock the test does not
+    need the host to keep) against the simulator.
+
+    Measured (3 windows, seeds 3, 4 and 5 on both sides): frequency within 1.5 %, decay
+    within 9 %, peak acceleration per speed within 5 % (aluminum's excepted: its 1-kHz
+    ringing sampled at 10 kHz through chattering taps spreads 2,000–3,500 s⁻¹ on either
+    side, so it is not compared). Before the firmware's plant modelled the simulator's
+    stylus and derived blocks, the host build rang wood at 300 Hz and aluminum at 547 Hz
+    (decay 389 and 804 1/s) and rubber's taps peaked 26 % low; the bounds below sit between.
+    """
+    from device.sim.backend import SimDevice
+
+    scenes = _real_samples()
+    assert set(scenes) == {"wood", "wood_on_foam", "foam", "rubber-real", "aluminum-real"}
+    emu = start_emulator("--firmware", firmware, "--seed", "4", "--speed", "2")
+    try:
+        with SerialDevice(emu.port) as dev:
+            wire = {sid: _tap_physics(dev, sc) for sid, sc in scenes.items()}
+    finally:
+        stop_emulator(emu)
+    sim = {sid: _tap_physics(SimDevice(seed=4), sc) for sid, sc in scenes.items()}
+    for sid in scenes:
+        w, s = wire[sid], sim[sid]
+        assert w["taps"] >= 15 and s["taps"] >= 15, (sid, w, s)
+        if "f" in s:
+            assert w["f"] == pytest.approx(s["f"], rel=0.03), (sid, w, s)
+            assert w["B"] == pytest.approx(s["B"], rel=0.20), (sid, w, s)
+        if sid != "aluminum-real":
+            assert w["gain"] == pytest.approx(s["gain"], rel=0.10), (sid, w, s)
