@@ -64,6 +64,10 @@ def test_fit_grasp_json():
     assert abs(r["m"]["intercept"] / 0.023 - 1) < 0.03
     assert abs(r["k"]["intercept"] / 75_000 - 1) < 0.03
     assert r["fit_percent"]["median"] > 80
+    # the round trip's error is reported, computed from the fit and the published line
+    assert r["error_vs_published"]["k"]["intercept"] == pytest.approx(
+        r["k"]["intercept"] / 75_000 - 1, abs=1e-12)
+    assert set(r["error_vs_published"]) == {"m", "c", "k"}
 
 
 def test_sysid_json_and_plot(artifacts):
