@@ -21,6 +21,7 @@ from .load import LoadError, load_sessions, select_sessions, tap_velocities
 from .stats import (
     StatsError,
     dz_ci,
+    equivalence_ttests,
     friedman,
     identification_scores,
     np2_ci,
@@ -33,7 +34,8 @@ from .stats import (
     zscore_by_subject,
 )
 
-__all__ = ["LoadError", "StatsError", "datasets", "dz_ci", "ordinal", "friedman",
+__all__ = ["LoadError", "StatsError", "datasets", "dz_ci", "equivalence_ttests", "ordinal",
+           "friedman",
            "identification_scores",
            "load_sessions", "np2_ci", "p_adjust", "pairwise_ttests", "pairwise_wilcoxon",
            "participant_identification_test", "preflight", "rm_anova", "select_sessions",

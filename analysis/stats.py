@@ -11,6 +11,7 @@ import itertools
 import math
 import re
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -19,7 +20,7 @@ from scipy import special, stats
 __all__ = ["preflight", "zscore_by_subject", "pairwise_ttests", "rm_anova",
            "identification_scores", "cell_means", "wide_means", "p_adjust", "StatsError",
            "friedman", "pairwise_wilcoxon", "dz_ci", "participant_identification_test",
-           "mixed_oneway", "np2_ci", "signed_rank_test", "tie_groups"]
+           "mixed_oneway", "np2_ci", "signed_rank_test", "tie_groups", "equivalence_ttests"]
 
 PADJUST = ("none", "bonf", "holm", "fdr_bh")
 #: Values closer than this fraction of the data's spread (largest minus smallest) are
@@ -382,6 +383,46 @@ def pairwise_ttests(data: pd.DataFrame, dv: str, within: str, subject: str,
     0  firm   foam      0.917  4.568    5   0.048
     1  firm  pulse     -0.667 -6.325    5   0.013
     """
+    d = _paired_differences(data, dv, within, subject, missing)
+    g, levels, n, mean, se = d.good, d.levels, d.n, d.mean, d.se
+    q = special.stdtrit(d.dof, 1 - alpha / 2)  # t quantile (scipy.special: no per-call overhead)
+    t = mean / se
+    p = 2 * special.stdtr(d.dof, -np.abs(t))  # two-sided p
+    out = pd.DataFrame({
+        "A": [levels[a] for a in d.ia[g]], "B": [levels[b] for b in d.ib[g]],
+        "mean_diff": mean[g], "ci_low": (mean - q * se)[g], "ci_high": (mean + q * se)[g],
+        "t": t[g], "dof": (n - 1)[g], "p_unc": p[g], "p_corr": p_adjust(p[g], padjust),
+        "p_adjust": padjust, "dz": (mean / np.where(g, d.sd, 1.0))[g], "n": n[g]})
+    return d.attach(out)
+
+
+class _Differences(NamedTuple):
+    """Per-pair paired differences of per-subject cell means (:func:`_paired_differences`)."""
+
+    levels: list
+    ia: np.ndarray
+    ib: np.ndarray
+    n: np.ndarray
+    mean: np.ndarray   # 0 where within the data's tolerance of it
+    sd: np.ndarray
+    se: np.ndarray     # 1 where the pair has no test (not ``good``)
+    dof: np.ndarray
+    good: np.ndarray   # at least 2 subjects and differences that vary
+    constant: list     # (A, B, why) of the pairs without a test
+    missing: str
+    excluded: list
+
+    def attach(self, table: pd.DataFrame) -> pd.DataFrame:
+        table.attrs["constant_pairs"] = self.constant
+        table.attrs["missing"] = self.missing
+        table.attrs["excluded_subjects"] = self.excluded if self.missing == "listwise" else []
+        return table
+
+
+def _paired_differences(data: pd.DataFrame, dv: str, within: str, subject: str,
+                        missing: str) -> _Differences:
+    """Every pair of levels at once: an n × pairs matrix of differences of cell means
+    (listwise or pairwise complete), their mean, SD and standard error."""
     if missing not in MISSING:
         raise StatsError(f"missing must be one of {', '.join(MISSING)}, got {missing!r}")
     W, subjects, levels = wide_means(data, dv, within, subject, centred=True)
@@ -390,37 +431,98 @@ def pairwise_ttests(data: pd.DataFrame, dv: str, within: str, subject: str,
     if missing == "listwise":
         W = W[~gaps]
     tol = _tol(W)
-    # every pair at once: an n × pairs matrix of differences (pairwise complete)
     ia, ib = np.triu_indices(len(levels), k=1)
     D = W[:, ia] - W[:, ib]
     ok = ~np.isnan(D)
     n = ok.sum(axis=0)
-    Dz = np.where(ok, D, 0.0)
     nn = np.maximum(n, 1)
-    mean = Dz.sum(axis=0) / nn
-    var = (np.where(ok, D - mean, 0.0) ** 2).sum(axis=0) / np.maximum(n - 1, 1)
-    sd = np.sqrt(var)
+    mean = np.where(ok, D, 0.0).sum(axis=0) / nn
+    sd = np.sqrt((np.where(ok, D - mean, 0.0) ** 2).sum(axis=0) / np.maximum(n - 1, 1))
     mean = np.where(np.abs(mean) <= tol, 0.0, mean)  # an exact zero is shown as 0
     good = (n >= 2) & (sd > tol)
     constant = [(levels[a], levels[b], "fewer than 2 subjects" if k < 2 else
                  f"difference {m:.6g} for every subject")
                 for a, b, k, m, g in zip(ia, ib, n, mean, good, strict=True) if not g]
     se = np.where(good, sd / np.sqrt(nn), 1.0)
-    t = mean / se
-    dof = np.maximum(n - 1, 1)
-    q = special.stdtrit(dof, 1 - alpha / 2)  # t quantile (scipy.special: no per-call overhead)
-    p = 2 * special.stdtr(dof, -np.abs(t))  # two-sided p
-    g = good
-    ga, gb = ia[g], ib[g]
-    out = pd.DataFrame({
-        "A": [levels[a] for a in ga], "B": [levels[b] for b in gb], "mean_diff": mean[g],
-        "ci_low": (mean - q * se)[g], "ci_high": (mean + q * se)[g], "t": t[g],
-        "dof": (n - 1)[g], "p_unc": p[g], "p_corr": p_adjust(p[g], padjust),
-        "p_adjust": padjust, "dz": (mean / np.where(g, sd, 1.0))[g], "n": n[g]})
-    out.attrs["constant_pairs"] = constant
-    out.attrs["missing"] = missing
-    out.attrs["excluded_subjects"] = excluded if missing == "listwise" else []
-    return out
+    return _Differences(levels, ia, ib, n, mean, sd, se, np.maximum(n - 1, 1), good, constant,
+                        missing, excluded)
+
+
+def equivalence_ttests(data: pd.DataFrame, dv: str, within: str, subject: str, bound: float,
+                       pairs: Sequence[tuple[str, str]] | None = None, alpha: float = 0.05,
+                       missing: str = "listwise") -> pd.DataFrame:
+    """Paired equivalence tests (TOST) between levels of ``within``, on per-subject means.
+
+    A non-significant t-test does not show that two samples are alike (with few subjects
+    it is what a real difference gives too); the two one-sided tests do: the mean
+    difference is shown to lie within ±``bound`` when both H₀: δ ≤ −bound and
+    H₀: δ ≥ +bound are rejected at ``alpha``, i.e. when the 1 − 2·alpha confidence interval
+    lies inside (−bound, +bound). Subjects and constant pairs as :func:`pairwise_ttests`.
+
+    Parameters
+    ----------
+    bound : float
+        The equivalence margin, in units of ``dv`` (> 0).
+    pairs : sequence of (str, str), optional
+        The pairs to test (default: every pair, levels in order of first appearance).
+
+    Returns
+    -------
+    DataFrame, one row per pair
+        ``A``, ``B``; ``mean_diff`` (A − B); ``ci_low``, ``ci_high`` (its 1 − 2·alpha CI);
+        ``bound``; ``t_lower`` = (mean_diff + bound)/SE, ``p_lower`` (one-sided, greater);
+        ``t_upper`` = (mean_diff − bound)/SE, ``p_upper`` (one-sided, less); ``dof``;
+        ``p`` (the larger of the two); ``equivalent`` (p < alpha); ``bound_reached``, the
+        smallest margin these data show equivalence within at alpha (the CI's farther end
+        from 0); ``n``.
+
+    Notes
+    -----
+    As R's ``t.test(x, y, paired = TRUE, mu = -bound, alternative = "greater")`` and
+    ``mu = bound, alternative = "less"`` (tests/r/reference.R), and pingouin's
+    ``tost(x, y, bound, paired=True)``.
+
+    Examples
+    --------
+    >>> import analysis as A
+    >>> df = A.datasets.read_dataset("ratings")
+    >>> eq = A.equivalence_ttests(df, "rating", "sample", "participant", bound=1.0,
+    ...                           pairs=[("firm", "foam"), ("firm", "pulse")])
+    >>> eq[["A", "B", "mean_diff", "ci_low", "ci_high", "p", "equivalent"]].round(3)
+          A      B  mean_diff  ci_low  ci_high      p  equivalent
+    0  firm   foam      0.917   0.512    1.321  0.348       False
+    1  firm  pulse     -0.667  -0.879   -0.454  0.013        True
+    """
+    if not (isinstance(bound, (int, float)) and math.isfinite(bound) and bound > 0):
+        raise StatsError(f"bound must be a finite number > 0 (in units of {dv!r}), "
+                         f"got {bound!r}")
+    d = _paired_differences(data, dv, within, subject, missing)
+    index = {(d.levels[a], d.levels[b]): (j, 1.0)
+             for j, (a, b) in enumerate(zip(d.ia, d.ib, strict=True))}
+    index.update({(b, a): (j, -1.0) for (a, b), (j, _) in list(index.items())})
+    wanted = list(index)[: len(d.ia)] if pairs is None else [tuple(p) for p in pairs]
+    unknown = [p for p in wanted if p not in index]
+    if unknown:
+        raise StatsError(f"no such pair of {within!r} levels: {unknown[0]} (levels: "
+                         f"{', '.join(map(str, d.levels))})")
+    rows = []
+    q = special.stdtrit(d.dof, 1 - alpha)
+    for a, b in wanted:
+        j, sign = index[(a, b)]
+        if not d.good[j]:
+            continue  # listed in attrs["constant_pairs"]
+        m, se, dof = sign * d.mean[j], d.se[j], d.dof[j]
+        lo, hi = m - q[j] * se, m + q[j] * se
+        t_lo, t_hi = (m + bound) / se, (m - bound) / se
+        p_lo, p_hi = special.stdtr(dof, -t_lo), special.stdtr(dof, t_hi)
+        rows.append({"A": a, "B": b, "mean_diff": m, "ci_low": lo, "ci_high": hi,
+                     "bound": float(bound), "t_lower": t_lo, "p_lower": p_lo,
+                     "t_upper": t_hi, "p_upper": p_hi, "dof": int(d.n[j] - 1),
+                     "p": max(p_lo, p_hi), "equivalent": bool(max(p_lo, p_hi) < alpha),
+                     "bound_reached": max(abs(lo), abs(hi)), "n": int(d.n[j])})
+    cols = ["A", "B", "mean_diff", "ci_low", "ci_high", "bound", "t_lower", "p_lower",
+            "t_upper", "p_upper", "dof", "p", "equivalent", "bound_reached", "n"]
+    return d.attach(pd.DataFrame(rows, columns=cols))
 
 
 # --------------------------------------------------------------------- ANOVA

@@ -8,7 +8,9 @@ temporary folder and analysed as ``hapticlab analyze`` would. Per seed:
   wood_on_foam and the matched samples; pulse and sinusoid; foam and the springs; Kuchenbecker
   et al., Fig. 6 and text) and whether the classes come in the paper's order; saturations
   per participant in testing (paper: mean 5, range 0–11); participants the repeated-measures
-  ANOVA dropped listwise because the saturation cap left a cell empty;
+  ANOVA dropped listwise because the saturation cap left a cell empty; the paper's "not
+  distinguishable" pairs tested for equivalence (TOST within one rating point) beside the
+  paper's paired t-test;
 * factorial — each material's best set and most significant factor against Table 2 and the
   text of the reality-based models (best: rubber LLL at −240 1/s, 60 1/s, 30 Hz; wood
   −150, 80, 100 Hz; aluminum −300, 90, 300 Hz; most significant: decay for rubber,
@@ -41,6 +43,12 @@ PAPER_BEST = {"rubber": {"slope": -240.0, "decay": 60.0, "frequency": 30.0},
               "wood": {"slope": -150.0, "decay": 80.0, "frequency": 100.0},
               "aluminum": {"slope": -300.0, "decay": 90.0, "frequency": 300.0}}
 PAPER_MOST = {"rubber": "decay", "wood": "frequency", "aluminum": "slope"}
+#: the pairs the realism paper found not distinguishable (paired t-tests on per-user means)
+PAPER_ALIKE = (("matched_firm", "wood_on_foam"), ("matched_soft", "wood_on_foam"),
+               ("matched_firm", "matched_soft"), ("firm_spring", "foam"))
+#: the margin they are tested equivalent within [rating points of the 1–7 scale]: one step
+#: of the scale, the smallest difference a single rating can state
+ALIKE_BOUND = 1.0
 PAPER_ID = {"all": 83.3, "group expert": 88.9, "group novice": 79.2, "repetition 1": None,
             "repetition 3": 85.7}
 
@@ -74,6 +82,36 @@ def _realism(data, protocol: str = "realism") -> dict:
             "saturations_mean": float(per.mean()), "saturations_min": int(per.min()),
             "saturations_max": int(per.max()), "participants": n_all,
             "anova_n": n_anova, "dropped_listwise": n_all - n_anova}
+
+
+def _alike(data, protocol: str = "realism") -> list[dict]:
+    """The paper's "not distinguishable" pairs, tested for equivalence within
+    :data:`ALIKE_BOUND` (two one-sided tests, 90 % CI) beside the paper's paired t-test: a
+    non-significant t-test with 9 participants is what a real difference gives too."""
+    from analysis import equivalence_ttests, pairwise_ttests
+
+    rows = data[(data["protocol"] == protocol) & (data["phase"] == "testing")
+                & data["valid"] & data["rating"].notna()]
+    args = (rows, "rating", "sample", "participant")
+    eq = equivalence_ttests(*args, ALIKE_BOUND, pairs=PAPER_ALIKE)
+    pw = pairwise_ttests(*args, padjust="none")
+    p_t = {frozenset((r.A, r.B)): r.p_unc for r in pw.itertuples()}
+    out = []
+    for a, b in PAPER_ALIKE:
+        r = eq[(eq["A"] == a) & (eq["B"] == b)]
+        if r.empty:
+            why = next((w for x, y, w in eq.attrs["constant_pairs"] if {x, y} == {a, b}),
+                       "not rated by every participant")
+            out.append({"pair": f"{a}–{b}", "verdict": f"no test: {why}"})
+            continue
+        r = r.iloc[0]
+        out.append({"pair": f"{a}–{b}", "mean_diff": float(r.mean_diff),
+                    "ci90": [float(r.ci_low), float(r.ci_high)], "p_tost": float(r.p),
+                    "equivalent": bool(r.equivalent), "bound_reached": float(r.bound_reached),
+                    "p_ttest": float(p_t[frozenset((a, b))]),
+                    "verdict": (f"equivalent within ±{ALIKE_BOUND:g}" if r.equivalent else
+                                f"not shown alike (±{r.bound_reached:.2f} reached)")})
+    return out
 
 
 def _factorial(data, protocol) -> dict:
@@ -145,7 +183,7 @@ def run_seed(seed: int, root: Path) -> dict:
     t0 = time.perf_counter()
     simulate_study(data, seed)
     d = load_sessions(data)
-    out = {"seed": seed, "realism": _realism(d),
+    out = {"seed": seed, "realism": _realism(d), "alike": _alike(d),
            "factorial": _factorial(d, load_protocol("factorial")),
            "identification": _identification(d)}
     free = root / f"seed-{seed}-uncapped"
@@ -197,6 +235,15 @@ def main(args) -> int:
                   f"({r['realism_uncapped']['saturations_min']}–"
                   f"{r['realism_uncapped']['saturations_max']})",
                   r["realism_uncapped"]["classes_in_order"]) for r in runs])
+    print_table(f"realism: the paper's \"not distinguishable\" pairs, tested equivalent within "
+                f"±{ALIKE_BOUND:g} rating point (TOST at .05; paired t-test p beside)",
+                ["pair", "seed", "A − B [90 % CI]", "TOST p", "verdict", "t-test p"],
+                [(a["pair"], r["seed"],
+                  f"{a['mean_diff']:+.2f} [{a['ci90'][0]:+.2f}, {a['ci90'][1]:+.2f}]"
+                  if "mean_diff" in a else "—",
+                  f"{a['p_tost']:.3f}" if "p_tost" in a else "—", a["verdict"],
+                  f"{a['p_ttest']:.3f}" if "p_ttest" in a else "—")
+                 for i in range(len(PAPER_ALIKE)) for r in runs for a in (r["alike"][i],)])
     rows = []
     for mat in PAPER_BEST:
         for r in runs:

@@ -267,8 +267,8 @@ def build_key(info: DeviceInfo, source: Scene, *, entries: int = 12, windows: in
 
 def build_library(device, source: Scene, entries: int = 12, method: str = "regularized",
                   lam: float = 1e-4, windows: int = 8, order: int = 7, relative_degree: int = 4,
-                  model: TFModel | None = None, *, record: BuildRecord | None = None,
-                  on_fault: OnFault | None = None,
+                  model: TFModel | None = None, *, band: tuple[float, float] = (10.0, 500.0),
+                  record: BuildRecord | None = None, on_fault: OnFault | None = None,
                   on_step: OnStep | None = None) -> TransientLibrary:
     """Run the whole pipeline on ``device`` for the real sample ``source``.
 
@@ -285,6 +285,10 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         Regularization of the ``regularized`` inversion.
     windows : int
         5-s tapping windows recorded on the source.
+    band : (float, float) [Hz]
+        Where the sweep identifies the device and the taps are matched: the paper's
+        10–500 Hz by default (the top clipped to 0.4 of the servo rate,
+        :func:`usable_band`); ``hapticlab bench causes`` widens it to see what it costs.
     record : BuildRecord, optional
         Keeps each finished measurement (a sweep, a tapping window) and gives back those
         of an earlier run of the same build, which are not measured again.
@@ -311,7 +315,7 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         raise LibraryError(f"a library of {entries} entries of {ticks} ticks is "
                            f"{entries * ticks} table items; this device's transient table "
                            f"holds {cap}: at most {cap // ticks} entries")
-    band = usable_band(info.servo_rate_hz)
+    band = usable_band(info.servo_rate_hz, band)
     sweeps = 0 if model is not None else len(SWEEP_LEVELS) * SWEEP_REPEATS
     nominal = ([sweep_seconds(info.servo_rate_hz, band)] * sweeps
                + [TAP_SECONDS] * windows)

@@ -3,8 +3,9 @@
 The references in tests/r/references.csv were computed by tests/r/reference.R (the R call
 is beside each value in the file) from the same rows; ``make test`` recomputes them when R
 is installed and checks that the committed values still hold. Tolerances: 1e-9 relative
-for closed forms (t, Wilcoxon, Friedman, ANOVA and their p; p below 1e-300 compared on the
-log scale); 1e-6 for the CI of partial η², a root of the noncentral F found by two
+for closed forms (t, equivalence, Wilcoxon, Friedman, ANOVA and their p; a TOST t at the
+margin itself, 0 here and 3e-16 in R, within 1e-9 of one standard error; p below 1e-300
+compared on the log scale); 1e-6 for the CI of partial η², a root of the noncentral F found by two
 root-finders (measured: 1.5e-8; R's side uses uniroot at 1e-12 on pf, because
 effectsize::F_to_eta2 misses the root by up to 0.03 at F near 0); 1e-5 relative for
 the REML fits: hapticlab's profiled search stops at 1e-12 in the variance ratio, lme4's
@@ -39,6 +40,7 @@ CLOSED = 1e-9
 FITTED = 1e-5
 ROOT = 1e-6
 ORDINAL = 1e-4
+TOST_BOUND = 0.5  # rating points, as tests/r/reference.R
 
 
 def _ours_oneway(d: pd.DataFrame) -> dict[tuple[str, str, str], float]:
@@ -52,6 +54,11 @@ def _ours_oneway(d: pd.DataFrame) -> dict[tuple[str, str, str], float]:
                     ("ttest", key, "p"): r.p_unc, ("ttest", key, "mean_diff"): r.mean_diff,
                     ("ttest", key, "ci_low"): r.ci_low, ("ttest", key, "ci_high"): r.ci_high,
                     ("ttest", key, "p_holm"): r.p_corr, ("ttest", key, "p_fdr"): pf})
+    for r in A.equivalence_ttests(*args, bound=TOST_BOUND).itertuples():
+        key = f"{r.A}|{r.B}"
+        out.update({("tost", key, "p"): r.p, ("tost", key, "t_lower"): r.t_lower,
+                    ("tost", key, "t_upper"): r.t_upper, ("tost", key, "ci_low"): r.ci_low,
+                    ("tost", key, "ci_high"): r.ci_high})
     for r in A.pairwise_wilcoxon(*args, "holm").itertuples():
         key = f"{r.A}|{r.B}"
         out.update({("wilcoxon", key, "V"): r.V, ("wilcoxon", key, "p"): r.p_unc,
@@ -128,6 +135,10 @@ def test_every_statistic_matches_r(study):
         assert key in ours, f"{study}: hapticlab has no {key} (R: {r.call})"
         if r.analysis.startswith("ordinal"):  # logit units: relative, floor of 1
             ok = abs(float(ours[key]) - float(r.value)) <= ORDINAL * max(abs(r.value), 1.0)
+        elif r.analysis == "tost" and r.stat.startswith("t_"):
+            # a t at the margin itself is 0 here and 3e-16 in R (mean − bound rounded):
+            # t is in standard errors, so 1e-9 of one is the floor
+            ok = abs(float(ours[key]) - float(r.value)) <= CLOSED * max(abs(r.value), 1.0)
         else:
             ok = _close(float(ours[key]), float(r.value),
                         FITTED if r.analysis.startswith("mixed") else

@@ -11,6 +11,7 @@ from statsmodels.stats.multitest import multipletests
 
 from analysis import (
     StatsError,
+    equivalence_ttests,
     identification_scores,
     p_adjust,
     pairwise_ttests,
@@ -104,6 +105,37 @@ def test_pairwise_matches_scipy_and_pingouin():
     #                                  padjust="holm")["p_corr"]
     assert pw["p_corr"].to_numpy() == pytest.approx(
         [0.122578, 0.122578, 0.000288, 0.016419, 0.122578, 0.004410], abs=1e-6)
+
+
+@pytest.mark.parametrize("a, b, bound, p_pingouin", [
+    # pingouin 0.7.0: pg.tost(Y[:, a], Y[:, b], bound=bound, paired=True)["pval"]
+    ("c0", "c1", 1.0, 0.5), ("c0", "c1", 2.0, 0.020429701929647926),
+    ("c0", "c2", 1.5, 0.0272450496711881), ("c1", "c0", 2.0, 0.020429701929647926)])
+def test_equivalence_matches_pingouin_and_its_definition(a, b, bound, p_pingouin):
+    eq = equivalence_ttests(ONE, "y", "cond", "subj", bound, pairs=[(a, b)]).iloc[0]
+    assert eq.p == pytest.approx(p_pingouin, rel=1e-9)
+    d = Y[:, int(a[1])] - Y[:, int(b[1])]
+    # scipy, independently: the two one-sided tests against ±bound
+    lo = stats.ttest_1samp(d, -bound, alternative="greater")
+    hi = stats.ttest_1samp(d, bound, alternative="less")
+    assert (eq.t_lower, eq.t_upper) == pytest.approx((lo.statistic, hi.statistic))
+    assert (eq.p_lower, eq.p_upper) == pytest.approx((lo.pvalue, hi.pvalue))
+    h = stats.t.ppf(0.95, 5) * d.std(ddof=1) / math.sqrt(6)  # the 90 % CI
+    assert (eq.ci_low, eq.ci_high) == pytest.approx((d.mean() - h, d.mean() + h))
+    assert eq.bound_reached == pytest.approx(max(abs(d.mean() - h), abs(d.mean() + h)))
+    assert eq.equivalent == (eq.p < 0.05) == (eq.bound_reached < bound)
+
+
+def test_equivalence_refuses_what_it_cannot_test():
+    with pytest.raises(StatsError, match="bound must be a finite number > 0"):
+        equivalence_ttests(ONE, "y", "cond", "subj", 0.0)
+    with pytest.raises(StatsError, match=r"no such pair of 'cond' levels: \('c0', 'c9'\)"):
+        equivalence_ttests(ONE, "y", "cond", "subj", 1.0, pairs=[("c0", "c9")])
+    same = ONE.copy()
+    same.loc[same["cond"] == "c3", "y"] = same.loc[same["cond"] == "c0", "y"].to_numpy() - 1
+    eq = equivalence_ttests(same, "y", "cond", "subj", 2.0, pairs=[("c0", "c3"), ("c0", "c1")])
+    assert list(eq["B"]) == ["c1"]  # a constant difference has no test: said in words
+    assert ("c0", "c3", "difference 1 for every subject") in eq.attrs["constant_pairs"]
 
 
 @pytest.mark.parametrize("ours, theirs", [("bonf", "bonferroni"), ("holm", "holm"),

@@ -32,6 +32,7 @@ np2_ci <- function(F, df1, df2) {
   }
   c(bound(0.975), bound(0.025))
 }
+TOST_BOUND <- 0.5  # rating points (tests/analysis/test_against_r.py uses the same)
 NP2_CALL <- "uniroot(pf(F, df1, df2, ncp = l) - p, tol = 1e-12), eta2 = l / (l + df2)"
 
 if (kind == "oneway") {
@@ -55,6 +56,16 @@ if (kind == "oneway") {
       add("ttest", key, "ci_low", tt$conf.int[1], call)
       add("ttest", key, "ci_high", tt$conf.int[2], call)
       tp <- c(tp, setNames(tt$p.value, key))
+      # equivalence within +-TOST_BOUND rating points: the two one-sided tests
+      lo <- t.test(x, y, paired = TRUE, mu = -TOST_BOUND, alternative = "greater")
+      hi <- t.test(x, y, paired = TRUE, mu = TOST_BOUND, alternative = "less")
+      ci <- t.test(x, y, paired = TRUE, conf.level = 0.90)$conf.int
+      call <- sprintf("max(t.test(x, y, paired = TRUE, mu = -%g, alternative = \"greater\")$p.value, t.test(x, y, paired = TRUE, mu = %g, alternative = \"less\")$p.value)", TOST_BOUND, TOST_BOUND)
+      add("tost", key, "p", max(lo$p.value, hi$p.value), call)
+      add("tost", key, "t_lower", unname(lo$statistic), call)
+      add("tost", key, "t_upper", unname(hi$statistic), call)
+      add("tost", key, "ci_low", ci[1], "t.test(x, y, paired = TRUE, conf.level = 0.90)$conf.int")
+      add("tost", key, "ci_high", ci[2], "t.test(x, y, paired = TRUE, conf.level = 0.90)$conf.int")
     }
     if (any(x != y)) {
       wt <- suppressWarnings(wilcox.test(x, y, paired = TRUE, digits.rank = 7))
