@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import numbers
 import re
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -493,14 +494,15 @@ def equivalence_ttests(data: pd.DataFrame, dv: str, within: str, subject: str, b
     0  firm   foam      0.917   0.512    1.321  0.348       False
     1  firm  pulse     -0.667  -0.879   -0.454  0.013        True
     """
-    if not (isinstance(bound, (int, float)) and math.isfinite(bound) and bound > 0):
+    if isinstance(bound, bool) or not (isinstance(bound, numbers.Real) and math.isfinite(bound)
+                                       and bound > 0):
         raise StatsError(f"bound must be a finite number > 0 (in units of {dv!r}), "
                          f"got {bound!r}")
     d = _paired_differences(data, dv, within, subject, missing)
-    index = {(d.levels[a], d.levels[b]): (j, 1.0)
-             for j, (a, b) in enumerate(zip(d.ia, d.ib, strict=True))}
-    index.update({(b, a): (j, -1.0) for (a, b), (j, _) in list(index.items())})
-    wanted = list(index)[: len(d.ia)] if pairs is None else [tuple(p) for p in pairs]
+    forward = [(d.levels[a], d.levels[b]) for a, b in zip(d.ia, d.ib, strict=True)]
+    index = {p: (j, 1.0) for j, p in enumerate(forward)}
+    index.update({(b, a): (j, -1.0) for j, (a, b) in enumerate(forward)})
+    wanted = forward if pairs is None else [tuple(p) for p in pairs]
     unknown = [p for p in wanted if p not in index]
     if unknown:
         raise StatsError(f"no such pair of {within!r} levels: {unknown[0]} (levels: "

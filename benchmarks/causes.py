@@ -85,7 +85,7 @@ def _seeds(text: str | None) -> list[int]:
 
 def run(seeds: list[int]) -> dict:
     from app.participant_model import FEATURES, JND
-    from device.matching.library import build_library
+    from device.matching.library import PAPER_BAND, build_library
     from device.sim.backend import SimDevice
     from protocols import load_protocol
 
@@ -110,14 +110,17 @@ def run(seeds: list[int]) -> dict:
                             "rank": ranks(d)["wood_on_foam"],
                             "d_stop": float((f["wood_on_foam"][0] - ref[0]) / JND[0])})
     matching_side = []
+    matched = dict(scenes)["matched_firm"]
     with tempfile.TemporaryDirectory(prefix="hapticlab-causes-band-") as tmp:
         for top in BAND_TOPS:
-            path = Path(tmp, f"band-{top:g}.npz")
-            build_library(SimDevice(), wof, band=(10.0, top)).save(path)
+            path = None  # the paper's band: the store's library, built above
+            if top != PAPER_BAND[1]:
+                path = str(Path(tmp, f"band-{top:g}.npz"))
+                build_library(SimDevice(), wof, band=(PAPER_BAND[0], top)).save(path)
             for att in ATTENUATIONS:
-                m = dict(scenes)["matched_firm"]
-                sc = replace(m, transient=replace(m.transient, path=str(path), attenuation=att))
-                f = feel(sc, seeds)
+                same = path is None and att == matched.transient.attenuation
+                f = felt["matched_firm"] if same else feel(replace(matched, transient=replace(
+                    matched.transient, path=path, attenuation=att)), seeds)
                 matching_side.append({
                     "band_top_hz": top, "attenuation": att,
                     "distance": distances({"m": f}, ref, JND)["m"],

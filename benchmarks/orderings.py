@@ -93,7 +93,9 @@ def _alike(data, protocol: str = "realism") -> list[dict]:
     rows = data[(data["protocol"] == protocol) & (data["phase"] == "testing")
                 & data["valid"] & data["rating"].notna()]
     args = (rows, "rating", "sample", "participant")
-    eq = equivalence_ttests(*args, ALIKE_BOUND, pairs=PAPER_ALIKE)
+    rated = set(rows["sample"])
+    pairs = [(a, b) for a, b in PAPER_ALIKE if {a, b} <= rated]
+    eq = equivalence_ttests(*args, ALIKE_BOUND, pairs=pairs)
     pw = pairwise_ttests(*args, padjust="none")
     p_t = {frozenset((r.A, r.B)): r.p_unc for r in pw.itertuples()}
     out = []
@@ -101,7 +103,7 @@ def _alike(data, protocol: str = "realism") -> list[dict]:
         r = eq[(eq["A"] == a) & (eq["B"] == b)]
         if r.empty:
             why = next((w for x, y, w in eq.attrs["constant_pairs"] if {x, y} == {a, b}),
-                       "not rated by every participant")
+                       f"{a if a not in rated else b} has no valid rating")
             out.append({"pair": f"{a}–{b}", "verdict": f"no test: {why}"})
             continue
         r = r.iloc[0]

@@ -704,15 +704,20 @@ class GraspTransient(Transient):
     The first term is the speed's share (it stops the handle), the second the grasp's
     (the step response of the paper's eq. 7), which makes the peak grow about linearly
     with grasp force, as the paper measured: at 0.11 m/s, 166 m/s² at 0 N, 315 at 5 N,
-    1,272 at 20 N. The device plays effective mass × ẍ, from a two-row table at
-    :attr:`SPEEDS` with the linear blend, which is exact between them because ẍ is affine
-    in v (below the slowest row the device scales it by speed, as every table).
+    1,272 at 20 N. The device plays ``attenuation`` × effective mass × ẍ, from a two-row
+    table at :attr:`SPEEDS` with the linear blend, which is exact between them because ẍ
+    is affine in v (below the slowest row the device scales it by speed, as every table).
+    On a 55-g stylus that is 9–70 N at 0.11 m/s unattenuated: the paper's gripper, not a
+    desktop device; a scene for a 3-N device attenuates it (0.04 keeps 5 N of grasp at
+    0.11 m/s within 3 N), and the protocol check and the wire refuse what does not fit.
 
     Parameters
     ----------
     grasp_force : float [N]
     cutoff : float [1]
         Playback stops when the envelope falls to this fraction.
+    attenuation : float [1]
+        Factor on the force played, in (0, 1].
     """
 
     kind: ClassVar[str] = "grasp"
@@ -722,10 +727,11 @@ class GraspTransient(Transient):
     SPEEDS: ClassVar[tuple[float, float]] = (0.02, 0.40)
     grasp_force: float
     cutoff: float = 0.01
+    attenuation: float = 1.0
 
     def __post_init__(self) -> None:
         w = "transient 'grasp'"
-        _set_checked(self, w, grasp_force=_NONNEG, cutoff=_FRACTION)
+        _set_checked(self, w, grasp_force=_NONNEG, cutoff=_FRACTION, attenuation=_FRACTION)
         try:
             PUBLISHED_GRASP.at(self.grasp_force)
         except ValueError as exc:
@@ -760,14 +766,15 @@ class GraspTransient(Transient):
 
     def unit_table(self, rate_hz: float, effective_mass: float):
         """The speed's share alone, per unit speed [N/(m/s)] (its frequency and crests are
-        the whole transient's)."""
-        return effective_mass * self.shares(rate_hz)[0]
+        the whole transient's; what is played is :meth:`table`)."""
+        return self.attenuation * effective_mass * self.shares(rate_hz)[0]
 
     def table(self, rate_hz: float, effective_mass: float) -> TransientTable:
         self.check_for(rate_hz)
         speed, grasp = self.shares(rate_hz)
-        rows = [effective_mass * (v * speed + grasp) for v in self.SPEEDS]
-        return TransientTable(list(self.SPEEDS), rows, "linear")
+        k = self.attenuation * effective_mass  # in the rows: the wire checks what is played
+        return TransientTable(list(self.SPEEDS), [k * (v * speed + grasp) for v in self.SPEEDS],
+                              "linear")
 
 
 @dataclass(frozen=True, eq=False)

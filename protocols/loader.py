@@ -680,8 +680,9 @@ def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:
         except SceneError as exc:
             raise cx.error((*path, exc.field) if exc.field else path,
                            f"sample '{s.id}': {exc.reason}") from None
-        table = tr.unit_table(device.servo_rate_hz, device.effective_mass)
-        peak = float(np.max(np.abs(table))) * v
+        # what is played at the design speed (a table's rows, blend and attenuation)
+        table = tr.table(device.servo_rate_hz, device.effective_mass)
+        peak = float(np.max(np.abs(table.force_at(v))))
         if not peak <= f_max:  # a NaN peak fails this too
             raise cx.error(path, f"sample '{s.id}': transient peak {peak:.2f} N at {v:g} m/s "
                            f"exceeds the {f_max:.2f} N the device can deliver ({limit:g} A × "

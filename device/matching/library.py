@@ -256,18 +256,24 @@ SWEEP_REPEATS = 4
 TAP_SECONDS = 5.0
 
 
+#: the matching band of the paper [Hz], the one the library store holds
+PAPER_BAND = (10.0, 500.0)
+
+
 def build_key(info: DeviceInfo, source: Scene, *, entries: int = 12, windows: int = 8,
-              levels: tuple[float, ...] = SWEEP_LEVELS, repeats: int = SWEEP_REPEATS) -> dict:
+              levels: tuple[float, ...] = SWEEP_LEVELS, repeats: int = SWEEP_REPEATS,
+              band: tuple[float, float] = PAPER_BAND) -> dict:
     """What a build's measurements depend on (a :class:`BuildRecord` is kept per key)."""
     return {"pipeline": PIPELINE_VERSION, "device": [info.model, info.serial_number,
                                                       float(info.servo_rate_hz)],
             "source": source.to_dict(), "windows": windows, "levels": list(levels),
-            "repeats": repeats, "tap_window_s": TAP_WINDOW_S, "entries": entries}
+            "repeats": repeats, "tap_window_s": TAP_WINDOW_S, "entries": entries,
+            "band": list(band)}
 
 
 def build_library(device, source: Scene, entries: int = 12, method: str = "regularized",
                   lam: float = 1e-4, windows: int = 8, order: int = 7, relative_degree: int = 4,
-                  model: TFModel | None = None, *, band: tuple[float, float] = (10.0, 500.0),
+                  model: TFModel | None = None, *, band: tuple[float, float] = PAPER_BAND,
                   record: BuildRecord | None = None, on_fault: OnFault | None = None,
                   on_step: OnStep | None = None) -> TransientLibrary:
     """Run the whole pipeline on ``device`` for the real sample ``source``.
@@ -395,7 +401,12 @@ def sysid_record_path(info: DeviceInfo) -> Path:
 
 def build_into_store(device, source: Scene, **options: Any) -> Path:
     """Build the library of real sample ``source`` on ``device`` (:func:`build_library`,
-    ``options`` passed on) and keep it in the store; returns its path."""
+    ``options`` passed on) and keep it in the store; returns its path. The store holds
+    libraries matched over the paper's band: another band is saved under a path of its own
+    (:meth:`TransientLibrary.save`), never in the protocol's place."""
+    if tuple(options.get("band", PAPER_BAND)) != PAPER_BAND:
+        raise ValueError(f"the library store holds libraries matched over {PAPER_BAND} Hz; "
+                         f"save one matched over {tuple(options['band'])} Hz under its own path")
     lib = build_library(device, source, **options)
     return lib.save(library_path(device.info, source))
 

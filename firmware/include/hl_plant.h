@@ -33,8 +33,8 @@ void plant_scene(float surface_m, int real_sample, float stiffness, float dampin
 void plant_block(float mass, float support_k, float support_b);
 void plant_home(float height_m);
 void plant_task(int task);        /* HAL_TASK_REST / TAP / HOLD */
-/* for tests: the mechanical energy stored [J] (stylus and block kinetic, the hand's,
- * contact's and support's springs), with the hand at rest */
+/* for tests: the mechanical energy stored [J] (motor side, tip and block kinetic; the
+ * linkage's, the hand's, the contact's and the support's springs), with the hand at rest */
 float plant_energy(void);
 
 #endif

@@ -12,6 +12,7 @@
 static const float M_MOTOR = 0.045f;  /* motor side, where the encoder sits [kg] */
 static const float M_TIP = 0.110f;    /* tip 0.010 + hand 0.100, where the accelerometer sits */
 static const float MASS = 0.155f;     /* all that moves: the hand's model of it [kg] */
+static const float INV_MOTOR = 1.0f / 0.045f, INV_TIP = 1.0f / 0.110f; /* no divisions per step */
 static const float K_LINK = 21000.0f; /* the linkage between motor and tip [N/m] */
 static const float B_LINK = 4.0f;     /* [N*s/m] */
 static const float K_HAND = 300.0f;   /* [N/m] */
@@ -35,6 +36,8 @@ typedef struct {
     float a;                   /* the accelerometer's output before noise [m/s^2] */
     float lp_b0, lp_a1, lp_a2, lp_s1, lp_s2; /* its filter (bilinear) and state */
     float amp_keep;            /* exp(-w_amp h): the amplifier's lag over one sub-step */
+    float amp_mean;            /* (1 - amp_keep) / (w_amp h): its mean over the sub-step */
+    float inv_mb;              /* 1 / the block's mass (0: no block) */
     float zr, vr, ar;          /* intended motion */
     float surface, k, b;
     int real;
@@ -101,7 +104,7 @@ void plant_scene(float surface_m, int real_sample, float stiffness, float dampin
     P.real = real_sample;
     P.k = stiffness > 0 ? stiffness : 0.0f;
     P.b = damping > 0 ? damping : 0.0f; /* as given: 0 is a lossless contact, as simulated */
-    P.mb = P.ks = P.bs = P.xb = P.vb = 0.0f;
+    P.mb = P.ks = P.bs = P.xb = P.vb = P.inv_mb = 0.0f;
     substeps();
 }
 
@@ -111,16 +114,17 @@ void plant_scene(float surface_m, int real_sample, float stiffness, float dampin
  * and c*h/m <= 0.5. A sample the servo's tick cannot integrate in SUB_MAX steps (a 0.1-mg
  * block on 70 kN/m, a 10^6 N*s/m damper: any value SCENE_BEGIN allows) is simulated at the
  * stiffness and damping SUB_MAX steps hold, so that the simulated plant never diverges; a
- * board has no plant. The amplifier's lag is integrated exactly. */
+ * board has no plant. The amplifier's lag is integrated exactly, and each sub-step pushes with
+ * its mean over the sub-step (the lag is 32 us, a 10-kHz tick 100 us). */
 #define SUB_MAX 256
 static void substeps(void)
 {
-    float inv_tip = 1.0f / M_TIP, inv_block = P.mb > 0.0f ? 1.0f / P.mb : 0.0f;
+    float inv_tip = INV_TIP, inv_block = P.inv_mb;
     float inv_c = inv_tip + inv_block; /* the contact joins the tip to the block */
     float hmin = P.dt / (float)SUB_MAX;
     float w2_max = (0.25f / hmin) * (0.25f / hmin), c_max = 0.5f / hmin;
-    float w2 = K_LINK * (1.0f / M_MOTOR + inv_tip) + K_HAND * inv_tip;
-    float c = B_LINK * (1.0f / M_MOTOR + inv_tip) + B_HAND * inv_tip + B_MOTOR / M_MOTOR;
+    float w2 = K_LINK * (INV_MOTOR + inv_tip) + K_HAND * inv_tip;
+    float c = B_LINK * (INV_MOTOR + inv_tip) + B_HAND * inv_tip + B_MOTOR * INV_MOTOR;
     if (P.mb > 0.0f) {
         P.ks = fminf(P.ks, 0.5f * w2_max * P.mb);
         P.bs = fminf(P.bs, 0.5f * c_max * P.mb);
@@ -135,7 +139,9 @@ static void substeps(void)
     }
     float need = fmaxf(sqrtf(w2) * P.dt / 0.25f, c * P.dt / 0.5f);
     P.sub = need < (float)(SUB_MAX - 1) ? 1 + (int)need : SUB_MAX;
-    P.amp_keep = expf(-2.0f * PI_F * AMP_HZ * P.dt / (float)P.sub);
+    float wh = 2.0f * PI_F * AMP_HZ * P.dt / (float)P.sub;
+    P.amp_keep = expf(-wh);
+    P.amp_mean = (1.0f - P.amp_keep) / wh;
 }
 
 void plant_block(float mass, float support_k, float support_b)
@@ -146,6 +152,7 @@ void plant_block(float mass, float support_k, float support_b)
     P.mb = moves ? mass : 0.0f;
     P.ks = moves ? support_k : 0.0f;
     P.bs = moves ? fmaxf(support_b, 0.0f) : 0.0f;
+    P.inv_mb = moves ? 1.0f / mass : 0.0f;
     P.xb = P.vb = 0.0f;
     substeps();
 }
@@ -251,6 +258,7 @@ void plant_step(float current_a)
     const float ff = (B_HAND + B_MOTOR) * P.vr + K_HAND * P.zr + MASS * P.ar;
     float a_sum = 0.0f;
     for (int i = 0; i < sub; i++) {
+        float fa = cmd + (P.fa - cmd) * P.amp_mean; /* the amplifier's mean push */
         P.fa = cmd + (P.fa - cmd) * P.amp_keep;
         float fl = K_LINK * (P.z - P.z1) + B_LINK * (P.v - P.v1); /* on the motor; -fl on the tip */
         float fc = 0.0f; /* the contact's force on the tip (up) */
@@ -258,10 +266,10 @@ void plant_step(float current_a)
             fc = P.k * (P.surface + P.xb - P.z) + P.b * (P.vb - P.v);
             fc = fc > 0.0f ? fc : 0.0f; /* a sample pushes, never pulls */
         }
-        float a2 = (ff - K_HAND * P.z - B_HAND * P.v - fl + fc) / M_TIP;
-        float a1 = (P.fa + fl - B_MOTOR * P.v1) / M_MOTOR;
+        float a2 = (ff - K_HAND * P.z - B_HAND * P.v - fl + fc) * INV_TIP;
+        float a1 = (fa + fl - B_MOTOR * P.v1) * INV_MOTOR;
         if (P.mb > 0.0f) { /* the block: pushed down by the contact, held by its support */
-            P.vb += (-fc - P.ks * P.xb - P.bs * P.vb) / P.mb * h;
+            P.vb += (-fc - P.ks * P.xb - P.bs * P.vb) * P.inv_mb * h;
             P.xb += P.vb * h;
         }
         P.v1 += a1 * h;

@@ -36,3 +36,11 @@ def test_a_pair_with_the_same_difference_for_everyone_is_said_to_have_no_test():
                                                    "rating"].to_numpy() - 0.5
     out = {a["pair"]: a for a in orderings._alike(d)}
     assert out["firm_spring–foam"]["verdict"] == "no test: difference 0.5 for every subject"
+
+
+def test_a_sample_nobody_rated_validly_is_said_to_have_no_test():
+    d = _rows({})
+    d.loc[d["sample"] == "foam", "valid"] = False
+    out = {a["pair"]: a for a in orderings._alike(d)}
+    assert out["firm_spring–foam"]["verdict"] == "no test: foam has no valid rating"
+    assert out["matched_firm–wood_on_foam"]["equivalent"]

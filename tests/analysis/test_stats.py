@@ -127,8 +127,10 @@ def test_equivalence_matches_pingouin_and_its_definition(a, b, bound, p_pingouin
 
 
 def test_equivalence_refuses_what_it_cannot_test():
-    with pytest.raises(StatsError, match="bound must be a finite number > 0"):
-        equivalence_ttests(ONE, "y", "cond", "subj", 0.0)
+    for bad in (0.0, -1.0, math.inf, math.nan, True, "1"):
+        with pytest.raises(StatsError, match="bound must be a finite number > 0"):
+            equivalence_ttests(ONE, "y", "cond", "subj", bad)
+    assert len(equivalence_ttests(ONE, "y", "cond", "subj", np.float32(1.0))) == 6
     with pytest.raises(StatsError, match=r"no such pair of 'cond' levels: \('c0', 'c9'\)"):
         equivalence_ttests(ONE, "y", "cond", "subj", 1.0, pairs=[("c0", "c9")])
     same = ONE.copy()

@@ -1,5 +1,7 @@
 """The grasp-force model of contact vibrations (SPEC §3)."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -114,3 +116,40 @@ def test_a_grasp_force_outside_the_models_range_is_refused():
                          "transient": {"kind": "grasp", "grasp_force": 80.0}})
     with pytest.raises(ValueError, match="outside the model's range"):
         PUBLISHED.at(100.0)
+
+
+def test_an_unattenuated_grasp_transient_is_refused_by_what_is_played_and_an_attenuated_fits():
+    """9–70 N at 0.11 m/s on a 55-g stylus: the wire refuses a linear table beyond ±32.767
+    N (never clips it), and 0.04 of it carries 5 N of grasp within a 3-N device."""
+    from device.serial.backend import _wire_table
+
+    full = _grasp_table(5.0)
+    with pytest.raises(SceneError, match=r"linear table carries at most ±32.767 N"):
+        _wire_table(full, "here")
+    soft = Scene.from_dict({"name": "g", "spring": 500.0, "transient": {
+        "kind": "grasp", "grasp_force": 5.0, "attenuation": 0.04}}).transient.table(10_000, 0.055)
+    v, q = _wire_table(soft, "here")
+    assert list(v) == [0.02, 0.40] and q.shape == soft.forces.shape
+    np.testing.assert_allclose(soft.force_at(0.11), 0.04 * full.force_at(0.11))
+    assert np.max(np.abs(soft.force_at(0.11))) < 3.0
+
+
+def test_the_protocol_check_names_the_grasp_transients_played_peak(tmp_path):
+    """The check at the design speed uses the played table (speed and grasp shares): at 20
+    N of grasp, 0.055 kg × 1,272 m/s² = 70 N, not the speed's share alone (9 N)."""
+    from device.sim.backend import SimDevice
+    from protocols import load_protocol
+    from protocols.loader import ProtocolError
+
+    text = load_protocol("realism").text.replace(
+        'scene.transient = { kind = "pulse", gain = 5.7, duration = 0.020 }',
+        'scene.transient = { kind = "grasp", grasp_force = 20.0 }', 1)
+    assert "grasp_force = 20.0" in text
+    path = tmp_path / "grasp.toml"
+    path.write_text(text)
+    with pytest.raises(ProtocolError, match=r"'pulse_firm': transient peak ([\d.]+) N at 0.11 m/s"
+                       ) as err:
+        load_protocol(path, SimDevice().info)
+    played = float(re.search(r"peak ([\d.]+) N", str(err.value)).group(1))
+    assert played == pytest.approx(np.max(np.abs(_grasp_table(20.0).force_at(0.11))), abs=0.01)
+    assert played > 65.0  # the speed's share alone was 9.2 N
