@@ -81,8 +81,9 @@ static volatile uint32_t lock_depth;
  * measurement finds the line's rate; it stays for QEMU run on the computer's clock. */
 #define TX_SHARE_DIV 4u           /* a quarter of the device's time */
 #define TX_CHUNK 128u
-#define TX_PROBE 2048u            /* bytes timed per measurement: 5-20 ms, long enough to
-                                   * meet the host's scheduler on a busy computer */
+#define TX_PROBE 2048u            /* bytes timed per measurement: 20 ms at the 1-Mbaud
+                                   * line's 100,000 B/s, long enough to meet the host's
+                                   * scheduler on a busy computer */
 static volatile uint32_t hal_ticks; /* servo ticks, for timing */
 #endif
 
