@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from device import LibraryTransient, Material, Ringing, Scene, SceneError, TransientTable
+from device import LibraryTransient, Material, Ringing, Scene, SceneError, Support, TransientTable
 from device.matching.compare import scene_distances
 from device.matching.inversion import (
     DiscreteModel,
@@ -423,3 +423,20 @@ def test_a_vibration_fit_that_finds_no_ring_down_says_what_it_found():
     msg = str(err.value)
     assert msg.startswith("0 of 3 taps hold a vibration that decays") and "300–1200 Hz" in msg
     assert "1 without an incoming speed" in msg and "a slope needs 2" in msg
+
+
+def test_the_store_refuses_a_library_matched_over_another_band(tmp_path, monkeypatch):
+    """A library matched over 10–1000 Hz would take the protocol's library's place in the
+    store (its path does not name the band): refused before anything is measured; its own
+    build record is kept apart by its key."""
+    from device.matching.library import PAPER_BAND, build_key
+
+    monkeypatch.setenv("HAPTICLAB_LIBRARIES", str(tmp_path))
+    src = Scene("wood_on_foam", material=Material(70_000.0, 20.0, mass=0.006,
+                                                  support=Support(350.0, 3.0)))
+    dev = SimDevice()
+    with pytest.raises(ValueError, match=r"save one matched over \(10.0, 1000.0\) Hz under"):
+        build_into_store(dev, src, band=(10.0, 1000.0))
+    assert not list(tmp_path.iterdir())
+    assert build_key(dev.info, src)["band"] == list(PAPER_BAND)
+    assert build_key(dev.info, src, band=(10.0, 1000.0)) != build_key(dev.info, src)
