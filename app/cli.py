@@ -263,7 +263,7 @@ def _bench(args: argparse.Namespace) -> int:
     except ModuleNotFoundError:
         raise UsageError(f"no benchmark named {args.what!r}; "
                          "available: sim, accuracy, matching, link, crash, analysis, demo, "
-                         "energy, orderings, causes, tick") from None
+                         "energy, orderings, causes, factorial, tick") from None
     return module.main(args)
 
 
@@ -715,6 +715,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("what", help="which benchmark: sim, accuracy (every scene, tap and servo "
                    "rate against 100 kHz), matching, link, crash, analysis, demo, energy, "
                    "orderings, causes (why realism's middle ranks differ from the paper), "
+                   "factorial (why the factorial and identification findings differ, and "
+                   "what would change them), "
                    "tick (the firmware's servo tick on the Cortex-M4)")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
@@ -724,7 +726,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--points", default=None, help="crash: kill after every write point "
                    "('all') or the listed ones ('3,17')")
     b.add_argument("--seeds", default=None, help="orderings: study seeds (default "
-                   "1,2,3,4,5); causes: device seeds (default 1,2)")
+                   "1,2,3,4,5); causes, factorial: device seeds (default 1,2)")
     b.add_argument("--firmware", choices=("host", "qemu"), default=None,
                    help="link: measure the reference firmware (against the Python emulator)")
     b.add_argument("--load", default=None, help="link: competing CPU-bound processes, e.g. "

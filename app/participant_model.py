@@ -83,7 +83,7 @@ from device import SimulatedHand
 
 from .participants import Participant
 
-__all__ = ["SimulatedParticipant", "felt_features", "FEATURES", "JND"]
+__all__ = ["SimulatedParticipant", "felt_features", "name_surfaces", "FEATURES", "JND"]
 
 FEATURES = ("stop", "jolt", "pitch", "ring")
 #: Per-feature spread that counts as one unit of perceived difference [log units].
@@ -188,6 +188,41 @@ def felt_features(result, window: float = 0.060) -> np.ndarray:
     if not rows:
         return _VOID.copy()
     return np.median(np.array(rows), axis=0)
+
+
+def name_surfaces(felt: np.ndarray, remembered: np.ndarray, jnd: np.ndarray = JND
+                  ) -> tuple[int, ...]:
+    """Which remembered material each felt surface is named as: the relative judgement of
+    the module docstring.
+
+    The pattern of differences among the surfaces (centred features) is matched to the
+    pattern among the remembered materials, scaled to the surfaces' spread (every rendering
+    is softer than any real block, so absolute distances would call everything the softest
+    material, and the renderings span a narrower range than the real blocks); the
+    assignment with the least ``ID_WEIGHT``-weighted, JND-scaled squared difference wins.
+
+    Parameters
+    ----------
+    felt : ndarray (n, 4)
+        The surfaces' features as perceived [log units].
+    remembered : ndarray (n, 4)
+        The materials' features as remembered [log units].
+    jnd : ndarray (4,)
+        One unit of perceived difference per feature [log units].
+
+    Returns
+    -------
+    tuple of int
+        For surface ``i``, the index of the material it is named as (a permutation).
+    """
+    felt_c, mem_c = felt - felt.mean(0), remembered - remembered.mean(0)
+    spread = np.where(mem_c.std(0) > 0, felt_c.std(0) / np.maximum(mem_c.std(0), 1e-12), 1.0)
+    mem_c = mem_c * spread
+    n = len(felt)
+    cost = {(i, j): float(np.nansum((ID_WEIGHT * (felt_c[i] - mem_c[j]) / jnd) ** 2))
+            for i in range(n) for j in range(n)}
+    return min(itertools.permutations(range(n)),
+               key=lambda p: sum(cost[i, j] for i, j in enumerate(p)))
 
 
 @dataclass(frozen=True)
@@ -353,17 +388,7 @@ class SimulatedParticipant(Participant):
         practice = max(int(getattr(trial, "repetition", 1)) - 1, 0)
         felt = np.array([self._perceive(felt_features(r), rng, practice) for r in results])
         mem = np.array([self._feel_scene(*refs[c]) for c in choices])
-        # relative judgement: the pattern of differences among the three surfaces is matched
-        # to the pattern among the remembered materials (every rendering is softer than any
-        # real block, so absolute distances would call everything the softest material)
-        felt_c, mem_c = felt - felt.mean(0), mem - mem.mean(0)
-        spread = np.where(mem_c.std(0) > 0, felt_c.std(0) / np.maximum(mem_c.std(0), 1e-12), 1.0)
-        mem_c = mem_c * spread  # the renderings span a narrower range than the real blocks
-        cost = {(i, j): float(np.nansum((ID_WEIGHT * (felt_c[i] - mem_c[j]) / JND) ** 2))
-                for i in range(len(felt)) for j in range(len(choices))}
-        best = min(itertools.permutations(range(len(choices))),
-                   key=lambda p: sum(cost[i, j] for i, j in enumerate(p)))
-        best = [choices[j] for j in best]
+        best = [choices[j] for j in name_surfaces(felt, mem)]
         return [str(c) for c in best], float(rng.uniform(4.0, 10.0))
 
     def debrief(self) -> str:
