@@ -274,7 +274,7 @@ def build_key(info: DeviceInfo, source: Scene, *, entries: int = 12, windows: in
 def build_library(device, source: Scene, entries: int = 12, method: str = "regularized",
                   lam: float = 1e-4, windows: int = 8, order: int = 7, relative_degree: int = 4,
                   model: TFModel | None = None, *, band: tuple[float, float] = PAPER_BAND,
-                  record: BuildRecord | None = None, on_fault: OnFault | None = None,
+                  under: Scene | None = None, record: BuildRecord | None = None, on_fault: OnFault | None = None,
                   on_step: OnStep | None = None) -> TransientLibrary:
     """Run the whole pipeline on ``device`` for the real sample ``source``.
 
@@ -295,6 +295,15 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         Where the sweep identifies the device and the taps are matched: the paper's
         10–500 Hz by default (the top clipped to 0.4 of the servo rate,
         :func:`usable_band`); ``hapticlab bench causes`` widens it to see what it costs.
+    under : Scene, optional
+        The virtual scene the library will be played over (its spring). By default each
+        transient reproduces the whole tap, as the paper's: played over a spring, the part
+        of the tap the spring renders anyway comes twice (the paper attenuated its library
+        by 0.8 for it and left "superposition" to future work). Given, ``windows`` windows
+        are also tapped on ``under``, and each target has the acceleration ``under`` gives
+        at its speed taken out first: their mean per unit of incoming speed (a linear
+        spring on a linear hand responds in proportion to the speed). Not for the store:
+        ``hapticlab bench causes`` measures what it changes.
     record : BuildRecord, optional
         Keeps each finished measurement (a sweep, a tapping window) and gives back those
         of an earlier run of the same build, which are not measured again.
@@ -336,7 +345,18 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     if len(taps) < 2:
         raise LibraryError(f"only {len(taps)} clean taps recorded on '{source.name}'")
     pick = even_spread(np.array([t.velocity for t in taps]), entries)
-    invs = [invert(dm, taps[i].accel, method, lam=lam, band=band) for i in pick]
+    targets = [taps[i].accel for i in pick]
+    superposed = None
+    if under is not None:
+        if under.is_real:
+            raise ValueError(f"a library is played over a virtual scene; '{under.name}' is real")
+        own = segment_taps(record_taps(device, under, windows, TAP_SECONDS))
+        if len(own) < 2:
+            raise LibraryError(f"only {len(own)} clean taps recorded on '{under.name}'")
+        per_speed = np.mean([t.accel / t.velocity for t in own], axis=0)  # [m/s² per m/s]
+        targets = [taps[i].accel - taps[i].velocity * per_speed for i in pick]
+        superposed = {"scene": under.to_dict(), "taps": len(own)}
+    invs = [invert(dm, a, method, lam=lam, band=band) for a in targets]
     meta: dict[str, Any] = {
         "format_version": FORMAT_VERSION,
         "pipeline": PIPELINE_VERSION,
@@ -350,6 +370,8 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         "source": {"sample": source.name, "scene": source.to_dict(), "windows": windows,
                    "taps_recorded": len(taps), "tap_times_s": [taps[i].t for i in pick]},
     }
+    if superposed is not None:
+        meta["superposed_on"] = superposed
     return TransientLibrary(np.array([taps[i].velocity for i in pick]),
                             np.stack([v.force for v in invs]), meta)
 
@@ -407,6 +429,9 @@ def build_into_store(device, source: Scene, **options: Any) -> Path:
     if tuple(options.get("band", PAPER_BAND)) != PAPER_BAND:
         raise ValueError(f"the library store holds libraries matched over {PAPER_BAND} Hz; "
                          f"save one matched over {tuple(options['band'])} Hz under its own path")
+    if options.get("under") is not None:
+        raise ValueError("the library store holds libraries of whole taps, as the paper's; "
+                         "save one with the spring's response taken out under its own path")
     lib = build_library(device, source, **options)
     return lib.save(library_path(device.info, source))
 

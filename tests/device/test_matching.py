@@ -440,3 +440,39 @@ def test_the_store_refuses_a_library_matched_over_another_band(tmp_path, monkeyp
     assert not list(tmp_path.iterdir())
     assert build_key(dev.info, src)["band"] == list(PAPER_BAND)
     assert build_key(dev.info, src, band=(10.0, 1000.0)) != build_key(dev.info, src)
+
+
+def test_a_library_played_over_a_spring_can_leave_the_springs_share_out(ident, realism):
+    """``build_library(under=spring)``: each target is the tap less the spring's mean response
+    per unit speed times the tap's speed, recomputed here from the same device's taps (the
+    source's windows, then the spring's: the order the build taps them in). The inversion is
+    linear in its target, so each transient is the whole tap's less the speed times the
+    inverse of that mean. A real ``under`` and the store are refused."""
+    from dataclasses import replace
+
+    from device.matching.inversion import discretize, invert
+    from device.matching.library import TAP_SECONDS, even_spread, record_taps
+
+    source = realism.samples["wood_on_foam"].scene
+    spring = replace(realism.samples["matched_firm"].scene, transient=None)
+    lib = build_library(SimDevice(seed=8), source, entries=4, windows=2, model=ident.model,
+                        under=spring)
+    assert lib.meta["superposed_on"]["taps"] >= 2
+    assert lib.meta["superposed_on"]["scene"]["spring"] == spring.spring
+    dev = SimDevice(seed=8)
+    taps = segment_taps(record_taps(dev, source, 2, TAP_SECONDS))
+    own = segment_taps(record_taps(dev, spring, 2, TAP_SECONDS))
+    per_speed = np.mean([t.accel / t.velocity for t in own], axis=0)
+    dm = discretize(ident.model, dev.info.servo_rate_hz)
+    pick = even_spread(np.array([t.velocity for t in taps]), 4)
+    for row, i in zip(lib.forces, pick, strict=True):
+        whole = invert(dm, taps[i].accel).force
+        share = invert(dm, per_speed).force
+        want = whole - taps[i].velocity * share
+        assert np.max(np.abs(row - want)) <= 1e-9 * np.max(np.abs(whole))
+        # the spring's share is a real part of the transient, not a rounding
+        assert np.max(np.abs(row - whole)) > 0.05 * np.max(np.abs(whole))
+    with pytest.raises(ValueError, match="played over a virtual scene"):
+        build_library(SimDevice(), source, model=ident.model, windows=2, under=source)
+    with pytest.raises(ValueError, match="libraries of whole taps"):
+        build_into_store(SimDevice(), source, under=spring)
