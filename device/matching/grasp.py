@@ -40,11 +40,18 @@ from scipy.linalg import expm
 from ..scene import PUBLISHED_GRASP as PUBLISHED
 from ..scene import GraspModel, GraspTransient
 
-__all__ = ["GraspModel", "PUBLISHED", "GraspRig", "Impact", "ImpactFit", "identify_impact",
-           "identify_grasp", "fit_percent", "GraspTransient", "rls_second_order", "peak_gain",
-           "foh_filter"]
+__all__ = ["GraspModel", "PUBLISHED", "TISSUE", "GraspRig", "Impact", "ImpactFit",
+           "identify_impact", "identify_grasp", "fit_percent", "GraspTransient",
+           "rls_second_order", "peak_gain", "foh_filter"]
 
 G = 9.80665
+#: The rig's unmodelled mode (:attr:`GraspRig.tissue`): 12 % of the handle's mass at twice
+#: its natural frequency (~575 Hz at no grasp, inside the accelerometer's 1-kHz band),
+#: damping ratio 0.2. The mass share is what makes a second-order fit of 60 impacts score
+#: what the paper's did (manual 69.8–79.6 %, recursive 80.3–81.4 %; measured on seed 1:
+#: manual 78.0, least squares 80.9, recursive 77.1); the frequency and damping are our
+#: assumption (the paper gives no second mode).
+TISSUE = (0.12, 2.0, 0.2)
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
@@ -68,6 +75,50 @@ def _plant(m: float, c: float, k: float, rc_hz: float | None):
         return A, B, np.array([0.0, 0.0, 1.0]), 0.0
     A = np.array([[0.0, 1.0], [-k / m, -c / m]])
     return A, np.array([0.0, 1.0 / m]), np.array([-k / m, -c / m]), 1.0 / m
+
+
+def _plant_with_tissue(m: float, c: float, k: float, tissue: tuple[float, float, float],
+                       rc_hz: float | None):
+    """(A, B, C, D) of force → the handle's acceleration with a tissue mass on the handle
+    (:attr:`GraspRig.tissue`), behind the RC when given. States: handle position and
+    velocity, tissue position and velocity (and the RC's output)."""
+    mu, ratio, zeta = tissue
+    m2 = mu * m
+    w2 = ratio * math.sqrt(k / m)
+    k2, c2 = m2 * w2 ** 2, 2 * zeta * m2 * w2
+    A = np.array([[0.0, 1.0, 0.0, 0.0],
+                  [-(k + k2) / m, -(c + c2) / m, k2 / m, c2 / m],
+                  [0.0, 0.0, 0.0, 1.0],
+                  [k2 / m2, c2 / m2, -k2 / m2, -c2 / m2]])
+    B = np.array([0.0, 1.0 / m, 0.0, 0.0])
+    C, D = A[1].copy(), 1.0 / m  # the handle's acceleration
+    if not rc_hz:
+        return A, B, C, D
+    wc = 2 * math.pi * rc_hz
+    Af = np.zeros((5, 5))
+    Af[:4, :4] = A
+    Af[4, :4] = wc * C
+    Af[4, 4] = -wc
+    return Af, np.append(B, wc * D), np.array([0.0, 0.0, 0.0, 0.0, 1.0]), 0.0
+
+
+def _zoh_response(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: float, dt: float,
+                  u: np.ndarray) -> np.ndarray:
+    """Output of ẋ = Ax + Bu, y = Cx + Du for ``u`` held over each step ``dt`` [s], mode by
+    mode (the discrete system diagonalized: one first-order recursion per eigenvalue), so a
+    fast sampling (1 MHz) of a 5th-order plant stays exact where a transfer function's
+    polynomials would not."""
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B[:, None], C[None, :], np.array([[D]])),
+                                             dt, method="zoh")
+    lam, V = np.linalg.eig(Ad)
+    b = np.linalg.solve(V, Bd[:, 0])
+    c = Cd[0] @ V
+    y = np.zeros(len(u), dtype=complex)
+    for i in range(len(lam)):
+        # z[k+1] = λ z[k] + b u[k]: the state after step k is the output one step later
+        z = signal.lfilter([0.0, b[i]], [1.0, -lam[i]], u.astype(complex))
+        y += c[i] * z
+    return y.real + Dd[0, 0] * u
 
 
 def foh_filter(m: float, c: float, k: float, rate_hz: float, rc_hz: float | None
@@ -145,6 +196,12 @@ class GraspRig:
         Duration of the half-sine contact force of an impact (steel tip on balsa).
     window : float [s]
         Recorded time from the impact.
+    tissue : (float, float, float), optional
+        A mode the second-order model does not have: the finger pads' tissue as a mass
+        ``μ·m`` on the handle, tuned alone to ``r`` × the handle's natural frequency with
+        damping ratio ``ζ`` (``(μ, r, ζ)``). ``None``: the handle is the published model
+        alone, and every fit is a round trip. :data:`TISSUE` is sized so that a second-order
+        fit scores what the paper's did (SPEC §3: 69.8–81.4 %).
     """
 
     model: GraspModel = PUBLISHED
@@ -155,6 +212,7 @@ class GraspRig:
     force_noise: float = 0.02
     pulse: float = 0.0004
     window: float = 0.030
+    tissue: tuple[float, float, float] | None = None
 
     def impact(self, rng: np.random.Generator, grasp_force: float, peak_force: float) -> Impact:
         """One impact: the continuous half-sine contact force integrated at 100× the rate
@@ -168,13 +226,9 @@ class GraspRig:
         ff = np.where((tf >= onset) & (tf <= onset + self.pulse),
                       peak_force * np.sin(np.pi * np.clip(tf - onset, 0, self.pulse) / self.pulse),
                       0.0)
-        A, B, C, D = _plant(m, c, k, self.rc_hz)
-        sysd = signal.cont2discrete((A, B[:, None], C[None, :], np.array([[D]])),
-                                    1 / (self.rate_hz * over), method="zoh")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", signal.BadCoefficients)
-            bz, az = signal.ss2tf(*sysd[:4])
-        a = signal.lfilter(bz[0], az, ff)[::over]
+        A, B, C, D = (_plant(m, c, k, self.rc_hz) if self.tissue is None else
+                      _plant_with_tissue(m, c, k, self.tissue, self.rc_hz))
+        a = _zoh_response(A, B, C, D, 1 / (self.rate_hz * over), ff)[::over]
         force = ff[::over]
         a = np.clip(a + rng.normal(0, self.accel_noise, a.size), -self.accel_range,
                     self.accel_range)

@@ -274,8 +274,9 @@ def build_key(info: DeviceInfo, source: Scene, *, entries: int = 12, windows: in
 def build_library(device, source: Scene, entries: int = 12, method: str = "regularized",
                   lam: float = 1e-4, windows: int = 8, order: int = 7, relative_degree: int = 4,
                   model: TFModel | None = None, *, band: tuple[float, float] = PAPER_BAND,
-                  under: Scene | None = None, record: BuildRecord | None = None, on_fault: OnFault | None = None,
-                  on_step: OnStep | None = None) -> TransientLibrary:
+                  under: Scene | None = None, record: BuildRecord | None = None,
+                  on_fault: OnFault | None = None, on_step: OnStep | None = None
+                  ) -> TransientLibrary:
     """Run the whole pipeline on ``device`` for the real sample ``source``.
 
     Parameters

@@ -1,6 +1,7 @@
 """The hapticlab command line, run as a user would."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -54,10 +55,11 @@ def test_bench_sim_json_shape():
 
 
 def test_fit_grasp_json():
-    out = run("device", "fit-grasp", "--simulated", "--impacts", "100", "--seed", "3",
-              "--json")
+    out = run("device", "fit-grasp", "--simulated", "--rig", "published", "--impacts", "100",
+              "--seed", "3", "--json")
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
+    assert r["rig"] == {"kind": "published", "tissue": None}
     for p in ("m", "c", "k"):
         assert set(r[p]) == {"intercept", "slope"}
     # published intercepts within 3 % (the least-squares estimate; see tests/device/test_grasp)
@@ -72,6 +74,18 @@ def test_fit_grasp_json():
         assert err["intercept"] == pytest.approx(r[p]["intercept"] / i_pub - 1, abs=1e-12)
         assert err["slope"] == pytest.approx(r[p]["slope"] / s_pub - 1, abs=1e-12)
         assert abs(err["intercept"]) < 0.03 and abs(err["slope"]) < 0.15, (p, err)
+
+
+def test_fit_grasp_defaults_to_the_rig_with_a_mode_the_model_lacks():
+    """The default rig is not a round trip: its fit % is the paper's range, not ~89 %, and
+    the command says what its differences mean; too few impacts are refused by name."""
+    out = run("device", "fit-grasp", "--simulated", "--impacts", "60", "--seed", "1")
+    assert out.returncode == 0, out.stderr
+    assert "what a second-order fit makes of such impacts" in out.stdout
+    median = float(re.search(r"fit % median ([0-9.]+)", out.stdout).group(1))
+    assert 69.0 < median < 84.0, out.stdout
+    bad = run("device", "fit-grasp", "--simulated", "--impacts", "2")
+    assert bad.returncode == 2 and "--impacts 2" in bad.stderr and "at least 3" in bad.stderr
 
 
 def test_sysid_json_and_plot(artifacts):

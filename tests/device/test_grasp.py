@@ -8,6 +8,7 @@ import pytest
 from device import Scene, SceneError
 from device.matching.grasp import (
     PUBLISHED,
+    TISSUE,
     GraspRig,
     _model_accel,
     fit_percent,
@@ -74,6 +75,39 @@ def test_recovers_the_published_relations_from_100_noisy_impacts(noisy, estimate
         assert r[name]["intercept"] == pytest.approx(i_pub, rel=tol_i), name
         assert r[name]["slope"] == pytest.approx(s_pub, rel=tol_s), name
     assert r["fit_percent"]["by_estimate"][estimate] > 80.0  # the paper: 69.8–81.4 %
+
+
+def test_a_tissue_mode_of_no_mass_is_the_published_handle():
+    """The tissue rig's plant with a vanishing tissue mass gives the published handle's
+    impact (to 1e-6 of its peak); a real one changes it."""
+    rng = np.random.default_rng(3)
+    plain = GraspRig(accel_noise=0.0, force_noise=0.0).impact(rng, 8.0, 1.5)
+    rng = np.random.default_rng(3)
+    none = GraspRig(accel_noise=0.0, force_noise=0.0, tissue=(1e-12, 2.0, 0.2)).impact(
+        rng, 8.0, 1.5)
+    rng = np.random.default_rng(3)
+    some = GraspRig(accel_noise=0.0, force_noise=0.0, tissue=TISSUE).impact(rng, 8.0, 1.5)
+    peak = np.max(np.abs(plain.accel))
+    assert np.max(np.abs(none.accel - plain.accel)) < 1e-6 * peak
+    assert np.max(np.abs(some.accel - plain.accel)) > 0.05 * peak
+
+
+def test_impacts_with_a_mode_the_model_lacks_fit_as_the_papers_and_bias_the_relations():
+    """The tissue rig (the published handle with TISSUE, 60 impacts, seed 1) is not a round
+    trip: a second-order fit scores what the paper's did (manual 69.8–79.6 %, recursive
+    80.3–81.4 %; measured: manual 78.0, least squares 80.9, recursive 77.1) where the
+    published rig scores 86–89, and the relations come out biased by the unmodelled mode
+    (measured: m +8.6 %, c +6.1 %, k −6.2 % at no grasp), the slopes keep their sign."""
+    r = identify_grasp(GraspRig(tissue=TISSUE).impacts(60, seed=1))
+    fit = r["fit_percent"]["by_estimate"]
+    assert 69.0 <= fit["manual"] <= 80.0 and 69.0 <= fit["rls"] <= 82.0, fit
+    assert fit["ls"] < 84.0, fit
+    plain = identify_grasp(GraspRig().impacts(60, seed=1))["fit_percent"]["by_estimate"]
+    assert all(plain[e] > fit[e] + 4.0 for e in fit), (plain, fit)
+    for name, (i_pub, s_pub) in (("m", PUBLISHED.m), ("c", PUBLISHED.c), ("k", PUBLISHED.k)):
+        err = r[name]["intercept"] / i_pub - 1.0
+        assert 0.03 < abs(err) < 0.15, (name, err)  # biased, and by a few per cent
+        assert np.sign(r[name]["slope"]) == np.sign(s_pub), name
 
 
 def _grasp_table(fg: float):
