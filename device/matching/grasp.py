@@ -214,6 +214,20 @@ class GraspRig:
     window: float = 0.030
     tissue: tuple[float, float, float] | None = None
 
+    def __post_init__(self) -> None:
+        if self.tissue is None:
+            return
+        try:
+            mu, ratio, zeta = (float(x) for x in self.tissue)
+        except (TypeError, ValueError):
+            raise ValueError(f"tissue must be (mass share, frequency ratio, damping ratio), "
+                             f"got {self.tissue!r}") from None
+        if not (all(math.isfinite(x) for x in (mu, ratio, zeta)) and mu > 0 and ratio > 0
+                and zeta >= 0):
+            raise ValueError(f"tissue (mass share, frequency ratio, damping ratio) must be "
+                             f"finite with share and ratio > 0 and damping >= 0, got "
+                             f"{self.tissue!r}")
+
     def impact(self, rng: np.random.Generator, grasp_force: float, peak_force: float) -> Impact:
         """One impact: the continuous half-sine contact force integrated at 100× the rate
         (a different path from the identification's first-order hold), then sampled."""

@@ -298,13 +298,14 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         :func:`usable_band`); ``hapticlab bench causes`` widens it to see what it costs.
     under : Scene, optional
         The virtual scene the library will be played over (its spring). By default each
-        transient reproduces the whole tap, as the paper's: played over a spring, the part
-        of the tap the spring renders anyway comes twice (the paper attenuated its library
-        by 0.8 for it and left "superposition" to future work). Given, ``windows`` windows
-        are also tapped on ``under``, and each target has the acceleration ``under`` gives
-        at its speed taken out first: their mean per unit of incoming speed (a linear
-        spring on a linear hand responds in proportion to the speed). Not for the store:
-        ``hapticlab bench causes`` measures what it changes.
+        transient reproduces the whole tap, as the paper's, so over a spring the part of
+        the tap the spring renders anyway comes twice (the paper's users found the surface
+        slightly active; it attenuated the library by 0.8 and left superposition to future
+        work). Given, ``windows`` windows are also tapped on ``under``, and each target has
+        the acceleration ``under`` gives at its speed taken out first: their mean per unit
+        of incoming speed (a linear spring on a linear hand responds in proportion to the
+        speed). Not for the store: ``hapticlab bench causes`` measures what it changes (on
+        the simulated wood on foam, nothing measurable).
     record : BuildRecord, optional
         Keeps each finished measurement (a sweep, a tapping window) and gives back those
         of an earlier run of the same build, which are not measured again.
@@ -322,6 +323,8 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     """
     if not source.is_real:
         raise ValueError(f"a library reproduces a real sample; '{source.name}' is virtual")
+    if under is not None and under.is_real:
+        raise ValueError(f"a library is played over a virtual scene; '{under.name}' is real")
     if method not in METHODS:
         raise ValueError(f"inversion method must be one of {', '.join(METHODS)}")
     info = device.info
@@ -349,8 +352,6 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     targets = [taps[i].accel for i in pick]
     superposed = None
     if under is not None:
-        if under.is_real:
-            raise ValueError(f"a library is played over a virtual scene; '{under.name}' is real")
         own = segment_taps(record_taps(device, under, windows, TAP_SECONDS))
         if len(own) < 2:
             raise LibraryError(f"only {len(own)} clean taps recorded on '{under.name}'")

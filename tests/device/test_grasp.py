@@ -90,6 +90,9 @@ def test_a_tissue_mode_of_no_mass_is_the_published_handle():
     peak = np.max(np.abs(plain.accel))
     assert np.max(np.abs(none.accel - plain.accel)) < 1e-6 * peak
     assert np.max(np.abs(some.accel - plain.accel)) > 0.05 * peak
+    for bad in ((0.0, 2.0, 0.2), (0.1, -1.0, 0.2), (0.1, 2.0, float("nan")), (0.1, 2.0)):
+        with pytest.raises(ValueError, match="tissue"):
+            GraspRig(tissue=bad)
 
 
 def test_impacts_with_a_mode_the_model_lacks_fit_as_the_papers_and_bias_the_relations():
