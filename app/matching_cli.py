@@ -139,7 +139,9 @@ def device_fit_grasp(args: argparse.Namespace) -> int:
                          "interface needs its own recording driver")
     if args.impacts < 3:
         raise UsageError(f"--impacts {args.impacts}: a line through m, c and k against grasp "
-                         "force needs at least 3 impacts")
+                         "force fitted to fewer than 3 impacts has no residual to judge it by")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {args.seed}")
     tissue = TISSUE if args.rig == "tissue" else None
     rig = GraspRig(tissue=tissue)
     result = identify_grasp(rig.impacts(args.impacts, args.seed), estimate=args.estimate)
@@ -171,8 +173,8 @@ def device_fit_grasp(args: argparse.Namespace) -> int:
         else:
             print(f"the tissue rig's handle is the published model with a mode it does not "
                   f"have ({tissue[0]:g} of its mass at {tissue[1]:g}× its frequency, damping "
-                  f"ratio {tissue[2]:g}; sized so the fit % is the paper's): these "
-                  "differences are what a second-order fit makes of such impacts")
+                  f"ratio {tissue[2]:g}; sized so the manual fit % is in the paper's range): "
+                  "these differences are what a second-order fit makes of such impacts")
     return 0
 
 
@@ -392,7 +394,7 @@ def add_parsers(device_sub, sub, func, clear_fault) -> None:
     dg.add_argument("--impacts", type=int, default=100, help="impacts to fit (default 100)")
     dg.add_argument("--rig", choices=("tissue", "published"), default="tissue",
                     help="tissue (default): the published handle with a mode the fitted "
-                    "model lacks, sized to the paper's fit %%; published: the published "
+                    "model lacks, sized to the paper's manual fit %%; published: the published "
                     "model alone (a round trip that checks the estimators)")
     dg.add_argument("--seed", type=int, default=1, help="seed of the simulated rig "
                     "(default 1)")

@@ -215,6 +215,10 @@ def name_surfaces(felt: np.ndarray, remembered: np.ndarray, jnd: np.ndarray = JN
     tuple of int
         For surface ``i``, the index of the material it is named as (a permutation).
     """
+    if np.shape(felt) != np.shape(remembered):
+        raise ValueError(f"{np.shape(felt)[0]} surfaces felt against {np.shape(remembered)[0]} "
+                         f"materials remembered (feature arrays {np.shape(felt)} and "
+                         f"{np.shape(remembered)}): one surface per material")
     felt_c, mem_c = felt - felt.mean(0), remembered - remembered.mean(0)
     spread = np.where(mem_c.std(0) > 0, felt_c.std(0) / np.maximum(mem_c.std(0), 1e-12), 1.0)
     mem_c = mem_c * spread

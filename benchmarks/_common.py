@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["median_time", "print_table", "emit", "library_store"]
+__all__ = ["median_time", "print_table", "emit", "library_store", "parse_seeds"]
 
 
 @contextlib.contextmanager
@@ -27,6 +27,23 @@ def library_store(prefix: str):
             yield
         finally:
             os.environ.pop("HAPTICLAB_LIBRARIES", None)
+
+
+def parse_seeds(text: str | None, default: Sequence[int]) -> list[int]:
+    """``--seeds 1,2,3`` as a list (``default`` when not given); anything else is refused
+    by name (a seed is a whole number >= 0, and at least one is needed)."""
+    from app.errors import UsageError
+
+    if not text:
+        return list(default)
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise UsageError(f"--seeds {text!r}: whole numbers separated by commas, e.g. 1,2,3"
+                         ) from None
+    if not seeds or any(s < 0 for s in seeds):
+        raise UsageError(f"--seeds {text!r}: at least one seed, each >= 0")
+    return seeds
 
 
 def median_time(fn: Callable[[], Any], repeats: int) -> float:

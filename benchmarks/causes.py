@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import emit, library_store, print_table
+from ._common import emit, library_store, parse_seeds, print_table
 
 MIDDLE = ("pulse_firm", "pulse_soft", "sinusoid_firm", "sinusoid_soft")
 UPPER = ("wood_on_foam", "matched_firm", "matched_soft")
@@ -51,31 +51,45 @@ SPECTRAL_BANDS = ((10.0, 100.0), (100.0, 250.0), (250.0, 500.0), (10.0, 500.0))
 LAMBDAS = (1e-2, 1e-1)
 
 
-def feel(scene, seeds: list[int], windows: int = 4) -> np.ndarray:
-    """Median felt features [log units] of ``scene`` over ``windows`` 3-s windows per seed."""
+def feel(scene, seeds: list[int], windows: int = 4, device=None, features=None) -> np.ndarray:
+    """Median felt features [log units] of ``scene`` over ``windows`` 3-s windows per seed.
+
+    ``device`` (:class:`~device.sim.params.DeviceParams`) replaces the simulated device's
+    defaults; ``features`` (a window → features function) replaces the participant's
+    :func:`~app.participant_model.felt_features`. All NaN when nothing was felt."""
     from app.participant_model import felt_features
     from device.sim.backend import SimDevice
 
+    features = features or felt_features
     rows = []
     for seed in seeds:
-        dev = SimDevice(seed=seed)
-        dev.load_scene(scene)
+        sim = SimDevice(device=device, seed=seed)
+        sim.load_scene(scene)
         for _ in range(windows):
-            dev.home()
-            rows.append(felt_features(dev.run_window(3.0, timeout=30.0)))
-    return np.nanmedian(np.array(rows), axis=0)
+            sim.home()
+            rows.append(features(sim.run_window(3.0, timeout=30.0)))
+    rows = np.array(rows)
+    if not np.isfinite(rows).any(axis=0).all():
+        return np.full(rows.shape[1], np.nan)  # a feature never felt: nothing to compare
+    return np.nanmedian(rows, axis=0)
 
 
 def distances(felt: dict[str, np.ndarray], ref: np.ndarray, jnd: np.ndarray
               ) -> dict[str, float]:
     """JND-scaled distance of each sample's features from ``ref`` (an infinite JND leaves
-    that feature out)."""
-    return {k: float(np.sqrt(np.nansum(((f - ref) / jnd) ** 2))) for k, f in felt.items()}
+    that feature out); NaN where no feature can be compared (nothing felt)."""
+    out = {}
+    for k, f in felt.items():
+        terms = ((f - ref) / jnd) ** 2
+        ok = np.isfinite(f) & np.isfinite(ref)
+        out[k] = float(np.sqrt(np.sum(terms[ok]))) if ok.any() else math.nan
+    return out
 
 
 def ranks(dist: dict[str, float]) -> dict[str, int]:
-    """1 = nearest to the reference."""
-    return {k: i + 1 for i, k in enumerate(sorted(dist, key=dist.get))}
+    """1 = nearest to the reference; a sample with no distance (NaN) ranks last."""
+    order = sorted(dist, key=lambda k: (math.isnan(dist[k]), dist[k]))
+    return {k: i + 1 for i, k in enumerate(order)}
 
 
 def _variant(scene, mass: float, times: float):
@@ -88,9 +102,6 @@ def _variant(scene, mass: float, times: float):
     return replace(scene, material=replace(m, mass=mass, support=replace(sup, stiffness=k,
                                                                          damping=b)))
 
-
-def _seeds(text: str | None) -> list[int]:
-    return [1, 2] if not text else [int(s) for s in text.split(",") if s.strip()]
 
 
 def run(seeds: list[int]) -> dict:
@@ -194,7 +205,7 @@ def library_side(scenes: dict, seed: int, windows: int = 6) -> list[dict]:
 
 def main(args) -> int:
     with library_store("hapticlab-causes-"):
-        out = run(_seeds(getattr(args, "seeds", None)))
+        out = run(parse_seeds(getattr(args, "seeds", None), [1, 2]))
     if args.json:
         emit(out, True)
         return 0

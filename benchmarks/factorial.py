@@ -14,12 +14,13 @@ answers are centred on can be computed without perception noise:
    the largest |effect| is the one an ANOVA of many participants finds first; under
    ``DETECTABLE_JND`` a study of nine hardly finds it at all. Beside it,
    what the decay factor does to the felt ring-down (its high level minus its low, log units;
-   the commanded decay rates differ by ×1.5).
+   the commanded decay rates differ by ×1.5), and what it does in a sinusoid alone.
 2. *The identification.* The test's three surfaces are the paper's best sets (rubber LLL,
    wood HHH, aluminum HHH). Each answer is drawn as the participant draws it, with perception
    noise 0.15 log units shrinking by 0.85 per repetition (``IDENTIFICATIONS`` answers per
-   variant): the share named all right, and the surfaces misnamed by pair (a surface named
-   as the other material of the pair; a swap of two surfaces counts two).
+   variant, in sessions of three that remember the blocks once): the share named all right,
+   and the surfaces misnamed by pair (a surface named as the other material of the pair; a
+   swap of two surfaces counts two).
 3. *Sensitivity.* The same with one thing changed at a time: the device's transmission
    stiffer (its resonance, ~129 Hz on the realism paper's device, moves up; the factorial
    paper's 3GM is not characterised beyond a fall-off "at frequencies lower than those in the
@@ -32,11 +33,12 @@ answers are centred on can be computed without perception noise:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
-from ._common import emit, print_table
+from ._common import emit, parse_seeds, print_table
 
 FACTORS = ("frequency", "decay", "slope")
 MATERIALS = ("rubber", "wood", "aluminum")
@@ -63,7 +65,6 @@ class Variant:
     spring: float | None = None
     jnd_times: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
     sensitivity_hz: tuple[float, float] | None = None
-    note: str = field(default="", compare=False)
 
 
 def variants() -> list[Variant]:
@@ -101,36 +102,53 @@ def _felt(result, band: tuple[float, float] | None) -> np.ndarray:
 
 def feel(scene, seeds: list[int], dev, band, windows: int = 4) -> np.ndarray:
     """Median felt features [log units] of ``scene`` over ``windows`` 3-s windows per seed on a
-    simulated device with parameters ``dev``."""
-    from device.sim.backend import SimDevice
+    simulated device with parameters ``dev``, felt through the sensitivity ``band`` [Hz]
+    (None: as the participant model feels)."""
+    from .causes import feel as feel_on
 
-    rows = []
-    for seed in seeds:
-        sim = SimDevice(device=dev, seed=seed)
-        sim.load_scene(scene)
-        for _ in range(windows):
-            sim.home()
-            rows.append(_felt(sim.run_window(3.0, timeout=30.0), band))
-    return np.nanmedian(np.array(rows), axis=0)
+    return feel_on(scene, seeds, windows, device=dev, features=partial(_felt, band=band))
+
+
+def ring_alone(frequency: float, decays: tuple[float, float], rate: float = 10_000.0) -> float:
+    """What the participant model reads of a decay difference in a vibration alone: the
+    ring-down [log units] of a decaying sinusoid at ``frequency`` [Hz] with the second of
+    ``decays`` [1/s] minus with the first, over the model's own onset window."""
+    from app.participant_model import (
+        ONSET_MAX_S,
+        ONSET_MIN_S,
+        ONSET_PERIODS,
+        _dominant_hz,
+        _pitch_ring,
+    )
+
+    t = np.arange(int(0.3 * rate)) / rate
+    rings = []
+    for b in decays:
+        a = np.exp(-b * t) * np.sin(2 * np.pi * frequency * t)
+        f0 = _dominant_hz(a[:int(ONSET_MAX_S * rate)], rate)
+        m = int(np.clip(ONSET_PERIODS / f0, ONSET_MIN_S, ONSET_MAX_S) * rate)
+        rings.append(_pitch_ring(a, m, rate)[1])
+    return rings[1] - rings[0]
 
 
 def judge(felt: dict[str, np.ndarray], jnd: np.ndarray) -> dict[str, dict]:
     """Per material: each set's distance from the real block, the nearest, and each factor's
-    effect [JND units]."""
+    effect [JND units] (a set nothing was felt of has no distance and ranks last)."""
+    from .causes import distances, ranks
+
     out = {}
     for mat in MATERIALS:
         ref = felt[f"{mat}-real"]
-        dist = {k.split("-", 1)[1]: float(np.sqrt(np.nansum(((v - ref) / jnd) ** 2)))
-                for k, v in felt.items() if k.startswith(f"{mat}-") and k != f"{mat}-real"}
-        order = sorted(dist, key=dist.get)
-        effects = {f: float(np.mean([d for s, d in dist.items() if s[i] == "L"])
-                            - np.mean([d for s, d in dist.items() if s[i] == "H"]))
+        sets = {k.split("-", 1)[1]: v for k, v in felt.items()
+                if k.startswith(f"{mat}-") and k != f"{mat}-real"}
+        dist = distances(sets, ref, jnd)
+        order = sorted(dist, key=ranks(dist).get)
+        effects = {f: float(np.nanmean([d for s, d in dist.items() if s[i] == "L"])
+                            - np.nanmean([d for s, d in dist.items() if s[i] == "H"]))
                    for i, f in enumerate(FACTORS)}
         first = max(effects, key=lambda f: abs(effects[f]))
         # what the decay factor changes of the felt ring-down (log RMS ratio of the onset):
         # the commanded decays differ by ×1.5
-        sets = {k.split("-", 1)[1]: v for k, v in felt.items()
-                if k.startswith(f"{mat}-") and k != f"{mat}-real"}
         ring = float(np.mean([v[3] for k, v in sets.items() if k[1] == "H"])
                      - np.mean([v[3] for k, v in sets.items() if k[1] == "L"]))
         out[mat] = {"order": order, "distances": dist, "effects": effects, "first": first,
@@ -144,7 +162,10 @@ def judge(felt: dict[str, np.ndarray], jnd: np.ndarray) -> dict[str, dict]:
 
 def identify(felt: dict[str, np.ndarray], jnd: np.ndarray, seed: int = 0) -> dict:
     """The identification test answered ``IDENTIFICATIONS`` times by the participant model's
-    rule (:func:`app.participant_model.name_surfaces`) with its perception noise."""
+    rule (:func:`app.participant_model.name_surfaces`) with its perception noise: in
+    sessions of three repetitions, each remembering the real blocks once (as a participant
+    taps them once before the test), the surfaces felt afresh with noise shrinking by
+    ``ID_LEARNING`` per repetition."""
     from app.participant_model import ID_LEARNING, name_surfaces
 
     surfaces = np.array([felt[f"{m}-{PAPER_BEST[m]}"] for m in MATERIALS])
@@ -153,9 +174,10 @@ def identify(felt: dict[str, np.ndarray], jnd: np.ndarray, seed: int = 0) -> dic
     swaps: dict[tuple[str, str], int] = {}
     right = 0
     for k in range(IDENTIFICATIONS):
+        if k % 3 == 0:  # a new session: the blocks remembered once
+            remembered = blocks + rng.normal(0, ID_NOISE, blocks.shape)
         noise = ID_NOISE * ID_LEARNING ** (k % 3)  # the first, second and third repetition
-        named = name_surfaces(surfaces + rng.normal(0, noise, surfaces.shape),
-                              blocks + rng.normal(0, ID_NOISE, blocks.shape), jnd)
+        named = name_surfaces(surfaces + rng.normal(0, noise, surfaces.shape), remembered, jnd)
         right += named == tuple(range(len(MATERIALS)))
         for i, j in enumerate(named):
             if i != j:
@@ -186,11 +208,13 @@ def run(seeds: list[int]) -> dict:
         rows.append({"variant": v.name, "side": v.side,
                      "resonance_hz": resonance_hz(dev, HandParams()),
                      "materials": judge(felt, jnd), "identification": identify(felt, jnd)})
-    return {"seeds": seeds, "identifications": IDENTIFICATIONS, "variants": rows}
+    alone = {}
+    for mat in MATERIALS:
+        lo, hi = (proto.samples[f"{mat}-{s}"].scene.transient for s in ("LLL", "LHL"))
+        alone[mat] = ring_alone(lo.frequency, (lo.decay, hi.decay))
+    return {"seeds": seeds, "identifications": IDENTIFICATIONS, "variants": rows,
+            "ring_alone_decay_high_minus_low": alone}
 
-
-def _seeds(text: str | None) -> list[int]:
-    return [1, 2] if not text else [int(s) for s in text.split(",") if s.strip()]
 
 
 def _mark(ok: bool) -> str:
@@ -198,7 +222,7 @@ def _mark(ok: bool) -> str:
 
 
 def main(args) -> int:
-    out = run(_seeds(getattr(args, "seeds", None)))
+    out = run(parse_seeds(getattr(args, "seeds", None), [1, 2]))
     if args.json:
         emit(out, True)
         return 0
@@ -215,6 +239,9 @@ def main(args) -> int:
                       f"{m['first']} {_mark(m['first_is_paper'])}",
                       f"{m['ring_decay_high_minus_low']:+.2f}")
                      for r in out["variants"] for m in [r["materials"][mat]]])
+    print("the decay factor's ring-down (high − low, log units) in a sinusoid alone, at the "
+          "low frequency: " + ", ".join(f"{m} {v:+.2f}" for m, v in
+                                       out["ring_alone_decay_high_minus_low"].items()))
     print_table(f"identification: {out['identifications']} answers per variant by the "
                 "participant's rule; paper: 83.3 % all right, wood–rubber most confused",
                 ["variant", "resonance [Hz]", "all right", "most confused",

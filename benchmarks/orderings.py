@@ -32,7 +32,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from ._common import emit, print_table
+from ._common import emit, parse_seeds, print_table
 
 CLASSES = {"wood": ("wood",), "wood_on_foam+matched": ("wood_on_foam", "matched_firm",
                                                         "matched_soft"),
@@ -52,11 +52,6 @@ ALIKE_BOUND = 1.0
 PAPER_ID = {"all": 83.3, "group expert": 88.9, "group novice": 79.2, "repetition 1": None,
             "repetition 3": 85.7}
 
-
-def _seeds(text: str | None) -> list[int]:
-    if not text:
-        return [1, 2, 3, 4, 5]
-    return [int(s) for s in text.split(",") if s.strip()]
 
 
 def _realism(data, protocol: str = "realism") -> dict:
@@ -204,7 +199,7 @@ def _spread(values) -> str:
 
 
 def main(args) -> int:
-    seeds = _seeds(getattr(args, "seeds", None))
+    seeds = parse_seeds(getattr(args, "seeds", None), [1, 2, 3, 4, 5])
     own_store = "HAPTICLAB_LIBRARIES" not in os.environ
     with tempfile.TemporaryDirectory(prefix="hapticlab-orderings-") as tmp:
         if own_store:

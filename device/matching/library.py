@@ -301,11 +301,12 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         transient reproduces the whole tap, as the paper's, so over a spring the part of
         the tap the spring renders anyway comes twice (the paper's users found the surface
         slightly active; it attenuated the library by 0.8 and left superposition to future
-        work). Given, ``windows`` windows are also tapped on ``under``, and each target has
-        the acceleration ``under`` gives at its speed taken out first: their mean per unit
-        of incoming speed (a linear spring on a linear hand responds in proportion to the
-        speed). Not for the store: ``hapticlab bench causes`` measures what it changes (on
-        the simulated wood on foam, nothing measurable).
+        work). Given, ``windows`` windows are also tapped on ``under`` (a spring alone), and
+        each target has the acceleration ``under`` gives at its speed taken out first: its
+        least-squares response per unit of incoming speed over those taps (a linear spring
+        on a linear hand responds in proportion to the speed). Not for the store:
+        ``hapticlab bench causes`` measures what it changes (on the simulated wood on foam,
+        nothing measurable).
     record : BuildRecord, optional
         Keeps each finished measurement (a sweep, a tapping window) and gives back those
         of an earlier run of the same build, which are not measured again.
@@ -323,8 +324,9 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     """
     if not source.is_real:
         raise ValueError(f"a library reproduces a real sample; '{source.name}' is virtual")
-    if under is not None and under.is_real:
-        raise ValueError(f"a library is played over a virtual scene; '{under.name}' is real")
+    if under is not None and (under.is_real or under.transient is not None):
+        raise ValueError(f"a library is played over a spring alone; '{under.name}' is "
+                         + ("real" if under.is_real else "a spring with a transient"))
     if method not in METHODS:
         raise ValueError(f"inversion method must be one of {', '.join(METHODS)}")
     info = device.info
@@ -337,7 +339,7 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     band = usable_band(info.servo_rate_hz, band)
     sweeps = 0 if model is not None else len(SWEEP_LEVELS) * SWEEP_REPEATS
     nominal = ([sweep_seconds(info.servo_rate_hz, band)] * sweeps
-               + [TAP_SECONDS] * windows)
+               + [TAP_SECONDS] * windows * (1 if under is None else 2))
     pace = Pace(nominal, 0 if record is None else record.count, on_step)
     if model is None:
         model = identify(device, SWEEP_LEVELS, SWEEP_REPEATS, order=order,
@@ -352,10 +354,14 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     targets = [taps[i].accel for i in pick]
     superposed = None
     if under is not None:
-        own = segment_taps(record_taps(device, under, windows, TAP_SECONDS))
+        own = segment_taps(record_taps(device, under, windows, TAP_SECONDS,
+                                       on_fault=on_fault, pace=pace))
         if len(own) < 2:
             raise LibraryError(f"only {len(own)} clean taps recorded on '{under.name}'")
-        per_speed = np.mean([t.accel / t.velocity for t in own], axis=0)  # [m/s² per m/s]
+        # its response per unit speed [m/s² per m/s]: the least-squares gain over the taps,
+        # so a slow tap's noise does not weigh more than a fast one's
+        v = np.array([t.velocity for t in own])
+        per_speed = (v[:, None] * np.stack([t.accel for t in own])).sum(0) / np.sum(v ** 2)
         targets = [taps[i].accel - taps[i].velocity * per_speed for i in pick]
         superposed = {"scene": under.to_dict(), "taps": len(own)}
     invs = [invert(dm, a, method, lam=lam, band=band) for a in targets]

@@ -85,7 +85,9 @@ def test_fit_grasp_defaults_to_the_rig_with_a_mode_the_model_lacks():
     median = float(re.search(r"fit % median ([0-9.]+)", out.stdout).group(1))
     assert 69.0 < median < 84.0, out.stdout
     bad = run("device", "fit-grasp", "--simulated", "--impacts", "2")
-    assert bad.returncode == 2 and "--impacts 2" in bad.stderr and "at least 3" in bad.stderr
+    assert bad.returncode == 2 and "--impacts 2" in bad.stderr and "fewer than 3" in bad.stderr
+    bad = run("device", "fit-grasp", "--simulated", "--seed", "-1")
+    assert bad.returncode == 2 and "--seed must be >= 0, got -1" in bad.stderr
 
 
 def test_sysid_json_and_plot(artifacts):

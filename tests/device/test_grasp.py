@@ -90,27 +90,47 @@ def test_a_tissue_mode_of_no_mass_is_the_published_handle():
     peak = np.max(np.abs(plain.accel))
     assert np.max(np.abs(none.accel - plain.accel)) < 1e-6 * peak
     assert np.max(np.abs(some.accel - plain.accel)) > 0.05 * peak
-    for bad in ((0.0, 2.0, 0.2), (0.1, -1.0, 0.2), (0.1, 2.0, float("nan")), (0.1, 2.0)):
+    for bad in ((0.0, 2.0, 0.2), (0.1, -1.0, 0.2), (0.1, 2.0, float("nan")), (0.1, 2.0),
+                ("a", 2.0, 0.2)):
         with pytest.raises(ValueError, match="tissue"):
             GraspRig(tissue=bad)
+    assert GraspRig(tissue=("0.12", "2", "0.2")).tissue == (0.12, 2.0, 0.2)
+
+
+def test_the_modal_response_is_scipys_state_space_simulation():
+    """The rig's mode-by-mode response of the 5-state tissue plant against scipy's dlsim of
+    the same ZOH-discretized system (a step-by-step state recursion), on a random force."""
+    from scipy import signal
+
+    from device.matching.grasp import _plant_with_tissue, _zoh_response
+
+    A, B, C, D = _plant_with_tissue(0.02, 12.0, 70_000.0, TISSUE, 1_000.0)
+    dt = 1e-5
+    u = np.random.default_rng(0).normal(size=400)
+    ours = _zoh_response(A, B, C, D, dt, u)
+    _, ref, _ = signal.dlsim(signal.cont2discrete((A, B[:, None], C[None, :], np.array([[D]])),
+                                                  dt, method="zoh"), u)
+    assert np.max(np.abs(ours - ref[:, 0])) <= 1e-9 * np.max(np.abs(ref))
 
 
 def test_impacts_with_a_mode_the_model_lacks_fit_as_the_papers_and_bias_the_relations():
     """The tissue rig (the published handle with TISSUE, 60 impacts, seed 1) is not a round
-    trip: a second-order fit scores what the paper's did (manual 69.8–79.6 %, recursive
-    80.3–81.4 %; measured: manual 78.0, least squares 80.9, recursive 77.1) where the
-    published rig scores 86–89, and the relations come out biased by the unmodelled mode
-    (measured: m +8.6 %, c +6.1 %, k −6.2 % at no grasp), the slopes keep their sign."""
+    trip: the manual fit scores in the paper's manual range (69.8–79.6 %; measured 78.0,
+    least squares 80.9, recursive 77.1) where the published rig scores 86–89, and the
+    relations come out biased by the unmodelled mode (measured: m +8.6 %, c +6.1 %, k −6.2 %
+    at no grasp), the slopes keep their sign. Fewer than 3 impacts are refused by name."""
     r = identify_grasp(GraspRig(tissue=TISSUE).impacts(60, seed=1))
     fit = r["fit_percent"]["by_estimate"]
-    assert 69.0 <= fit["manual"] <= 80.0 and 69.0 <= fit["rls"] <= 82.0, fit
-    assert fit["ls"] < 84.0, fit
+    assert 69.8 <= fit["manual"] <= 79.6, fit
+    assert fit["ls"] < 84.0 and fit["rls"] < 84.0, fit
     plain = identify_grasp(GraspRig().impacts(60, seed=1))["fit_percent"]["by_estimate"]
     assert all(plain[e] > fit[e] + 4.0 for e in fit), (plain, fit)
     for name, (i_pub, s_pub) in (("m", PUBLISHED.m), ("c", PUBLISHED.c), ("k", PUBLISHED.k)):
         err = r[name]["intercept"] / i_pub - 1.0
         assert 0.03 < abs(err) < 0.15, (name, err)  # biased, and by a few per cent
         assert np.sign(r[name]["slope"]) == np.sign(s_pub), name
+    with pytest.raises(ValueError, match="2 impacts: .* fewer than 3"):
+        identify_grasp(GraspRig().impacts(2, seed=1))
 
 
 def _grasp_table(fg: float):

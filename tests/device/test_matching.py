@@ -443,11 +443,12 @@ def test_the_store_refuses_a_library_matched_over_another_band(tmp_path, monkeyp
 
 
 def test_a_library_played_over_a_spring_can_leave_the_springs_share_out(ident, realism):
-    """``build_library(under=spring)``: each target is the tap less the spring's mean response
-    per unit speed times the tap's speed, recomputed here from the same device's taps (the
-    source's windows, then the spring's: the order the build taps them in). The inversion is
-    linear in its target, so each transient is the whole tap's less the speed times the
-    inverse of that mean. A real ``under`` and the store are refused."""
+    """``build_library(under=spring)``: each target is the tap less the spring's
+    least-squares response per unit speed times the tap's speed, recomputed here from the
+    same device's taps (the source's windows, then the spring's: the order the build taps
+    them in). The inversion is linear in its target, so each transient is the whole tap's
+    less the speed times the inverse of that response. A real ``under``, one with a
+    transient and the store are refused."""
     from dataclasses import replace
 
     from device.matching.inversion import discretize, invert
@@ -462,7 +463,7 @@ def test_a_library_played_over_a_spring_can_leave_the_springs_share_out(ident, r
     dev = SimDevice(seed=8)
     taps = segment_taps(record_taps(dev, source, 2, TAP_SECONDS))
     own = segment_taps(record_taps(dev, spring, 2, TAP_SECONDS))
-    per_speed = np.mean([t.accel / t.velocity for t in own], axis=0)
+    per_speed = sum(t.velocity * t.accel for t in own) / sum(t.velocity ** 2 for t in own)
     dm = discretize(ident.model, dev.info.servo_rate_hz)
     pick = even_spread(np.array([t.velocity for t in taps]), 4)
     for row, i in zip(lib.forces, pick, strict=True):
@@ -472,7 +473,10 @@ def test_a_library_played_over_a_spring_can_leave_the_springs_share_out(ident, r
         assert np.max(np.abs(row - want)) <= 1e-9 * np.max(np.abs(whole))
         # the spring's share is a real part of the transient, not a rounding
         assert np.max(np.abs(row - whole)) > 0.05 * np.max(np.abs(whole))
-    with pytest.raises(ValueError, match="played over a virtual scene"):
+    with pytest.raises(ValueError, match="over a spring alone; 'wood_on_foam' is real"):
         build_library(SimDevice(), source, model=ident.model, windows=2, under=source)
+    matched = realism.samples["matched_firm"].scene
+    with pytest.raises(ValueError, match="is a spring with a transient"):
+        build_library(SimDevice(), source, model=ident.model, windows=2, under=matched)
     with pytest.raises(ValueError, match="libraries of whole taps"):
         build_into_store(SimDevice(), source, under=spring)
