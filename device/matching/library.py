@@ -213,7 +213,8 @@ def segment_taps(results, window: float = TAP_WINDOW_S, baseline: float = 0.005)
     """Acceleration windows from each contact, keeping taps with no other contact inside.
 
     The contact instant is the device's position-threshold crossing (its contact event);
-    the acceleration's mean over ``baseline`` seconds before it is removed.
+    the acceleration's mean over ``baseline`` seconds before it is removed. A tap whose
+    window or baseline holds a record lost on the link (NaN) is left out.
     """
     taps = []
     for res in results:
@@ -229,6 +230,8 @@ def segment_taps(results, window: float = TAP_WINDOW_S, baseline: float = 0.005)
             if i - nb < 0 or i + n > len(tr["t"]):
                 continue
             a = tr["accel"][i: i + n] - np.mean(tr["accel"][i - nb: i])
+            if not np.all(np.isfinite(a)):
+                continue  # records lost on the link (NaN): a tap with a gap is no tap
             taps.append(Tap(float(c.velocity), a.astype(float), float(c.t)))
     return taps
 
