@@ -163,9 +163,10 @@ def confusion(a: dict, out: Path) -> list[str]:
 
 def _tap_near(path: Path, speed: float):
     """(|v − speed|, acceleration [m/s²] 100 ms from contact, v [m/s], rate [Hz]) of the tap
-    in a trace file whose incoming speed is nearest ``speed``; None without contacts."""
+    in a trace file whose incoming speed is nearest ``speed``; None without contacts, or from
+    a device without an accelerometer (no ``accel_counts``)."""
     with np.load(path) as z:
-        if not len(z["contacts_v"]):
+        if not len(z["contacts_v"]) or "accel_counts" not in z:
             return None
         k = int(np.argmin(np.abs(z["contacts_v"] - speed)))
         rate, t0 = float(z["rate_hz"]), float(z["t0"])

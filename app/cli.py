@@ -214,15 +214,18 @@ def _device_emulate(args: argparse.Namespace) -> int:
         raise UsageError(f"--speed must be in (0, 20] (device seconds per wall second), "
                          f"got {args.speed:g}")
     if args.firmware != "python":
-        from device.serial.firmware import serve
+        from device.serial.firmware import REAL_TIME_ONLY, serve
 
         if args.rate != 10_000.0:
-            raise UsageError("the firmware's servo runs at its own 10 kHz: --rate applies to "
-                             "--firmware python only")
+            raise UsageError("the firmware's servo runs at its build's own rate (10 kHz; the "
+                             "bridges 4 and 1 kHz): --rate applies to --firmware python only")
         if args.firmware == "qemu" and args.speed != 1.0:
             raise UsageError("the firmware under QEMU runs at the pace of its counted "
                              "instructions and its sleeps: --speed applies to "
-                             "--firmware python, host and host-board")
+                             "--firmware python, host, host-board, host-san and dhd-stub")
+        if args.firmware in REAL_TIME_ONLY and args.speed != 1.0:
+            raise UsageError(f"--firmware {args.firmware} runs in real time, in the HD "
+                             "scheduler's clock: --speed must be 1")
         return serve(args.firmware, args.seed, args.speed)
     from device.serial.emulator import main as emulate
 
@@ -639,12 +642,16 @@ def build_parser() -> argparse.ArgumentParser:
     em.add_argument("--seed", type=int, default=0, help="seed of the simulated plant and "
                     "tapping (default 0)")
     em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
-    em.add_argument("--firmware", choices=("python", "host", "host-board", "host-san", "qemu"),
+    em.add_argument("--firmware", choices=("python", "host", "host-board", "host-san", "qemu",
+                                           "dhd-stub", "hd-stub"),
                     default="python",
                     help="what serves the port (protocol 2): the Python emulator, or the C "
                     "reference firmware built for this machine (host-board: with the "
                     "STM32F405's buffers and 1-Mbaud link; host-san: that under ASan and "
-                    "UBSan) or run on an emulated STM32F405 under QEMU")
+                    "UBSan) or run on an emulated STM32F405 under QEMU, or the bridges to "
+                    "commercial devices over stand-ins for their SDKs (dhd-stub: Force "
+                    "Dimension, 4 kHz; hd-stub: OpenHaptics, 1 kHz, real time only; neither "
+                    "has an accelerometer)")
     em.set_defaults(func=_device_emulate)
     from app.matching_cli import add_parsers
 

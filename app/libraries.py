@@ -107,10 +107,18 @@ def prepare_libraries(protocol, device, spec: str, say: Callable[[str], None] = 
             continue
         for sid in samples:
             out[sid] = {"source": tr.source, "path": str(path), "sha256": lib.sha256}
-    problems = [f"{', '.join(samples)} need(s) a library reproducing '{src}' built on this "
-                f"device ({info.model}, serial {info.serial_number}); build it with: "
-                + build_line(spec, str(ref or protocol.source), src)
-                for src, samples in missing] + broken
+    if missing and not info.accelerometer:
+        problems = [f"{', '.join(samples)} need(s) a library reproducing '{src}', built on the "
+                    "device that plays it from its accelerometer's readings; this device "
+                    f"({info.model}, serial {info.serial_number}) has no accelerometer on the "
+                    "stylus, so no library can be built on it: run these samples on a device "
+                    "with one, or leave them out of the protocol"
+                    for src, samples in missing] + broken
+    else:
+        problems = [f"{', '.join(samples)} need(s) a library reproducing '{src}' built on "
+                    f"this device ({info.model}, serial {info.serial_number}); build it "
+                    "with: " + build_line(spec, str(ref or protocol.source), src)
+                    for src, samples in missing] + broken
     if problems:
         raise MissingLibraryError("; ".join(problems))
     return out

@@ -142,7 +142,8 @@ def felt_features(result, window: float = 0.060) -> np.ndarray:
     Parameters
     ----------
     result : WindowResult
-        With the ``t``, ``velocity`` and ``accel`` traces.
+        With the ``t`` and ``velocity`` traces, and ``accel`` (or ``true_accel``) where the
+        device records it.
     window : float [s]
         How long after contact the vibration is judged.
 
@@ -152,12 +153,18 @@ def felt_features(result, window: float = 0.060) -> np.ndarray:
         ``stop``, ``jolt``, ``pitch``, ``ring`` [log units]; NaN when nothing was felt.
     """
     tr = result.traces
-    if not result.contacts or "accel" not in tr or not len(tr.get("t", ())):
+    if not result.contacts or not len(tr.get("t", ())):
         return _VOID.copy()
-    # the hand feels the stylus' true acceleration (the simulator reports it); the
-    # accelerometer's reading, which clips at 50 g, stands in on other backends
-    t, vel, acc = tr["t"], tr["velocity"], tr.get("true_accel", tr["accel"])
     from scipy import signal
+
+    # the hand feels the stylus' true acceleration (the simulator reports it); the
+    # accelerometer's reading, which clips at 50 g, stands in on other backends, and on a
+    # device without one (the commercial devices' bridges) the acceleration its own
+    # velocity estimate implies: what such a device can tell of the vibration
+    t, vel = tr["t"], tr["velocity"]
+    acc = tr.get("true_accel", tr.get("accel"))
+    if acc is None:
+        acc = np.gradient(np.asarray(vel, dtype=float), 1.0 / float(result.rate_hz))
 
     # vibration only: the slow push of the hand and the spring is felt as force, not as
     # vibration (zero-phase 2nd-order high-pass at HIGHPASS_HZ over the whole window)

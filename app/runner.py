@@ -716,9 +716,10 @@ def _trace_payload(res, mode: str, info, sample: str) -> dict:
     """The device's own streams, in the device's own units where they are quantized.
 
     ``t0`` [s] and ``rate_hz`` [Hz] instead of a time column; ``position_counts`` (int32,
-    × ``encoder_resolution`` [m]); ``accel_counts`` (int16, × ``accel_lsb`` [m/s²]); velocity,
-    forces and current as float32; flags as uint8. ``mode = "contacts"`` keeps 10 ms before
-    to 140 ms after each contact (with ``sample_index`` of what was kept).
+    × ``encoder_resolution`` [m]); ``accel_counts`` (int16, × ``accel_lsb`` [m/s²]; neither
+    from a device without an accelerometer); velocity, forces and current as float32; flags
+    as uint8. ``mode = "contacts"`` keeps 10 ms before to 140 ms after each contact (with
+    ``sample_index`` of what was kept).
     """
     tr = res.traces
     n = len(tr["t"])
@@ -732,12 +733,13 @@ def _trace_payload(res, mode: str, info, sample: str) -> dict:
     out = {"sample": np.str_(sample),
            "t0": np.float64(tr["t"][0] if n else 0.0), "rate_hz": np.float64(res.rate_hz),
            "encoder_resolution": np.float64(info.encoder_resolution),
-           "accel_lsb": np.float64(lsb),
            "position_counts": np.round(np.asarray(tr["position"])[keep]
                                        / info.encoder_resolution).astype(np.int32),
-           "accel_counts": np.clip(np.round(np.asarray(tr["accel"])[keep] / lsb), -32768,
-                                   32767).astype(np.int16),
            "flags": np.asarray(tr["flags"])[keep].astype(np.uint8)}
+    if "accel" in tr:
+        out["accel_lsb"] = np.float64(lsb)
+        out["accel_counts"] = np.clip(np.round(np.asarray(tr["accel"])[keep] / lsb), -32768,
+                                      32767).astype(np.int16)
     for k in ("velocity", "force_cmd", "force_out", "current"):
         out[k] = np.asarray(tr[k])[keep].astype(np.float32)
     if mode == "contacts":

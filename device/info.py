@@ -33,6 +33,9 @@ class DeviceInfo:
         Position quantum at the tip.
     accel_range : float [m/s²]
         Accelerometer full scale (±).
+    accelerometer : bool
+        Whether the stylus has an accelerometer (the commercial devices' bridges have none:
+        no ``accel`` trace, no acceleration matching).
     """
 
     backend: str
@@ -46,6 +49,7 @@ class DeviceInfo:
     watchdog_s: float
     encoder_resolution: float
     accel_range: float
+    accelerometer: bool = True
 
     @property
     def max_force(self) -> float:

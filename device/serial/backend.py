@@ -40,6 +40,9 @@ __all__ = ["SerialDevice", "DeviceGoneError", "DeviceTimeoutError", "PortBusyErr
            "ProtocolMismatchError", "CRCStormError", "device_clock_on_host"]
 
 _OPTIONAL = ("true_position", "true_velocity", "true_accel")
+#: sensors a device may lack (the commercial devices' bridges have no accelerometer on the
+#: stylus): left out of "every channel" when LIMITS says the device records none
+_SENSORS = ("accel",)
 
 
 #: how long a device may take to acknowledge SCENE_COMMIT [s] (docs/wire-protocol.md)
@@ -193,7 +196,7 @@ class SerialDevice(HapticDevice):
         self.link = Link(port, timeout, retries, transport, baudrate, handler=self._on_message,
                          native=native)
         try:
-            self._info = self._identify(self.link.hello())
+            self._info = self._identify(self.link.hello(), self.link.limits)
             self._stream = self._configure_traces()
             # the device reports its state at >= 20 Hz: wait for the first report, so a fault
             # it latched before this host connected is known as soon as the device is open
@@ -243,7 +246,7 @@ class SerialDevice(HapticDevice):
             self._output = 0.0
 
     @staticmethod
-    def _identify(h: M.HelloAck) -> DeviceInfo:
+    def _identify(h: M.HelloAck, limits: M.Limits | None = None) -> DeviceInfo:
         if h.protocol not in (1, 2):
             raise ProtocolMismatchError(f"device speaks protocol {h.protocol}, this host "
                                         "speaks 1 and 2")
@@ -253,11 +256,14 @@ class SerialDevice(HapticDevice):
                           current_limit=h.current_limit_ma / 1000, force_constant=h.force_constant
                           / 1000, effective_mass=h.effective_mass * 1e-6,
                           watchdog_s=h.watchdog_ms / 1000, encoder_resolution=h.encoder_nm * 1e-9,
-                          accel_range=h.accel_range / 1000)
+                          accel_range=h.accel_range / 1000,
+                          accelerometer=limits is None or bool(
+                              limits.channels >> M.Channel.NAMES.index("accel") & 1))
 
     def _configure_traces(self, names: tuple[str, ...] | None = None) -> tuple[str, ...]:
         """Stream ``names`` (None: every base channel the device records, the channels
-        :class:`~device.events.WindowResult` carries, and the optional ones it has), one
+        :class:`~device.events.WindowResult` carries, but ``accel`` on a device without an
+        accelerometer, and the optional ones it has), one
         record per tick unless the device's link is too narrow for that
         (:func:`stream_decimation`). Returns the streamed channel names in order.
 
@@ -277,11 +283,15 @@ class SerialDevice(HapticDevice):
             raise ProtocolMismatchError(f"{self.port}: a version-2 device sent no LIMITS "
                                         "after HELLO_ACK")
         base = [ch for ch, name in enumerate(M.Channel.NAMES)
-                if (name not in _OPTIONAL if names is None else name in names)]
+                if (name not in _OPTIONAL if names is None else name in names)
+                and not (names is None and name in _SENSORS and not lim.channels >> ch & 1)]
         missing = [M.Channel.NAMES[ch] for ch in base if not lim.channels >> ch & 1]
         if missing:
+            why = (" (it has no accelerometer on the stylus: acceleration matching, its "
+                   "identification and the grasp model need one)" if "accel" in missing
+                   else "")
             raise DeviceError(f"{self.port}: the device records no {', '.join(missing)} "
-                              "trace")
+                              f"trace{why}")
         known = (1 << len(M.Channel.NAMES)) - 1  # a bit beyond them names no channel
         mask = sum(1 << ch for ch in base)
         if names is None:

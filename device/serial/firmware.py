@@ -1,10 +1,12 @@
 """The reference firmware (``firmware/``) as a device on a pseudo-terminal.
 
-Four builds serve the protocol with the firmware's simulated plant: ``host`` (the C code
+Six builds serve the protocol with the firmware's simulated plant: ``host`` (the C code
 compiled for this machine, paced to its clock), ``host-board`` (the same with the
 STM32F405's resources and its 1-Mbaud link as LIMITS: what a lab's board offers a host, at
 any speed), ``host-san`` (that under ASan and UBSan) and ``qemu`` (the Cortex-M build on
-an emulated STM32F405, netduinoplus2, its USART on a pty). :func:`host_command` and
+an emulated STM32F405, netduinoplus2, its USART on a pty), and the bridges to commercial
+devices over hapticlab's stand-ins for their SDKs, ``dhd-stub`` (Force Dimension, 4 kHz) and
+``hd-stub`` (OpenHaptics, 1 kHz: :data:`BRIDGE_STUBS`). :func:`host_command` and
 :func:`qemu_command` say how to start each, building it with ``make -C firmware`` when the
 binary is missing; the caller
 (``hapticlab device emulate --firmware``) prints the port as its first line.
@@ -27,12 +29,21 @@ FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 #: traffic is what the tests check; it has no plant, so it serves no session)
 _TARGETS = {"host": "build/hlfw-host", "host-board": "build/hlfw-host-board",
             "host-san": "build/hlfw-host-san",
+            "dhd-stub": "build/hlfw-dhd-stub", "hd-stub": "build/hlfw-hd-stub",
             "qemu": "build/hlfw-stm32.elf", "board-qemu": "build/hlfw-board-qemu.elf"}
 _ARM = ("arm-none-eabi-gcc", "gcc-arm-none-eabi")
 _CC = ("cc", "build-essential")
-_TOOLS = {"host": _CC, "host-board": _CC, "host-san": _CC, "qemu": _ARM, "board-qemu": _ARM}
-#: the builds that run on this machine (paced to its clock, at any speed)
-HOST_KINDS = ("host", "host-board", "host-san")
+_TOOLS = {"host": _CC, "host-board": _CC, "host-san": _CC, "dhd-stub": _CC, "hd-stub": _CC,
+          "qemu": _ARM, "board-qemu": _ARM}
+#: the builds that run on this machine (paced to its clock; at any speed but ``hd-stub``)
+HOST_KINDS = ("host", "host-board", "host-san", "dhd-stub", "hd-stub")
+#: the bridges to commercial devices, built over hapticlab's stand-ins for their SDKs: the
+#: Force Dimension bridge (its own 4-kHz servo loop through libdhd) and the OpenHaptics
+#: one (the servo tick in the HD scheduler's 1-kHz callback, real time only). Neither
+#: device has an accelerometer on the stylus, so neither records an accel trace.
+BRIDGE_STUBS = ("dhd-stub", "hd-stub")
+#: the builds whose device runs in real time only (the HD scheduler's clock)
+REAL_TIME_ONLY = ("hd-stub",)
 #: QEMU's clock for the Cortex-M builds: it counts the emulated board's instructions, 8 ns
 #: each (2**3; the STM32F405 runs ~130 M instructions/s at 168 MHz), and runs at wall-clock
 #: pace while the board sleeps (WFI). Without it the emulated clock is this computer's, so

@@ -12,12 +12,27 @@
 
 #include "hl_wire.h"
 
-/* ratings of the papers' one-axis device (SPEC section 1), as HELLO_ACK reports them */
+/* ratings of the papers' one-axis device (SPEC section 1), as HELLO_ACK reports them; the
+ * bridges to commercial devices (src/io_dhd.c, src/io_hd.c) build with their own. The
+ * servo rate divides 1,000,000 and is a multiple of 1,000 (1 kHz at the least) */
+#ifndef HL_SERVO_HZ
 #define HL_SERVO_HZ 10000u
+#endif
+#ifndef HL_ENCODER_NM
 #define HL_ENCODER_NM 10000u          /* encoder resolution [nm] */
+#endif
+#ifndef HL_FORCE_CONSTANT_MN_A
 #define HL_FORCE_CONSTANT_MN_A 2150u  /* [mN/A] */
+#endif
+#ifndef HL_CURRENT_RATING_MA
 #define HL_CURRENT_RATING_MA 1400u    /* [mA] */
+#endif
+#ifndef HL_EFFECTIVE_MASS_MG
 #define HL_EFFECTIVE_MASS_MG 55000u   /* [mg] */
+#endif
+#if HL_SERVO_HZ < 1000u || HL_SERVO_HZ % 1000u != 0u || 1000000u % HL_SERVO_HZ != 0u
+#error "HL_SERVO_HZ must be a multiple of 1000 that divides 1000000"
+#endif
 /* the watchdog [ms]: 100 on the board. The rule: at least twice the longest gap between
  * the host's frames the device saw beside 2 x cores CPU-bound processes (README, `bench
  * link`): 45 ms from hapticlab's native heartbeat thread, 56 ms from its Python-thread
@@ -53,7 +68,11 @@
 #endif
 #define HL_MAX_ROWS 255u
 #define HL_N_CHANNELS 7u         /* position velocity force_cmd force_out current accel flags */
+/* the channels this device records (LIMITS.channels): all seven, or without accel (bit 5)
+ * on a device that has no accelerometer on its stylus (the commercial devices' bridges) */
+#ifndef HL_CHANNEL_MASK
 #define HL_CHANNEL_MASK 0x7Fu
+#endif
 #define HL_MAX_DECIMATION 100u
 #define HL_CHUNK_FLOATS 250u     /* f32 items per TRACE_CHUNK */
 

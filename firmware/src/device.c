@@ -4,7 +4,8 @@
  *   - commands change servo state only inside hal_lock() … hal_unlock();
  *   - the servo reports to the main loop through two single-producer rings: events
  *     (contacts, saturation runs, faults, window ends) and trace records;
- *   - ESTOP and ZERO set a request flag the next tick acts on, whatever is in flight.
+ *   - ESTOP sets a request flag the next tick acts on, whatever is in flight; ZERO turns
+ *     output off at once (under hal_lock), in order with the commands after it.
  */
 #include "hl_device.h"
 
@@ -15,7 +16,9 @@
 #include "hl_hal.h"
 
 #define RAMP_TICKS (HL_SERVO_HZ / 20u)      /* the enable ramp: 50 ms */
-#define VEL_TICKS (HL_SERVO_HZ / 1000u)     /* speed estimate: least squares over 1 ms */
+/* speed estimate: least squares over the last 1 ms (10 ticks at 10 kHz), and over at least
+ * 3 ticks (2 ms at 1 kHz), where two would be a bare difference */
+#define VEL_TICKS (HL_SERVO_HZ / 1000u < 3u ? 3u : HL_SERVO_HZ / 1000u)
 #define HYST_UM 200 /* a new contact once the reading was 0.2 mm above the surface */
 #define REPORT_TICKS (HL_SERVO_HZ / 40u)    /* STATUS and POSITION at 40 Hz */
 #define WATCHDOG_TICKS (HL_WATCHDOG_MS * (HL_SERVO_HZ / 1000u))
@@ -26,6 +29,10 @@
 /* the longest frame the e-stop's own path looks into [encoded bytes]: an ESTOP with stray
  * bytes in its body; a longer one is acted on by the main loop, as every other command */
 #define SNIFF_MAX 64u
+/* the model HELLO_ACK names (the bridges name theirs) */
+#ifndef HL_MODEL
+#define HL_MODEL "hapticlab reference firmware"
+#endif
 
 static const float ENC_M = (float)HL_ENCODER_NM * 1e-9f;
 static const float KF = (float)HL_FORCE_CONSTANT_MN_A * 1e-3f;
@@ -56,7 +63,7 @@ typedef struct {
 static struct {
     /* ---- servo state (the tick owns it; commands touch it under hal_lock) ---- */
     volatile uint8_t state, fault, prev_enabled;
-    volatile uint8_t req_estop, req_zero, req_stop;
+    volatile uint8_t req_estop, req_stop;
     uint8_t enabled;
     uint32_t ramp;
     uint64_t ticks;
@@ -232,7 +239,7 @@ static void push_event(uint8_t type, uint8_t code, uint32_t tick, int32_t a, int
     D.ev_w = D.ev_w + 1;
 }
 
-/* incoming speed [m/s, > 0 into the surface]: least-squares slope of the last 1 ms */
+/* incoming speed [m/s, > 0 into the surface]: least-squares slope over VEL_TICKS */
 static float incoming_speed(void)
 {
     if (D.enc_n < VEL_TICKS) {
@@ -368,11 +375,6 @@ void hl_servo_tick(void)
     }
     if (D.enabled && D.ticks - D.last_rx_tick > D.wd_ticks) {
         latch_fault(HL_FAULT_WATCHDOG); /* armed while output is enabled */
-    }
-    if (D.req_zero) {
-        D.req_zero = 0;
-        D.enabled = 0;
-        D.prev_enabled = 0;
     }
 
     if (D.state == HL_WINDOW) {
@@ -550,7 +552,7 @@ static void send_hello_ack(void)
     p = put_u16(p, HL_WATCHDOG_MS);
     p = put_u32(p, HL_ENCODER_NM);
     p = put_u32(p, HL_ACCEL_RANGE_MMS2);
-    copy_str(p, "hapticlab reference firmware", 32);
+    copy_str(p, HL_MODEL, 32);
     copy_str(p + 32, D.serial, 16);
     copy_str(p + 48, "hlfw-2.0 " HL_BUILD, 16);
     send(0x81, b, sizeof b, 1);
@@ -793,7 +795,13 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         }
         return HL_OK;
     case HL_MSG_ZERO:
-        D.req_zero = 1;
+        /* at once, in order with the commands after it: a HOME or PLAY_START the main loop
+         * takes before the next tick must find output off and ramp it up again (as a flag
+         * for the next tick, a 1-kHz bridge's playback after ZERO ran with output off) */
+        hal_lock();
+        D.enabled = 0;
+        D.prev_enabled = 0;
+        hal_unlock();
         if (running()) {
             D.req_stop = 1;
         }
@@ -897,7 +905,7 @@ static void handle(const hl_frame *f, uint8_t version)
         D.limit = clamp_of(HL_CURRENT_RATING_MA);
         D.mask = HL_CHANNEL_MASK;
         D.decim = 1;
-        D.nch = HL_N_CHANNELS;
+        D.nch = popcount16(HL_CHANNEL_MASK);
         hal_unlock();
         D.done_pending = 0;
         send_hello_ack();
@@ -1064,7 +1072,7 @@ void hl_device_init(const char *serial_number)
     D.limit = clamp_of(HL_CURRENT_RATING_MA);
     D.mask = D.run_mask = HL_CHANNEL_MASK;
     D.decim = D.run_decim = 1;
-    D.nch = D.run_nch = HL_N_CHANNELS;
+    D.nch = D.run_nch = popcount16(HL_CHANNEL_MASK);
     D.proto = 2;
     D.wd_ticks = WATCHDOG_TICKS;
     copy_str((uint8_t *)D.serial, serial_number, sizeof D.serial - 1);

@@ -144,13 +144,3 @@ void hal_amp_enable(int on)
 }
 
 int hal_estop_pressed(void) { return (int)((GPIO_IDR(PORT_C) >> 13) & 1u); }
-
-/* the simulated plant's hooks: nothing to simulate on the real device */
-void hal_plant_scene(float surface_m, int real_sample, const hal_sample *sample)
-{
-    (void)surface_m;
-    (void)real_sample;
-    (void)sample;
-}
-void hal_plant_home(float height_m) { (void)height_m; }
-void hal_plant_task(int task) { (void)task; }

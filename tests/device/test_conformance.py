@@ -23,7 +23,7 @@ from device.serial.framing import encode_frame
 from ..conftest import start_emulator, stop_emulator
 from .test_state_table import ANSWER_S, Host
 
-TARGETS = ["python", "host", "host-board", "host-san"]
+TARGETS = ["python", "host", "host-board", "host-san", "dhd-stub", "hd-stub"]
 SPRING = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
 S = M.Status
 
@@ -158,13 +158,15 @@ def test_a_second_playback_plays_the_buffer_again_and_output_is_off_after(host):
     assert host.ask(M.TraceConfig(1 << 2, 1)) == S.OK  # force_cmd alone
     assert host.ask(M.PlayChunk(0, 480, (430,) * 480)) == S.OK
     assert host.ask(M.PlayChunk(480, 480, (430,) * 480)) == S.OK
-    first = _force_cmd(_play(host, 1, 1000))
-    second = _force_cmd(_play(host, 2, 1000))
-    assert first.size == second.size == 1000
-    # output was off before each: ramped over the first 500 ticks, then the buffer's 0.43 N
+    ramp = host.servo_hz // 20  # 50 ms of ticks: 500 at 10 kHz, 50 on a 1-kHz bridge
+    n = min(1000, ramp + 460)
+    first = _force_cmd(_play(host, 1, n))
+    second = _force_cmd(_play(host, 2, n))
+    assert first.size == second.size == n
+    # output was off before each: ramped over the first 50 ms, then the buffer's 0.43 N
     for played in (first, second):
-        assert np.allclose(played[:500], 0.43 * np.arange(1, 501) / 500, atol=1e-6)
-        assert np.allclose(played[500:960], 0.43, atol=1e-6)
+        assert np.allclose(played[:ramp], 0.43 * np.arange(1, ramp + 1) / ramp, atol=1e-6)
+        assert np.allclose(played[ramp:960], 0.43, atol=1e-6)
     n = host.status_count
     out = host._pump(lambda m: isinstance(m, M.StatusReport) and host.status_count >= n + 2,
                      2.0)
@@ -179,12 +181,15 @@ def _fault_ends_playback(host: Host, stall: float = 0.0) -> None:
     assert host.ask(M.EStop()) == S.OK
     msgs = collect(host, lambda m: isinstance(m, M.WindowDone), 10.0)
     done = msgs[-1]
-    (fault,) = [m for m in msgs if isinstance(m, M.Fault)]
+    faults = [m for m in msgs if isinstance(m, M.Fault)]
+    # one FAULT, the e-stop's (the whole list when not: what came, in order, says why)
+    assert len(faults) == 1, [type(m).__name__ for m in msgs if not isinstance(m, M.TraceChunk)]
+    (fault,) = faults
     assert fault.code == done.fault == M.FaultCode.ESTOP
     assert done.n_ticks < host.limits.play_items
     # in device time (a busy computer may delay the frames, not the device's clock): the
     # playback's last tick is the one that zeroed output, within a millisecond
-    end_us = done.t0_us + done.n_ticks * 100
+    end_us = done.t0_us + done.n_ticks * 1e6 / host.servo_hz
     assert abs(end_us - fault.time_us) <= 1000, (end_us, fault.time_us)
     assert host.ask(M.ClearFault()) == S.OK
 
@@ -250,7 +255,7 @@ def test_an_estop_zeroes_output_within_its_bound_while_traces_stream(host):
     playback. Three e-stops in a window and three in a playback; the device's own worst
     figure since the attempt began (LINK_REPORT)."""
     for k in range(6):
-        assert host.ask(M.TraceConfig(0x7F, 1)) == S.OK
+        assert host.ask(M.TraceConfig(host.limits.channels & 0x7F, 1)) == S.OK
         if k % 2:
             assert host.ask(M.PlayStart(8, min(200_000, host.limits.play_items))) == S.OK
         else:
@@ -277,7 +282,8 @@ def test_a_from_contact_window_lasts_its_duration_and_position_is_its_tick(host)
     assert host.ask(M.StartWindow(5, 300, 30_000, 1)) == S.OK
     msgs = collect(host, lambda m: isinstance(m, M.WindowDone), 40.0)
     done = msgs[-1]
-    assert done.first_contact >= 0 and done.n_ticks == done.first_contact + 3000
+    assert done.first_contact >= 0
+    assert done.n_ticks == done.first_contact + round(0.3 * host.servo_hz)
     pos = _force_cmd(msgs)  # channel 0 alone: the position [m]
     heights = [(m.tick, m.height_um) for m in msgs if isinstance(m, M.Position)]
     assert len(heights) >= 5
@@ -293,7 +299,7 @@ def test_the_enable_ramp_runs_after_home_not_in_every_window(host):
     wait(host, 0.2)  # the 50-ms ramp is over in device time
     assert host.ask(M.StartWindow(6, 200, 200, 0)) == S.OK
     flags = _force_cmd(collect(host, lambda m: isinstance(m, M.WindowDone), 10.0))
-    assert flags.size == 2000
+    assert flags.size == round(0.2 * host.servo_hz)
     assert not (flags.astype(int) & 16).any()  # bit 4: the enable ramp
 
 

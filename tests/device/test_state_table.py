@@ -258,7 +258,8 @@ def test_the_document_table_is_read_whole():
     assert rows["ZERO"]["PLAYING"] == (M.Status.OK, "IDLE")
 
 
-@pytest.mark.parametrize("firmware", ["python", "host", "host-board", "host-san"])
+@pytest.mark.parametrize("firmware", ["python", "host", "host-board", "host-san", "dhd-stub",
+                                      "hd-stub"])
 def test_every_state_answers_every_command_as_the_document_says(firmware):
     emu = start_emulator("--firmware", firmware, "--seed", "2")
     host = Host(emu.port)

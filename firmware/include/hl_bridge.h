@@ -1,0 +1,33 @@
+/* What the bridges to commercial devices share (src/io_bridge.c): their servo I/O is a
+ * vendor's SDK (src/io_dhd.c: Force Dimension's libdhd; src/io_hd.c: OpenHaptics' HD API),
+ * and the papers' one axis is the device's vertical axis.
+ *
+ *   encoder       the end effector's height in counts of HL_ENCODER_NM
+ *   amplifier     the force along the vertical axis: the command [A] times
+ *                 HL_FORCE_CONSTANT_MN_A, so the host's limits and clamp keep their meaning
+ *   holding       a spring and damper towards the axis on the two others (BRIDGE_HOLD_K,
+ *                 BRIDGE_HOLD_B, at most BRIDGE_HOLD_MAX_N each), so the hand moves the
+ *                 stylus along the papers' one axis; off whenever output is
+ *   accelerometer none: these devices have none on the stylus, so the bridges record no
+ *                 accel trace (LIMITS.channels without bit 5); hal_accel_read is 0
+ *   e-stop        the program's SIGUSR1, as the host build's button; the device's own
+ *                 force switch stays the operator's hardware stop
+ */
+#ifndef HL_BRIDGE_H
+#define HL_BRIDGE_H
+
+#include <stdint.h>
+
+#define BRIDGE_HOLD_K 300.0    /* [N/m] towards the axis */
+#define BRIDGE_HOLD_B 2.0      /* [N*s/m] */
+#define BRIDGE_HOLD_MAX_N 2.0  /* [N] per axis */
+
+/* the seed of the simulated plant behind an SDK stand-in (HL_SDK_STUB builds); nothing
+ * against a vendor's SDK */
+void bridge_seed(uint64_t seed);
+/* the encoder's counts for a height [m]: rounded, and clamped to +-INT32_MAX */
+int32_t bridge_counts(double height_m);
+/* the holding force [N] on an off-axis coordinate at p [m], p_prev one tick earlier */
+double bridge_hold(double p, double p_prev);
+
+#endif

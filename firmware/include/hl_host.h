@@ -1,0 +1,33 @@
+/* What the programs that serve protocol v2 on this computer share (src/host_pty.c): the
+ * host build (src/main_host.c, which also drives the Force Dimension bridge) and the
+ * OpenHaptics bridge (src/main_hd.c). */
+#ifndef HL_HOST_H
+#define HL_HOST_H
+
+#include <signal.h>
+#include <stdint.h>
+
+typedef struct {
+    unsigned long long seed; /* the simulated plant's (the stand-ins' too); 0 by default */
+    double speed;            /* x real time; 1 by default */
+    int realtime;            /* --realtime: ask for SCHED_FIFO and locked memory */
+} hl_host_args;
+
+/* parse [--seed N] [--speed S] [--realtime]; `max_speed` 1 refuses any other pace. Prints
+ * the usage or the reason and returns 0 on a bad command line, 1 otherwise */
+int hl_host_parse(int argc, char **argv, double max_speed, hl_host_args *out);
+/* a raw pseudo-terminal: returns its master (non-blocking) and sets *path to the device
+ * file a host opens; the other end stays open, so a host that closes is no EOF; -1 on
+ * failure (reported on stderr) */
+int hl_host_pty(const char **path);
+/* SIGINT and SIGTERM set *stop; SIGUSR1 presses the e-stop button, SIGUSR2 releases it */
+void hl_host_signals(volatile sig_atomic_t *stop, volatile sig_atomic_t *button);
+/* everything waiting on the pty into the device's input (hal_sim.c's queue), until the
+ * port is empty, then hl_device_rx_idle: the device counts an ESTOP's wait from there */
+void hl_host_take_input(int master);
+/* --realtime: SCHED_FIFO at `priority` and all memory locked, where the system grants
+ * them; otherwise the stated fallback (normal scheduling) on stderr. Returns 1 if granted */
+int hl_host_realtime(int priority);
+uint64_t hl_host_now_ns(void); /* CLOCK_MONOTONIC [ns] */
+
+#endif

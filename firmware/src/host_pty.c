@@ -1,0 +1,128 @@
+/* The pieces every program serving protocol v2 on this computer shares (hl_host.h). */
+#define _GNU_SOURCE
+#include "hl_host.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <sched.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "hl_device.h"
+#include "hl_sim.h"
+
+int hl_host_parse(int argc, char **argv, double max_speed, hl_host_args *out)
+{
+    out->seed = 0;
+    out->speed = 1.0;
+    out->realtime = 0;
+    for (int i = 1; i < argc; i++) {
+        char *end = NULL;
+        if (strcmp(argv[i], "--seed") == 0 && i + 1 < argc) {
+            out->seed = strtoull(argv[++i], &end, 10);
+        } else if (strcmp(argv[i], "--speed") == 0 && i + 1 < argc) {
+            out->speed = strtod(argv[++i], &end);
+            if (!(out->speed > 0.0 && out->speed <= max_speed)) {
+                if (max_speed == 1.0) {
+                    fprintf(stderr, "%s: --speed must be 1: this device runs in real time, "
+                            "got %s\n", argv[0], argv[i]);
+                } else {
+                    fprintf(stderr, "%s: --speed must be in (0, %g], got %s\n", argv[0],
+                            max_speed, argv[i]);
+                }
+                return 0;
+            }
+        } else if (strcmp(argv[i], "--realtime") == 0) {
+            out->realtime = 1;
+            continue;
+        }
+        if (end == NULL || *end != '\0' || end == argv[i]) {
+            fprintf(stderr, "usage: %s [--seed N] [--speed S] [--realtime]\n", argv[0]);
+            return 0;
+        }
+    }
+    return 1;
+}
+
+int hl_host_pty(const char **path)
+{
+    int master = posix_openpt(O_RDWR | O_NOCTTY);
+    if (master < 0 || grantpt(master) || unlockpt(master)) {
+        perror("pty");
+        return -1;
+    }
+    *path = ptsname(master);
+    int slave = open(*path, O_RDWR | O_NOCTTY); /* held open: a host closing is no EOF */
+    struct termios t;
+    if (slave < 0 || tcgetattr(slave, &t)) {
+        perror("pty");
+        return -1;
+    }
+    cfmakeraw(&t);
+    tcsetattr(slave, TCSANOW, &t);
+    tcgetattr(master, &t);
+    cfmakeraw(&t);
+    tcsetattr(master, TCSANOW, &t);
+    fcntl(master, F_SETFL, fcntl(master, F_GETFL) | O_NONBLOCK);
+    return master;
+}
+
+static volatile sig_atomic_t *stop_flag, *button_flag;
+static void on_stop(int sig)
+{
+    (void)sig;
+    *stop_flag = 1;
+}
+static void on_button(int sig) { *button_flag = sig == SIGUSR1; }
+
+void hl_host_signals(volatile sig_atomic_t *stop, volatile sig_atomic_t *button)
+{
+    stop_flag = stop;
+    button_flag = button;
+    signal(SIGINT, on_stop);
+    signal(SIGTERM, on_stop);
+    signal(SIGPIPE, SIG_IGN);
+    signal(SIGUSR1, on_button);
+    signal(SIGUSR2, on_button);
+}
+
+void hl_host_take_input(int master)
+{
+    static uint8_t in[4096];
+    ssize_t r;
+    uint64_t t = hl_device_ticks(); /* before the read that finds the port empty */
+    while ((r = read(master, in, sizeof in)) > 0) {
+        sim_uart_to_device(in, (size_t)r);
+        t = hl_device_ticks();
+    }
+    hl_device_rx_idle(t);
+}
+
+int hl_host_realtime(int priority)
+{
+    struct sched_param p = {.sched_priority = priority};
+    if (sched_setscheduler(0, SCHED_FIFO, &p) != 0) {
+        fprintf(stderr, "real-time scheduling not granted (%s): the servo runs at normal "
+                "priority, and a busy computer can hold its ticks up (give the user "
+                "rtprio in /etc/security/limits.conf, or CAP_SYS_NICE)\n", strerror(errno));
+        return 0;
+    }
+    if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
+        fprintf(stderr, "memory not locked (%s): a page fault can hold a tick up\n",
+                strerror(errno));
+    }
+    fprintf(stderr, "real-time scheduling: SCHED_FIFO at priority %d\n", priority);
+    return 1;
+}
+
+uint64_t hl_host_now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}

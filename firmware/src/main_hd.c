@@ -1,0 +1,149 @@
+/* The OpenHaptics bridge: the firmware's servo tick inside the HD scheduler's callback (at
+ * its 1 kHz: HL_SERVO_HZ is 1000 in this build), protocol v2 on a pseudo-terminal served
+ * by the main thread, as the host build serves it.
+ *
+ *   build/hlfw-hd [--seed N]          (build/hlfw-hd-stub over the HD API's stand-in)
+ *
+ * Prints the pty's path as its first line. One lock keeps the tick and the main thread's
+ * link work apart, as a Cortex-M's interrupt mask does (hal_lock has nothing more to
+ * keep out): the tick waits for at most one pass of the link's work. The device runs in
+ * real time (no --speed); the HD scheduler sets its own thread's priority. SIGUSR1
+ * presses the e-stop button, SIGUSR2 releases it. At exit, stderr gets the tick periods
+ * the callback saw (median, 99th, 99.9th percentile, longest). */
+#define _GNU_SOURCE
+#include <poll.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <HD/hd.h>
+
+#include "hl_device.h"
+#include "hl_host.h"
+#include "hl_sim.h"
+
+#ifndef HL_SERIAL_PREFIX
+#define HL_SERIAL_PREFIX "HD"
+#endif
+#ifndef HL_HOST_WHAT
+#define HL_HOST_WHAT "OpenHaptics bridge"
+#endif
+#define PERIOD_BINS 20000u /* tick periods in 1-us bins; the last holds the longer ones */
+
+static volatile sig_atomic_t stop_flag, button;
+static pthread_mutex_t device_lock = PTHREAD_MUTEX_INITIALIZER;
+static struct {
+    uint64_t last_ns, n;
+    uint32_t bins[PERIOD_BINS];
+    HDerror error; /* the first error the HD API reported inside the callback */
+} T;
+
+static HDCallbackCode HDCALLBACK servo(void *data)
+{
+    (void)data;
+    HHD h = hdGetCurrentDevice();
+    hdBeginFrame(h);
+    pthread_mutex_lock(&device_lock);
+    sim_estop_button(button);
+    hl_servo_tick();
+    pthread_mutex_unlock(&device_lock);
+    hdEndFrame(h);
+    HDErrorInfo e = hdGetError();
+    if (HD_DEVICE_ERROR(e) && T.error == HD_SUCCESS) {
+        T.error = e.errorCode;
+    }
+    uint64_t t = hl_host_now_ns();
+    if (T.last_ns != 0) {
+        uint64_t us = (t - T.last_ns) / 1000u;
+        T.bins[us < PERIOD_BINS ? us : PERIOD_BINS - 1u]++;
+        T.n++;
+    }
+    T.last_ns = t;
+    return HD_CALLBACK_CONTINUE;
+}
+
+/* the period [us] below which a fraction q of the ticks' periods fall */
+static unsigned period_quantile(double q)
+{
+    uint64_t want = q >= 1.0 ? T.n - 1u : (uint64_t)(q * (double)T.n), seen = 0;
+    for (unsigned i = 0; i < PERIOD_BINS; i++) {
+        seen += T.bins[i];
+        if (seen > want) {
+            return i;
+        }
+    }
+    return PERIOD_BINS - 1u;
+}
+
+int main(int argc, char **argv)
+{
+    hl_host_args args;
+    if (!hl_host_parse(argc, argv, 1.0, &args)) {
+        return 2;
+    }
+    const char *path = NULL;
+    int master = hl_host_pty(&path);
+    if (master < 0) {
+        return 1;
+    }
+    hl_host_signals(&stop_flag, &button);
+    if (args.realtime) {
+        fprintf(stderr, "%s: --realtime does nothing here: the HD scheduler sets its own "
+                "thread's priority\n", argv[0]);
+    }
+
+    char serial[16];
+    snprintf(serial, sizeof serial, "%s-%llu", HL_SERIAL_PREFIX, args.seed);
+    sim_hal_init(args.seed); /* opens the device (src/io_hd.c) */
+    hl_device_init(serial);
+    HDSchedulerHandle tick = hdScheduleAsynchronous(servo, NULL, HD_MAX_SCHEDULER_PRIORITY);
+    hdStartScheduler();
+    HDErrorInfo e = hdGetError();
+    if (HD_DEVICE_ERROR(e)) {
+        fprintf(stderr, "%s: the HD scheduler did not start (%s)\n", argv[0],
+                hdGetErrorString(e.errorCode));
+        return 1;
+    }
+    printf("%s\n", path);
+    fflush(stdout);
+    fprintf(stderr, "reference firmware (" HL_HOST_WHAT ", seed %llu) at %u Hz in the HD "
+            "scheduler on %s; stop with Ctrl-C\n", args.seed, HL_SERVO_HZ, path);
+
+    static uint8_t out[65536];
+    size_t out_len = 0;
+    while (!stop_flag) {
+        pthread_mutex_lock(&device_lock);
+        hl_host_take_input(master);
+        hl_device_poll();
+        if (out_len == 0) {
+            out_len = sim_uart_from_device(out, sizeof out);
+        }
+        pthread_mutex_unlock(&device_lock);
+        if (out_len > 0) {
+            ssize_t w = write(master, out, out_len);
+            if (w > 0) {
+                memmove(out, out + w, out_len - (size_t)w);
+                out_len -= (size_t)w;
+            }
+        }
+        /* until input (or room to write), or half a tick: the link's work follows the ticks'
+         * reports (STATUS, trace records) within half a period */
+        struct timespec ts = {0, 500000000L / (long)HL_SERVO_HZ};
+        struct pollfd p = {master, (short)(POLLIN | (out_len ? POLLOUT : 0)), 0};
+        ppoll(&p, 1, &ts, NULL);
+    }
+    hdStopScheduler();
+    hdUnschedule(tick);
+    hl_device_view v = hl_device_peek();
+    fprintf(stderr, "%s: %llu ticks, %u frames in, %u control frames dropped, %u trace records "
+            "lost; tick period median %u us, 99%% %u us, 99.9%% %u us, longest %s%u us%s%s\n",
+            argv[0], (unsigned long long)v.ticks, v.frames_in, v.tx_dropped, v.records_lost,
+            period_quantile(0.5), period_quantile(0.99), period_quantile(0.999),
+            T.bins[PERIOD_BINS - 1u] ? ">= " : "", T.n ? period_quantile(1.0) : 0u,
+            T.error != HD_SUCCESS ? "; the HD API reported: " : "",
+            T.error != HD_SUCCESS ? hdGetErrorString(T.error) : "");
+    close(master);
+    return 0;
+}

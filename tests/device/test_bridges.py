@@ -1,0 +1,196 @@
+"""The bridges to commercial devices (issue 31): the firmware's device core with its servo
+I/O through a vendor's SDK, here built over hapticlab's stand-ins for the SDKs (libdhd at
+4 kHz, the OpenHaptics HD scheduler at 1 kHz, the simulated plant behind both). What a lab
+meets: the device self-test, a session, a device that has no accelerometer, and the
+builds against an SDK that is not installed. The conformance suite, the state table and
+the field ranges run on both bridges too (test_conformance.py, test_state_table.py,
+test_contract.py).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from device.scene import Scene
+from device.serial import messages as M
+from device.serial.backend import SerialDevice
+from device.serial.firmware import FIRMWARE_DIR
+
+from ..app.test_session import MINI
+from ..conftest import start_emulator, stop_emulator
+from .test_firmware import assert_selftest_passes
+
+CLI = [sys.executable, "-m", "app"]
+RATES = {"dhd-stub": 4000.0, "hd-stub": 1000.0}
+
+
+@pytest.fixture(params=sorted(RATES))
+def bridge(request):
+    emu = start_emulator("--firmware", request.param, "--seed", "7")
+    emu.kind = request.param
+    yield emu
+    stop_emulator(emu)
+
+
+def test_the_self_test_passes_on_each_bridge(bridge):
+    assert_selftest_passes(bridge.port)
+
+
+def test_a_bridge_says_its_rate_and_that_it_records_no_acceleration(bridge):
+    """HELLO_ACK carries the bridge's servo rate and its model; LIMITS leaves the accel
+    channel out (bit 5), so the host streams every other channel and a window's traces
+    have no accel, rather than a column of zeros that would read as a still stylus."""
+    with SerialDevice(bridge.port) as dev:
+        assert dev.info.servo_rate_hz == RATES[bridge.kind]
+        assert dev.info.model.startswith("hapticlab: ")
+        assert dev.link.limits.channels & 0x7F == 0x7F & ~(1 << M.Channel.NAMES.index("accel"))
+        dev.load_scene(Scene("firm", spring=680.0))
+        dev.home()
+        res = dev.run_window(0.5)
+    assert "accel" not in res.traces
+    assert {"position", "velocity", "force_cmd", "force_out", "current", "flags"} <= set(
+        res.traces)
+    # a record at every tick, for the window's 0.5 s from its first contact and before it
+    assert res.rate_hz == RATES[bridge.kind]
+    assert len(res.traces["t"]) >= 0.5 * RATES[bridge.kind]
+    assert np.allclose(np.diff(res.traces["t"]), 1 / RATES[bridge.kind])
+
+
+def test_a_session_runs_over_each_bridge(bridge, tmp_path):
+    """A whole session (three samples twice: a real block, a spring, a pulse) with the
+    simulated participant, whose felt acceleration comes from the device's velocity where
+    there is no accelerometer; the traces it keeps have no acceleration column."""
+    proto = tmp_path / "mini.toml"
+    proto.write_text(MINI)
+    out = subprocess.run([*CLI, "run", str(proto), "--participant", "P31", "--seed", "4",
+                          "--data", str(tmp_path), "--device", f"serial:{bridge.port}",
+                          "--responder", "simulated", "--no-audio", "--quiet"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    folder = tmp_path / "sub-P31" / "ses-1"
+    from app.recorder import read_trials
+
+    rows, _ = read_trials(folder / "trials.tsv")
+    valid = [r for r in rows if r["status"] == "valid"]
+    assert len(valid) == 6
+    assert all(1 <= int(r["rating"]) <= 7 for r in valid)
+    meta = json.loads((folder / "session.json").read_text())
+    assert meta["device"]["servo_rate_hz"] == RATES[bridge.kind]
+    traces = sorted((folder / "traces").glob("*.npz"))
+    assert traces
+    with np.load(traces[0]) as z:
+        assert "accel_counts" not in z and "position_counts" in z
+        assert float(z["rate_hz"]) == RATES[bridge.kind]
+
+
+def test_a_library_build_on_a_bridge_is_refused_for_want_of_an_accelerometer(tmp_path):
+    """Acceleration matching identifies the device from its accelerometer: on a device
+    without one the build stops before it measures anything and says why."""
+    emu = start_emulator("--firmware", "dhd-stub", "--seed", "8", "--speed", "4")
+    try:
+        out = subprocess.run([*CLI, "library", "build", "--device", f"serial:{emu.port}",
+                              "--windows", "2", "--out", str(tmp_path / "wood.npz")],
+                             capture_output=True, text=True, timeout=600)
+    finally:
+        stop_emulator(emu)
+    assert out.returncode != 0
+    assert "no accelerometer on the stylus" in out.stderr, out.stderr
+    assert not (tmp_path / "wood.npz").exists()
+
+
+def test_the_hd_bridge_runs_in_real_time_only():
+    run = subprocess.run([*CLI, "device", "emulate", "--firmware", "hd-stub", "--speed", "2"],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and "real time" in run.stderr and "--speed must be 1" in run.stderr
+
+
+@pytest.mark.parametrize(("target", "variable"), [("dhd", "DHD_SDK"), ("hd", "OPENHAPTICS")])
+def test_a_build_against_an_sdk_that_is_not_there_says_what_it_needs(target, variable,
+                                                                      tmp_path):
+    """`make -C firmware dhd DHD_SDK=…` and `make -C firmware hd OPENHAPTICS=…` build the
+    bridges against a lab's installed SDK; pointed at a folder without it, each stops
+    before compiling and names the variable."""
+    run = subprocess.run(["make", "-C", str(FIRMWARE_DIR), target, f"{variable}={tmp_path}"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode != 0
+    assert f"make {target} needs" in run.stdout + run.stderr and variable in run.stdout
+
+
+def test_validate_says_up_front_what_each_bridge_cannot_render(bridge):
+    """`protocol validate --device`: the factorial's 300-Hz aluminum sets are 0.3 × a 1-kHz
+    servo, played at about 80 % of their peak (a warning per set, naming the rate), and
+    faithfully at 4 kHz (0.075 ×: no warning); the realism protocol's matched samples need
+    libraries that only a device with an accelerometer can build: refused, saying so."""
+    def validate(name):
+        return subprocess.run([*CLI, "protocol", "validate", name, "--device",
+                               f"serial:{bridge.port}"], capture_output=True, text=True,
+                              timeout=300)
+
+    fact = validate("factorial")
+    assert fact.returncode == 0, fact.stderr
+    warned = sorted(line.split("'")[1] for line in fact.stdout.splitlines()
+                    if line.startswith("warning: sample"))
+    if bridge.kind == "hd-stub":
+        assert warned == ["aluminum-HHH", "aluminum-HHL", "aluminum-HLH", "aluminum-HLL"]
+        assert "a device at 1000 Hz renders 8" in fact.stdout
+    else:
+        assert warned == []
+    real = validate("realism")
+    assert real.returncode == 2
+    assert "has no accelerometer on the stylus, so no library can be built on it" in real.stderr
+    assert "library build" not in real.stderr  # no command that would fail in its turn
+
+
+SDK_LAYOUT = {  # target: (variable, the header's place, the library's folder and name)
+    "dhd": ("DHD_SDK", "include/dhdc.h", "lib/release/lin-x86_64-gcc", "dhd"),
+    "hd": ("OPENHAPTICS", "include/HD/hd.h", "lib", "HD"),
+}
+
+
+@pytest.mark.parametrize("target", sorted(SDK_LAYOUT))
+def test_the_labs_build_command_builds_a_bridge_against_an_installed_sdk(target, tmp_path):
+    """`make -C firmware dhd|hd` as a lab runs it, against an SDK folder laid out as the
+    Makefile says (its header under include/, a static library under lib/), here holding
+    the stand-in packed as that library: the bridge compiles and links without the
+    stand-in's hooks (no seed, no plant hooks: hal_noplant.c), refuses a pace other than
+    real time, and answers HELLO on its pty. The real SDKs' own libraries (and what they
+    link: libusb, the C++ runtime) are not tried here."""
+    var, header, libdir, lib = SDK_LAYOUT[target]
+    stub = FIRMWARE_DIR / "stubs" / ("dhd" if target == "dhd" else "openhaptics")
+    sdk = tmp_path / "sdk"
+    (sdk / header).parent.mkdir(parents=True)
+    (sdk / libdir).mkdir(parents=True)
+    (sdk / header).write_bytes((stub / "include" / header.removeprefix("include/")).read_bytes())
+    objs = []
+    for src in (stub / f"{target}_stub.c", FIRMWARE_DIR / "src" / "plant.c"):
+        obj = tmp_path / (src.stem + ".o")
+        subprocess.run(["cc", "-std=c11", "-O1", "-D_DEFAULT_SOURCE", "-c",
+                        f"-I{FIRMWARE_DIR / 'include'}", f"-I{sdk / 'include'}", str(src),
+                        "-o", str(obj)], check=True, capture_output=True)
+        objs.append(str(obj))
+    subprocess.run(["ar", "rcs", str(sdk / libdir / f"lib{lib}.a"), *objs], check=True)
+    run = subprocess.run(["make", "-C", str(FIRMWARE_DIR), target, f"{var}={sdk}",
+                          f"{target.upper()}_LIBS=-L{sdk / libdir} -l{lib} -lpthread -lm"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout + run.stderr
+    binary = FIRMWARE_DIR / "build" / f"hlfw-{target}"
+    fast = subprocess.run([str(binary), "--speed", "2"], capture_output=True, text=True,
+                          timeout=30)
+    assert fast.returncode == 2 and "real time" in fast.stderr
+    proc = subprocess.Popen([str(binary)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        port = proc.stdout.readline().strip()
+        assert port.startswith("/dev/"), proc.stderr.read()
+        with SerialDevice(port) as dev:
+            assert dev.info.firmware == f"hlfw-2.0 {target}"
+            assert dev.info.servo_rate_hz == (4000.0 if target == "dhd" else 1000.0)
+            assert not dev.info.accelerometer
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
