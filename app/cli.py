@@ -643,15 +643,15 @@ def build_parser() -> argparse.ArgumentParser:
                     "tapping (default 0)")
     em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
     em.add_argument("--firmware", choices=("python", "host", "host-board", "host-san", "qemu",
-                                           "dhd-stub", "hd-stub"),
+                                           "dhd-stub", "hd-stub", "hd-stub-tsan"),
                     default="python",
                     help="what serves the port (protocol 2): the Python emulator, or the C "
                     "reference firmware built for this machine (host-board: with the "
                     "STM32F405's buffers and 1-Mbaud link; host-san: that under ASan and "
                     "UBSan) or run on an emulated STM32F405 under QEMU, or the bridges to "
                     "commercial devices over stand-ins for their SDKs (dhd-stub: Force "
-                    "Dimension, 4 kHz; hd-stub: OpenHaptics, 1 kHz, real time only; neither "
-                    "has an accelerometer)")
+                    "Dimension, 4 kHz; hd-stub: OpenHaptics, 1 kHz, real time only, and "
+                    "hd-stub-tsan, that under ThreadSanitizer; neither has an accelerometer)")
     em.set_defaults(func=_device_emulate)
     from app.matching_cli import add_parsers
 

@@ -30,20 +30,22 @@ FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 _TARGETS = {"host": "build/hlfw-host", "host-board": "build/hlfw-host-board",
             "host-san": "build/hlfw-host-san",
             "dhd-stub": "build/hlfw-dhd-stub", "hd-stub": "build/hlfw-hd-stub",
+            "hd-stub-tsan": "build/hlfw-hd-stub-tsan",
             "qemu": "build/hlfw-stm32.elf", "board-qemu": "build/hlfw-board-qemu.elf"}
 _ARM = ("arm-none-eabi-gcc", "gcc-arm-none-eabi")
 _CC = ("cc", "build-essential")
 _TOOLS = {"host": _CC, "host-board": _CC, "host-san": _CC, "dhd-stub": _CC, "hd-stub": _CC,
-          "qemu": _ARM, "board-qemu": _ARM}
+          "hd-stub-tsan": _CC, "qemu": _ARM, "board-qemu": _ARM}
 #: the builds that run on this machine (paced to its clock; at any speed but ``hd-stub``)
-HOST_KINDS = ("host", "host-board", "host-san", "dhd-stub", "hd-stub")
+HOST_KINDS = ("host", "host-board", "host-san", "dhd-stub", "hd-stub", "hd-stub-tsan")
 #: the bridges to commercial devices, built over hapticlab's stand-ins for their SDKs: the
 #: Force Dimension bridge (its own 4-kHz servo loop through libdhd) and the OpenHaptics
 #: one (the servo tick in the HD scheduler's 1-kHz callback, real time only). Neither
 #: device has an accelerometer on the stylus, so neither records an accel trace.
 BRIDGE_STUBS = ("dhd-stub", "hd-stub")
-#: the builds whose device runs in real time only (the HD scheduler's clock)
-REAL_TIME_ONLY = ("hd-stub",)
+#: the builds whose device runs in real time only (the HD scheduler's clock); the second is
+#: the first under ThreadSanitizer (its tick and its link run in two threads)
+REAL_TIME_ONLY = ("hd-stub", "hd-stub-tsan")
 #: QEMU's clock for the Cortex-M builds: it counts the emulated board's instructions, 8 ns
 #: each (2**3; the STM32F405 runs ~130 M instructions/s at 168 MHz), and runs at wall-clock
 #: pace while the board sleeps (WFI). Without it the emulated clock is this computer's, so

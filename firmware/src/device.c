@@ -719,15 +719,17 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         }
         scene_upload();
         S.committed = 1;
+        hal_lock(); /* the plant's hooks, like servo state, change only with the tick kept out */
         hal_plant_scene((float)S.surface_um * 1e-6f, S.kind == 0, &S.sample);
+        hal_unlock();
         return HL_OK;
     }
     case HL_MSG_HOME: {
         if (!S.committed) {
             return HL_BAD_STATE;
         }
-        hal_plant_home((float)S.surface_um * 1e-6f + (float)get_u32(b) * 1e-6f);
         hal_lock();
+        hal_plant_home((float)S.surface_um * 1e-6f + (float)get_u32(b) * 1e-6f);
         D.enabled = 1;
         D.ramp = 0;
         D.state = HL_HOMED;
@@ -740,8 +742,8 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         D.timeout = get_u32(b + 6) * (HL_SERVO_HZ / 1000u);
         D.from_contact = b[10];
         begin_run(HL_WINDOW, get_u16(b));
-        hal_unlock();
         hal_plant_task(HAL_TASK_TAP);
+        hal_unlock();
         return HL_OK;
     case HL_MSG_STOP_WINDOW:
         if (running()) {
@@ -756,8 +758,8 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         return HL_OK;
     }
     case HL_MSG_PLAY_START:
-        hal_plant_task(HAL_TASK_HOLD);
         hal_lock();
+        hal_plant_task(HAL_TASK_HOLD);
         D.prev_enabled = D.enabled;
         if (!D.enabled) {
             D.enabled = 1;

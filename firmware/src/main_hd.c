@@ -44,12 +44,12 @@ static HDCallbackCode HDCALLBACK servo(void *data)
 {
     (void)data;
     HHD h = hdGetCurrentDevice();
+    pthread_mutex_lock(&device_lock); /* over the frame: the device's state is one tick's */
     hdBeginFrame(h);
-    pthread_mutex_lock(&device_lock);
     sim_estop_button(button);
     hl_servo_tick();
-    pthread_mutex_unlock(&device_lock);
     hdEndFrame(h);
+    pthread_mutex_unlock(&device_lock);
     HDErrorInfo e = hdGetError();
     if (HD_DEVICE_ERROR(e) && T.error == HD_SUCCESS) {
         T.error = e.errorCode;

@@ -41,6 +41,19 @@ def test_the_self_test_passes_on_each_bridge(bridge):
     assert_selftest_passes(bridge.port)
 
 
+def test_the_hd_bridges_two_threads_share_nothing_unguarded():
+    """The OpenHaptics bridge runs its tick in the scheduler's thread and its link in the
+    main thread: under ThreadSanitizer the whole self-test (windows, playbacks, e-stop,
+    watchdog, faults) runs with no data race reported."""
+    emu = start_emulator("--firmware", "hd-stub-tsan", "--seed", "9")
+    try:
+        assert_selftest_passes(emu.port)
+    finally:
+        stop_emulator(emu)
+    races = [line for line in emu.stderr_lines if "ThreadSanitizer" in line]
+    assert not races, emu.stderr()
+
+
 def test_a_bridge_says_its_rate_and_that_it_records_no_acceleration(bridge):
     """HELLO_ACK carries the bridge's servo rate and its model; LIMITS leaves the accel
     channel out (bit 5), so the host streams every other channel and a window's traces

@@ -3,8 +3,8 @@
  * millimetres; x and z stay at 0.
  *
  * The scheduler is a thread that runs the scheduled callbacks once per period (1 kHz, or
- * hdSetSchedulerRate's), then advances the plant by one period of device time with the
- * force the last frame set along y. Its periods follow this computer's clock; held up by
+ * hdSetSchedulerRate's); each hdEndFrame advances the plant by one period of device time
+ * with the force the frame set along y. Its periods follow this computer's clock; held up by
  * more than 20 ms it lets its clock slip instead of racing to catch up, so device time is
  * the number of periods run, as the host build's plant is. Forces pass only while
  * HD_FORCE_OUTPUT is enabled (as after hdInitDevice). Errors queue as OpenHaptics' do, and
@@ -118,6 +118,10 @@ void hdEndFrame(HHD hHD)
         return;
     }
     H.in_frame = 0;
+    /* the device applies the frame's force for one period: the plant advances here, in
+     * the frame's caller's context (the bridge holds its lock over the frame, so the plant
+     * is never stepped while its hooks change the scene) */
+    plant_step(H.open && H.force_on ? (float)H.force[1] : 0.0f);
 }
 
 void hdGetDoublev(HDenum pname, HDdouble *params)
@@ -264,7 +268,6 @@ static void *scheduler(void *arg)
                 pthread_mutex_unlock(&H.lock);
             }
         }
-        plant_step(H.open && H.force_on ? (float)H.force[1] : 0.0f);
         uint64_t t = now_ns();
         H.rate_now = t > last ? 1e9 / (double)(t - last) : (double)H.rate;
         last = t;
