@@ -29,5 +29,10 @@ void hl_host_take_input(int master);
  * them; otherwise the stated fallback (normal scheduling) on stderr. Returns 1 if granted */
 int hl_host_realtime(int priority);
 uint64_t hl_host_now_ns(void); /* CLOCK_MONOTONIC [ns] */
+/* the servo's achieved rate: note each tick as it runs (from one thread), then describe the
+ * periods between ticks [us of wall time] in words (median, 99th and 99.9th percentile,
+ * longest) into buf */
+void hl_host_tick_seen(void);
+void hl_host_tick_periods(char *buf, unsigned long cap);
 
 #endif

@@ -30,15 +30,10 @@
 #ifndef HL_HOST_WHAT
 #define HL_HOST_WHAT "OpenHaptics bridge"
 #endif
-#define PERIOD_BINS 20000u /* tick periods in 1-us bins; the last holds the longer ones */
 
 static volatile sig_atomic_t stop_flag, button;
 static pthread_mutex_t device_lock = PTHREAD_MUTEX_INITIALIZER;
-static struct {
-    uint64_t last_ns, n;
-    uint32_t bins[PERIOD_BINS];
-    HDerror error; /* the first error the HD API reported inside the callback */
-} T;
+static HDerror first_error; /* the first error the HD API reported inside the callback */
 
 static HDCallbackCode HDCALLBACK servo(void *data)
 {
@@ -51,30 +46,11 @@ static HDCallbackCode HDCALLBACK servo(void *data)
     hdEndFrame(h);
     pthread_mutex_unlock(&device_lock);
     HDErrorInfo e = hdGetError();
-    if (HD_DEVICE_ERROR(e) && T.error == HD_SUCCESS) {
-        T.error = e.errorCode;
+    if (HD_DEVICE_ERROR(e) && first_error == HD_SUCCESS) {
+        first_error = e.errorCode;
     }
-    uint64_t t = hl_host_now_ns();
-    if (T.last_ns != 0) {
-        uint64_t us = (t - T.last_ns) / 1000u;
-        T.bins[us < PERIOD_BINS ? us : PERIOD_BINS - 1u]++;
-        T.n++;
-    }
-    T.last_ns = t;
+    hl_host_tick_seen();
     return HD_CALLBACK_CONTINUE;
-}
-
-/* the period [us] below which a fraction q of the ticks' periods fall */
-static unsigned period_quantile(double q)
-{
-    uint64_t want = q >= 1.0 ? T.n - 1u : (uint64_t)(q * (double)T.n), seen = 0;
-    for (unsigned i = 0; i < PERIOD_BINS; i++) {
-        seen += T.bins[i];
-        if (seen > want) {
-            return i;
-        }
-    }
-    return PERIOD_BINS - 1u;
 }
 
 int main(int argc, char **argv)
@@ -137,13 +113,12 @@ int main(int argc, char **argv)
     hdStopScheduler();
     hdUnschedule(tick);
     hl_device_view v = hl_device_peek();
+    char periods[160];
+    hl_host_tick_periods(periods, sizeof periods);
     fprintf(stderr, "%s: %llu ticks, %u frames in, %u control frames dropped, %u trace records "
-            "lost; tick period median %u us, 99%% %u us, 99.9%% %u us, longest %s%u us%s%s\n",
-            argv[0], (unsigned long long)v.ticks, v.frames_in, v.tx_dropped, v.records_lost,
-            period_quantile(0.5), period_quantile(0.99), period_quantile(0.999),
-            T.bins[PERIOD_BINS - 1u] ? ">= " : "", T.n ? period_quantile(1.0) : 0u,
-            T.error != HD_SUCCESS ? "; the HD API reported: " : "",
-            T.error != HD_SUCCESS ? hdGetErrorString(T.error) : "");
+            "lost; %s%s%s\n", argv[0], (unsigned long long)v.ticks, v.frames_in, v.tx_dropped,
+            v.records_lost, periods, first_error != HD_SUCCESS ? "; the HD API reported: " : "",
+            first_error != HD_SUCCESS ? hdGetErrorString(first_error) : "");
     close(master);
     return 0;
 }

@@ -98,6 +98,7 @@ int main(int argc, char **argv)
         hl_device_poll();
         if (done < due) {
             hl_servo_tick();
+            hl_host_tick_seen();
             done++;
             hl_host_take_input(master);
             hl_device_poll();
@@ -123,10 +124,12 @@ int main(int argc, char **argv)
         }
     }
     hl_device_view v = hl_device_peek();
+    char periods[160];
+    hl_host_tick_periods(periods, sizeof periods);
     fprintf(stderr, "%s: %llu ticks, %u frames in, %u control frames dropped, %u trace "
-            "records lost, %llu ticks slipped while held up\n", argv[0],
+            "records lost, %llu ticks slipped while held up; %s (wall time)\n", argv[0],
             (unsigned long long)v.ticks, v.frames_in, v.tx_dropped, v.records_lost,
-            (unsigned long long)late);
+            (unsigned long long)late, periods);
     close(master);
     return 0;
 }

@@ -10,6 +10,7 @@ test_contract.py).
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -207,3 +208,23 @@ def test_the_labs_build_command_builds_a_bridge_against_an_installed_sdk(target,
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+def test_realtime_is_asked_for_and_its_answer_said():
+    """`--realtime` asks for SCHED_FIFO and locked memory: granted (as root, or with an
+    rtprio limit) it says so, refused it says what it runs at and how to grant it; either
+    way the servo runs (ticks counted at exit)."""
+    binary = FIRMWARE_DIR / "build" / "hlfw-dhd-stub"
+    proc = subprocess.Popen([str(binary), "--realtime"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().startswith("/dev/")
+    import time
+
+    time.sleep(1.0)
+    proc.terminate()
+    _, err = proc.communicate(timeout=30)
+    granted = "real-time scheduling: SCHED_FIFO at priority 80" in err
+    refused = "real-time scheduling not granted" in err and "rtprio" in err
+    assert granted != refused, err
+    m = re.search(r"hlfw-dhd-stub: (\d+) ticks,", err)
+    assert m and int(m.group(1)) > 0, err
