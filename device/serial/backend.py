@@ -240,6 +240,10 @@ class SerialDevice(HapticDevice):
                    "the device computed a current that is not a finite number (a simulated "
                    "device: its stylus left every physical bound) and zeroed its output"
                    if code == "nonfinite" else
+                   "the device's own I/O failed (a bridge's SDK refused a position reading "
+                   "or a force, or its servo loop was held up past its bound) and it zeroed "
+                   "its output; check the device's cable and power, then clear the fault"
+                   if code == "device" else
                    "emergency stop (latched): output zeroed" if self._estop_sent else
                    "the device's own e-stop button was pressed: output zeroed")
             self._fault = FaultEvent(msg.time_us * 1e-6, code, why)

@@ -37,7 +37,7 @@ _INT_RANGE = {"u8": (0, 2**8 - 1), "u16": (0, 2**16 - 1), "u32": (0, 2**32 - 1),
 LIMIT_NAMES = ("table_items", "play_items", "channels", "max_decimation", "current_limit_ma")
 
 #: fault codes (FAULT.code, STATUS.fault, WINDOW_DONE.fault): code → name
-FAULTS = {1: "watchdog", 2: "estop", 3: "nonfinite"}
+FAULTS = {1: "watchdog", 2: "estop", 3: "nonfinite", 4: "device"}
 
 
 @dataclass(frozen=True)

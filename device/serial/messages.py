@@ -44,6 +44,7 @@ class FaultCode:
     WATCHDOG = 1
     ESTOP = 2
     NONFINITE = 3  #: the servo computed a current that is not finite
+    DEVICE = 4  #: the device's own I/O failed (a bridge's SDK call, a servo held up)
     NAMES: ClassVar[dict[int, str]] = dict(C.FAULTS)
 
 

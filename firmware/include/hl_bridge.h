@@ -7,11 +7,15 @@
  *                 HL_FORCE_CONSTANT_MN_A, so the host's limits and clamp keep their meaning
  *   holding       a spring and damper towards the axis on the two others (BRIDGE_HOLD_K,
  *                 BRIDGE_HOLD_B, at most BRIDGE_HOLD_MAX_N each), so the hand moves the
- *                 stylus along the papers' one axis; off whenever output is
+ *                 stylus along the papers' one axis; off whenever output is, and ramped
+ *                 up with it
+ *   failures      a reading or command the SDK refuses latches a device fault (FAULT code
+ *                 4) at the next tick; the encoder then keeps its last good reading
  *   accelerometer none: these devices have none on the stylus, so the bridges record no
  *                 accel trace (LIMITS.channels without bit 5); hal_accel_read is 0
  *   e-stop        the program's SIGUSR1, as the host build's button; the device's own
- *                 force switch stays the operator's hardware stop
+ *                 force switch stays the operator's hardware stop (not yet read by the
+ *                 bridge: a device that turns its forces off itself is not reported)
  */
 #ifndef HL_BRIDGE_H
 #define HL_BRIDGE_H
@@ -20,14 +24,20 @@
 
 #define BRIDGE_HOLD_K 300.0    /* [N/m] towards the axis */
 #define BRIDGE_HOLD_B 2.0      /* [N*s/m] */
-#define BRIDGE_HOLD_MAX_N 2.0  /* [N] per axis */
+#define BRIDGE_HOLD_MAX_N 1.0  /* [N] per axis */
 
 /* the seed of the simulated plant behind an SDK stand-in (HL_SDK_STUB builds); nothing
  * against a vendor's SDK */
 void bridge_seed(uint64_t seed);
-/* the encoder's counts for a height [m]: rounded, and clamped to +-INT32_MAX */
+/* the encoder's counts for a height [m]: rounded, and clamped to +-INT32_MAX (finite
+ * heights only: a reading that failed is bridge_io_failed's, never a count) */
 int32_t bridge_counts(double height_m);
-/* the holding force [N] on an off-axis coordinate at p [m], p_prev one tick earlier */
-double bridge_hold(double p, double p_prev);
+/* the holding forces [N] on the two off-axis coordinates a and b [m] (a0, b0 one tick
+ * earlier) into out[0], out[1]: 0 while output is off (`on` 0), ramped up over the 50 ms
+ * after it is enabled, as the device core ramps the axis's force */
+void bridge_hold(int on, double a, double a0, double b, double b0, double out[2]);
+/* a reading or a command failed, or the servo loop was held up past its bound: the next
+ * tick's hal_io_ok() is 0, so the device latches a device fault and output goes off */
+void bridge_io_failed(void);
 
 #endif

@@ -19,7 +19,10 @@
 #define HL_SERVO_HZ 10000u
 #endif
 #ifndef HL_ENCODER_NM
-#define HL_ENCODER_NM 10000u          /* encoder resolution [nm] */
+#define HL_ENCODER_NM 10000u          /* encoder resolution [nm], whole micrometres */
+#endif
+#if HL_ENCODER_NM % 1000u != 0u || HL_ENCODER_NM == 0u
+#error "HL_ENCODER_NM must be a whole number of micrometres"
 #endif
 #ifndef HL_FORCE_CONSTANT_MN_A
 #define HL_FORCE_CONSTANT_MN_A 2150u  /* [mN/A] */
@@ -79,7 +82,8 @@
 enum { HL_IDLE = 0, HL_HOMED = 1, HL_WINDOW = 2, HL_PLAYING = 3, HL_FAULT = 4 };
 enum { HL_OK = 0, HL_BAD_MESSAGE = 1, HL_BAD_STATE = 2, HL_FAULT_LATCHED = 3,
        HL_UNKNOWN_SCENE = 4, HL_TABLE_CRC = 5, HL_BUSY = 6 };
-enum { HL_FAULT_NONE = 0, HL_FAULT_WATCHDOG = 1, HL_FAULT_ESTOP = 2, HL_FAULT_NONFINITE = 3 };
+enum { HL_FAULT_NONE = 0, HL_FAULT_WATCHDOG = 1, HL_FAULT_ESTOP = 2, HL_FAULT_NONFINITE = 3,
+       HL_FAULT_DEVICE = 4 };
 /* trace flag bits (channel 6) */
 enum { HL_FLAG_CONTACT = 1, HL_FLAG_SATURATED = 2, HL_FLAG_TRANSIENT = 4, HL_FLAG_ZEROED = 8,
        HL_FLAG_RAMP = 16 };

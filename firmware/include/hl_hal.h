@@ -26,6 +26,9 @@ float hal_accel_read(void);        /* stylus acceleration [m/s^2], up positive *
 void hal_amp_enable(int on);       /* the amplifier's enable line: on only while output is
                                       enabled and no fault is latched (every tick) */
 void hal_watchdog_kick(void);      /* the hardware watchdog (the servo tick proves liveness) */
+int hal_io_ok(void);               /* 0 when the servo side's own I/O failed (a bridge's SDK
+                                      call, a servo loop held up past its bound): latches a
+                                      device fault, read every tick; 1 on a board and a plant */
 int hal_estop_pressed(void);       /* the operator's e-stop button, read every tick: pressed
                                       (or its wire broken) latches ESTOP, and CLEAR_FAULT is
                                       refused until it is released */

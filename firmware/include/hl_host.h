@@ -5,6 +5,8 @@
 #define HL_HOST_H
 
 #include <signal.h>
+#include <stdatomic.h>
+#include <stddef.h>
 #include <stdint.h>
 
 typedef struct {
@@ -20,8 +22,10 @@ int hl_host_parse(int argc, char **argv, double max_speed, hl_host_args *out);
  * file a host opens; the other end stays open, so a host that closes is no EOF; -1 on
  * failure (reported on stderr) */
 int hl_host_pty(const char **path);
-/* SIGINT and SIGTERM set *stop; SIGUSR1 presses the e-stop button, SIGUSR2 releases it */
-void hl_host_signals(volatile sig_atomic_t *stop, volatile sig_atomic_t *button);
+/* SIGINT, SIGTERM, SIGHUP and SIGQUIT set *stop (so the program zeroes its output and
+ * closes the device); SIGUSR1 presses the e-stop button, SIGUSR2 releases it. Lock-free
+ * atomics: a handler may run on any thread, another thread reads them */
+void hl_host_signals(atomic_int *stop, atomic_int *button);
 /* everything waiting on the pty into the device's input (hal_sim.c's queue), until the
  * port is empty, then hl_device_rx_idle: the device counts an ESTOP's wait from there */
 void hl_host_take_input(int master);
@@ -33,6 +37,6 @@ uint64_t hl_host_now_ns(void); /* CLOCK_MONOTONIC [ns] */
  * periods between ticks [us of wall time] in words (median, 99th and 99.9th percentile,
  * longest) into buf */
 void hl_host_tick_seen(void);
-void hl_host_tick_periods(char *buf, unsigned long cap);
+void hl_host_tick_periods(char *buf, size_t cap);
 
 #endif

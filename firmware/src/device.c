@@ -373,6 +373,9 @@ void hl_servo_tick(void)
     if (hal_estop_pressed()) {
         latch_fault(HL_FAULT_ESTOP); /* the operator's button */
     }
+    if (!hal_io_ok()) {
+        latch_fault(HL_FAULT_DEVICE); /* a reading or command failed: never render on */
+    }
     if (D.enabled && D.ticks - D.last_rx_tick > D.wd_ticks) {
         latch_fault(HL_FAULT_WATCHDOG); /* armed while output is enabled */
     }
@@ -393,7 +396,7 @@ void hl_servo_tick(void)
                 float v = speed > 2.147f ? 2.147f : speed < -2.147f ? -2.147f : speed;
                 push_event(EV_CONTACT, 0, D.wtick, (int32_t)lroundf(v * 1e9f), 0, 0);
                 if (S.kind == 2) {
-                    pick_rows(speed);
+                    pick_rows(v); /* the speed a hand can reach, whatever a glitch reads */
                     D.tr_on = 1;
                     D.tr_k = 0;
                 }

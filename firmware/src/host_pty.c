@@ -27,7 +27,8 @@ int hl_host_parse(int argc, char **argv, double max_speed, hl_host_args *out)
             out->seed = strtoull(argv[++i], &end, 10);
         } else if (strcmp(argv[i], "--speed") == 0 && i + 1 < argc) {
             out->speed = strtod(argv[++i], &end);
-            if (!(out->speed > 0.0 && out->speed <= max_speed)) {
+            if (!(out->speed > 0.0 && out->speed <= max_speed) ||
+                (max_speed == 1.0 && out->speed != 1.0)) {
                 if (max_speed == 1.0) {
                     fprintf(stderr, "%s: --speed must be 1: this device runs in real time, "
                             "got %s\n", argv[0], argv[i]);
@@ -72,20 +73,22 @@ int hl_host_pty(const char **path)
     return master;
 }
 
-static volatile sig_atomic_t *stop_flag, *button_flag;
+static atomic_int *stop_flag, *button_flag;
 static void on_stop(int sig)
 {
     (void)sig;
-    *stop_flag = 1;
+    atomic_store(stop_flag, 1);
 }
-static void on_button(int sig) { *button_flag = sig == SIGUSR1; }
+static void on_button(int sig) { atomic_store(button_flag, sig == SIGUSR1); }
 
-void hl_host_signals(volatile sig_atomic_t *stop, volatile sig_atomic_t *button)
+void hl_host_signals(atomic_int *stop, atomic_int *button)
 {
     stop_flag = stop;
     button_flag = button;
     signal(SIGINT, on_stop);
     signal(SIGTERM, on_stop);
+    signal(SIGHUP, on_stop);
+    signal(SIGQUIT, on_stop);
     signal(SIGPIPE, SIG_IGN);
     signal(SIGUSR1, on_button);
     signal(SIGUSR2, on_button);
@@ -157,7 +160,7 @@ static unsigned period_quantile(double q)
     return PERIOD_BINS - 1u;
 }
 
-void hl_host_tick_periods(char *buf, unsigned long cap)
+void hl_host_tick_periods(char *buf, size_t cap)
 {
     if (T.n == 0) {
         snprintf(buf, cap, "no tick periods measured");

@@ -24,20 +24,45 @@ void bridge_seed(uint64_t seed)
 int32_t bridge_counts(double height_m)
 {
     double c = round(height_m / ((double)HL_ENCODER_NM * 1e-9));
-    if (isnan(c)) {
-        return INT32_MAX; /* a reading that is no height: far above any surface, no force */
-    }
     return c > (double)INT32_MAX ? INT32_MAX : c < -(double)INT32_MAX ? -INT32_MAX : (int32_t)c;
 }
 
-double bridge_hold(double p, double p_prev)
+static double hold_axis(double p, double p_prev, double gain)
 {
-    double f = -BRIDGE_HOLD_K * p - BRIDGE_HOLD_B * (p - p_prev) * (double)HL_SERVO_HZ;
+    double f = gain * (-BRIDGE_HOLD_K * p - BRIDGE_HOLD_B * (p - p_prev) * (double)HL_SERVO_HZ);
     if (!isfinite(f)) {
         return 0.0;
     }
     return f > BRIDGE_HOLD_MAX_N ? BRIDGE_HOLD_MAX_N
                                  : f < -BRIDGE_HOLD_MAX_N ? -BRIDGE_HOLD_MAX_N : f;
+}
+
+void bridge_hold(int on, double a, double a0, double b, double b0, double out[2])
+{
+    static uint32_t ramp; /* ticks since output was enabled */
+    const uint32_t ramp_ticks = HL_SERVO_HZ / 20u;
+    if (!on) {
+        ramp = 0;
+        out[0] = out[1] = 0.0;
+        return;
+    }
+    if (ramp < ramp_ticks) {
+        ramp++;
+    }
+    double gain = (double)ramp / (double)ramp_ticks;
+    out[0] = hold_axis(a, a0, gain);
+    out[1] = hold_axis(b, b0, gain);
+}
+
+static volatile int io_failed;
+
+void bridge_io_failed(void) { io_failed = 1; }
+
+int hal_io_ok(void)
+{
+    int ok = !io_failed;
+    io_failed = 0; /* a failure is reported once; one that lasts is reported every tick */
+    return ok;
 }
 
 float hal_accel_read(void) { return 0.0f; } /* no accelerometer: not recorded */

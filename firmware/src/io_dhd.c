@@ -3,6 +3,7 @@
  * (stubs/dhd/, built with HL_SDK_STUB) for the tests; the mapping is hl_bridge.h's, with
  * z the vertical axis (up positive, as libdhd's frame has it). Called from the servo loop
  * of src/main_host.c, one libdhd read and one write per tick. */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -12,8 +13,9 @@
 #include "hl_hal.h"
 
 static const double KF = (double)HL_FORCE_CONSTANT_MN_A * 1e-3; /* [N/A] */
-static char id = -1;
+static signed char id = -1; /* signed: plain char is unsigned on some of libdhd's platforms */
 static int amp_on;
+static int32_t counts = INT32_MAX; /* the last good reading: far above, until the first */
 static double x, y, x_prev, y_prev;
 
 static void close_device(void)
@@ -35,41 +37,52 @@ void hal_io_init(uint64_t seed)
                 dhdErrorGetLastStr());
         exit(1);
     }
-    id = (char)d;
+    id = (signed char)d;
     const char *name = dhdGetSystemName(id);
     fprintf(stderr, "Force Dimension device: %s\n", name ? name : "(unnamed)");
-    dhdEnableForce(DHD_OFF, id);
+    if (dhdEnableForce(DHD_OFF, id) < 0) {
+        fprintf(stderr, "the Force Dimension device refused to turn its forces off (%s)\n",
+                dhdErrorGetLastStr());
+        exit(1);
+    }
     amp_on = 0;
     atexit(close_device);
 }
 
 int32_t hal_encoder_counts(void)
 {
-    double z = 0.0;
+    double nx = 0.0, ny = 0.0, z = 0.0;
+    if (dhdGetPosition(&nx, &ny, &z, id) < 0 || !isfinite(nx) || !isfinite(ny) ||
+        !isfinite(z)) {
+        bridge_io_failed(); /* the last good reading stands; output goes off */
+        return counts;
+    }
     x_prev = x;
     y_prev = y;
-    if (dhdGetPosition(&x, &y, &z, id) < 0) {
-        x = x_prev;
-        y = y_prev;
-        return INT32_MAX; /* no reading: far above any surface, no force */
-    }
-    return bridge_counts(z);
+    x = nx;
+    y = ny;
+    counts = bridge_counts(z);
+    return counts;
 }
 
 void hal_current_set(float amps)
 {
-    if (!amp_on) {
-        dhdSetForce(0.0, 0.0, 0.0, id); /* a disabled amplifier passes nothing */
-        return;
+    double hold[2];
+    bridge_hold(amp_on, x, x_prev, y, y_prev, hold);
+    /* a disabled amplifier passes nothing */
+    double fz = amp_on ? (double)amps * KF : 0.0;
+    if (dhdSetForce(hold[0], hold[1], fz, id) < 0) {
+        bridge_io_failed();
     }
-    dhdSetForce(bridge_hold(x, x_prev), bridge_hold(y, y_prev), (double)amps * KF, id);
 }
 
 void hal_amp_enable(int on)
 {
     on = on != 0;
     if (on != amp_on) { /* the USB traffic only when it changes */
-        dhdEnableForce(on ? DHD_ON : DHD_OFF, id);
+        if (dhdEnableForce(on ? DHD_ON : DHD_OFF, id) < 0) {
+            bridge_io_failed();
+        }
         amp_on = on;
     }
 }

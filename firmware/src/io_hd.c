@@ -4,6 +4,7 @@
  * API's frame has it) and positions in millimetres. Called from the servo tick that
  * src/main_hd.c runs inside the HD scheduler's callback, between hdBeginFrame and
  * hdEndFrame. */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -16,6 +17,7 @@
 static const double KF = (double)HL_FORCE_CONSTANT_MN_A * 1e-3; /* [N/A] */
 static HHD device = HD_INVALID_HANDLE;
 static int amp_on;
+static int32_t counts = INT32_MAX; /* the last good reading: far above, until the first */
 static double x, z, x_prev, z_prev; /* [m] */
 
 static void close_device(void)
@@ -44,23 +46,27 @@ void hal_io_init(uint64_t seed)
 
 int32_t hal_encoder_counts(void)
 {
-    HDdouble p[3] = {0.0, 0.0, 0.0};
+    HDdouble p[3] = {NAN, NAN, NAN};
+    hdGetDoublev(HD_CURRENT_POSITION, p);
+    HDErrorInfo e = hdGetError();
+    if (HD_DEVICE_ERROR(e) || !isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) {
+        bridge_io_failed(); /* the last good reading stands; output goes off */
+        return counts;
+    }
     x_prev = x;
     z_prev = z;
-    hdGetDoublev(HD_CURRENT_POSITION, p);
     x = p[0] * 1e-3;
     z = p[2] * 1e-3;
-    return bridge_counts(p[1] * 1e-3);
+    counts = bridge_counts(p[1] * 1e-3);
+    return counts;
 }
 
 void hal_current_set(float amps)
 {
-    HDdouble f[3] = {0.0, 0.0, 0.0}; /* a disabled amplifier passes nothing */
-    if (amp_on) {
-        f[0] = bridge_hold(x, x_prev);
-        f[1] = (double)amps * KF;
-        f[2] = bridge_hold(z, z_prev);
-    }
+    double hold[2];
+    bridge_hold(amp_on, x, x_prev, z, z_prev, hold);
+    /* a disabled amplifier passes nothing */
+    HDdouble f[3] = {hold[0], amp_on ? (double)amps * KF : 0.0, hold[1]};
     hdSetDoublev(HD_CURRENT_FORCE, f);
 }
 

@@ -34,6 +34,7 @@ void hal_current_set(float amps)
 float hal_accel_read(void) { return plant_accel(); }
 void hal_amp_enable(int on) { amp_on = on != 0; }
 int hal_estop_pressed(void) { return estop_button; }
+int hal_io_ok(void) { return 1; }
 
 float sim_current(void) { return last_current; }
 int sim_amp_enabled(void) { return amp_on; }

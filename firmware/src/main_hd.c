@@ -4,12 +4,15 @@
  *
  *   build/hlfw-hd [--seed N]          (build/hlfw-hd-stub over the HD API's stand-in)
  *
- * Prints the pty's path as its first line. One lock keeps the tick and the main thread's
- * link work apart, as a Cortex-M's interrupt mask does (hal_lock has nothing more to
- * keep out): the tick waits for at most one pass of the link's work. The device runs in
- * real time (no --speed); the HD scheduler sets its own thread's priority. SIGUSR1
- * presses the e-stop button, SIGUSR2 releases it. At exit, stderr gets the tick periods
- * the callback saw (median, 99th, 99.9th percentile, longest). */
+ * Prints the pty's path as its first line. One lock (priority-inheriting, so the
+ * scheduler's thread lends its priority to the main thread holding it) keeps the tick and
+ * the link's work apart, as a Cortex-M's interrupt mask does: the tick waits while the main
+ * thread reads the port and executes the frames that came. An error the HD API reports
+ * during a tick latches a device fault at the next one. The device runs in real time (no
+ * --speed); the HD scheduler sets its own thread's priority. SIGUSR1 presses the e-stop
+ * button, SIGUSR2 releases it; on SIGINT, SIGTERM, SIGHUP or SIGQUIT the callback sets zero
+ * force and turns output off in a last frame before the scheduler stops. At exit, stderr
+ * gets the tick periods the callback saw (median, 99th, 99.9th percentile, longest). */
 #define _GNU_SOURCE
 #include <poll.h>
 #include <pthread.h>
@@ -20,6 +23,7 @@
 
 #include <HD/hd.h>
 
+#include "hl_bridge.h"
 #include "hl_device.h"
 #include "hl_host.h"
 #include "hl_sim.h"
@@ -31,9 +35,10 @@
 #define HL_HOST_WHAT "OpenHaptics bridge"
 #endif
 
-static volatile sig_atomic_t stop_flag, button;
-static pthread_mutex_t device_lock = PTHREAD_MUTEX_INITIALIZER;
-static HDerror first_error; /* the first error the HD API reported inside the callback */
+static atomic_int stop_flag, button;
+static atomic_int stopping, stopped; /* the last frame: asked for, and done */
+static pthread_mutex_t device_lock;
+static HDerror first_error; /* the first error the HD API reported during a tick */
 
 static HDCallbackCode HDCALLBACK servo(void *data)
 {
@@ -41,16 +46,40 @@ static HDCallbackCode HDCALLBACK servo(void *data)
     HHD h = hdGetCurrentDevice();
     pthread_mutex_lock(&device_lock); /* over the frame: the device's state is one tick's */
     hdBeginFrame(h);
-    sim_estop_button(button);
+    if (atomic_load(&stopping)) { /* the program ends: zero force, output off, no more */
+        const HDdouble zero[3] = {0.0, 0.0, 0.0};
+        hdSetDoublev(HD_CURRENT_FORCE, zero);
+        hdDisable(HD_FORCE_OUTPUT);
+        hdEndFrame(h);
+        pthread_mutex_unlock(&device_lock);
+        atomic_store(&stopped, 1);
+        return HD_CALLBACK_DONE;
+    }
+    sim_estop_button(atomic_load(&button));
     hl_servo_tick();
     hdEndFrame(h);
-    pthread_mutex_unlock(&device_lock);
     HDErrorInfo e = hdGetError();
-    if (HD_DEVICE_ERROR(e) && first_error == HD_SUCCESS) {
-        first_error = e.errorCode;
+    if (HD_DEVICE_ERROR(e)) {
+        bridge_io_failed(); /* the next tick latches a device fault */
+        if (first_error == HD_SUCCESS) {
+            first_error = e.errorCode;
+        }
     }
+    pthread_mutex_unlock(&device_lock);
     hl_host_tick_seen();
     return HD_CALLBACK_CONTINUE;
+}
+
+/* the last frame (zero force, output off), then the scheduler stopped */
+static void stop_servo(HDSchedulerHandle tick)
+{
+    atomic_store(&stopping, 1);
+    for (int i = 0; i < 500 && !atomic_load(&stopped); i++) { /* 0.5 s: 500 ticks */
+        struct timespec ts = {0, 1000000L};
+        nanosleep(&ts, NULL);
+    }
+    hdStopScheduler();
+    hdUnschedule(tick);
 }
 
 int main(int argc, char **argv)
@@ -59,6 +88,10 @@ int main(int argc, char **argv)
     if (!hl_host_parse(argc, argv, 1.0, &args)) {
         return 2;
     }
+    pthread_mutexattr_t attr;
+    pthread_mutexattr_init(&attr);
+    pthread_mutexattr_setprotocol(&attr, PTHREAD_PRIO_INHERIT);
+    pthread_mutex_init(&device_lock, &attr);
     const char *path = NULL;
     int master = hl_host_pty(&path);
     if (master < 0) {
@@ -80,6 +113,7 @@ int main(int argc, char **argv)
     if (HD_DEVICE_ERROR(e)) {
         fprintf(stderr, "%s: the HD scheduler did not start (%s)\n", argv[0],
                 hdGetErrorString(e.errorCode));
+        stop_servo(tick);
         return 1;
     }
     printf("%s\n", path);
@@ -89,7 +123,7 @@ int main(int argc, char **argv)
 
     static uint8_t out[65536];
     size_t out_len = 0;
-    while (!stop_flag) {
+    while (!atomic_load(&stop_flag)) {
         pthread_mutex_lock(&device_lock);
         hl_host_take_input(master);
         hl_device_poll();
@@ -110,14 +144,15 @@ int main(int argc, char **argv)
         struct pollfd p = {master, (short)(POLLIN | (out_len ? POLLOUT : 0)), 0};
         ppoll(&p, 1, &ts, NULL);
     }
-    hdStopScheduler();
-    hdUnschedule(tick);
+    stop_servo(tick);
     hl_device_view v = hl_device_peek();
     char periods[160];
     hl_host_tick_periods(periods, sizeof periods);
     fprintf(stderr, "%s: %llu ticks, %u frames in, %u control frames dropped, %u trace records "
-            "lost; %s%s%s\n", argv[0], (unsigned long long)v.ticks, v.frames_in, v.tx_dropped,
-            v.records_lost, periods, first_error != HD_SUCCESS ? "; the HD API reported: " : "",
+            "lost; %s%s%s%s\n", argv[0], (unsigned long long)v.ticks, v.frames_in,
+            v.tx_dropped, v.records_lost, periods,
+            atomic_load(&stopped) ? "; output off in its last frame" : "; NO last frame",
+            first_error != HD_SUCCESS ? "; the HD API reported: " : "",
             first_error != HD_SUCCESS ? hdGetErrorString(first_error) : "");
     close(master);
     return 0;

@@ -39,10 +39,13 @@
 
 #include "hl_device.h"
 #include "hl_host.h"
+#ifdef HL_REAL_DEVICE
+#include "hl_bridge.h"
+#endif
 #include "hl_sim.h"
 
-static volatile sig_atomic_t stop_flag;
-static volatile sig_atomic_t button; /* the e-stop button, pressed by SIGUSR1 */
+static atomic_int stop_flag;
+static atomic_int button; /* the e-stop button, pressed by SIGUSR1 */
 
 int main(int argc, char **argv)
 {
@@ -80,18 +83,34 @@ int main(int argc, char **argv)
      * 20 ms (of wall time) overdue are not raced through: the device clock slips instead,
      * as it would have run only while this process ran, so the watchdog never counts a
      * stall in which the device itself was not reading the host's frames */
+#ifdef HL_REAL_DEVICE
+    /* a real device's clock is the world's: ticks are never run back to back to catch up
+     * (each would read a stylus that moved a stall's worth, and the speed estimate and
+     * the damping assume one period), and a loop held up past HL_OVERRUN_TICKS periods
+     * latches a device fault, since the device held the last force meanwhile */
+    const uint64_t slip = 1u;
+#ifndef HL_OVERRUN_TICKS
+#define HL_OVERRUN_TICKS (HL_SERVO_HZ / 200u) /* 5 ms */
+#endif
+#else
     const uint64_t slip = (uint64_t)(0.020 * HL_SERVO_HZ * speed) + 1u;
+#endif
     uint64_t start = hl_host_now_ns(), done = 0, late = 0;
     static uint8_t out[65536];
     size_t out_len = 0;
-    while (!stop_flag) {
+    while (!atomic_load(&stop_flag)) {
         uint64_t due = (uint64_t)((double)(hl_host_now_ns() - start) / period);
         if (due > done + slip) {
+#ifdef HL_REAL_DEVICE
+            if (due - done > HL_OVERRUN_TICKS) {
+                bridge_io_failed();
+            }
+#endif
             late += due - done - slip;
             start += (uint64_t)((double)(due - done - slip) * period);
             due = done + slip;
         }
-        sim_estop_button(button);
+        sim_estop_button(atomic_load(&button));
         /* input first, then at most one tick: the device reads what arrived between ticks,
          * as the Cortex-M main loop does, also while it catches up */
         hl_host_take_input(master);

@@ -735,6 +735,29 @@ static void test_plant_at_extremes(void)
     }
 }
 
+/* ZERO and a PLAY_START taken in one pass of the main loop, before any tick: the playback
+ * finds output off and ramps it up from the first step (ZERO acted on at the next tick
+ * once switched it off under the playback, which then played nothing, found at 1 kHz) */
+static void test_zero_then_play_before_a_tick(void)
+{
+    fresh(5);
+    uint8_t none[1] = {0};
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    ticks(600, 1, 1); /* output on, its ramp over */
+    EXPECT(cmd(0x32, none, 0) == HL_OK); /* ZERO */
+    static int16_t f[480];
+    for (int i = 0; i < 480; i++) {
+        f[i] = 430; /* 0.43 N = 0.2 A */
+    }
+    EXPECT(play(f, 480) == HL_OK); /* no tick since the ZERO */
+    ticks(1, 0, 0);
+    EXPECT(sim_amp_enabled());
+    EXPECT(fabsf(hl_device_peek().current - 0.2f / 500.0f) < 1e-6f); /* the ramp's first step */
+    ticks(300, 1, 1);
+    EXPECT(fabsf(hl_device_peek().current - 0.2f * 301.0f / 500.0f) < 1e-5f);
+}
+
 int device_tests(void)
 {
     test_plant_at_extremes();
@@ -745,6 +768,7 @@ int device_tests(void)
     test_refusal_changes_nothing();
     test_conformance();
     test_ramp_clamp_estop();
+    test_zero_then_play_before_a_tick();
     test_watchdog();
     test_estop_button();
     test_stream();

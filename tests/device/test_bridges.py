@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import json
 import re
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -49,10 +51,19 @@ def test_the_hd_bridges_two_threads_share_nothing_unguarded():
     emu = start_emulator("--firmware", "hd-stub-tsan", "--seed", "9")
     try:
         assert_selftest_passes(emu.port)
+        emu.proc.send_signal(signal.SIGUSR1)  # the e-stop button: a signal on any thread
+        time.sleep(0.2)
+        emu.proc.send_signal(signal.SIGUSR2)
     finally:
         stop_emulator(emu)
+    # the whole of stderr: the program's last line comes after every report TSan prints
+    deadline = time.monotonic() + 10
+    while not any(" ticks, " in line for line in emu.stderr_lines) and time.monotonic() < deadline:
+        time.sleep(0.05)
     races = [line for line in emu.stderr_lines if "ThreadSanitizer" in line]
     assert not races, emu.stderr()
+    assert emu.proc.returncode == 0, emu.stderr()  # TSan exits 66 after a report
+    assert "output off in its last frame" in emu.stderr()
 
 
 def test_a_bridge_says_its_rate_and_that_it_records_no_acceleration(bridge):
@@ -72,7 +83,6 @@ def test_a_bridge_says_its_rate_and_that_it_records_no_acceleration(bridge):
     # a record at every tick, for the window's 0.5 s from its first contact and before it
     assert res.rate_hz == RATES[bridge.kind]
     assert len(res.traces["t"]) >= 0.5 * RATES[bridge.kind]
-    assert np.allclose(np.diff(res.traces["t"]), 1 / RATES[bridge.kind])
 
 
 def test_a_session_runs_over_each_bridge(bridge, tmp_path):
@@ -188,14 +198,20 @@ def test_the_labs_build_command_builds_a_bridge_against_an_installed_sdk(target,
                         "-o", str(obj)], check=True, capture_output=True)
         objs.append(str(obj))
     subprocess.run(["ar", "rcs", str(sdk / libdir / f"lib{lib}.a"), *objs], check=True)
-    run = subprocess.run(["make", "-C", str(FIRMWARE_DIR), target, f"{var}={sdk}",
-                          f"{target.upper()}_LIBS=-L{sdk / libdir} -l{lib} -lpthread -lm"],
-                         capture_output=True, text=True, timeout=300)
+    make = ["make", "-C", str(FIRMWARE_DIR), target, f"{var}={sdk}",
+            f"{target.upper()}_LIBS=-L{sdk / libdir} -l{lib} -lpthread -lm",
+            f"BRIDGE_OUT={tmp_path}"]  # never over a lab's own build/hlfw-dhd
+    bare = subprocess.run(make, capture_output=True, text=True, timeout=300)
+    assert bare.returncode != 0 and "needs BRIDGE_RATINGS" in bare.stdout  # no default
+    ratings = "-DHL_EFFECTIVE_MASS_MG=55000u -DHL_CURRENT_RATING_MA=400u"
+    run = subprocess.run([*make, f"BRIDGE_RATINGS={ratings}"], capture_output=True, text=True,
+                         timeout=300)
     assert run.returncode == 0, run.stdout + run.stderr
-    binary = FIRMWARE_DIR / "build" / f"hlfw-{target}"
-    fast = subprocess.run([str(binary), "--speed", "2"], capture_output=True, text=True,
-                          timeout=30)
-    assert fast.returncode == 2 and "real time" in fast.stderr
+    binary = tmp_path / f"hlfw-{target}"
+    for pace in ("2", "0.5"):  # slower is no more real than faster
+        other = subprocess.run([str(binary), "--speed", pace], capture_output=True,
+                               text=True, timeout=30)
+        assert other.returncode == 2 and "real time" in other.stderr, (pace, other.stderr)
     proc = subprocess.Popen([str(binary)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     try:
@@ -205,6 +221,7 @@ def test_the_labs_build_command_builds_a_bridge_against_an_installed_sdk(target,
             assert dev.info.firmware == f"hlfw-2.0 {target}"
             assert dev.info.servo_rate_hz == (4000.0 if target == "dhd" else 1000.0)
             assert not dev.info.accelerometer
+            assert dev.info.current_limit == pytest.approx(0.4)  # BRIDGE_RATINGS's
     finally:
         proc.terminate()
         proc.wait(timeout=30)
@@ -218,8 +235,6 @@ def test_realtime_is_asked_for_and_its_answer_said():
     proc = subprocess.Popen([str(binary), "--realtime"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     assert proc.stdout.readline().startswith("/dev/")
-    import time
-
     time.sleep(1.0)
     proc.terminate()
     _, err = proc.communicate(timeout=30)
@@ -228,3 +243,25 @@ def test_realtime_is_asked_for_and_its_answer_said():
     assert granted != refused, err
     m = re.search(r"hlfw-dhd-stub: (\d+) ticks,", err)
     assert m and int(m.group(1)) > 0, err
+
+
+@pytest.mark.parametrize("kind", sorted(RATES))
+def test_a_device_that_stops_answering_latches_a_fault_and_output_goes_off(kind, monkeypatch):
+    """A real device's cable pulled mid-window: the stand-in's position readings fail after
+    2 s of its time (HL_STUB_FAIL_AFTER). The bridge never renders from a made-up height:
+    it latches a `device` fault at the next tick, output goes to zero, the window ends, and
+    the host says what happened in words."""
+    monkeypatch.setenv("HL_STUB_FAIL_AFTER", "2")
+    emu = start_emulator("--firmware", kind, "--seed", "10")
+    try:
+        with SerialDevice(emu.port) as dev:
+            dev.load_scene(Scene("firm", spring=680.0))
+            dev.home()
+            res = dev.run_window(10.0, from_first_contact=False)
+            assert [f.code for f in res.faults] == ["device"]
+            assert res.traces["t"][-1] < 3.0  # ended at the fault, not after its 10 s
+            assert dev.fault is not None and dev.fault.code == "device"
+            assert "own I/O failed" in dev.fault.message
+            assert dev.output_force == 0.0
+    finally:
+        stop_emulator(emu)

@@ -10,6 +10,8 @@
 #include "dhdc.h"
 
 #include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
 
 #include "hl_plant.h"
 #include "hl_stub.h"
@@ -21,6 +23,9 @@
 
 static uint64_t seed;
 static int is_open, forces_on;
+/* the tests' failing device: HL_STUB_FAIL_AFTER=S makes every position reading after S
+ * seconds of the stand-in's time fail, as a cable pulled out of a real one */
+static uint64_t refreshes, fail_after = UINT64_MAX;
 static const char *last_error = "no error";
 
 void hl_stub_seed(uint64_t s) { seed = s; }
@@ -45,6 +50,9 @@ int dhdOpen(void)
         return -1;
     }
     plant_init(seed, (float)DHD_STUB_HZ, STUB_ENC_M, 1.0f);
+    const char *fail = getenv("HL_STUB_FAIL_AFTER");
+    refreshes = 0;
+    fail_after = fail ? (uint64_t)(atof(fail) * DHD_STUB_HZ) : UINT64_MAX;
     is_open = 1;
     forces_on = 0;
     return 0;
@@ -78,6 +86,10 @@ int dhdGetPosition(double *px, double *py, double *pz, char ID)
     if (bad_id(ID) || px == NULL || py == NULL || pz == NULL) {
         return -1;
     }
+    if (refreshes >= fail_after) {
+        last_error = "communication error (HL_STUB_FAIL_AFTER)";
+        return -1;
+    }
     *px = 0.0;
     *py = 0.0;
     *pz = (double)plant_encoder() * (double)STUB_ENC_M;
@@ -92,6 +104,7 @@ int dhdSetForce(double fx, double fy, double fz, char ID)
         return -1;
     }
     plant_step(forces_on ? (float)fz : 0.0f);
+    refreshes++;
     return 0;
 }
 

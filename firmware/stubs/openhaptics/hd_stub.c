@@ -15,6 +15,7 @@
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
@@ -40,6 +41,9 @@ static struct {
     double force[3], rate_now;
     callback cb[MAX_CALLBACKS];
     HDErrorInfo errors[MAX_ERRORS];
+    /* the tests' failing device: HL_STUB_FAIL_AFTER=S fails every position reading after S
+     * seconds of frames, as a cable pulled out of a real one */
+    uint64_t frames, fail_after;
     unsigned n_errors;
     pthread_t thread;
     pthread_mutex_t lock; /* the callbacks' table and the error queue */
@@ -68,6 +72,9 @@ HHD hdInitDevice(HDstring pConfigName)
         return HD_INVALID_HANDLE;
     }
     plant_init(H.seed, (float)H.rate, STUB_ENC_M, 1.0f);
+    const char *fail_at = getenv("HL_STUB_FAIL_AFTER");
+    H.frames = 0;
+    H.fail_after = fail_at ? (uint64_t)(atof(fail_at) * (double)H.rate) : UINT64_MAX;
     H.open = 1;
     H.force_on = 1;
     return 1u;
@@ -122,6 +129,7 @@ void hdEndFrame(HHD hHD)
      * the frame's caller's context (the bridge holds its lock over the frame, so the plant
      * is never stepped while its hooks change the scene) */
     plant_step(H.open && H.force_on ? (float)H.force[1] : 0.0f);
+    H.frames++;
 }
 
 void hdGetDoublev(HDenum pname, HDdouble *params)
@@ -132,6 +140,10 @@ void hdGetDoublev(HDenum pname, HDdouble *params)
     }
     switch (pname) {
     case HD_CURRENT_POSITION:
+        if (H.frames >= H.fail_after) {
+            fail(HD_DEVICE_FAULT);
+            return;
+        }
         params[0] = 0.0;
         params[1] = (double)plant_encoder() * (double)STUB_ENC_M * 1e3;
         params[2] = 0.0;
