@@ -36,6 +36,10 @@ class DeviceInfo:
     accelerometer : bool
         Whether the stylus has an accelerometer (the commercial devices' bridges have none:
         no ``accel`` trace, no acceleration matching).
+    tick_p99_s, tick_max_s : float or None [s]
+        The 99th percentile and the longest of the servo's tick periods since the device
+        started, where its servo follows a computer's clock (the bridges to commercial
+        devices, the host builds: LIMITS); None where not measured.
     """
 
     backend: str
@@ -50,6 +54,8 @@ class DeviceInfo:
     encoder_resolution: float
     accel_range: float
     accelerometer: bool = True
+    tick_p99_s: float | None = None
+    tick_max_s: float | None = None
 
     @property
     def max_force(self) -> float:

@@ -69,7 +69,10 @@ def check_info(opener: Opener) -> str:
                      "encoder_resolution", "accel_range"):
             v = getattr(i, name)
             _require(math.isfinite(v) and v > 0, f"info.{name} = {v!r}")
-        return f"{i.model} at {i.servo_rate_hz:g} Hz, {i.max_force:.2f} N max"
+        ticks = ("" if i.tick_p99_s is None else
+                 f"; tick periods since it started: 99 % within {i.tick_p99_s * 1e3:.3g} ms, "
+                 f"longest {i.tick_max_s * 1e3:.3g} ms (nominal {1e3 / i.servo_rate_hz:.3g})")
+        return f"{i.model} at {i.servo_rate_hz:g} Hz, {i.max_force:.2f} N max{ticks}"
 
 
 def check_real_sample(opener: Opener) -> str:

@@ -262,7 +262,11 @@ class SerialDevice(HapticDevice):
                           watchdog_s=h.watchdog_ms / 1000, encoder_resolution=h.encoder_nm * 1e-9,
                           accel_range=h.accel_range / 1000,
                           accelerometer=limits is None or bool(
-                              limits.channels >> M.Channel.NAMES.index("accel") & 1))
+                              limits.channels >> M.Channel.NAMES.index("accel") & 1),
+                          tick_p99_s=limits.tick_p99_us * 1e-6
+                          if limits is not None and limits.tick_p99_us else None,
+                          tick_max_s=limits.tick_max_us * 1e-6
+                          if limits is not None and limits.tick_max_us else None)
 
     def _configure_traces(self, names: tuple[str, ...] | None = None) -> tuple[str, ...]:
         """Stream ``names`` (None: every base channel the device records, the channels

@@ -233,7 +233,9 @@ SPECS: tuple[Spec, ...] = (
         F("ring_records", "u32", "records", 1, 2**32 - 1),
         F("channels", "u16", "bit mask", 1, 0x3FF),
         F("max_decimation", "u16", "servo ticks", 1, 65_535),
-        F("link_bytes_s", "u32", "B/s; 0: no limit")), versions=(2,)),
+        F("link_bytes_s", "u32", "B/s; 0: no limit"),
+        F("tick_p99_us", "u32", "µs of wall time; 0: not measured"),
+        F("tick_max_us", "u32", "µs of wall time; 0: not measured")), versions=(2,)),
     Spec(0x83, "PONG", "device", (F("stamp", "u32", "host µs, echoed"),)),
     Spec(0x90, "CONTACT", "device", (
         F("window_id", "u16"), F("tick", "u32", "window tick"),

@@ -380,7 +380,10 @@ class Limits(Message):
     play_items [i16 items]; ring_records: the trace ring buffer [records]; channels: the
     channels it records (bit mask); max_decimation; link_bytes_s: the bytes per second its
     link carries towards the host [B/s] (e.g. 100,000 for a 1-Mbaud UART), 0 when the link
-    is no limit (USB, a pty)."""
+    is no limit (USB, a pty); tick_p99_us and tick_max_us: the 99th percentile and the
+    longest of its servo's tick periods since it started [µs of wall time], where a servo
+    loop runs on a computer's clock (the host builds, the bridges), 0 where not measured
+    (a board's timer interrupt, the Python emulator)."""
 
     NAME = "LIMITS"
     table_items: int = 0
@@ -389,6 +392,8 @@ class Limits(Message):
     channels: int = 0
     max_decimation: int = 1
     link_bytes_s: int = 0
+    tick_p99_us: int = 0
+    tick_max_us: int = 0
 
 
 @dataclass(frozen=True)

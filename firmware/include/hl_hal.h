@@ -42,6 +42,10 @@ void hal_uart_write(const uint8_t *buf, size_t len); /* len <= hal_uart_space() 
 uint32_t hal_link_bytes_s(void); /* what the link carries towards the host now [B/s], as
                                     measured where sending costs the device time; 0: no
                                     limit (LIMITS.link_bytes_s) */
+/* the 99th percentile and the longest of the servo's tick periods since start [us of wall
+ * time] (LIMITS), where the tick follows a computer's clock; 0, 0 where not measured (a
+ * board's timer interrupt) */
+void hal_tick_periods_us(uint32_t *p99, uint32_t *longest);
 void hal_lock(void);   /* keep the servo tick out (mask its interrupt); nests once */
 void hal_unlock(void);
 

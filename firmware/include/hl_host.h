@@ -33,10 +33,8 @@ void hl_host_take_input(int master);
  * them; otherwise the stated fallback (normal scheduling) on stderr. Returns 1 if granted */
 int hl_host_realtime(int priority);
 uint64_t hl_host_now_ns(void); /* CLOCK_MONOTONIC [ns] */
-/* the servo's achieved rate: note each tick as it runs (from one thread), then describe the
- * periods between ticks [us of wall time] in words (median, 99th and 99.9th percentile,
- * longest) into buf */
-void hl_host_tick_seen(void);
+/* the servo's achieved rate (noted by sim_tick_seen, hl_sim.h) in words: the median, 99th
+ * and 99.9th percentile and the longest period between ticks [us of wall time] */
 void hl_host_tick_periods(char *buf, size_t cap);
 
 #endif

@@ -21,4 +21,12 @@ void sim_estop_button(int pressed);
  * or runaway encoder, for the tests at the ends of its range */
 void sim_encoder_force(int on, int32_t counts);
 
+/* the servo's tick periods: note each tick's wall time [ns] as it runs (from the thread
+ * that runs the ticks), then read the period [us] below which a fraction q of them fall
+ * (q = 1: the longest; SIM_PERIOD_BINS - 1: that or longer) and how many were timed */
+#define SIM_PERIOD_BINS 20000u
+void sim_tick_seen(uint64_t now_ns);
+uint32_t sim_tick_period_us(double q);
+uint64_t sim_ticks_timed(void);
+
 #endif

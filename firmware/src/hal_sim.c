@@ -63,3 +63,43 @@ void hal_uart_write(const uint8_t *buf, size_t len) { (void)q_put(&TX, buf, len)
 void hal_lock(void) {}
 void hal_unlock(void) {}
 uint32_t hal_cycles(void) { return 0; }
+
+/* the servo's tick periods [us of wall time] in 1-us bins (the last holds the longer
+ * ones), noted by the program that paces the ticks (sim_tick_seen) */
+static struct {
+    uint64_t last_ns, n;
+    uint32_t bins[SIM_PERIOD_BINS];
+} T;
+
+void sim_tick_seen(uint64_t now_ns)
+{
+    if (T.last_ns != 0 && now_ns >= T.last_ns) {
+        uint64_t us = (now_ns - T.last_ns) / 1000u;
+        T.bins[us < SIM_PERIOD_BINS ? us : SIM_PERIOD_BINS - 1u]++;
+        T.n++;
+    }
+    T.last_ns = now_ns;
+}
+
+uint64_t sim_ticks_timed(void) { return T.n; }
+
+uint32_t sim_tick_period_us(double q)
+{
+    if (T.n == 0) {
+        return 0u;
+    }
+    uint64_t want = q >= 1.0 ? T.n - 1u : (uint64_t)(q * (double)T.n), seen = 0;
+    for (uint32_t i = 0; i < SIM_PERIOD_BINS; i++) {
+        seen += T.bins[i];
+        if (seen > want) {
+            return i;
+        }
+    }
+    return SIM_PERIOD_BINS - 1u;
+}
+
+void hal_tick_periods_us(uint32_t *p99, uint32_t *longest)
+{
+    *p99 = sim_tick_period_us(0.99);
+    *longest = sim_tick_period_us(1.0);
+}

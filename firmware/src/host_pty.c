@@ -130,43 +130,14 @@ uint64_t hl_host_now_ns(void)
     return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
 }
 
-#define PERIOD_BINS 20000u /* tick periods in 1-us bins; the last holds the longer ones */
-static struct {
-    uint64_t last_ns, n;
-    uint32_t bins[PERIOD_BINS];
-} T;
-
-void hl_host_tick_seen(void)
-{
-    uint64_t t = hl_host_now_ns();
-    if (T.last_ns != 0) {
-        uint64_t us = (t - T.last_ns) / 1000u;
-        T.bins[us < PERIOD_BINS ? us : PERIOD_BINS - 1u]++;
-        T.n++;
-    }
-    T.last_ns = t;
-}
-
-/* the period [us] below which a fraction q of the periods fall (q = 1: the longest) */
-static unsigned period_quantile(double q)
-{
-    uint64_t want = q >= 1.0 ? T.n - 1u : (uint64_t)(q * (double)T.n), seen = 0;
-    for (unsigned i = 0; i < PERIOD_BINS; i++) {
-        seen += T.bins[i];
-        if (seen > want) {
-            return i;
-        }
-    }
-    return PERIOD_BINS - 1u;
-}
-
 void hl_host_tick_periods(char *buf, size_t cap)
 {
-    if (T.n == 0) {
+    if (sim_ticks_timed() == 0) {
         snprintf(buf, cap, "no tick periods measured");
         return;
     }
     snprintf(buf, cap, "tick period median %u us, 99%% %u us, 99.9%% %u us, longest %s%u us",
-             period_quantile(0.5), period_quantile(0.99), period_quantile(0.999),
-             T.bins[PERIOD_BINS - 1u] ? ">= " : "", period_quantile(1.0));
+             sim_tick_period_us(0.5), sim_tick_period_us(0.99), sim_tick_period_us(0.999),
+             sim_tick_period_us(1.0) >= SIM_PERIOD_BINS - 1u ? ">= " : "",
+             sim_tick_period_us(1.0));
 }

@@ -65,8 +65,8 @@ static HDCallbackCode HDCALLBACK servo(void *data)
             first_error = e.errorCode;
         }
     }
+    sim_tick_seen(hl_host_now_ns()); /* under the lock: LIMITS reads them in the link's thread */
     pthread_mutex_unlock(&device_lock);
-    hl_host_tick_seen();
     return HD_CALLBACK_CONTINUE;
 }
 

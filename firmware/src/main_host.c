@@ -117,7 +117,7 @@ int main(int argc, char **argv)
         hl_device_poll();
         if (done < due) {
             hl_servo_tick();
-            hl_host_tick_seen();
+            sim_tick_seen(hl_host_now_ns());
             done++;
             hl_host_take_input(master);
             hl_device_poll();

@@ -105,6 +105,13 @@ def test_a_session_runs_over_each_bridge(bridge, tmp_path):
     assert all(1 <= int(r["rating"]) <= 7 for r in valid)
     meta = json.loads((folder / "session.json").read_text())
     assert meta["device"]["servo_rate_hz"] == RATES[bridge.kind]
+    assert meta["device"]["accelerometer"] is False
+    # the achieved rate, as LIMITS reported it when the session opened the device: the
+    # 99th percentile of the tick periods at or above the nominal period (a loop on this
+    # computer's clock is never early by more than its clock's grain), the longest above it
+    nominal = 1 / RATES[bridge.kind]
+    assert meta["device"]["tick_p99_s"] >= 0.9 * nominal
+    assert meta["device"]["tick_max_s"] >= meta["device"]["tick_p99_s"]
     traces = sorted((folder / "traces").glob("*.npz"))
     assert traces
     with np.load(traces[0]) as z:
