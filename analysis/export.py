@@ -22,6 +22,10 @@ Formats
 ``spss``
     The wide files and the long file as SPSS ``.sav`` (pyreadstat): variable labels from
     the codebook, value labels for low/high factors and for ``correct``.
+``bids``
+    A BIDS dataset (behavioural modality): every attempt of the chosen sessions with its
+    onset, and the device's traces of each window kept in full (:mod:`analysis.bids`; no
+    codebook: the JSON sidecars describe every column).
 
 Every format writes ``codebook.csv``: column, type (text or number), unit, meaning (and,
 for renamed columns, the original name). CSV files quote every text cell, but quotes do not
@@ -45,7 +49,7 @@ from .study import analysed_phases, phase_rows
 
 __all__ = ["export", "FORMATS", "LONG_COLUMNS"]
 
-FORMATS = ("long-csv", "wide-csv", "jasp", "r", "spss")
+FORMATS = ("long-csv", "wide-csv", "jasp", "r", "spss", "bids")
 
 #: column → (unit, meaning) of the long file.
 LONG_COLUMNS = {
@@ -284,6 +288,10 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
     """
     if fmt not in FORMATS:
         raise ValueError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+    if fmt == "bids":  # every attempt of the chosen sessions, raw: analysis/bids.py
+        from .bids import export_bids
+
+        return export_bids(data_dir, out, **filters)["files"]
     data = load_sessions(data_dir, drop_invalid=drop_invalid)
     selected, _table = select_sessions(data, **{k: v for k, v in filters.items()
                                                 if v is not None})

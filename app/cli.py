@@ -412,7 +412,8 @@ def _analyze(args: argparse.Namespace) -> int:
     if bad:
         raise UsageError(f"--format takes html, md, json; got {sorted(bad)}")
     rep = analyze(args.data_dir, args.out, formats=formats, protocol=_list(args.protocol),
-                  kind=args.kind, status=args.status, participants=_list(args.participants),
+                  kind=args.kind, status=args.status or "complete",
+                  participants=_list(args.participants),
                   since=args.since, until=args.until, drop_invalid=args.drop_invalid,
                   ids=args.ids, sim_device=args.sim_device)
     sel = rep["selection"]
@@ -433,8 +434,10 @@ def _selection_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--protocol", help="protocol names to analyse, comma-separated")
     p.add_argument("--kind", choices=("human", "dry-run", "simulated", "all"),
                    help="session kind (default: human when any human session exists)")
-    p.add_argument("--status", choices=("complete", "all"), default="complete",
-                   help="complete sessions only (default), or all (interrupted ones too)")
+    p.add_argument("--status", choices=("complete", "all"), default=None,
+                   help="complete sessions only (the default; a BIDS export's default is all: "
+                   "a raw dataset keeps interrupted sessions, its sessions.tsv says so), or "
+                   "all (interrupted ones too)")
     p.add_argument("--participants", help="participant ids, comma-separated")
     p.add_argument("--since", help="sessions created on or after (YYYY-MM-DD, UTC)")
     p.add_argument("--until", help="sessions created on or before (YYYY-MM-DD, UTC)")
@@ -454,7 +457,8 @@ def _export(args: argparse.Namespace) -> int:
     from app.api import export
 
     files = export(args.data_dir, args.out, args.format, drop_invalid=args.drop_invalid,
-                   protocol=_list(args.protocol), kind=args.kind, status=args.status,
+                   protocol=_list(args.protocol), kind=args.kind,
+                   status=args.status or ("all" if args.format == "bids" else "complete"),
                    participants=_list(args.participants), since=args.since, until=args.until,
                    ids=args.ids, sim_device=args.sim_device)
     print(f"{len(files)} files written to {args.out}/: {', '.join(f.name for f in files)}")
@@ -693,11 +697,13 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("data_dir", help="folder of session folders (sub-*/ses-*)")
     ex.add_argument("--out", required=True, help="folder to write into")
     ex.add_argument("--format", default="long-csv",
-                    choices=("long-csv", "wide-csv", "jasp", "r", "spss"),
+                    choices=("long-csv", "wide-csv", "jasp", "r", "spss", "bids"),
                     help="long-csv: one row per trial; wide-csv: one row per participant and "
                     "one column per cell, per analysed phase; jasp: wide with names JASP and R "
                     "read unchanged; r: long.csv and load.R; spss: the wide and long files "
-                    "as .sav with variable and value labels")
+                    "as .sav with variable and value labels; bids: a BIDS dataset (beh/: "
+                    "every attempt, onsets, the device's traces), as the BIDS validator "
+                    "accepts it")
     _selection_args(ex)
     ex.set_defaults(func=_export)
     _add_session_parsers(sub)
