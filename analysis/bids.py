@@ -2,32 +2,36 @@
 
 ``hapticlab export DATA --format bids --out DIR`` writes::
 
-    dataset_description.json  README  participants.tsv/.json  task-<task>_beh.json
-    task-<task>_events.json
+    dataset_description.json  README  participants.tsv/.json  sessions.json
+    task-<task>_beh.json  task-<task>_events.json
     sub-<label>/sub-<label>_sessions.tsv
     sub-<label>/ses-<n>/beh/sub-<label>_ses-<n>_task-<task>_beh.tsv      one row per attempt
     sub-<label>/ses-<n>/beh/sub-<label>_ses-<n>_task-<task>_events.tsv   the same, with onsets
-    sub-<label>/ses-<n>/beh/sub-<label>_ses-<n>_task-<task>_recording-<trial>_physio.tsv.gz
-                                                          and .json: one per kept window
+    sub-<label>/ses-<n>/beh/sub-<label>_ses-<n>_task-<task>_recording-t<trial>w<k>_physio.tsv.gz
+                                                          and .json: one per window kept in full
 
 Decisions (BIDS 1.10):
 
-* **Labels.** BIDS labels are letters and digits only. A participant id with anything else
-  (``P_01``, ``p-1``) loses it, and one that then collides with another, or is left
-  empty, gets a number appended; ``participants.tsv`` keeps the id as entered
-  (``hapticlab_id``), so the mapping is written down. The task is the protocol's name, so
-  mapped; a session is its number.
-* **Every attempt is a row**, valid or not (``status`` and ``reason`` say which), as
-  trials.tsv has them: a raw dataset, not the analysis's selection. Empty cells are
-  ``n/a``.
+* **Labels.** BIDS labels are letters and digits only. An id that is already one keeps it;
+  any other (``P_01``, ``p-1``) loses what is not a letter or digit and gains ``x`` and four
+  hex digits of its CRC-32, so its label does not depend on which other ids are exported
+  with it (``P_01`` → ``P01xa8b3``, say). ``participants.tsv`` keeps the id as entered
+  (``hapticlab_id``). The task is the protocol's name, so mapped (two protocols whose names
+  map alike are refused); a session is its number.
+* **Every attempt is a row**, valid or not, with the cells as trials.tsv has them (text,
+  ``n/a`` where empty), ``invalid_reason`` where a row recorded valid cannot be analysed,
+  and ``recording``: the physio recordings of its windows. Every session of the chosen
+  participants is kept, interrupted ones and later sessions too (the design's rule of which
+  session to analyse is the analysis's, not the data's); backup copies are not.
 * **Onsets** are seconds from the session's start (``created_utc`` in session.json; the
-  first trial's start when absent), from each attempt's recorded start and end (ms).
+  first attempt's start when absent), from each attempt's recorded start and end (ms; a
+  time without a zone is taken as UTC, as the analysis does).
 * **Traces.** Each window kept in full (``--traces full``) is one ``_physio.tsv.gz`` at the
-  device's servo rate, in SI units (the recorded counts times their resolution), with
-  ``StartTime`` the attempt's start in seconds from the session's (the window begins then,
-  to the millisecond the trial's start is recorded in); windows kept as
-  contact snippets (``--traces contacts``) are not continuous recordings and are left out
-  (counted in the return value).
+  device's servo rate, in SI units (the recorded counts times their resolution).
+  ``StartTime`` is the attempt's onset: the window's first sample comes after it (after the
+  phase's instructions, if any, and the device's homing), by an amount the session files do
+  not record. Windows kept as contact snippets (``--traces contacts``) are not continuous
+  recordings and are left out, counted.
 """
 
 from __future__ import annotations
@@ -36,19 +40,21 @@ import datetime as dt
 import gzip
 import json
 import re
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from .load import load_sessions, select_sessions
-from .session_format import META, read_meta
+from .load import LoadError, load_sessions, select_sessions
+from .session_format import META, TRIALS, read_meta, read_trials
 
 __all__ = ["export_bids", "BIDS_VERSION", "bids_label"]
 
 BIDS_VERSION = "1.10.0"
 
-#: the trials.tsv columns in _beh.tsv and _events.tsv, with their descriptions and units
+#: the trials.tsv columns in _beh.tsv and _events.tsv: (unit, description)
 BEH_COLUMNS = {
     "trial_index": ("", "trial number in the session (1, 2, ...)"),
     "phase": ("", "the protocol's phase"),
@@ -57,83 +63,131 @@ BEH_COLUMNS = {
     "sample": ("", "the sample felt (a real block or a rendering; the protocol names them); "
                "identification trials list the surfaces"),
     "block": ("", "block (the factorial's material); n/a when the phase has none"),
+    "factors": ("", "the sample's factor levels as recorded (name=level, semicolon-separated)"),
     "placement": ("", "what the operator placed on the device (a real sample, or a "
                   "placeholder)"),
     "status": ("", "valid, or why the attempt does not count"),
     "n_taps": ("", "taps in the window"),
     "tap_velocities": ("", "incoming speed of each tap [m/s], semicolon-separated (text: "
-                       "BIDS gives a column one unit only where every value is one number)"),
+                       "BIDS gives a column a unit only where every value is one number)"),
     "peak_current": ("A", "largest amplifier current commanded in the window"),
-    "rating": ("", "the participant's rating on the protocol's scale (participants.json "
-               "and the sidecar give its anchors)"),
+    "rating": ("", "the participant's rating on the protocol's scale"),
     "response_time": ("s", "from the rating screen to the answer"),
     "answer": ("", "identification: the materials named for the surfaces, in order"),
     "correct": ("", "identification: 1 when every surface was named right, else 0"),
     "reason": ("", "why an attempt is not valid, in words"),
 }
+EXTRA_COLUMNS = {
+    "invalid_reason": ("", "why an attempt recorded valid cannot be analysed (a rating off "
+                       "the scale, not a number); n/a when it can"),
+    "recording": ("", "the _physio recordings of the attempt's windows (recording labels, "
+                  "semicolon-separated); n/a when none was kept in full"),
+}
 
 
 def bids_label(text: str) -> str:
-    """``text`` with everything but ASCII letters and digits left out."""
-    return re.sub(r"[^A-Za-z0-9]", "", text)
+    """A BIDS label for ``text``: itself when it is letters and digits only, else those
+    letters and digits, ``x`` and four hex digits of its CRC-32 (so the label of one id
+    never depends on the others).
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> bids_label("P01"), bids_label("P_01") == bids_label("P_01"), bids_label("P_01")[:4]
+    ('P01', True, 'P01x')
+    """
+    if re.fullmatch(r"[A-Za-z0-9]+", text):
+        return text
+    return re.sub(r"[^A-Za-z0-9]", "", text) + f"x{zlib.crc32(text.encode()) & 0xFFFF:04x}"
 
 
 def _labels(ids: list[str]) -> dict[str, str]:
-    """A BIDS label per participant id: unique, letters and digits only."""
-    out: dict[str, str] = {}
-    taken: set[str] = set()
-    for pid in sorted(set(ids)):
-        base = bids_label(pid) or "x"
-        label, n = base, 1
-        while label.lower() in taken:  # BIDS labels must differ also in case on some disks
-            n += 1
-            label = f"{base}{n}"
-        taken.add(label.lower())
-        out[pid] = label
+    """A BIDS label per participant id; two ids with one label (letters and digits alike,
+    in any case) are an error that names them."""
+    out = {pid: bids_label(pid) for pid in sorted(set(ids))}
+    seen: dict[str, str] = {}
+    for pid, label in out.items():
+        other = seen.setdefault(label.lower(), pid)
+        if other != pid:
+            raise LoadError(f"participants '{other}' and '{pid}' would share the BIDS label "
+                            f"sub-{label} (labels are letters and digits, and folders may not "
+                            "tell case apart): rename one before exporting")
     return out
 
 
-def _na(v):
-    if v is None:
-        return "n/a"
-    if isinstance(v, float) and not np.isfinite(v):
-        return "n/a"
-    if isinstance(v, str) and v == "":
-        return "n/a"
-    return v
+def _recording(trace_file: str) -> str:
+    """The recording label of a window's trace file: trial-0012-1.npz → t0012w1."""
+    m = re.fullmatch(r"trial-(\d+)(?:-(\d+))?", Path(trace_file).stem)
+    if m is None:
+        return bids_label(Path(trace_file).stem)
+    return f"t{m.group(1)}w{m.group(2) or 0}"
+
+
+def _utc(text: str, where: str) -> dt.datetime | None:
+    """An ISO time as UTC (a time without a zone is UTC); None for an empty cell."""
+    if not text:
+        return None
+    try:
+        t = dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise LoadError(f"{where}: '{text}' is not an ISO time") from None
+    return t.replace(tzinfo=dt.UTC) if t.tzinfo is None else t.astimezone(dt.UTC)
 
 
 def _write_tsv(path: Path, table: pd.DataFrame) -> None:
-    text = table.map(_na).to_csv(sep="\t", index=False, lineterminator="\n", na_rep="n/a")
-    path.write_text(text, encoding="utf-8")
+    cells = table.astype(object).where(table.notna(), "n/a")
+    cells = cells.map(lambda v: "n/a" if v == "" else v)
+    path.write_text(cells.to_csv(sep="\t", index=False, lineterminator="\n"), encoding="utf-8")
 
 
 def _json(path: Path, data: dict) -> None:
     path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
 
 
-def _utc(text) -> dt.datetime | None:
-    if not isinstance(text, str) or not text:
-        return None
-    return dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+def _physio(path: Path, onset: float) -> tuple[pd.DataFrame, dict] | None:
+    """One window's trace file as SI columns, and its sidecar.
 
+    Parameters
+    ----------
+    path : Path
+        A ``traces/*.npz`` the runner wrote.
+    onset : float [s]
+        The attempt's onset from the session's start (``StartTime``).
 
-def _physio(z, onset: float) -> tuple[pd.DataFrame, dict] | None:
-    """A full window's trace as SI columns, and its sidecar (``StartTime``: ``onset``, the
-    attempt's start in seconds from the session's, to the millisecond the trial records);
-    None for contact snippets."""
-    if "sample_index" in z:
-        return None
-    enc = float(z["encoder_resolution"])
-    cols = {"position": ("m", z["position_counts"] * enc),
-            "velocity": ("m/s", z["velocity"]), "force_cmd": ("N", z["force_cmd"]),
-            "force_out": ("N", z["force_out"]), "current": ("A", z["current"])}
-    if "accel_counts" in z:
-        cols["accel"] = ("m/s^2", z["accel_counts"] * float(z["accel_lsb"]))
-    cols["flags"] = ("", z["flags"])
+    Returns
+    -------
+    (DataFrame, dict) or None
+        None for contact snippets (not a continuous recording).
+
+    Raises
+    ------
+    LoadError
+        The file cannot be read, or lacks a stream (named).
+    """
+    try:
+        with np.load(path) as z:
+            if "sample_index" in z:
+                return None
+            enc = float(z["encoder_resolution"])
+            cols = {"position": ("m", z["position_counts"] * enc),
+                    "velocity": ("m/s", z["velocity"]), "force_cmd": ("N", z["force_cmd"]),
+                    "force_out": ("N", z["force_out"]), "current": ("A", z["current"])}
+            if "accel_counts" in z:
+                cols["accel"] = ("m/s^2", z["accel_counts"] * float(z["accel_lsb"]))
+            cols["flags"] = ("", z["flags"])
+            rate = float(z["rate_hz"])
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise LoadError(f"{path}: not a readable trace file ({type(exc).__name__}: {exc})") \
+            from None
     table = pd.DataFrame({k: np.asarray(v) for k, (_u, v) in cols.items()})
-    side = {"SamplingFrequency": float(z["rate_hz"]),
-            "StartTime": round(onset, 3),
+    side = {"SamplingFrequency": rate, "StartTime": round(onset, 3),
             "Columns": list(table.columns),
             **{k: {"Units": u} for k, (u, _v) in cols.items() if u},
             "flags": {"Description": "bit 0 contact, 1 saturated, 2 transient playing, 3 "
@@ -141,143 +195,204 @@ def _physio(z, onset: float) -> tuple[pd.DataFrame, dict] | None:
     return table, side
 
 
+def _write_physio(path: Path, table: pd.DataFrame, side: dict) -> list[Path]:
+    text = table.to_csv(sep="\t", header=False, index=False, lineterminator="\n",
+                        float_format="%.9g")
+    # no file name and no time in the gzip header (BIDS): the same data, the same bytes
+    with open(path, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw,
+                                               mtime=0) as gz:
+        gz.write(text.encode("utf-8"))
+    side_path = path.with_name(path.name.replace(".tsv.gz", ".json"))
+    _json(side_path, side)
+    return [path, side_path]
+
+
 def export_bids(data_dir: str | Path, out: str | Path, **filters) -> dict:
     """Write the sessions of ``data_dir`` to ``out`` as a BIDS dataset.
 
     Parameters
     ----------
-    data_dir : path
+    data_dir : str or Path
         Folder of session folders.
-    out : path
-        The dataset's folder (created; files hapticlab writes there are replaced).
+    out : str or Path
+        The dataset's folder: new, or empty.
     **filters
         protocol, kind, status, participants, since, until, ids, sim_device: as the report,
-        but ``status`` is ``all`` unless given (a raw dataset keeps interrupted sessions;
-        sessions.tsv says how each ended).
+        but ``status`` is ``all`` unless given, and every session of a participant is kept.
 
     Returns
     -------
     dict
-        ``files`` (list of Path written), ``labels`` (participant id → BIDS label; ids that
-        changed are the ones to read about), ``traces_left_out`` (windows kept as contact
-        snippets, not continuous), ``sessions`` (count).
+        ``files`` (list of Path written), ``labels`` (participant id → BIDS label),
+        ``sessions`` (count), ``traces_left_out`` (windows kept as contact snippets),
+        ``traces_missing`` (trace files trials.tsv names that are not there),
+        ``events_without_onset`` (attempts without a recorded start: n/a onsets),
+        ``torn`` (torn last lines of trials.tsv, set aside, by file), ``left_out`` (session
+        folder → why, for the sessions not exported).
+
+    Raises
+    ------
+    LoadError
+        No session chosen, ``out`` not empty, two sessions or ids that would share a BIDS
+        name, a trace or time that cannot be read (each named).
+
+    Examples
+    --------
+    >>> import tempfile, analysis as A
+    >>> from analysis.bids import export_bids
+    >>> res = export_bids(A.datasets.sessions_path(), tempfile.mkdtemp() + "/bids")
+    >>> res["sessions"], sorted(res["labels"].values())
+    (3, ['P01', 'P02', 'P03'])
     """
+    out = Path(out)
+    if out.exists() and any(out.iterdir()):
+        raise LoadError(f"{out}: not empty; a BIDS export goes to a new or empty folder (a "
+                        "stale subject left beside a fresh one would be read as data)")
     data = load_sessions(data_dir, drop_invalid=True)
     chosen = {k: v for k, v in filters.items() if v is not None}
     chosen.setdefault("status", "all")
-    selected, _table = select_sessions(data, **chosen)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    selected, table = select_sessions(data, every_session=True, **chosen)
+    if selected.empty:
+        why = "; ".join(f"{r.session_dir}: {r.reason}" for r in table.itertuples()) or "none"
+        raise LoadError(f"{data_dir}: no session chosen for the BIDS export ({why})")
     labels = _labels([str(p) for p in selected["participant"].unique()])
-    written: list[Path] = []
-    left_out = 0
+    out.mkdir(parents=True, exist_ok=True)
+    res = {"files": [], "labels": labels, "traces_left_out": 0, "traces_missing": 0,
+           "events_without_onset": 0, "torn": dict(data.attrs.get("torn", {})),
+           "left_out": {r.session_dir: r.reason for r in table.itertuples()
+                        if not r.included}}
     tasks: dict[str, dict] = {}
     people: dict[str, dict] = {}
     visits: dict[str, list[dict]] = {}
-    for folder, rows in selected.groupby("session_dir", sort=True):
+    names: dict[tuple, str] = {}
+    for folder, typed in selected.groupby("session_dir", sort=True):
         folder = Path(folder)
-        meta = read_meta(folder / META)
-        pid = str(rows["participant"].iloc[0])
-        sub = labels[pid]
-        ses = str(int(rows["session"].iloc[0]))
-        proto = meta["protocol"]["name"]
-        task = bids_label(proto) or "task"
-        tasks.setdefault(task, {"protocol": proto, "meta": meta, "factors": set()})
-        start = _utc(meta.get("times", {}).get("created_utc")) or \
-            min((_utc(t) for t in rows["t_start"] if _utc(t)), default=None)
-        base = out / f"sub-{sub}" / f"ses-{ses}" / "beh"
-        base.mkdir(parents=True, exist_ok=True)
-        stem = f"sub-{sub}_ses-{ses}_task-{task}"
-        factors = [c for c in rows.columns if c in ("frequency", "decay", "slope")]
-        tasks[task]["factors"].update(factors)
-        beh = rows[[c for c in BEH_COLUMNS if c in rows.columns] + factors].copy()
-        beh = beh.sort_values(["trial_index", "attempt"], kind="stable")
-        for c in ("n_taps", "trial_index", "attempt"):
-            beh[c] = beh[c].astype("Int64")
-        p = base / f"{stem}_beh.tsv"
-        _write_tsv(p, beh)
-        written.append(p)
-        t0 = [_utc(t) for t in rows.sort_values(["trial_index", "attempt"])["t_start"]]
-        t1 = [_utc(t) for t in rows.sort_values(["trial_index", "attempt"])["t_end"]]
-        if start is not None and all(t0) and all(t1):
-            ev = beh.copy()
-            ev.insert(0, "onset", [round((a - start).total_seconds(), 3) for a in t0])
-            ev.insert(1, "duration", [round((b - a).total_seconds(), 3)
-                                      for a, b in zip(t0, t1, strict=True)])
-            ev.insert(2, "trial_type", beh["sample"].to_numpy())
-            p = base / f"{stem}_events.tsv"
-            _write_tsv(p, ev)
-            written.append(p)
-        for row in rows.itertuples():
-            name = getattr(row, "trace_file", "")
-            if not isinstance(name, str) or not name or not (folder / name).exists():
-                continue
-            begun = _utc(row.t_start)
-            if start is None or begun is None:
-                continue
-            with np.load(folder / name) as z:
-                got = _physio(z, (begun - start).total_seconds())
-            if got is None:
-                left_out += 1
-                continue
-            table, side = got
-            rec = bids_label(Path(name).stem)
-            p = base / f"{stem}_recording-{rec}_physio.tsv.gz"
-            text = table.to_csv(sep="\t", header=False, index=False, lineterminator="\n",
-                                float_format="%.9g")
-            # no file name and no time in the gzip header (BIDS): the same data, the same bytes
-            with open(p, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw,
-                                                       mtime=0) as gz:
-                gz.write(text.encode("utf-8"))
-            written.append(p)
-            q = p.with_name(p.name.replace(".tsv.gz", ".json"))
-            _json(q, side)
-            written.append(q)
-        who = meta.get("participant", {})
-        people.setdefault(pid, {"participant_id": f"sub-{sub}", "hapticlab_id": pid,
-                                "group": who.get("group", "") or ""})
-        visits.setdefault(sub, []).append({
-            "session_id": f"ses-{ses}",
-            "acq_time": start.astimezone(dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3]
-            if start else "n/a",
-            "protocol": proto, "kind": meta.get("kind", ""), "status": meta.get("status", ""),
-            "device": f"{meta.get('device', {}).get('model', '')} "
-                      f"({meta.get('device', {}).get('serial_number', '')})".strip()})
+        _session(folder, typed, labels, tasks, people, visits, names, out, res)
     if visits:
-        p = out / "sessions.json"  # inherited by every sub-*/sub-*_sessions.tsv
-        _json(p, {"acq_time": {"Description": "when the session began (UTC)"},
-                  "protocol": {"Description": "the hapticlab protocol the session ran"},
-                  "kind": {"Description": "who answered",
-                           "Levels": {"human": "a person", "dry-run": "a scripted responder "
-                                      "testing the machinery", "simulated": "the simulated "
-                                      "participant model"}},
-                  "status": {"Description": "how the session ended (complete, interrupted, "
-                                            "stopped, ...)"},
-                  "device": {"Description": "the device's model and serial number"}})
-        written.append(p)
-    for sub, rows_ in visits.items():
+        res["files"].append(_sessions_json(out))
+    for sub, rows in visits.items():
         p = out / f"sub-{sub}" / f"sub-{sub}_sessions.tsv"
-        _write_tsv(p, pd.DataFrame(rows_))
-        written.append(p)
-    written += _top_level(out, people, tasks)
-    return {"files": written, "labels": labels, "traces_left_out": left_out,
-            "sessions": int(selected["session_dir"].nunique())}
+        _write_tsv(p, pd.DataFrame(rows))
+        res["files"].append(p)
+    res["files"] += _top_level(out, people, tasks)
+    res["sessions"] = len(names)
+    return res
+
+
+def _session(folder: Path, typed: pd.DataFrame, labels: dict, tasks: dict, people: dict,
+             visits: dict, names: dict, out: Path, res: dict) -> None:
+    """One session folder into the dataset (see :func:`export_bids`)."""
+    meta = read_meta(folder / META)
+    raw, _torn = read_trials(folder / TRIALS)
+    if len(raw) != len(typed):  # both without a torn last line: one row per attempt
+        raise LoadError(f"{folder / TRIALS}: {len(raw)} rows, but {len(typed)} were loaded")
+    pid = str(typed["participant"].iloc[0])
+    sub, ses = labels[pid], str(int(meta["session"]))
+    proto = meta["protocol"]["name"]
+    task = re.sub(r"[^A-Za-z0-9]", "", proto) or "task"
+    known = tasks.setdefault(task.lower(), {"task": task, "protocol": proto, "meta": meta})
+    if known["protocol"] != proto:
+        raise LoadError(f"protocols '{known['protocol']}' and '{proto}' would share the BIDS "
+                        f"task label '{task}': rename one before exporting")
+    task = known["task"]
+    key = (sub, ses, task)
+    if key in names:
+        raise LoadError(f"{names[key]} and {folder} are both session {ses} of participant "
+                        f"'{pid}' in protocol '{proto}': BIDS has one place for it; export "
+                        "them apart (--since/--until) or renumber one")
+    names[key] = str(folder)
+    where = folder / TRIALS
+    start = _utc(str(meta.get("times", {}).get("created_utc") or ""), str(folder / META)) or \
+        min((t for r in raw if (t := _utc(r["t_start"], str(where)))), default=None)
+    base = out / f"sub-{sub}" / f"ses-{ses}" / "beh"
+    base.mkdir(parents=True, exist_ok=True)
+    stem = f"sub-{sub}_ses-{ses}_task-{task}"
+    beh = pd.DataFrame([{c: r[c] for c in BEH_COLUMNS} for r in raw])
+    beh["invalid_reason"] = list(typed["invalid_reason"]) if "invalid_reason" in typed else ""
+    recordings = []
+    for line, r in enumerate(raw, start=2):
+        got = []
+        if r["trace_file"]:
+            files = sorted(folder.glob(r["trace_file"]))  # a glob for several windows
+            res["traces_missing"] += 0 if files else 1
+            begun = _utc(r["t_start"], f"{where}:{line}")
+            for f in files:
+                phys = _physio(f, (begun - start).total_seconds()
+                               if begun and start else 0.0)
+                if phys is None:
+                    res["traces_left_out"] += 1
+                    continue
+                label = _recording(f.name)
+                res["files"] += _write_physio(
+                    base / f"{stem}_recording-{label}_physio.tsv.gz", *phys)
+                got.append(label)
+        recordings.append(";".join(got))
+    beh["recording"] = recordings
+    p = base / f"{stem}_beh.tsv"
+    _write_tsv(p, beh)
+    res["files"].append(p)
+    onsets, durations = [], []
+    for line, r in enumerate(raw, start=2):
+        a, b = _utc(r["t_start"], f"{where}:{line}"), _utc(r["t_end"], f"{where}:{line}")
+        onsets.append(round((a - start).total_seconds(), 3) if a and start else None)
+        durations.append(round((b - a).total_seconds(), 3) if a and b else None)
+    res["events_without_onset"] += sum(o is None for o in onsets)
+    ev = beh.copy()
+    ev.insert(0, "onset", onsets)
+    ev.insert(1, "duration", durations)
+    ev.insert(2, "trial_type", beh["sample"])
+    p = base / f"{stem}_events.tsv"
+    _write_tsv(p, ev)
+    res["files"].append(p)
+    group = (meta.get("participant") or {}).get("group", "") or ""
+    person = people.setdefault(pid, {"participant_id": f"sub-{sub}", "hapticlab_id": pid,
+                                     "group": group})
+    if person["group"] != group:
+        raise LoadError(f"participant '{pid}' is in group '{person['group']}' in one session "
+                        f"and '{group}' in {folder}: BIDS has one group per participant")
+    device = meta.get("device") or {}
+    visits.setdefault(sub, []).append({
+        "session_id": f"ses-{ses}",
+        "acq_time": start.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z" if start else None,
+        "protocol": proto, "kind": meta.get("kind"), "status": meta.get("status"),
+        "device": " ".join(x for x in (device.get("model"), device.get("serial_number"))
+                           if x) or None,
+        "hapticlab_folder": str(folder)})
+
+
+def _sessions_json(out: Path) -> Path:
+    p = out / "sessions.json"  # inherited by every sub-*/sub-*_sessions.tsv
+    _json(p, {"acq_time": {"Description": "when the session began (UTC)"},
+              "protocol": {"Description": "the hapticlab protocol the session ran"},
+              "kind": {"Description": "who answered",
+                       "Levels": {"human": "a person", "dry-run": "a scripted responder "
+                                  "testing the machinery", "simulated": "the simulated "
+                                  "participant model"}},
+              "status": {"Description": "how the session ended (complete, interrupted, ...)"},
+              "device": {"Description": "the device's model and serial number"},
+              "hapticlab_folder": {"Description": "the session folder it was exported from"}})
+    return p
 
 
 def _scale(meta: dict) -> dict:
-    rating = meta["protocol"].get("design", {}).get("rating") or {}
-    lo, hi = rating.get("min"), rating.get("max")
+    """The rating scale's levels from the recorded design (empty: none recorded)."""
+    scale = meta["protocol"].get("design", {}).get("scale") or {}
+    lo, hi = scale.get("min"), scale.get("max")
     if lo is None or hi is None:
         return {}
-    levels = {str(v): str(v) for v in range(int(lo), int(hi) + 1)}
-    for k, v in (rating.get("anchors") or {}).items():
-        levels[str(k)] = f"{k}: {v}"
+    levels = {str(v): f"{v} on the {lo}–{hi} scale" for v in range(int(lo), int(hi) + 1)}
+    if scale.get("question"):
+        levels[str(lo)] += f" (asked: {scale['question']})"
     return levels
 
 
 def _top_level(out: Path, people: dict, tasks: dict) -> list[Path]:
-    from app import __version__ as version
+    from importlib.metadata import PackageNotFoundError, version
 
+    try:
+        ours = version("hapticlab")
+    except PackageNotFoundError:
+        ours = "unknown"
     written = []
     p = out / "dataset_description.json"
     _json(p, {"Name": "hapticlab sessions: " + ", ".join(sorted(t["protocol"]
@@ -285,7 +400,7 @@ def _top_level(out: Path, people: dict, tasks: dict) -> list[Path]:
               "BIDSVersion": BIDS_VERSION, "DatasetType": "raw",
               "License": "n/a: set by the lab that shares it",
               "Authors": ["n/a: the lab that ran the sessions"],
-              "GeneratedBy": [{"Name": "hapticlab", "Version": str(version),
+              "GeneratedBy": [{"Name": "hapticlab", "Version": ours,
                                "Description": "hapticlab export DATA --format bids"}]})
     written.append(p)
     p = out / "README"
@@ -293,9 +408,9 @@ def _top_level(out: Path, people: dict, tasks: dict) -> list[Path]:
                  "contact realism, exported with `hapticlab export DATA --format bids`.\n"
                  "Each beh/ folder holds one row per attempt (_beh.tsv), the same rows with "
                  "onsets (_events.tsv), and the force-feedback device's traces of each "
-                 "tapping window kept in full (_physio.tsv.gz).\nparticipants.tsv maps each "
-                 "BIDS label to the participant id as entered (hapticlab_id).\n",
-                 encoding="utf-8")
+                 "tapping window kept in full (_physio.tsv.gz, named in the rows' "
+                 "`recording` column).\nparticipants.tsv maps each BIDS label to the "
+                 "participant id as entered (hapticlab_id).\n", encoding="utf-8")
     written.append(p)
     p = out / "participants.tsv"
     _write_tsv(p, pd.DataFrame(sorted(people.values(), key=lambda r: r["participant_id"])))
@@ -306,16 +421,13 @@ def _top_level(out: Path, people: dict, tasks: dict) -> list[Path]:
               "group": {"Description": "participant group as given at the session (e.g. "
                                        "expert, novice); n/a when none"}})
     written.append(p)
-    for task, info in tasks.items():
-        meta = info["meta"]
+    for info in tasks.values():
+        task, meta = info["task"], info["meta"]
         cols = {c: {"Description": d, **({"Units": u} if u else {})}
-                for c, (u, d) in BEH_COLUMNS.items()}
+                for c, (u, d) in {**BEH_COLUMNS, **EXTRA_COLUMNS}.items()}
         scale = _scale(meta)
         if scale:
             cols["rating"]["Levels"] = scale
-        for f in sorted(info["factors"]):
-            cols[f] = {"Description": f"factorial level of the vibration's {f}",
-                       "Levels": {"low": "the lower level", "high": "the higher level"}}
         side = {"TaskName": task, "TaskDescription": f"hapticlab protocol '{info['protocol']}'",
                 **cols}
         p = out / f"task-{task}_beh.json"

@@ -27,7 +27,8 @@ Formats
     onset, and the device's traces of each window kept in full (:mod:`analysis.bids`; no
     codebook: the JSON sidecars describe every column).
 
-Every format writes ``codebook.csv``: column, type (text or number), unit, meaning (and,
+Every format but ``bids`` (whose JSON sidecars describe its columns) writes
+``codebook.csv``: column, type (text or number), unit, meaning (and,
 for renamed columns, the original name). CSV files quote every text cell, but quotes do not
 stop pandas, R's ``read.csv`` or JASP from reading a participant id ``001`` as the number 1:
 only a reader told the column is text keeps it. So the CSV formats also write ``load.py``

@@ -279,8 +279,8 @@ def _date(text: str | None, name: str) -> dt.datetime | None:
 def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
                     kind: str | None = None, status: str = "complete",
                     participants: list[str] | None = None, since: str | None = None,
-                    until: str | None = None, ids: str = "check", sim_device: bool = False
-                    ) -> tuple[pd.DataFrame, pd.DataFrame]:
+                    until: str | None = None, ids: str = "check", sim_device: bool = False,
+                    every_session: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Choose which sessions to analyse, and say why each is in or out.
 
     Parameters
@@ -309,6 +309,10 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         emulator, a firmware build with its simulated plant: nobody touched a physical
         surface). Default False: they are left out of a human analysis and named — a
         rehearsal is not a participant.
+    every_session : bool
+        Keep every session of a participant, whatever the design says it analyses (its
+        ``sessions`` rule: the first complete one, or all); a raw export (BIDS) does.
+        Backup copies (the same participant, seed and rows) are still left out.
 
     Returns
     -------
@@ -407,7 +411,7 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
     designs = data.attrs.get("designs", {})
     inc = table[table["included"]].sort_values(["created_utc", "session"])
     for (_pid, key), g in inc.groupby(["participant", "design_key"], sort=False):
-        if len(g) < 2:
+        if len(g) < 2 or every_session:
             continue
         policy = (designs.get(key) or {}).get("sessions", "first")
         if policy == "first":  # the first complete one; the first of any only if none is

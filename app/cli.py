@@ -461,6 +461,10 @@ def _export(args: argparse.Namespace) -> int:
                    status=args.status or ("all" if args.format == "bids" else "complete"),
                    participants=_list(args.participants), since=args.since, until=args.until,
                    ids=args.ids, sim_device=args.sim_device)
+    if args.format == "bids":  # thousands of files with traces: what to read first
+        print(f"a BIDS dataset of {len(files)} files in {args.out}/: participants.tsv maps "
+              "each BIDS label to the id as entered; validate it with the BIDS validator")
+        return 0
     print(f"{len(files)} files written to {args.out}/: {', '.join(f.name for f in files)}")
     return 0
 

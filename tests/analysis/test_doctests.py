@@ -6,6 +6,7 @@ import importlib
 import pytest
 
 MODULES = ("analysis.stats", "analysis.load", "analysis.datasets", "analysis.study",
+           "analysis.bids",
            "analysis.session_format")
 
 
