@@ -34,6 +34,9 @@ int hal_estop_pressed(void);       /* the operator's e-stop button, read every t
                                       refused until it is released */
 void hal_io_init(uint64_t seed);   /* the servo side's I/O, before the first tick: the plant
                                       (seeded) or the board's peripherals (seed unused) */
+const char *hal_serial_number(void); /* after hal_io_init, on a computer: the device's own
+                                        serial number (a bridge's SDK tells it), or NULL
+                                        where the program names its device (the plant) */
 
 /* ---- link side ---- */
 size_t hal_uart_read(uint8_t *buf, size_t cap);     /* non-blocking; bytes read */

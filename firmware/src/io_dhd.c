@@ -17,6 +17,7 @@ static signed char id = -1; /* signed: plain char is unsigned on some of libdhd'
 static int amp_on;
 static int32_t counts = INT32_MAX; /* the last good reading: far above, until the first */
 static double x, y, x_prev, y_prev;
+static char serial_number[8];
 
 static void close_device(void)
 {
@@ -39,7 +40,12 @@ void hal_io_init(uint64_t seed)
     }
     id = (signed char)d;
     const char *name = dhdGetSystemName(id);
-    fprintf(stderr, "Force Dimension device: %s\n", name ? name : "(unnamed)");
+    unsigned short sn = 0;
+    if (dhdGetSerialNumber(&sn, id) == 0) {
+        snprintf(serial_number, sizeof serial_number, "%u", (unsigned)sn);
+    }
+    fprintf(stderr, "Force Dimension device: %s, serial number %s\n",
+            name ? name : "(unnamed)", serial_number[0] ? serial_number : "unknown");
     if (dhdEnableForce(DHD_OFF, id) < 0) {
         fprintf(stderr, "the Force Dimension device refused to turn its forces off (%s)\n",
                 dhdErrorGetLastStr());
@@ -86,3 +92,5 @@ void hal_amp_enable(int on)
         amp_on = on;
     }
 }
+
+const char *hal_serial_number(void) { return serial_number[0] ? serial_number : NULL; }

@@ -19,6 +19,7 @@ static HHD device = HD_INVALID_HANDLE;
 static int amp_on;
 static int32_t counts = INT32_MAX; /* the last good reading: far above, until the first */
 static double x, z, x_prev, z_prev; /* [m] */
+static char serial_number[16];
 
 static void close_device(void)
 {
@@ -38,6 +39,10 @@ void hal_io_init(uint64_t seed)
         fprintf(stderr, "no OpenHaptics device: hdInitDevice failed (%s)\n",
                 hdGetErrorString(e.errorCode));
         exit(1);
+    }
+    HDstring sn = hdGetString(HD_DEVICE_SERIAL_NUMBER);
+    if (!HD_DEVICE_ERROR(hdGetError()) && sn != NULL) {
+        snprintf(serial_number, sizeof serial_number, "%s", sn);
     }
     hdDisable(HD_FORCE_OUTPUT);
     amp_on = 0;
@@ -82,3 +87,5 @@ void hal_amp_enable(int on)
         amp_on = on;
     }
 }
+
+const char *hal_serial_number(void) { return serial_number[0] ? serial_number : NULL; }

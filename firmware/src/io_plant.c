@@ -35,6 +35,7 @@ float hal_accel_read(void) { return plant_accel(); }
 void hal_amp_enable(int on) { amp_on = on != 0; }
 int hal_estop_pressed(void) { return estop_button; }
 int hal_io_ok(void) { return 1; }
+const char *hal_serial_number(void) { return NULL; } /* named by its seed */
 
 float sim_current(void) { return last_current; }
 int sim_amp_enabled(void) { return amp_on; }

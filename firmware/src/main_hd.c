@@ -25,6 +25,7 @@
 
 #include "hl_bridge.h"
 #include "hl_device.h"
+#include "hl_hal.h"
 #include "hl_host.h"
 #include "hl_sim.h"
 
@@ -104,8 +105,13 @@ int main(int argc, char **argv)
     }
 
     char serial[16];
-    snprintf(serial, sizeof serial, "%s-%llu", HL_SERIAL_PREFIX, args.seed);
-    sim_hal_init(args.seed); /* opens the device (src/io_hd.c) */
+    sim_hal_init(args.seed); /* opens the device (src/io_hd.c), which tells its serial number */
+    const char *own = hal_serial_number();
+    if (own != NULL) {
+        snprintf(serial, sizeof serial, "%s-%s", HL_SERIAL_PREFIX, own);
+    } else {
+        snprintf(serial, sizeof serial, "%s-%llu", HL_SERIAL_PREFIX, args.seed);
+    }
     hl_device_init(serial);
     HDSchedulerHandle tick = hdScheduleAsynchronous(servo, NULL, HD_MAX_SCHEDULER_PRIORITY);
     hdStartScheduler();

@@ -38,6 +38,7 @@
 #include <unistd.h>
 
 #include "hl_device.h"
+#include "hl_hal.h"
 #include "hl_host.h"
 #ifdef HL_REAL_DEVICE
 #include "hl_bridge.h"
@@ -63,8 +64,13 @@ int main(int argc, char **argv)
     hl_host_signals(&stop_flag, &button);
 
     char serial[16];
-    snprintf(serial, sizeof serial, "%s-%llu", HL_SERIAL_PREFIX, seed);
-    sim_hal_init(seed);
+    sim_hal_init(seed); /* opens a bridge's device, which may tell its serial number */
+    const char *own = hal_serial_number();
+    if (own != NULL) {
+        snprintf(serial, sizeof serial, "%s-%s", HL_SERIAL_PREFIX, own);
+    } else {
+        snprintf(serial, sizeof serial, "%s-%llu", HL_SERIAL_PREFIX, seed);
+    }
     hl_device_init(serial);
     if (speed != 1.0) {
         hl_device_pace((float)speed);

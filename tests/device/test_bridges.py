@@ -73,6 +73,10 @@ def test_a_bridge_says_its_rate_and_that_it_records_no_acceleration(bridge):
     with SerialDevice(bridge.port) as dev:
         assert dev.info.servo_rate_hz == RATES[bridge.kind]
         assert dev.info.model.startswith("hapticlab: ")
+        # the device's own serial number, as its SDK tells it (the stand-ins make one of
+        # their seed, 7), not the program's seed
+        assert dev.info.serial_number == {"dhd-stub": "DHDSTUB-4007",
+                                          "hd-stub": "HDSTUB-2205007"}[bridge.kind]
         assert dev.link.limits.channels & 0x7F == 0x7F & ~(1 << M.Channel.NAMES.index("accel"))
         dev.load_scene(Scene("firm", spring=680.0))
         dev.home()

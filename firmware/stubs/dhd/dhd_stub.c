@@ -67,6 +67,15 @@ int dhdClose(char ID)
     return 0;
 }
 
+int dhdGetSerialNumber(unsigned short *sn, char ID)
+{
+    if (bad_id(ID) || sn == NULL) {
+        return -1;
+    }
+    *sn = (unsigned short)(4000u + seed % 1000u); /* a stand-in's number, from its seed */
+    return 0;
+}
+
 const char *dhdGetSystemName(char ID)
 {
     return bad_id(ID) ? NULL : "hapticlab libdhd stand-in";

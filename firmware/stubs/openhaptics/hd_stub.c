@@ -15,6 +15,7 @@
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -170,6 +171,17 @@ void hdSetDoublev(HDenum pname, const HDdouble *params)
         return;
     }
     memcpy(H.force, params, sizeof H.force);
+}
+
+HDstring hdGetString(HDenum pname)
+{
+    static char serial[24];
+    if (pname != HD_DEVICE_SERIAL_NUMBER || !H.open) {
+        fail(pname != HD_DEVICE_SERIAL_NUMBER ? HD_INVALID_ENUM : HD_INVALID_OPERATION);
+        return NULL;
+    }
+    snprintf(serial, sizeof serial, "%llu", 2205000ull + H.seed % 1000u);
+    return serial;
 }
 
 HDErrorInfo hdGetError(void)

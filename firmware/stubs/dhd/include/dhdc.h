@@ -17,6 +17,7 @@ typedef unsigned char uchar;
 #define DHD_OFF 0
 
 int dhdOpen(void);                                     /* device ID, or -1 */
+int dhdGetSerialNumber(unsigned short *sn, char ID);   /* 0, or -1 */
 int dhdClose(char ID);                                 /* 0, or -1 */
 const char *dhdGetSystemName(char ID);                 /* NULL on error */
 int dhdEnableForce(uchar val, char ID);                /* DHD_ON / DHD_OFF */

@@ -43,6 +43,8 @@ typedef HDCallbackCode(HDCALLBACK *HDSchedulerCallback)(void *pUserData);
 #define HD_CURRENT_POSITION 0x2050u          /* [mm] x, y (up), z */
 #define HD_CURRENT_FORCE 0x2700u             /* [N] */
 #define HD_INSTANTANEOUS_UPDATE_RATE 0x2600u /* [Hz] the scheduler's last period's */
+/* strings (hdGetString) */
+#define HD_DEVICE_SERIAL_NUMBER 0x2505u
 /* errors */
 #define HD_INVALID_ENUM 0x0100u
 #define HD_INVALID_VALUE 0x0101u
@@ -61,6 +63,7 @@ void hdBeginFrame(HHD hHD);
 void hdEndFrame(HHD hHD);
 void hdGetDoublev(HDenum pname, HDdouble *params);
 void hdSetDoublev(HDenum pname, const HDdouble *params);
+HDstring hdGetString(HDenum pname);
 HDErrorInfo hdGetError(void);
 HDstring hdGetErrorString(HDerror errorCode);
 void hdStartScheduler(void);
