@@ -363,7 +363,7 @@ def _session(folder: Path, typed: pd.DataFrame, labels: dict, tasks: dict, peopl
 def _sessions_json(out: Path) -> Path:
     p = out / "sessions.json"  # inherited by every sub-*/sub-*_sessions.tsv
     _json(p, {"acq_time": {"Description": "when the session began (UTC)"},
-              "protocol": {"Description": "the hapticlab protocol the session ran"},
+              "protocol": {"Description": "the protocol the session ran (hapticlab's name)"},
               "kind": {"Description": "who answered",
                        "Levels": {"human": "a person", "dry-run": "a scripted responder "
                                   "testing the machinery", "simulated": "the simulated "
@@ -401,11 +401,12 @@ def _top_level(out: Path, people: dict, tasks: dict) -> list[Path]:
               "License": "n/a: set by the lab that shares it",
               "Authors": ["n/a: the lab that ran the sessions"],
               "GeneratedBy": [{"Name": "hapticlab", "Version": ours,
-                               "Description": "hapticlab export DATA --format bids"}]})
+                               "Description": "hapticlab export DATA --out DIR --format "
+                                              "bids"}]})
     written.append(p)
     p = out / "README"
     p.write_text("Sessions recorded with hapticlab, a psychophysics application for haptic "
-                 "contact realism, exported with `hapticlab export DATA --format bids`.\n"
+                 "contact realism, exported by its export command in the format bids.\n"
                  "Each beh/ folder holds one row per attempt (_beh.tsv), the same rows with "
                  "onsets (_events.tsv), and the force-feedback device's traces of each "
                  "tapping window kept in full (_physio.tsv.gz, named in the rows' "
@@ -428,7 +429,8 @@ def _top_level(out: Path, people: dict, tasks: dict) -> list[Path]:
         scale = _scale(meta)
         if scale:
             cols["rating"]["Levels"] = scale
-        side = {"TaskName": task, "TaskDescription": f"hapticlab protocol '{info['protocol']}'",
+        side = {"TaskName": task,
+                "TaskDescription": f"the protocol '{info['protocol']}' of hapticlab",
                 **cols}
         p = out / f"task-{task}_beh.json"
         _json(p, side)
