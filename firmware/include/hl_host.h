@@ -33,6 +33,9 @@ void hl_host_take_input(int master);
  * them; otherwise the stated fallback (normal scheduling) on stderr. Returns 1 if granted */
 int hl_host_realtime(int priority);
 uint64_t hl_host_now_ns(void); /* CLOCK_MONOTONIC [ns] */
+/* the serial number HELLO_ACK names: <prefix>-<the device's own number> where the HAL
+ * knows it (a bridge's SDK, after hal_io_init), else <prefix>-<seed> */
+void hl_host_serial(char *buf, size_t cap, const char *prefix, unsigned long long seed);
 /* the servo's achieved rate (noted by sim_tick_seen, hl_sim.h) in words: the median, 99th
  * and 99.9th percentile and the longest period between ticks [us of wall time] */
 void hl_host_tick_periods(char *buf, size_t cap);

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include "hl_device.h"
+#include "hl_hal.h"
 #include "hl_sim.h"
 
 int hl_host_parse(int argc, char **argv, double max_speed, hl_host_args *out)
@@ -140,4 +141,14 @@ void hl_host_tick_periods(char *buf, size_t cap)
              sim_tick_period_us(0.5), sim_tick_period_us(0.99), sim_tick_period_us(0.999),
              sim_tick_period_us(1.0) >= SIM_PERIOD_BINS - 1u ? ">= " : "",
              sim_tick_period_us(1.0));
+}
+
+void hl_host_serial(char *buf, size_t cap, const char *prefix, unsigned long long seed)
+{
+    const char *own = hal_serial_number();
+    if (own != NULL) {
+        snprintf(buf, cap, "%s-%s", prefix, own);
+    } else {
+        snprintf(buf, cap, "%s-%llu", prefix, seed);
+    }
 }

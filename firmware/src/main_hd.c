@@ -106,12 +106,7 @@ int main(int argc, char **argv)
 
     char serial[16];
     sim_hal_init(args.seed); /* opens the device (src/io_hd.c), which tells its serial number */
-    const char *own = hal_serial_number();
-    if (own != NULL) {
-        snprintf(serial, sizeof serial, "%s-%s", HL_SERIAL_PREFIX, own);
-    } else {
-        snprintf(serial, sizeof serial, "%s-%llu", HL_SERIAL_PREFIX, args.seed);
-    }
+    hl_host_serial(serial, sizeof serial, HL_SERIAL_PREFIX, args.seed);
     hl_device_init(serial);
     HDSchedulerHandle tick = hdScheduleAsynchronous(servo, NULL, HD_MAX_SCHEDULER_PRIORITY);
     hdStartScheduler();

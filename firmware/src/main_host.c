@@ -65,12 +65,7 @@ int main(int argc, char **argv)
 
     char serial[16];
     sim_hal_init(seed); /* opens a bridge's device, which may tell its serial number */
-    const char *own = hal_serial_number();
-    if (own != NULL) {
-        snprintf(serial, sizeof serial, "%s-%s", HL_SERIAL_PREFIX, own);
-    } else {
-        snprintf(serial, sizeof serial, "%s-%llu", HL_SERIAL_PREFIX, seed);
-    }
+    hl_host_serial(serial, sizeof serial, HL_SERIAL_PREFIX, seed);
     hl_device_init(serial);
     if (speed != 1.0) {
         hl_device_pace((float)speed);
