@@ -28,6 +28,7 @@ from .events import (
     ContactEvent,
     FaultEvent,
     Flags,
+    HostClock,
     SaturationEvent,
     WindowResult,
 )
@@ -62,6 +63,7 @@ __all__ = [
     "Flags",
     "ForceSinusoid",
     "HapticDevice",
+    "HostClock",
     "LibraryTransient",
     "TransientTable",
     "Material",

@@ -24,7 +24,7 @@ from .errors import (
     SceneError,
     UnknownBackendError,
 )
-from .events import TRACE_CHANNELS, FaultEvent, WindowResult
+from .events import TRACE_CHANNELS, FaultEvent, HostClock, WindowResult
 from .info import DeviceInfo
 from .scene import Scene, Transient, TransientTable
 
@@ -357,6 +357,14 @@ class HapticDevice(ABC):
         """Statistics of the link to the device (frames, errors, round trips); empty for a
         device without one."""
         return {}
+
+    def host_clock(self, span: tuple[float, float] | None = None) -> HostClock | None:
+        """Where this device's clock lies on this computer's, from its readings around
+        ``span`` (device times [s], e.g. a window's first and last tick; default: its
+        recent readings), or None when its time is not this computer's: a simulation in
+        virtual time, which runs as fast as it can. Event markers put a window's contacts
+        on a clock shared with other recordings through it. The default: None."""
+        return None
 
     # ------------------------------------------------------ backend interface
     @abstractmethod

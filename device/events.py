@@ -14,6 +14,7 @@ __all__ = [
     "Flags",
     "WindowResult",
     "TRACE_CHANNELS",
+    "HostClock",
 ]
 
 
@@ -69,6 +70,37 @@ class FaultEvent:
     t: float
     code: str
     message: str
+
+
+@dataclass(frozen=True)
+class HostClock:
+    """Where a device's clock lies on this computer's: device time ``t`` [s] happened at
+    ``offset_s + rate * t`` on :func:`time.perf_counter`'s clock, within ± ``uncertainty_s``.
+
+    Attributes
+    ----------
+    offset_s : float [s]
+        Host time of device time 0.
+    rate : float [1]
+        Host seconds per device second (a simulated device on a busy computer, or an
+        emulated board, runs slow; a crystal differs by parts per million).
+    uncertainty_s : float [s]
+        Half-width of the interval the true host time lies in.
+    round_trip_s : float or None [s]
+        The link's fastest round trip the bound rests on (None: a device without a link).
+    pairs : int
+        Clock readings the mapping was fitted to.
+    """
+
+    offset_s: float
+    rate: float
+    uncertainty_s: float
+    round_trip_s: float | None
+    pairs: int
+
+    def on_host(self, t: float) -> float:
+        """Host time [s, perf_counter] of device time ``t`` [s]."""
+        return self.offset_s + self.rate * t
 
 
 class Flags(IntFlag):

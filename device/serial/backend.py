@@ -12,6 +12,7 @@ a library user decides what a signal means in their program.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 import zlib
@@ -24,7 +25,7 @@ import numpy as np
 from ..base import DeviceInfo, HapticDevice
 from ..codes import Blend, SceneKind
 from ..errors import DeviceError, DeviceFaultError, SceneError
-from ..events import ContactEvent, FaultEvent, SaturationEvent, WindowResult
+from ..events import ContactEvent, FaultEvent, HostClock, SaturationEvent, WindowResult
 from ..scene import Material, Scene, TransientTable
 from . import messages as M
 from .link import (
@@ -81,21 +82,59 @@ def stream_decimation(lim: M.Limits, n_channels: int, servo_rate_hz: float,
                       f"({lim.max_decimation})")
 
 
-def device_clock_on_host(pairs) -> Callable[[float], float]:
+def _lower_hull(t: np.ndarray, h: np.ndarray) -> list[int]:
+    """Indices of the lower convex hull of the points (t, h), ``t`` ascending."""
+    hull: list[int] = []
+    for i in range(len(t)):
+        while len(hull) >= 2:
+            a, b = hull[-2], hull[-1]
+            if (h[b] - h[a]) * (t[i] - t[a]) >= (h[i] - h[a]) * (t[b] - t[a]):
+                hull.pop()  # b lies on or above the chord a–i
+            else:
+                break
+        hull.append(i)
+    return hull
+
+
+def device_clock_on_host(pairs, round_trip_s: float | None = None) -> HostClock:
     """Device time → host perf time, from STATUS frames' (host receipt, device time) pairs.
 
-    The device's clock may run at another rate than the host's (a device simulated on a
-    busy computer slips; QEMU's ran at 0.71×), so the rate is fitted (least squares) and
-    the line is then lowered to the fastest frame (every frame reaches the host after it
-    was stamped): a time mapped with it is an upper bound by that frame's one-way delay.
+    Every frame reaches the host after it was stamped, so the device's clock lies below
+    every pair. The line taken is the one under all of them that is highest at their mean
+    device time: the edge of their lower convex hull above that time (the least total
+    delay, as clock synchronisation over one-way messages estimates it). Its rate follows
+    a device clock at any rate (a device simulated on a busy computer slips; QEMU's ran at
+    0.71×), and a least-squares fit would be tilted by the delays' spread instead. The line
+    is late by the delay of the hull's frames, which lies between 0 and the link's fastest
+    round trip ``round_trip_s`` [s] (a round trip holds one device → host frame), so the
+    mapping is centred in that interval and its half is the uncertainty (for frames as
+    fast as a round trip's legs). A clock that is not a line over the pairs (one that
+    stepped) leaves some quarter of them far above the line: the largest of the four
+    quarters' lowest gaps is added to the uncertainty, which then holds at each quarter's
+    fastest frame (between them the line's tilt against the steps adds to the error).
+    Without a round trip the uncertainty is unknown (infinite).
     """
     p = np.asarray(list(pairs), float)
     if len(p) < 2:
         raise ValueError("need two STATUS frames or more to put the device's clock on the "
                          "host's")
-    rate = np.polyfit(p[:, 1], p[:, 0], 1)[0] if np.ptp(p[:, 1]) > 0 else 1.0
-    offset = float(np.min(p[:, 0] - rate * p[:, 1]))
-    return lambda t: offset + rate * t
+    p = p[np.lexsort((p[:, 0], p[:, 1]))]  # by device time, the earliest receipt first
+    h, t = p[:, 0], p[:, 1]
+    if np.ptp(t) > 0:
+        hull = _lower_hull(t, h)
+        mean = float(np.mean(t))
+        k = next((j for j in range(len(hull) - 1) if t[hull[j + 1]] >= mean), len(hull) - 2)
+        a, b = hull[k], hull[k + 1]
+        rate = float((h[b] - h[a]) / (t[b] - t[a])) if t[b] > t[a] else 1.0
+    else:
+        rate = 1.0
+    lag = h - rate * t
+    offset = float(np.min(lag))
+    bend = max(float(np.min(q)) for q in np.array_split(lag, 4) if q.size) - offset
+    if round_trip_s is None:
+        return HostClock(offset, rate, math.inf, None, len(p))
+    return HostClock(offset - round_trip_s / 2, rate, round_trip_s / 2 + bend, round_trip_s,
+                     len(p))
 
 
 #: the largest force a table item carries [N] (``i16``, 1 mN per LSB)
@@ -334,6 +373,24 @@ class SerialDevice(HapticDevice):
     def ping(self, timeout: float = 0.5) -> float:
         """One PING/PONG round trip [s] (also counted in the link statistics)."""
         return self.link.ping(timeout)
+
+    def host_clock(self, span: tuple[float, float] | None = None) -> HostClock | None:
+        """The device's clock on this computer's, from the last STATUS frames (up to 400:
+        20 s at the 20-Hz floor) and the link's fastest round trip
+        (:func:`device_clock_on_host`). Given a ``span`` (device times [s]: a window's),
+        the frames within it when there are four (a device's clock may step between its
+        windows: a simulated one slips, a board resets), else those within 1 s of it,
+        else all; None before two frames arrived."""
+        pairs = list(self.status_log)
+        if span is not None:
+            for pad, least in ((0.0, 4), (1.0, 2)):
+                near = [q for q in pairs if span[0] - pad <= q[1] <= span[1] + pad]
+                if len(near) >= least:
+                    pairs = near
+                    break
+        if len(pairs) < 2:
+            return None
+        return device_clock_on_host(pairs, self.link.fastest_round_trip())
 
     def link_stats(self) -> dict:
         """The link's figures (:meth:`Link.link_stats`) and, when the device reports them

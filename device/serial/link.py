@@ -508,6 +508,11 @@ class Link:
         self._rtt.append(rtt)
         return rtt
 
+    def fastest_round_trip(self) -> float | None:
+        """The fastest command or PING round trip of the last 4,096 [s], or None."""
+        rtt = list(self._rtt)
+        return min(rtt) if rtt else None
+
     # ------------------------------------------------------------------ heartbeats
     def start_heartbeats(self, watchdog_s: float) -> None:
         """Keep the device's watchdog fed: a HEARTBEAT after T_wd/4 without a frame.

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..base import DeviceInfo, HapticDevice, SimulatedHand
 from ..errors import DeviceError, DeviceSpecError, SceneError
-from ..events import ContactEvent, FaultEvent, Flags, SaturationEvent, WindowResult
+from ..events import ContactEvent, FaultEvent, Flags, HostClock, SaturationEvent, WindowResult
 from ..scene import MAX_REACH_M, Scene, TransientTable
 from . import kernel as K
 from .params import DeviceParams, HandParams
@@ -160,6 +160,7 @@ class SimDevice(HapticDevice):
         #: wall seconds the live clock has slipped behind the wall clock (see ``_SLIP_S``)
         self.slipped_s = 0.0
         self._stop_requested = False
+        self._live_clock: HostClock | None = None  # live mode: the last window's pacing
         self.noise = bool(noise)
         # the serial number names the configuration, so a transient library built for
         # another simulated device (other mechanics, hand or rate) is refused like a
@@ -249,6 +250,12 @@ class SimDevice(HapticDevice):
         self._free_air = None
         if current is not None:
             self.load_scene(current)
+
+    def host_clock(self, span: tuple[float, float] | None = None) -> HostClock | None:
+        """In live mode, the last window's pacing: its ticks on the wall clock, within a
+        pacing chunk and the time the window slipped; None in virtual time (and before a
+        live window ran)."""
+        return self._live_clock if self.live else None
 
     def set_simulated_hand(self, hand: SimulatedHand) -> bool:
         """A simulated person takes the stylus: their grasp scales the nominal hand's
@@ -562,6 +569,10 @@ class SimDevice(HapticDevice):
         if self.live:
             wall = time.perf_counter() - start
             self.slipped_s += slipped
+            # tick k of the window was paced to wall0 + k·dt/speed, its chunk computed
+            # within the chunk before; a slip moved wall0 for the ticks after it
+            self._live_clock = HostClock(wall0 - tick0 * dt / self.speed, 1 / self.speed,
+                                         chunk * dt / self.speed + slipped, None, 1)
             lat = np.asarray(late)
             res.timing = {"achieved_rate_hz": n / wall if wall > 0 else float("nan"),
                           "slipped_s": slipped,
