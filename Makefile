@@ -12,7 +12,7 @@ $(PY):
 
 # setup.py builds the link's native threads (firmware/src/hostlink.c) with the package
 $(STAMP): pyproject.toml setup.py firmware/src/hostlink.c firmware/include/hl_hostlink.h | $(PY)
-	$(PY) -m pip install --quiet -e '.[test,ui]'
+	$(PY) -m pip install --quiet -e '.[test,ui,lsl]'
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -23,13 +23,14 @@ venv: $(STAMP)
 # when missing; chromium renders report.html headless for its screenshot test; gcc builds the
 # firmware's host build, arm-none-eabi-gcc (with newlib) its Cortex-M build, and
 # qemu-system-arm runs that on an emulated STM32F405; clang-14 and libFuzzer fuzz the
-# firmware's receive path and command executor; R and its packages recompute the
-# statistics' reference values (tests/r/).
+# firmware's receive path and command executor; strace shows where liblsl sends (the LSL
+# tests); R and its packages recompute the statistics' reference values (tests/r/).
 R_PACKAGES := afex lme4 lmerTest ordinal car effectsize coin multcompView
 R_CHECK := quit(status = !all(sapply(strsplit("$(R_PACKAGES)", " ")[[1]], requireNamespace, quietly = TRUE)))
 system-deps:
 	@if ! command -v Xvfb >/dev/null 2>&1 || ! ldconfig -p | grep -q libportaudio \
 	    || ! command -v xdotool >/dev/null 2>&1 || ! command -v tmux >/dev/null 2>&1 \
+	    || ! command -v strace >/dev/null 2>&1 \
 	    || ! command -v chromium >/dev/null 2>&1 || ! command -v cc >/dev/null 2>&1 \
 	    || ! command -v arm-none-eabi-gcc >/dev/null 2>&1 \
 	    || ! command -v qemu-system-arm >/dev/null 2>&1 \
@@ -37,13 +38,13 @@ system-deps:
 	    || [ ! -d /usr/lib/arm-none-eabi/newlib ] \
 	    || [ ! -f /usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf ] \
 	    || ! dpkg -s libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 >/dev/null 2>&1; then \
-	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries, chromium, the compilers, QEMU and libFuzzer from Debian's packages"; \
+	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries, chromium, the compilers, QEMU, libFuzzer and strace from Debian's packages"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
 	    xvfb libgl1-mesa-dri libglu1-mesa libportaudio2 libasound2 libsndfile1 xdotool tmux \
 	    fonts-dejavu-core libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 libxkbcommon-x11-0 \
 	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 \
 	    chromium gcc libc6-dev make gcc-arm-none-eabi libnewlib-arm-none-eabi \
-	    qemu-system-arm clang-14 libfuzzer-14-dev libclang-rt-14-dev >/dev/null; \
+	    qemu-system-arm clang-14 libfuzzer-14-dev libclang-rt-14-dev strace >/dev/null; \
 	fi
 	@if ! command -v Rscript >/dev/null 2>&1 || ! Rscript -e '$(R_CHECK)' >/dev/null 2>&1; then \
 	  echo "installing R and the reference packages (afex, lme4, lmerTest, ordinal, car, effectsize, coin, multcompView) from Debian's packages"; \

@@ -139,13 +139,31 @@ def _apply_limit(protocol, dev, recorded: float | None = None) -> dict:
             "protocol_max_current_a": protocol.limits.max_current}
 
 
-def _drive(runner, files, meta, console) -> SessionResult:
+def _markers(lsl: bool, meta: dict):
+    """The session's marker sink: an LSL outlet with ``lsl`` (its run recorded in
+    ``meta["lsl"]``, updated as it runs), else one that sends nothing."""
+    from app.markers import LslMarkers, MarkerSink
+
+    if not lsl:
+        return MarkerSink()
+    pid, ses, name = meta["participant"]["id"], meta["session"], meta["protocol"]["name"]
+    m = LslMarkers("hapticlab markers", f"hapticlab:{name}:sub-{pid}:ses-{ses}",
+                   {"participant": pid, "session": ses, "protocol": name,
+                    "device": f"{meta['device']['backend']} {meta['device']['serial_number']}"})
+    meta.setdefault("lsl", {"stream": m.stream, "runs": []})["runs"].append(m.run)
+    return m
+
+
+def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResult:
     from app.errors import DataFolderError
-    from app.runner import SessionInterrupted, utc_now
+
+    markers = runner.markers
 
     def stopped(why: str, status: str, msg: str) -> SessionResult:
         meta["status"] = "interrupted"
         meta.setdefault("interruptions", []).append(why)
+        markers.send("session_end", status=status, why=why)
+        markers.close()
         try:
             files.write_meta(meta)
         except DataFolderError as exc:  # the disk that stopped the session
@@ -153,6 +171,23 @@ def _drive(runner, files, meta, console) -> SessionResult:
         console.say(msg)
         return SessionResult(files.folder, status, len(runner.log), msg)
 
+    try:
+        return _drive_run(runner, files, meta, console, lsl_wait, stopped)
+    finally:
+        markers.close()  # an error no stop caught: the stream goes, its run is recorded
+
+
+def _drive_run(runner, files, meta, console, lsl_wait, stopped) -> SessionResult:
+    from app.runner import SessionInterrupted, utc_now
+
+    markers = runner.markers
+    if not markers.wait_for_consumer(lsl_wait, console.say):
+        return stopped("no LSL recorder", "interrupted",
+                       f"no recorder received the LSL markers within {lsl_wait:g} s; no trial "
+                       "ran. Start the recording, then resume with: hapticlab resume "
+                       f"{files.folder} --lsl")
+    markers.send("session_start", participant=runner.participant, session=runner.session,
+                 protocol=runner.protocol.name, attempts_logged=len(runner.log))
     started = time.monotonic()
     try:
         runner.run()
@@ -181,6 +216,8 @@ def _drive(runner, files, meta, console) -> SessionResult:
         console.say(f"trials complete: {summary} — the participant is answering the "
                     "debrief question")
     meta["participant"]["debrief"] = runner.participant_ui.debrief()
+    markers.send("session_end", status="complete")
+    markers.close()
     files.write_meta(meta)
     console.say(f"session complete: {summary}")
     runner.participant_ui.finished(summary)
@@ -200,7 +237,8 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 audio: bool = True, fullscreen: bool = False, quiet: bool = False,
                 operator_keys: bool | None = None, clear_fault: bool = False,
                 info_fields: dict | None = None, new_session: bool = False,
-                say: Callable[[str], None] | None = None) -> SessionResult:
+                say: Callable[[str], None] | None = None, lsl: bool = False,
+                lsl_wait: float = 300.0) -> SessionResult:
     """Run one session to the end (or until it is stopped) and record it.
 
     Parameters
@@ -244,6 +282,11 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
         a dry run or a simulated participant what exists is said, and the session runs.
     say : callable, optional
         Where messages for the operator go (default: stderr).
+    lsl : bool
+        Send the session's events as markers on Lab Streaming Layer (:mod:`app.markers`).
+    lsl_wait : float [s]
+        With ``lsl``, how long to wait for a recorder to receive the markers before the
+        first trial; without one the session stops there (resumable, nothing lost).
 
     Returns
     -------
@@ -345,8 +388,8 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
             files.write_meta(meta)
             console.say(f"session {folder} (seed {seed})")
             runner = SessionRunner(proto, engine, dev, files, ui, participant, n, seed, console,
-                                   sound, traces, meta=meta)
-            return _drive(runner, files, meta, console)
+                                   sound, traces, meta=meta, markers=_markers(lsl, meta))
+            return _drive(runner, files, meta, console, lsl_wait)
         finally:
             for part in (ui, sound, console):
                 if part is not None:
@@ -391,7 +434,8 @@ def _check_rows(files, meta: dict, rows: list[dict]) -> None:
 
 def resume_session(folder: str | Path, *, device: str | None = None, audio: bool | None = None,
                    clear_fault: bool = False, fullscreen: bool = False, quiet: bool = False,
-                   operator_keys: bool | None = None) -> SessionResult:
+                   operator_keys: bool | None = None, lsl: bool = False,
+                   lsl_wait: float = 300.0) -> SessionResult:
     """Continue an interrupted session exactly where it stopped.
 
     The session keeps its kind and responder; the protocol is the copy in the session
@@ -408,8 +452,9 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
         Default: as recorded.
     clear_fault : bool
         Clear a latched e-stop or watchdog fault first (the operator's decision).
-    fullscreen, quiet, operator_keys
-        As :func:`run_session`.
+    fullscreen, quiet, operator_keys, lsl, lsl_wait
+        As :func:`run_session` (a resume with ``lsl`` is a new run of the markers' stream,
+        recorded beside the earlier ones in session.json).
     """
     from app.console import make_console
     from app.recorder import SessionFiles
@@ -424,13 +469,13 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
             return SessionResult(files.folder, "complete", len(files.read_rows()[0]),
                                  f"{files.folder}: the session is already complete")
         return _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
-                       operator_keys)
+                       operator_keys, lsl, lsl_wait)
     finally:
         files.release()
 
 
 def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
-            operator_keys) -> SessionResult:
+            operator_keys, lsl, lsl_wait) -> SessionResult:
     from app.console import make_console
     from app.ids import validate_participant
     from app.libraries import check_recorded, with_libraries
@@ -486,7 +531,7 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                 console = make_console("keys", quiet, dev)
             runner = SessionRunner(proto, engine, dev, files, ui, p["id"], meta["session"],
                                    meta["seed"], console, sound, meta.get("traces_mode", "full"),
-                                   meta=meta)
+                                   meta=meta, markers=_markers(lsl, meta))
             runner.load_log()
             try:
                 engine.next_trial(runner.log)
@@ -502,7 +547,7 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
             meta["status"] = "running"
             files.write_meta(meta)
             console.say(f"resuming {files.folder} after {len(runner.log)} attempts")
-            return _drive(runner, files, meta, console)
+            return _drive(runner, files, meta, console, lsl_wait)
         finally:
             for part in (ui, sound, console):
                 if part is not None:

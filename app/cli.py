@@ -376,7 +376,8 @@ def _run(args: argparse.Namespace) -> int:
                     quiet=args.quiet, clear_fault=args.clear_fault,
                     operator_keys=True if args.operator_keys else None,
                     info_fields={"age": "", "handedness": ["right", "left", "both"]}
-                    if args.info_dialog else None, new_session=args.new_session)
+                    if args.info_dialog else None, new_session=args.new_session,
+                    lsl=args.lsl, lsl_wait=args.lsl_wait)
     _report(r, args.quiet)
     return r.exit_code
 
@@ -386,9 +387,18 @@ def _resume(args: argparse.Namespace) -> int:
 
     r = resume_session(args.session_dir, device=args.device,
                        audio=False if args.no_audio else None, clear_fault=args.clear_fault,
-                       fullscreen=args.fullscreen, quiet=args.quiet)
+                       fullscreen=args.fullscreen, quiet=args.quiet, lsl=args.lsl,
+                       lsl_wait=args.lsl_wait)
     _report(r, args.quiet)
     return r.exit_code
+
+
+def _add_lsl(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--lsl", action="store_true", help="send the session's events as markers "
+                   "on Lab Streaming Layer (needs the hapticlab[lsl] extra; README: LSL)")
+    p.add_argument("--lsl-wait", type=float, default=300.0, metavar="SECONDS",
+                   help="with --lsl, wait this long for a recorder to receive the markers "
+                   "before the first trial (default 300)")
 
 
 def _report(r, quiet: bool) -> None:
@@ -571,6 +581,7 @@ def _add_session_parsers(sub) -> None:
                    "protocol (without it the run lists them and stops)")
     r.add_argument("--quiet", action="store_true", help="no console lines (errors still "
                    "print)")
+    _add_lsl(r)
     r.set_defaults(func=_run)
     pf = sub.add_parser("preflight", help="every check a session makes before it starts")
     pf.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
@@ -594,6 +605,7 @@ def _add_session_parsers(sub) -> None:
     rs.add_argument("--fullscreen", action="store_true", help="the participant's window "
                     "fills the screen")
     rs.add_argument("--quiet", action="store_true", help="no console lines")
+    _add_lsl(rs)
     rs.set_defaults(func=_resume)
     s = sub.add_parser("simulate", help="run a whole study with simulated participants")
     s.add_argument("protocol", help="realism, factorial, identification, or a protocol file")

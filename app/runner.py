@@ -43,6 +43,7 @@ from protocols import (
 from . import __version__
 from .console import PlainConsole
 from .errors import DataFolderError, SessionFileError
+from .markers import MarkerSink
 from .participants import Participant
 from .recorder import SessionFiles
 
@@ -134,6 +135,8 @@ class SessionRunner:
     files : SessionFiles
     participant_ui : Participant
         Who answers (a person's screen, a scripted or simulated participant).
+    markers : MarkerSink
+        Where the session's events go as markers (:mod:`app.markers`; default: nowhere).
     """
 
     protocol: Protocol
@@ -153,6 +156,7 @@ class SessionRunner:
     #: first words: each is said to the operator once and kept in session.json
     warnings: dict[str, str] = field(default_factory=dict)
     meta: dict | None = None  # session.json's content (notes are added to it)
+    markers: MarkerSink = field(default_factory=MarkerSink)
     _expected: list[dict] | None = None  # while replaying: the recorded rows still to meet
     _durations: list[float] = field(default_factory=list)
     _windows_in_attempt: int = 0
@@ -201,6 +205,7 @@ class SessionRunner:
         self.log = []
         self._expected = [dict(r, _line=i + 2) for i, r in enumerate(rows)]
         console, self.console = self.console, PlainConsole(quiet=True)  # nothing to tell
+        markers, self.markers = self.markers, MarkerSink()  # nor anything to mark
         try:
             while self._expected:
                 row = self._expected[0]
@@ -220,6 +225,7 @@ class SessionRunner:
         finally:
             self._expected = None
             self.console = console
+            self.markers = markers
 
     def _run(self) -> str:
         v = self.console.view
@@ -426,6 +432,8 @@ class SessionRunner:
             self._on_device = ref.placement or ref_id
             self.participant_ui.reference(rtrial, ref)
             t_start = utc_now()
+            self.markers.trial(rtrial)
+            self.markers.send("trial_start", sample=ref_id, kind="reference")
             self._windows_in_attempt = 0
             try:
                 rng = np.random.default_rng(np.random.SeedSequence(
@@ -482,6 +490,8 @@ class SessionRunner:
         rng = self._rng(trial)
         t_start = utc_now()
         self.participant_ui.ready(trial)
+        self.markers.trial(trial)
+        self.markers.send("trial_start", sample=trial.sample, kind=trial.kind)
         self.console.set_state("trial")
         if self.audio is not None:
             self.audio.tap_cue()
@@ -518,6 +528,8 @@ class SessionRunner:
                     results.append(self._window(trial, sid, rng))
         except DeviceFaultError as exc:  # latched before the window (an e-stop between trials)
             fault = self.device.fault
+            if fault is not None:
+                self.markers.fault(fault)
             if not self.console.interactive or fault is None:
                 raise SessionInterrupted(f"trial {trial.trial_index}: {exc}; once it is safe: "
                                          f"{self._resume_line()}") from exc
@@ -566,6 +578,7 @@ class SessionRunner:
         row: dict[str, Any] = {}
         if trial.kind == "rated":
             self.console.set_state("rating")
+            self.markers.send("rating_onset")
             rating, rt = self.participant_ui.rate(trial, self.protocol.rating, res, rng)
             if not self.protocol.rating.min <= rating <= self.protocol.rating.max:
                 raise SessionInterrupted(f"the responder gave rating {rating!r}, outside the "
@@ -573,12 +586,17 @@ class SessionRunner:
                                          f"{self.protocol.rating.max}; nothing was recorded "
                                          "for this trial")
             row.update(rating=int(rating), response_time=round(float(rt), 3))
+            self.markers.send("response", rating=row["rating"],
+                              response_time_s=row["response_time"])
         elif trial.kind == "identification":
             self.console.set_state("rating")  # naming the surfaces: the operator's e acts
+            self.markers.send("rating_onset")
             answers, rt = self.participant_ui.identify(trial, self.protocol.answer.choices,
                                                        named, rng)
             row.update(answer=",".join(answers), response_time=round(float(rt), 3),
                        correct=int(list(answers) == list(trial.samples)))
+            self.markers.send("response", answer=row["answer"],
+                              response_time_s=row["response_time"])
         self._record(trial, "valid", t_start=t_start, result=res, results=results, played=played,
                      **row)
         self.console.result("valid", len(velocities),
@@ -613,6 +631,7 @@ class SessionRunner:
                                  trial.samples.index(sample_id)]), k])
         self.participant_ui.before_window(trial, sample_id, dev, rng)
         dev.home()
+        self.markers.send("homed", sample=sample_id, window=k)
         w = self.protocol.window
 
         shown = 0
@@ -637,6 +656,8 @@ class SessionRunner:
         except DeviceError as exc:
             exc.partial = res  # the window ended whole: its row names it
             raise
+        finally:  # its contacts, saturations and faults, on the markers' clock
+            self.markers.window(res, dev, window=k)
         if res.timing:
             self.timing.append(res.timing)
         for text in res.warnings:  # what the device could not do as asked: said once
@@ -695,6 +716,9 @@ class SessionRunner:
         }
         self.files.append_row(row)  # durable before anything else happens
         self.log.append(Attempt(trial.item, status, reason))
+        self.markers.trial(trial)
+        self.markers.send("trial_end", status=status, reason=reason)
+        self.markers.trial(None)
 
     def _meet(self, trial: Trial, status: str, vel: list[float], extra: dict) -> None:
         """A replayed attempt against its recorded row."""

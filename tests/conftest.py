@@ -34,9 +34,28 @@ def wait_for(pred, limit: float = 30.0, what: str = "condition") -> None:
 
 def pytest_configure(config):
     """Build transient libraries into a fresh library store per run (subprocesses inherit
-    it)."""
+    it); refuse to load liblsl anywhere but in a private network (app.markers.PRIVATE_ENV:
+    every process the tests start inherits it)."""
     if "HAPTICLAB_LIBRARIES" not in os.environ:
         os.environ["HAPTICLAB_LIBRARIES"] = tempfile.mkdtemp(prefix="hapticlab-libraries-")
+    os.environ["HAPTICLAB_LSL_PRIVATE"] = "1"
+
+
+#: a command's prefix that runs it in a network namespace with loopback alone, liblsl
+#: configured to stay on this machine (tools/private_net.py)
+PRIVATE_NET = [sys.executable, str(ROOT / "tools" / "private_net.py")]
+_private: list[str | None] = []
+
+
+def private_net_problem() -> str | None:
+    """Why no private network namespace can be made here (the wrapper's own words), or
+    None; asked once per run."""
+    if not _private:
+        out = subprocess.run([*PRIVATE_NET, sys.executable, "-c", "pass"],
+                             capture_output=True, text=True, timeout=60)
+        _private.append(None if out.returncode == 0 else
+                        (out.stderr.strip() or f"exit status {out.returncode}"))
+    return _private[0]
 
 
 @pytest.fixture(scope="session")

@@ -45,6 +45,15 @@ def test_dependency_direction(package):
             assert "psychopy" not in roots, f"{f.relative_to(ROOT)} imports PsychoPy"
 
 
+def test_liblsl_is_loaded_in_one_module_only():
+    """pylsl (and with it liblsl, which talks on the network) is imported by app/markers.py
+    alone, which checks for a private network first where one is required; among the
+    tests, by the receiver that runs inside one."""
+    users = {f.relative_to(ROOT).as_posix() for d in (*sorted(OURS), "tests", "tools")
+             for f in (ROOT / d).rglob("*.py") if "pylsl" in imported_roots(f)}
+    assert users == {"app/markers.py", "tests/app/lsl_receive.py"}
+
+
 def test_the_checker_sees_imports(tmp_path):
     bad = tmp_path / "m.py"
     bad.write_text("import os\nfrom app.cli import main\ndef f():\n    import psychopy.visual\n")

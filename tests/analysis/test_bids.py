@@ -10,7 +10,6 @@ from __future__ import annotations
 import gzip
 import json
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -23,6 +22,7 @@ import analysis as A
 from analysis.bids import export_bids
 
 from ..app.test_session import MINI
+from ..conftest import PRIVATE_NET, private_net_problem
 
 CLI = [sys.executable, "-m", "app"]
 VALIDATOR = Path(sys.executable).parent / "bids-validator-deno"
@@ -30,13 +30,9 @@ VALIDATOR = Path(sys.executable).parent / "bids-validator-deno"
 
 def _offline(cmd: list[str]) -> list[str]:
     """``cmd`` inside a new network namespace with loopback alone, where this machine lets
-    one be made (as root: unshare, ip); otherwise ``cmd`` as it is (the validator reads
+    one be made (tools/private_net.py); otherwise ``cmd`` as it is (the validator reads
     files and needs no network)."""
-    if shutil.which("unshare") is None or shutil.which("ip") is None:
-        return cmd
-    if subprocess.run(["unshare", "--net", "true"], capture_output=True).returncode != 0:
-        return cmd
-    return ["unshare", "--net", "sh", "-c", 'ip link set lo up && exec "$@"', "sh", *cmd]
+    return cmd if private_net_problem() else [*PRIVATE_NET, *cmd]
 
 
 def validate(folder: Path) -> tuple[list[dict], list[dict]]:
