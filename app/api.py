@@ -23,7 +23,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -139,29 +139,36 @@ def _apply_limit(protocol, dev, recorded: float | None = None) -> dict:
             "protocol_max_current_a": protocol.limits.max_current}
 
 
-def _markers(lsl: bool, meta: dict):
-    """The session's marker sink: an LSL outlet with ``lsl`` (its run recorded in
-    ``meta["lsl"]``, updated as it runs), else one that sends nothing."""
+def _markers(lsl: bool, protocol: str, participant: str, seed: int, dev, say):
+    """The session's marker sink: an LSL outlet with ``lsl`` (made before the session's
+    folder, named by what a resume knows: protocol, participant, seed), else one that
+    sends nothing."""
     from app.markers import LslMarkers, MarkerSink
 
     if not lsl:
         return MarkerSink()
-    pid, ses, name = meta["participant"]["id"], meta["session"], meta["protocol"]["name"]
-    m = LslMarkers("hapticlab markers", f"hapticlab:{name}:sub-{pid}:ses-{ses}",
-                   {"participant": pid, "session": ses, "protocol": name,
-                    "device": f"{meta['device']['backend']} {meta['device']['serial_number']}"})
-    meta.setdefault("lsl", {"stream": m.stream, "runs": []})["runs"].append(m.run)
-    return m
+    return LslMarkers("hapticlab markers", f"hapticlab:{protocol}:sub-{participant}:seed-{seed}",
+                      {"participant": participant, "protocol": protocol, "seed": seed,
+                       "device": f"{dev.info.backend} {dev.info.serial_number}"}, say)
+
+
+def _keep_markers(meta: dict, markers) -> None:
+    """This run of the markers' stream in session.json (updated in place as it runs)."""
+    if markers.active:
+        meta.setdefault("lsl", {"stream": markers.stream, "runs": []})["runs"].append(
+            markers.run)
 
 
 def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResult:
     from app.errors import DataFolderError
+    from app.runner import SessionInterrupted, utc_now
 
     markers = runner.markers
 
     def stopped(why: str, status: str, msg: str) -> SessionResult:
         meta["status"] = "interrupted"
         meta.setdefault("interruptions", []).append(why)
+        markers.trial(None)
         markers.send("session_end", status=status, why=why)
         markers.close()
         try:
@@ -171,25 +178,15 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
         console.say(msg)
         return SessionResult(files.folder, status, len(runner.log), msg)
 
-    try:
-        return _drive_run(runner, files, meta, console, lsl_wait, stopped)
-    finally:
-        markers.close()  # an error no stop caught: the stream goes, its run is recorded
-
-
-def _drive_run(runner, files, meta, console, lsl_wait, stopped) -> SessionResult:
-    from app.runner import SessionInterrupted, utc_now
-
-    markers = runner.markers
-    if not markers.wait_for_consumer(lsl_wait, console.say):
-        return stopped("no LSL recorder", "interrupted",
-                       f"no recorder received the LSL markers within {lsl_wait:g} s; no trial "
-                       "ran. Start the recording, then resume with: hapticlab resume "
-                       f"{files.folder} --lsl")
-    markers.send("session_start", participant=runner.participant, session=runner.session,
-                 protocol=runner.protocol.name, attempts_logged=len(runner.log))
     started = time.monotonic()
     try:
+        if not markers.wait_for_consumer(lsl_wait, console.say):
+            return stopped("no LSL recorder", "interrupted",
+                           f"no recorder received the LSL markers within {lsl_wait:g} s; no "
+                           "trial ran. Start the recording, then resume with: hapticlab "
+                           f"resume {files.folder} --lsl")
+        markers.send("session_start", participant=runner.participant, session=runner.session,
+                     protocol=runner.protocol.name, attempts_logged=len(runner.log))
         runner.run()
     except SessionInterrupted as exc:
         return stopped(str(exc), "interrupted", f"session interrupted: {exc}\nresume with: "
@@ -198,6 +195,12 @@ def _drive_run(runner, files, meta, console, lsl_wait, stopped) -> SessionResult
         return stopped(f"stopped ({type(exc).__name__})", "stopped",
                        "stopped; everything recorded is saved. resume with: hapticlab resume "
                        f"{files.folder}")
+    except BaseException:  # an error no stop caught: the stream goes, its record is kept
+        if markers.active:
+            markers.close()
+            with suppress(Exception):
+                files.write_meta(meta)
+        raise
     meta["times"]["finished_utc"] = utc_now()
     meta["status"] = "complete"
     summary = runner.summary(time.monotonic() - started)
@@ -347,6 +350,10 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
         early.append(check_display())
     if failed(early):
         raise PreflightError(failed(early))
+    if lsl:  # no pylsl, or no private network where one is required: said before anything
+        from app.markers import load_pylsl
+
+        load_pylsl()
     with _open(device, seed, person=responder == "person") as dev:
         close_at_exit(dev)
         if clear_fault and dev.fault is not None:
@@ -369,11 +376,12 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 raise UsageError("the participant information dialog was cancelled; nothing "
                                  "was recorded")
         ui = _participant(responder, proto, seed, group, fullscreen)
-        sound = None
+        sound = markers = None
         try:
             sound = _audio(audio, dev.info.backend, say)
             if keys:
                 console = make_console("keys", quiet, dev)
+            markers = _markers(lsl, proto.name, participant, seed, dev, console.say)
             folder, n = new_session_dir(Path(data), participant)
             files = SessionFiles(folder)
             files.lock()
@@ -385,13 +393,14 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
             meta["limits"] = limits
             if info is not None:
                 meta["participant"]["info"] = info
+            _keep_markers(meta, markers)
             files.write_meta(meta)
             console.say(f"session {folder} (seed {seed})")
             runner = SessionRunner(proto, engine, dev, files, ui, participant, n, seed, console,
-                                   sound, traces, meta=meta, markers=_markers(lsl, meta))
+                                   sound, traces, meta=meta, markers=markers)
             return _drive(runner, files, meta, console, lsl_wait)
         finally:
-            for part in (ui, sound, console):
+            for part in (ui, sound, console, markers):
                 if part is not None:
                     part.close()
             if "files" in locals():
@@ -515,6 +524,10 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
     if responder not in KIND_OF:
         responder = "person" if meta.get("ui") == "psychopy" else "scripted"
     spec = device or meta["device"]["spec"]
+    if lsl:
+        from app.markers import load_pylsl
+
+        load_pylsl()
     with _open(spec, meta["seed"], person=responder == "person") as dev:
         close_at_exit(dev)
         if clear_fault and dev.fault is not None:
@@ -523,15 +536,17 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
         limits = _apply_limit(proto, dev, (meta.get("limits") or {}).get("current_limit_a"))
         check_recorded(meta.get("libraries", {}), dev)
         ui = _participant(responder, proto, meta["seed"], p.get("group", ""), fullscreen)
-        sound = None
+        sound = markers = None
         try:
             sound = _audio(meta.get("audio", False) if audio is None else audio,
                            dev.info.backend, console.say)
             if operator_keys if operator_keys is not None else responder == "person":
                 console = make_console("keys", quiet, dev)
+            markers = _markers(lsl, meta["protocol"]["name"], p["id"], meta["seed"], dev,
+                               console.say)
             runner = SessionRunner(proto, engine, dev, files, ui, p["id"], meta["session"],
                                    meta["seed"], console, sound, meta.get("traces_mode", "full"),
-                                   meta=meta, markers=_markers(lsl, meta))
+                                   meta=meta, markers=markers)
             runner.load_log()
             try:
                 engine.next_trial(runner.log)
@@ -545,11 +560,12 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                                     "torn_line": None if torn is None else torn.line,
                                     "device": spec, "limits": limits})
             meta["status"] = "running"
+            _keep_markers(meta, markers)
             files.write_meta(meta)
             console.say(f"resuming {files.folder} after {len(runner.log)} attempts")
             return _drive(runner, files, meta, console, lsl_wait)
         finally:
-            for part in (ui, sound, console):
+            for part in (ui, sound, console, markers):
                 if part is not None:
                     part.close()
 

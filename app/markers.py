@@ -25,13 +25,14 @@ import os
 import socket
 import struct
 import time
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
 from device.errors import HapticlabError
 
 __all__ = ["EVENTS", "MarkerSink", "LslMarkers", "machine_config", "LslUnavailable",
-           "PRIVATE_ENV", "private_network_problem"]
+           "PRIVATE_ENV", "private_network_problem", "load_pylsl"]
 
 #: event → what it marks (the README lists them)
 EVENTS: dict[str, str] = {
@@ -51,6 +52,9 @@ EVENTS: dict[str, str] = {
 }
 
 _SIOCGIFFLAGS, _IFF_UP = 0x8913, 0x1  # <linux/sockios.h>, <net/if.h>
+
+#: how long a closing outlet stays for a recorder to take its last markers [s]
+_DRAIN_S = 1.0
 
 #: the environment variable that, set to 1, makes hapticlab refuse to load liblsl outside a
 #: network namespace with loopback alone (the test suite sets it)
@@ -100,16 +104,21 @@ class MarkerSink:
     """Where a session's events go: this base sends nothing (a session without ``--lsl``).
 
     Subclasses implement :meth:`_push` and :meth:`now`; the runner calls :meth:`send` for
-    host events and :meth:`window` for the device events of a finished window.
+    host events and :meth:`window` for the device events of a finished window. A marker
+    that cannot be sent never stops the session: the first failure is said once
+    (``say``) and every failure counted in the run's record.
     """
 
     active = False
 
-    def __init__(self) -> None:
+    def __init__(self, say: Callable[[str], None] | None = None) -> None:
         self.sent = 0
         #: this run's record for session.json (see :meth:`LslMarkers.__init__`)
         self.run: dict = {}
+        self._say = say or (lambda _text: None)
         self._trial_key: dict = {}
+        self._open = False  # a trial_start without its trial_end
+        self._faults: set[tuple[str, float]] = set()  # (code, device time) already marked
 
     def now(self) -> float:
         """The markers' clock [s]."""
@@ -136,22 +145,44 @@ class MarkerSink:
 
     def send(self, event: str, stamp: float | None = None, **fields) -> None:
         """One marker: ``event`` (a key of :data:`EVENTS`) with the attempt's keys and
-        ``fields``, stamped ``stamp`` [s, the markers' clock] or now."""
+        ``fields`` (a value that is not a finite number goes as null), stamped ``stamp``
+        [s, the markers' clock] or now."""
         if event not in EVENTS:
             raise ValueError(f"unknown marker event {event!r}")
         if not self.active:
             return
-        body = {"event": event, **self._trial_key, **fields}
-        self._push(json.dumps(body, separators=(",", ":"), allow_nan=False),
-                   self.now() if stamp is None else stamp)
+        if event == "trial_start":
+            self._open = True
+        elif event == "trial_end":
+            self._open = False
+        body = {"event": event, **self._trial_key,
+                **{k: _json_value(v) for k, v in fields.items()}}
+        try:
+            self._push(json.dumps(body, separators=(",", ":"), allow_nan=False),
+                       self.now() if stamp is None else stamp)
+        except Exception as exc:  # noqa: BLE001 — markers never stop a session
+            failed = self.run.get("send_failures", 0)
+            self.run["send_failures"] = failed + 1
+            if not failed:
+                self._say(f"warning: an LSL marker could not be sent ({exc}); the session "
+                          "goes on, and session.json counts the markers lost")
+            return
         self.sent += 1
 
+    def unfinished(self, why: str) -> None:
+        """An attempt that began and ends without a row (a fault before its window, an
+        answer the scale refuses): its ``trial_end`` says so, status ``not_recorded``."""
+        if self._open:
+            self.send("trial_end", status="not_recorded", reason=why)
+        self.trial(None)
+
     def window(self, res, device, *, window: int) -> None:
-        """The device events of a finished window ``res``, in device time order, each
-        stamped with the device's time on the markers' clock through ``device``'s clock
-        over the window (:meth:`device.HapticDevice.host_clock`; a device in virtual time
-        has none: its events are stamped now, when the host learned of them). Each carries
-        its device time ``t_device_s``."""
+        """The device events of a window ``res`` (whole, or the part a device error left),
+        in device time order, each stamped with the device's time on the markers' clock
+        through ``device``'s clock over the window (:meth:`device.HapticDevice.host_clock`;
+        a device without one, as the simulator in virtual time, has its events stamped
+        now, when the host learned of them). Each carries its device time ``t_device_s``;
+        the window's clock goes into the run's record."""
         if not self.active:
             return
         traces_t = res.traces.get("t")
@@ -166,29 +197,62 @@ class MarkerSink:
         events += [(s.t, "saturation", {"peak_current_a": round(s.peak_current, 4),
                                         "duration_s": round(s.duration, 6)})
                    for s in res.saturations]
-        events += [(f.t, "estop" if f.code == "estop" else "fault",
-                    {"code": f.code, "message": f.message}) for f in res.faults]
+        for f in res.faults:
+            self._faults.add((f.code, f.t))
+            events.append((f.t, "estop" if f.code == "estop" else "fault",
+                           {"code": f.code, "message": f.message}))
         events.sort(key=lambda e: e[0])  # stable: window start, first contact, its tap
         now = self.now()
         entry = {**self._trial_key, "window": window, "t0_device_s": t0}
         if clock is None:
-            entry["clock"] = "virtual"
+            entry["clock"] = "none: device events stamped when the window ended"
         else:
             entry.update(t0_lsl_s=None if t0 is None else self.from_perf(clock.on_host(t0)),
-                         rate=clock.rate, uncertainty_s=_finite(clock.uncertainty_s))
+                         offset_s=self.from_perf(clock.offset_s), rate=clock.rate,
+                         uncertainty_s=_json_value(clock.uncertainty_s),
+                         round_trip_s=clock.round_trip_s, frames=clock.pairs)
         self.run.setdefault("windows", []).append(entry)
         for t, event, fields in events:
             stamp = now if clock is None else self.from_perf(clock.on_host(t))
             self.send(event, stamp, t_device_s=round(t, 6), **fields)
 
     def fault(self, fault) -> None:
-        """A fault latched outside a window (an e-stop between trials): stamped now."""
+        """A latched fault the runner meets (an e-stop between trials, a pause for one):
+        marked now, unless its window's markers already carried it."""
+        if (fault.code, fault.t) in self._faults:
+            return
+        self._faults.add((fault.code, fault.t))
         self.send("estop" if fault.code == "estop" else "fault", code=fault.code,
                   message=fault.message)
 
 
-def _finite(x: float) -> float | None:
-    return x if math.isfinite(x) else None
+def _json_value(v):
+    """``v`` as a marker carries it: a number that is not finite as None."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def load_pylsl():
+    """pylsl, with liblsl configured: the lab's ``LSLAPICFG`` when set, else
+    :func:`machine_config`. Called before a session folder is made, so that a session that
+    cannot send markers leaves nothing behind.
+
+    Raises
+    ------
+    LslUnavailable
+        pylsl is not installed, or :data:`PRIVATE_ENV` asks for a private network and this
+        process is not in one (checked before liblsl loads).
+    """
+    if os.environ.get(PRIVATE_ENV) == "1" and (why := private_network_problem()):
+        raise LslUnavailable(f"{PRIVATE_ENV}=1 and this process is not in a private "
+                             f"network ({why}): liblsl is not loaded")
+    os.environ.setdefault("LSLAPICFG", str(machine_config()))
+    try:
+        import pylsl
+    except ImportError as exc:
+        raise LslUnavailable("LSL markers need pylsl: pip install 'hapticlab[lsl]'") from exc
+    return pylsl
 
 
 class LslMarkers(MarkerSink):
@@ -202,36 +266,33 @@ class LslMarkers(MarkerSink):
         Stable id of the session, so a recorder picks the stream up again after a resume.
     description : dict of str → str
         Written into the stream's description (participant, session, protocol, device).
+    say : callable, optional
+        Where a marker that could not be sent is said (once).
 
     Raises
     ------
     LslUnavailable
-        pylsl is not installed, or :data:`PRIVATE_ENV` asks for a private network and this
-        process is not in one.
+        As :func:`load_pylsl`, or liblsl could not open the outlet.
     """
 
     active = True
 
-    def __init__(self, name: str, source_id: str, description: dict[str, str]):
-        super().__init__()
-        if os.environ.get(PRIVATE_ENV) == "1" and (why := private_network_problem()):
-            raise LslUnavailable(f"{PRIVATE_ENV}=1 and this process is not in a private "
-                                 f"network ({why}): liblsl is not loaded")
-        os.environ.setdefault("LSLAPICFG", str(machine_config()))
-        try:
-            import pylsl
-        except ImportError as exc:
-            raise LslUnavailable("LSL markers need pylsl: pip install 'hapticlab[lsl]'") \
-                from exc
+    def __init__(self, name: str, source_id: str, description: dict[str, str],
+                 say: Callable[[str], None] | None = None):
+        super().__init__(say)
+        pylsl = load_pylsl()
         self._lsl = pylsl
-        info = pylsl.StreamInfo(name, "Markers", 1, pylsl.IRREGULAR_RATE, pylsl.cf_string,
-                                source_id)
-        desc = info.desc()
-        desc.append_child_value("manufacturer", "hapticlab")
-        for k, v in description.items():
-            desc.append_child_value(k, str(v))
-        desc.append_child_value("format", "one JSON object per marker; 'event' names it")
-        self._outlet = pylsl.StreamOutlet(info)
+        try:
+            info = pylsl.StreamInfo(name, "Markers", 1, pylsl.IRREGULAR_RATE,
+                                    pylsl.cf_string, source_id)
+            desc = info.desc()
+            desc.append_child_value("manufacturer", "hapticlab")
+            for k, v in description.items():
+                desc.append_child_value(k, str(v))
+            desc.append_child_value("format", "one JSON object per marker; 'event' names it")
+            self._outlet = pylsl.StreamOutlet(info)
+        except Exception as exc:  # noqa: BLE001 — liblsl's errors are RuntimeError and kin
+            raise LslUnavailable(f"liblsl could not open the marker stream: {exc}") from exc
         self._offset, self._offset_unc = self._perf_offset()
         self.run = {"started_utc": _utc(), "config": os.environ["LSLAPICFG"],
                     "liblsl": pylsl.library_version(),
@@ -260,7 +321,8 @@ class LslMarkers(MarkerSink):
         return best[1], best[0] / 2
 
     def _wall_pair(self) -> dict:
-        """The UTC wall clock against the LSL clock, within the bracket's half-width."""
+        """The UTC wall clock against the LSL clock, within the bracket's half-width (and
+        the microsecond the UTC text is written to)."""
         a = self._lsl.local_clock()
         utc = _utc()
         b = self._lsl.local_clock()
@@ -270,15 +332,25 @@ class LslMarkers(MarkerSink):
         self._outlet.push_sample([text], stamp)
 
     def wait_for_consumer(self, timeout: float, say) -> bool:
+        """Wait up to ``timeout`` [s] for a recorder, in 0.1-s steps (so Ctrl-C and SIGTERM
+        act at once)."""
         if self._outlet.have_consumers():
             return True
         say(f"LSL: waiting up to {timeout:g} s for a recorder to receive the stream "
             f"'{self.stream['name']}' (select it in LabRecorder and start recording)")
-        return bool(self._outlet.wait_for_consumers(timeout))
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if self._outlet.wait_for_consumers(min(0.1, max(0.0, end - time.monotonic()))):
+                return True
+        return bool(self._outlet.have_consumers())
 
     def close(self) -> None:
+        """End the stream. liblsl drops what an outlet has not sent when it goes, and the
+        last markers were pushed a moment ago: a recorder gets 1 s to take them."""
         if self._outlet is None:
             return
+        if self._outlet.have_consumers():
+            time.sleep(_DRAIN_S)
         self.run["wall"].append(self._wall_pair())
         self.run["markers_sent"] = self.sent
         self._outlet = None  # the stream disappears from the network

@@ -339,6 +339,7 @@ class SessionRunner:
     def _fault_pause(self, fault) -> None:
         """An e-stop or the watchdog latched the device: the participant's window stays up,
         the session waits for the operator to make it safe and clear the fault (c)."""
+        self.markers.fault(fault)  # unless its window's markers carried it
         self.console.set_state("fault")
         self.console.say(f"{fault.code.upper()}: output is off and latched ({fault.message}). "
                          "Make it safe, then press c to clear it and continue, or q to stop and "
@@ -441,6 +442,7 @@ class SessionRunner:
                 res = self._window(rtrial, ref_id, rng,
                                    reseed=[self.seed, trial.trial_index, 0, k])
             except DeviceError as exc:
+                self.markers.unfinished(str(exc)[:200])
                 if not (isinstance(exc, DeviceFaultError) and self.console.interactive
                         and self.device.fault is not None):
                     raise SessionInterrupted(f"device error while tapping the real block "
@@ -480,6 +482,9 @@ class SessionRunner:
         self._windows_in_attempt = 0
         try:
             self._attempt_windows(trial)
+        except BaseException as exc:  # an attempt that ends without its row says so
+            self.markers.unfinished(str(exc)[:200] or type(exc).__name__)
+            raise
         finally:  # what the attempt wrote early and no row names goes aside, never reused
             if self._spilled:
                 self.files.set_aside([name for _, name, _ in self._spilled if name])
@@ -647,7 +652,12 @@ class SessionRunner:
                 ended = True  # the participant went to another surface, or to answer
                 dev.end_window()
 
-        res = dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
+        try:
+            res = dev.run_window(w.duration, timeout=w.timeout, on_progress=progress)
+        except DeviceError as exc:  # what the window recorded before it was cut short
+            if getattr(exc, "partial", None) is not None:
+                self.markers.window(exc.partial, dev, window=k)
+            raise
         try:
             # output off while the participant answers, switches surfaces or rests: only
             # a window keeps it on, and the device's watchdog then guards a host that hangs
@@ -719,6 +729,8 @@ class SessionRunner:
         self.markers.trial(trial)
         self.markers.send("trial_end", status=status, reason=reason)
         self.markers.trial(None)
+        if self.markers.active and self.meta is not None:  # the windows' clocks, kept
+            self.files.write_meta(self.meta)
 
     def _meet(self, trial: Trial, status: str, vel: list[float], extra: dict) -> None:
         """A replayed attempt against its recorded row."""

@@ -82,6 +82,10 @@ def stream_decimation(lim: M.Limits, n_channels: int, servo_rate_hz: float,
                       f"({lim.max_decimation})")
 
 
+#: the frames that bound a window's first tick from above come within this of it [s]
+_NEAR_S = 0.25
+
+
 def _lower_hull(t: np.ndarray, h: np.ndarray) -> list[int]:
     """Indices of the lower convex hull of the points (t, h), ``t`` ascending."""
     hull: list[int] = []
@@ -96,23 +100,30 @@ def _lower_hull(t: np.ndarray, h: np.ndarray) -> list[int]:
     return hull
 
 
-def device_clock_on_host(pairs, round_trip_s: float | None = None) -> HostClock:
+def device_clock_on_host(pairs, round_trip_s: float | None = None, *,
+                         earliest: tuple[float, float] | None = None,
+                         rate: float | None = None) -> HostClock:
     """Device time → host perf time, from STATUS frames' (host receipt, device time) pairs.
 
     Every frame reaches the host after it was stamped, so the device's clock lies below
-    every pair. The line taken is the one under all of them that is highest at their mean
-    device time: the edge of their lower convex hull above that time (the least total
-    delay, as clock synchronisation over one-way messages estimates it). Its rate follows
-    a device clock at any rate (a device simulated on a busy computer slips; QEMU's ran at
-    0.71×), and a least-squares fit would be tilted by the delays' spread instead. The line
-    is late by the delay of the hull's frames, which lies between 0 and the link's fastest
-    round trip ``round_trip_s`` [s] (a round trip holds one device → host frame), so the
-    mapping is centred in that interval and its half is the uncertainty (for frames as
-    fast as a round trip's legs). A clock that is not a line over the pairs (one that
-    stepped) leaves some quarter of them far above the line: the largest of the four
-    quarters' lowest gaps is added to the uncertainty, which then holds at each quarter's
-    fastest frame (between them the line's tilt against the steps adds to the error).
-    Without a round trip the uncertainty is unknown (infinite).
+    every pair. The rate (``rate``, or fitted here) is that of the edge of the pairs' lower
+    convex hull above their mean device time: the line under all of them that is highest
+    there (the least total delay, as clock synchronisation over one-way messages estimates
+    it). It follows a device clock at any rate (a device simulated on a busy computer slips;
+    QEMU's ran at 0.71×); a least-squares fit would be tilted by the delays' spread.
+
+    With that rate, the line lowered to the fastest frame is a latest bound: device time
+    ``t`` happened no later than it. ``earliest`` = (device time [s], host time [s]) gives
+    the other side at that device time: a window's first tick comes after the host sent
+    the command that started it. The mapping is centred between the two and half their
+    distance is the uncertainty, which then holds at that device time up to the rate's
+    error over the time to the frames that bound it from above (those within 0.25 s after
+    it, or the first), and later in the span up to the rate's error over the time since. Without
+    ``earliest`` the delay of the fastest frame is taken as half the link's fastest round
+    trip ``round_trip_s`` [s], an estimate (a frame queued behind others waits longer),
+    infinite without one. A clock that is not a
+    line over the pairs (one that stepped) leaves a quarter of them far above the line:
+    the largest of the quarters' lowest gaps is added to the uncertainty.
     """
     p = np.asarray(list(pairs), float)
     if len(p) < 2:
@@ -120,21 +131,35 @@ def device_clock_on_host(pairs, round_trip_s: float | None = None) -> HostClock:
                          "host's")
     p = p[np.lexsort((p[:, 0], p[:, 1]))]  # by device time, the earliest receipt first
     h, t = p[:, 0], p[:, 1]
-    if np.ptp(t) > 0:
-        hull = _lower_hull(t, h)
-        mean = float(np.mean(t))
-        k = next((j for j in range(len(hull) - 1) if t[hull[j + 1]] >= mean), len(hull) - 2)
-        a, b = hull[k], hull[k + 1]
-        rate = float((h[b] - h[a]) / (t[b] - t[a])) if t[b] > t[a] else 1.0
-    else:
-        rate = 1.0
+    if rate is None:
+        rate = _hull_rate(t, h)
     lag = h - rate * t
-    offset = float(np.min(lag))
-    bend = max(float(np.min(q)) for q in np.array_split(lag, 4) if q.size) - offset
+    latest = float(np.min(lag))  # the latest-bound line's offset
+    bend = max(float(np.min(q)) for q in np.array_split(lag, 4) if q.size) - latest
+    if earliest is not None:
+        te, he = earliest
+        # the latest bound at te from the frames soon after it, so the rate's error over
+        # the whole span does not enter it
+        soon = t <= max(te + _NEAR_S, float(t[0]))  # at least the first frame
+        upper = float(np.min(lag[soon])) + rate * te
+        lo, hi = min(he, upper), max(he, upper)  # crossed: the rate's error, or a step
+        return HostClock((lo + hi) / 2 - rate * te, rate, (hi - lo) / 2 + bend, round_trip_s,
+                         len(p))
     if round_trip_s is None:
-        return HostClock(offset, rate, math.inf, None, len(p))
-    return HostClock(offset - round_trip_s / 2, rate, round_trip_s / 2 + bend, round_trip_s,
+        return HostClock(latest, rate, math.inf, None, len(p))
+    return HostClock(latest - round_trip_s / 2, rate, round_trip_s / 2 + bend, round_trip_s,
                      len(p))
+
+
+def _hull_rate(t: np.ndarray, h: np.ndarray) -> float:
+    """Slope of the lower convex hull's edge above the mean of ``t`` (ascending) [1]."""
+    if np.ptp(t) <= 0:
+        return 1.0
+    hull = _lower_hull(t, h)
+    mean = float(np.mean(t))
+    k = next((j for j in range(len(hull) - 1) if t[hull[j + 1]] >= mean), len(hull) - 2)
+    a, b = hull[k], hull[k + 1]
+    return float((h[b] - h[a]) / (t[b] - t[a])) if t[b] > t[a] else 1.0
 
 
 #: the largest force a table item carries [N] (``i16``, 1 mN per LSB)
@@ -232,6 +257,8 @@ class SerialDevice(HapticDevice):
         #: the last STATUS frames (host perf time [s] at receipt, device time [s]): the
         #: device's clock against the host's (:func:`device_clock_on_host`)
         self.status_log: deque[tuple[float, float]] = deque(maxlen=400)
+        #: the last window's first tick [device s] and when its command left [host perf s]
+        self._window_sent: tuple[float, float] | None = None
         self.link = Link(port, timeout, retries, transport, baudrate, handler=self._on_message,
                          native=native)
         try:
@@ -380,17 +407,25 @@ class SerialDevice(HapticDevice):
         (:func:`device_clock_on_host`). Given a ``span`` (device times [s]: a window's),
         the frames within it when there are four (a device's clock may step between its
         windows: a simulated one slips, a board resets), else those within 1 s of it,
-        else all; None before two frames arrived."""
+        else all; when the span starts at the last window's first
+        tick, bounded from below by when the command that started it left; None before
+        two frames arrived."""
         pairs = list(self.status_log)
-        if span is not None:
-            for pad, least in ((0.0, 4), (1.0, 2)):
-                near = [q for q in pairs if span[0] - pad <= q[1] <= span[1] + pad]
-                if len(near) >= least:
-                    pairs = near
-                    break
         if len(pairs) < 2:
             return None
-        return device_clock_on_host(pairs, self.link.fastest_round_trip())
+        rtt = self.link.fastest_round_trip()
+        if span is None:
+            return device_clock_on_host(pairs, rtt)
+        # the span's own frames: a device's clock may step or change pace between windows
+        # (a simulated one slips on a busy computer)
+        for pad, least in ((0.0, 4), (1.0, 2)):
+            near = [q for q in pairs if span[0] - pad <= q[1] <= span[1] + pad]
+            if len(near) >= least:
+                pairs = near
+                break
+        first = self._window_sent  # (t0 [device s], host perf time the command left)
+        earliest = first if first is not None and abs(first[0] - span[0]) < 1e-9 else None
+        return device_clock_on_host(pairs, rtt, earliest=earliest)
 
     def link_stats(self) -> dict:
         """The link's figures (:meth:`Link.link_stats`) and, when the device reports them
@@ -546,10 +581,14 @@ class SerialDevice(HapticDevice):
         self._window_id = (self._window_id + 1) & 0xFFFF
         wid = self._window_id
         self.link.clear_events()
+        sent = time.perf_counter()  # the window's first tick comes after this
         self._command(M.StartWindow(wid, int(round(duration * 1000)), int(round(timeout * 1000)),
                                     int(from_first_contact)))
         limit = (timeout + duration if from_first_contact else duration) + 2.0
-        return self._collect(wid, limit, on_progress, heartbeats)
+        res = self._collect(wid, limit, on_progress, heartbeats)
+        if len(res.traces.get("t", ())):
+            self._window_sent = (float(res.traces["t"][0]), sent)
+        return res
 
     def _play_force(self, f: np.ndarray, heartbeats: bool) -> WindowResult:
         q = np.clip(np.round(f * 1000), -32768, 32767).astype("<i2")

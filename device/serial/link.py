@@ -445,7 +445,8 @@ class Link:
                     self.cv.wait((deadline if now < deadline else cap) - now)
                 self.check()
                 if seq in self._acks:
-                    self._rtt.append(time.perf_counter() - t0)
+                    if not attempt:  # a retry's ACK may answer an earlier try
+                        self._rtt.append(time.perf_counter() - t0)
                     return self._acks.pop(seq)
             self.stats["timeouts"] += 1
         raise DeviceTimeoutError(f"{self.port}: no acknowledgement of {type(msg).__name__} "

@@ -22,7 +22,8 @@ def main(out: str, cmd: list[str]) -> int:
         return 2
     import pylsl
 
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    out_f, err_f = open(f"{out}.stdout", "w+"), open(f"{out}.stderr", "w+")  # never a full pipe
+    proc = subprocess.Popen(cmd, stdout=out_f, stderr=err_f, text=True)
     found = []
     while not found and proc.poll() is None:
         found = pylsl.resolve_byprop("name", "hapticlab markers", timeout=1.0)
@@ -39,7 +40,8 @@ def main(out: str, cmd: list[str]) -> int:
                     break
             elif proc.poll() is not None:
                 break
-    stdout, stderr = proc.communicate(timeout=600)
+    proc.wait(timeout=600)
+    stdout, stderr = (f.seek(0) or f.read() for f in (out_f, err_f))
     with open(out, "w") as f:
         json.dump({"markers": markers, "time_correction_s": correction,
                    "returncode": proc.returncode, "stdout": stdout, "stderr": stderr}, f)
