@@ -47,6 +47,11 @@
 #ifndef HL_WATCHDOG_MS
 #define HL_WATCHDOG_MS 100u
 #endif
+/* a reader that has not looked at the input for this many watchdog periods is taken as
+ * hung, and the watchdog trips without its word (see device.c, watchdog_expired) */
+#ifndef HL_WATCHDOG_HUNG
+#define HL_WATCHDOG_HUNG 5u
+#endif
 #define HL_ACCEL_RANGE_MMS2 490333u   /* +-50 g [mm/s^2] */
 
 /* resource limits, advertised in LIMITS (0x82); a build may lower them */

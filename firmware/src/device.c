@@ -343,6 +343,18 @@ static void record(float pos, float vel, float fcmd, float fout, float cur, floa
     D.ring_w = D.ring_w + 1;
 }
 
+/* The watchdog judges a silence its reader saw: the host's last frame is older than the
+ * period at a look that found the input empty (rx_empty_tick). A reader that did not look
+ * (its thread held up on a busy computer: a bridge's link thread, a host build's loop
+ * catching up) cannot tell a silent host from frames waiting unread, and tripped on
+ * heartbeats that had arrived in time. A reader that stopped looking altogether is
+ * caught too, after HL_WATCHDOG_HUNG periods. Called under hal_lock. */
+static int watchdog_expired(void)
+{
+    uint64_t seen = D.rx_empty_tick > D.last_rx_tick ? D.rx_empty_tick - D.last_rx_tick : 0u;
+    return seen > D.wd_ticks || D.ticks - D.last_rx_tick > (uint64_t)HL_WATCHDOG_HUNG * D.wd_ticks;
+}
+
 void hl_servo_tick(void)
 {
     uint32_t c0 = hal_cycles();
@@ -376,7 +388,7 @@ void hl_servo_tick(void)
     if (!hal_io_ok()) {
         latch_fault(HL_FAULT_DEVICE); /* a reading or command failed: never render on */
     }
-    if (D.enabled && D.ticks - D.last_rx_tick > D.wd_ticks) {
+    if (D.enabled && watchdog_expired()) {
         latch_fault(HL_FAULT_WATCHDOG); /* armed while output is enabled */
     }
 
@@ -1154,7 +1166,9 @@ void hl_device_poll(void)
         uint64_t t = hl_device_ticks();
         size_t n = hal_uart_read(buf, sizeof buf);
         if (n == 0) {
+            hal_lock(); /* the servo tick's watchdog reads it */
             D.rx_empty_tick = t;
+            hal_unlock();
             break;
         }
         for (size_t i = 0; i < n; i++) {

@@ -611,6 +611,30 @@ static void test_watchdog(void)
     EXPECT(seen[0x92] == 1);
 }
 
+static void test_watchdog_waits_for_its_reader(void)
+{
+    /* the reader held up (a bridge's link thread on a busy computer) while the host's
+     * heartbeat waits unread: no fault, whatever the ticks did meanwhile; a reader that
+     * never looks again: a fault after HL_WATCHDOG_HUNG periods */
+    fresh(4);
+    uint8_t none[1] = {0};
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    ticks(10, 1, 1); /* the reader looks and finds the input empty */
+    uint8_t hb[HL_MAX_ENCODED + 1];
+    size_t n = hl_encode_frame_v(2, 0x02, ++seq, none, 0, hb, sizeof hb);
+    sim_uart_to_device(hb, n); /* a heartbeat arrives, and waits unread */
+    ticks(1500, 0, 0); /* 1.5 periods without a look */
+    EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
+    ticks(1, 1, 1); /* the reader takes it */
+    EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
+    ticks(HL_WATCHDOG_HUNG * 1000u - 10u, 0, 1);
+    EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
+    ticks(20, 0, 1);
+    EXPECT(hl_device_peek().fault == HL_FAULT_WATCHDOG);
+    EXPECT(sim_current() == 0.0f);
+}
+
 static void test_estop_button(void)
 {
     /* the operator's button: output off at the tick that reads it, latched as ESTOP, the
@@ -770,6 +794,7 @@ int device_tests(void)
     test_ramp_clamp_estop();
     test_zero_then_play_before_a_tick();
     test_watchdog();
+    test_watchdog_waits_for_its_reader();
     test_estop_button();
     test_stream();
     printf("device: %d failure(s)\n", fails);
