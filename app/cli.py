@@ -56,8 +56,11 @@ def _load_protocol(path: str, device_spec: str | None = None, args=None):
 
 def _protocol_validate(args: argparse.Namespace) -> int:
     p = _load_protocol(args.file, args.device, args)
-    n_items = sum(len(ph.samples) * ph.repetitions if ph.kind != "identification"
-                  else ph.repetitions for ph in p.phases)
+    from protocols import SessionEngine
+
+    # the engine's own plan (any seed and counterbalance row plan as many trials)
+    williams = any(ph.block_order == "williams" for ph in p.phases)
+    n_items = len(SessionEngine(p, 0, "validate", 0 if williams else None).plan())
     libs = ""
     if args.device:  # the libraries its matched samples need, built on this device
         from app.libraries import prepare_libraries
