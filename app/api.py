@@ -396,8 +396,10 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
             _keep_markers(meta, markers)
             files.write_meta(meta)
             console.say(f"session {folder} (seed {seed})")
-            runner = SessionRunner(proto, engine, dev, files, ui, participant, n, seed, console,
-                                   sound, traces, meta=meta, markers=markers)
+            runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
+                                   participant_ui=ui, participant=participant, session=n,
+                                   seed=seed, console=console, audio=sound, traces=traces,
+                                   meta=meta, markers=markers)
             return _drive(runner, files, meta, console, lsl_wait)
         finally:
             for part in (ui, sound, console, markers):
@@ -544,8 +546,10 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                 console = make_console("keys", quiet, dev)
             markers = _markers(lsl, meta["protocol"]["name"], p["id"], meta["seed"], dev,
                                console.say)
-            runner = SessionRunner(proto, engine, dev, files, ui, p["id"], meta["session"],
-                                   meta["seed"], console, sound, meta.get("traces_mode", "full"),
+            runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
+                                   participant_ui=ui, participant=p["id"],
+                                   session=meta["session"], seed=meta["seed"], console=console,
+                                   audio=sound, traces=meta.get("traces_mode", "full"),
                                    meta=meta, markers=markers)
             runner.load_log()
             try:

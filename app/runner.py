@@ -124,9 +124,9 @@ def session_meta(protocol: Protocol, protocol_ref: str, participant: str, sessio
     }
 
 
-@dataclass
+@dataclass(kw_only=True)
 class SessionRunner:
-    """Runs trials until the engine says done.
+    """Runs trials until the engine says done. Built with keywords.
 
     Parameters
     ----------

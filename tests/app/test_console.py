@@ -244,8 +244,9 @@ def test_familiarization_runs_until_the_participant_is_done(tmp_path):
     p = load_protocol("realism")
     folder, n = new_session_dir(tmp_path, "P01")
     dev = open_device("sim", seed=1)
-    runner = SessionRunner(p, SessionEngine(p, 1, "P01"), dev, SessionFiles(folder),
-                           ThreeWindows(), "P01", n, 1, traces="none")
+    runner = SessionRunner(protocol=p, engine=SessionEngine(p, 1, "P01"), device=dev,
+                           files=SessionFiles(folder), participant_ui=ThreeWindows(),
+                           participant="P01", session=n, seed=1, traces="none")
     trial = runner.engine.next_trial([])
     runner._attempt(trial)
     rows, _ = read_trials(folder / "trials.tsv")

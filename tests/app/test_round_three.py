@@ -43,8 +43,10 @@ def _session(tmp: Path, p, ui, seed: int, console=None) -> tuple[Path, list[dict
     dev = open_device("sim", seed=seed)
     if p.limits.max_current is not None:
         dev.set_current_limit(p.limits.max_current)
-    runner = SessionRunner(p, SessionEngine(p, seed, "P01"), dev, files, ui, "P01", n, seed,
-                           traces="full", **({"console": console} if console else {}))
+    runner = SessionRunner(protocol=p, engine=SessionEngine(p, seed, "P01"), device=dev,
+                           files=files, participant_ui=ui, participant="P01", session=n,
+                           seed=seed, traces="full",
+                           **({"console": console} if console else {}))
     assert runner.run() == "complete"
     rows, _ = read_trials(folder / "trials.tsv")
     return folder, rows
@@ -498,8 +500,9 @@ def test_familiarization_writes_each_window_as_it_ends(tmp_path):
     ui = TapsFourTimes(folder / "traces")
     files = SessionFiles(folder)
     files.start("")
-    runner = SessionRunner(p, SessionEngine(p, 4, "P01"), open_device("sim", seed=4), files,
-                           ui, "P01", 1, 4, traces="full")
+    runner = SessionRunner(protocol=p, engine=SessionEngine(p, 4, "P01"),
+                           device=open_device("sim", seed=4), files=files, participant_ui=ui,
+                           participant="P01", session=1, seed=4, traces="full")
     trial = runner.engine.next_trial([])
     assert trial.kind == "free"
     runner._attempt(trial)
@@ -545,8 +548,9 @@ def _familiarization(tmp_path, ui_of):
     files.start("")
     dev = open_device("sim", seed=4)
     ui = ui_of(folder / "traces")
-    runner = SessionRunner(p, SessionEngine(p, 4, "P01"), dev, files, ui, "P01", 1, 4,
-                           traces="full")
+    runner = SessionRunner(protocol=p, engine=SessionEngine(p, 4, "P01"), device=dev,
+                           files=files, participant_ui=ui, participant="P01", session=1,
+                           seed=4, traces="full")
     trial = runner.engine.next_trial([])
     with pytest.raises(SessionInterrupted):
         runner._attempt(trial)
