@@ -26,6 +26,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -124,6 +125,57 @@ def _open(spec: str, seed: int, person: bool = False):
     if spec == "sim" or spec.startswith("sim:"):
         return open_device(spec, seed=seed, live=person)
     return open_device(spec)
+
+
+@contextmanager
+def _session_device(spec: str, seed: int, person: bool, clear_fault: bool, lsl: bool,
+                    say: Callable[[str], None]) -> Iterator:
+    """The device a session (run or resume) opens: LSL checked first when asked for (no
+    pylsl, or no private network where one is required, is said before anything opens),
+    closed at exit whatever ends the process, a fault it latched before cleared when the
+    operator said so."""
+    if lsl:
+        from app.markers import load_pylsl
+
+        load_pylsl()
+    with _open(spec, seed, person=person) as dev:
+        close_at_exit(dev)
+        if clear_fault and dev.fault is not None:
+            say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
+            dev.clear_fault()
+        yield dev
+
+
+@dataclass
+class _Parts:
+    """What a session runs with beside its device, closed together."""
+
+    ui: Any
+    sound: Any
+    console: Any
+    markers: Any
+
+
+@contextmanager
+def _session_parts(dev, proto, *, responder: str, seed: int, group: str, fullscreen: bool,
+                   audio: bool, keys: bool, quiet: bool, console, lsl: bool,
+                   participant: str, say: Callable[[str], None]) -> Iterator[_Parts]:
+    """The participant's side, the sound, the operator's console and the markers of a
+    session (run or resume) on ``dev``, each closed when it ends."""
+    from app.console import make_console
+
+    parts = _Parts(_participant(responder, proto, seed, group, fullscreen), None, console,
+                   None)
+    try:
+        parts.sound = _audio(audio, dev.info.backend, say)
+        if keys:
+            parts.console = make_console("keys", quiet, dev)
+        parts.markers = _markers(lsl, proto.name, participant, seed, dev, parts.console.say)
+        yield parts
+    finally:
+        for part in (parts.ui, parts.sound, parts.console, parts.markers):
+            if part is not None:
+                part.close()
 
 
 def _apply_limit(protocol, dev, recorded: float | None = None) -> dict:
@@ -350,15 +402,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
         early.append(check_display())
     if failed(early):
         raise PreflightError(failed(early))
-    if lsl:  # no pylsl, or no private network where one is required: said before anything
-        from app.markers import load_pylsl
-
-        load_pylsl()
-    with _open(device, seed, person=responder == "person") as dev:
-        close_at_exit(dev)
-        if clear_fault and dev.fault is not None:
-            say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
-            dev.clear_fault()
+    with _session_device(device, seed, responder == "person", clear_fault, lsl, say) as dev:
         again = (f"hapticlab run {protocol} --participant {participant} --device {device} "
                  "--clear-fault (with the session's other options)")
         checks = [check_device(dev, device, again), check_protocol_on(text, source, dev)]
@@ -375,37 +419,35 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
             if info is None:
                 raise UsageError("the participant information dialog was cancelled; nothing "
                                  "was recorded")
-        ui = _participant(responder, proto, seed, group, fullscreen)
-        sound = markers = None
+        files = None
         try:
-            sound = _audio(audio, dev.info.backend, say)
-            if keys:
-                console = make_console("keys", quiet, dev)
-            markers = _markers(lsl, proto.name, participant, seed, dev, console.say)
-            folder, n = new_session_dir(Path(data), participant)
-            files = SessionFiles(folder)
-            files.lock()
-            files.start(text)
-            meta = session_meta(proto, str(protocol), participant, n, seed, row, dev, device,
-                                "psychopy" if responder == "person" else "none", responder,
-                                sound is not None, group, KIND_OF[responder], libraries)
-            meta["traces_mode"] = traces
-            meta["limits"] = limits
-            if info is not None:
-                meta["participant"]["info"] = info
-            _keep_markers(meta, markers)
-            files.write_meta(meta)
-            console.say(f"session {folder} (seed {seed})")
-            runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
-                                   participant_ui=ui, participant=participant, session=n,
-                                   seed=seed, console=console, audio=sound, traces=traces,
-                                   meta=meta, markers=markers)
-            return _drive(runner, files, meta, console, lsl_wait)
+            with _session_parts(dev, proto, responder=responder, seed=seed, group=group,
+                                fullscreen=fullscreen, audio=audio, keys=keys, quiet=quiet,
+                                console=console, lsl=lsl, participant=participant,
+                                say=say) as parts:
+                folder, n = new_session_dir(Path(data), participant)
+                files = SessionFiles(folder)
+                files.lock()
+                files.start(text)
+                meta = session_meta(proto, str(protocol), participant, n, seed, row, dev,
+                                    device, "psychopy" if responder == "person" else "none",
+                                    responder, parts.sound is not None, group,
+                                    KIND_OF[responder], libraries)
+                meta["traces_mode"] = traces
+                meta["limits"] = limits
+                if info is not None:
+                    meta["participant"]["info"] = info
+                _keep_markers(meta, parts.markers)
+                files.write_meta(meta)
+                parts.console.say(f"session {folder} (seed {seed})")
+                runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
+                                       participant_ui=parts.ui, participant=participant,
+                                       session=n, seed=seed, console=parts.console,
+                                       audio=parts.sound, traces=traces, meta=meta,
+                                       markers=parts.markers)
+                return _drive(runner, files, meta, parts.console, lsl_wait)
         finally:
-            for part in (ui, sound, console, markers):
-                if part is not None:
-                    part.close()
-            if "files" in locals():
+            if files is not None:
                 files.release()
 
 
@@ -487,7 +529,6 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
 
 def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
             operator_keys, lsl, lsl_wait) -> SessionResult:
-    from app.console import make_console
     from app.ids import validate_participant
     from app.libraries import check_recorded, with_libraries
     from app.preflight import data_folder_ready
@@ -526,37 +567,28 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
     if responder not in KIND_OF:
         responder = "person" if meta.get("ui") == "psychopy" else "scripted"
     spec = device or meta["device"]["spec"]
-    if lsl:
-        from app.markers import load_pylsl
-
-        load_pylsl()
-    with _open(spec, meta["seed"], person=responder == "person") as dev:
-        close_at_exit(dev)
-        if clear_fault and dev.fault is not None:
-            console.say(f"clearing the latched {dev.fault.code} fault (operator's decision)")
-            dev.clear_fault()
+    with _session_device(spec, meta["seed"], responder == "person", clear_fault, lsl,
+                         console.say) as dev:
         limits = _apply_limit(proto, dev, (meta.get("limits") or {}).get("current_limit_a"))
         check_recorded(meta.get("libraries", {}), dev)
-        ui = _participant(responder, proto, meta["seed"], p.get("group", ""), fullscreen)
-        sound = markers = None
-        try:
-            sound = _audio(meta.get("audio", False) if audio is None else audio,
-                           dev.info.backend, console.say)
-            if operator_keys if operator_keys is not None else responder == "person":
-                console = make_console("keys", quiet, dev)
-            markers = _markers(lsl, meta["protocol"]["name"], p["id"], meta["seed"], dev,
-                               console.say)
+        keys = operator_keys if operator_keys is not None else responder == "person"
+        with _session_parts(dev, proto, responder=responder, seed=meta["seed"],
+                            group=p.get("group", ""), fullscreen=fullscreen,
+                            audio=meta.get("audio", False) if audio is None else audio,
+                            keys=keys, quiet=quiet, console=console, lsl=lsl,
+                            participant=p["id"], say=console.say) as parts:
+            console = parts.console
             runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
-                                   participant_ui=ui, participant=p["id"],
+                                   participant_ui=parts.ui, participant=p["id"],
                                    session=meta["session"], seed=meta["seed"], console=console,
-                                   audio=sound, traces=meta.get("traces_mode", "full"),
-                                   meta=meta, markers=markers)
+                                   audio=parts.sound, traces=meta.get("traces_mode", "full"),
+                                   meta=meta, markers=parts.markers)
             runner.load_log()
             try:
                 engine.next_trial(runner.log)
             except LogMismatch as exc:
                 raise SessionFileError(f"{files.trials}: {exc}") from None
-            if ui.stateful:  # its answers depend on what it felt: bring it where it was
+            if parts.ui.stateful:  # its answers depend on what it felt: bring it where it was
                 console.say(f"replaying {len(rows)} recorded attempts for the simulated "
                             "participant's memory")
                 runner.replay(rows)
@@ -564,14 +596,10 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                                     "torn_line": None if torn is None else torn.line,
                                     "device": spec, "limits": limits})
             meta["status"] = "running"
-            _keep_markers(meta, markers)
+            _keep_markers(meta, parts.markers)
             files.write_meta(meta)
             console.say(f"resuming {files.folder} after {len(runner.log)} attempts")
             return _drive(runner, files, meta, console, lsl_wait)
-        finally:
-            for part in (ui, sound, console, markers):
-                if part is not None:
-                    part.close()
 
 
 def session_seed(study_seed: int, k: int) -> int:
