@@ -238,7 +238,7 @@ def _device_emulate(args: argparse.Namespace) -> int:
 
 
 def _device_check(args: argparse.Namespace) -> int:
-    from app.check import saturation_check
+    from app.saturation_forecast import saturation_check
 
     protocol = _load_protocol(args.protocol)
     with _opener(args)(args.device) as dev:

@@ -83,7 +83,7 @@ class HapticDevice(ABC):
     The public methods are templates (in the manner of python-can's ``BusABC``): they do
     the checks every backend shares once — device open, no latched fault, a scene loaded
     and homed, arguments finite and in range — turn a scene's transient into the table
-    this device plays (:func:`device.render.transient_table`), and call the backend's
+    this device plays (:func:`device.tables.transient_table`), and call the backend's
     ``_load_scene``, ``_home``, ``_run_window`` and ``_play_force``. A backend renders
     tables; it never builds them.
     """
@@ -149,7 +149,7 @@ class HapticDevice(ABC):
             return None
         table = self._tables.get(scene.transient)
         if table is None:
-            from .render import transient_table
+            from .tables import transient_table
 
             table = self._tables[scene.transient] = transient_table(scene.transient,
                                                                     self.info)

@@ -126,10 +126,10 @@ def test_simulated_device_does_not_import_matching():
 
 
 def test_backends_do_not_build_tables():
-    """One function outside the backends turns a transient into a table (device.render)."""
+    """One function outside the backends turns a transient into a table (device.tables)."""
     for mod, deps in _graph().items():
         if mod.startswith(("device.sim", "device.serial")):
-            assert "device.render" not in deps, mod
+            assert "device.tables" not in deps, mod
             assert not any(d.startswith("device.matching") for d in deps), mod
 
 
