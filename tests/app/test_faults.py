@@ -18,30 +18,7 @@ from analysis.session_format import header_line, read_trials
 CLI = [sys.executable, "-m", "app"]
 DATA = Path(__file__).resolve().parents[1] / "data" / "protocols"
 
-MINI = """
-[protocol]
-name = "mini"
-[window]
-duration = 1.0
-timeout = 10.0
-[rating]
-min = 1
-max = 7
-question = "How real?"
-[operator]
-placeholders = ["placeholder A", "placeholder B"]
-[[samples]]
-id = "wood"
-scene.material = { stiffness = 70000.0, damping = 40.0 }
-[[samples]]
-id = "pulse"
-scene.spring = 680.0
-scene.transient = { kind = "pulse", gain = 5.7, duration = 0.02 }
-[[phases]]
-name = "testing"
-samples = "all"
-repetitions = 2
-"""
+MINI = (DATA.parent / "mini_two.toml").read_text()
 DRY = ["--dry-run", "--no-audio", "--quiet"]
 SPRINGS = MINI.replace('scene.transient = { kind = "pulse", gain = 5.7, duration = 0.02 }\n', "")
 KEY = slice(0, 15)  # the columns a resumed session must reproduce (not the times)

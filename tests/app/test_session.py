@@ -14,33 +14,7 @@ CLI = [sys.executable, "-m", "app"]
 HEADLESS = ["--dry-run", "--no-audio",
             "--quiet"]
 
-MINI = """
-[protocol]
-name = "mini"
-[window]
-duration = 1.0
-timeout = 10.0
-[rating]
-min = 1
-max = 7
-question = "How real?"
-[operator]
-placeholders = ["block A", "block B"]
-[[samples]]
-id = "wood"
-scene.material = { stiffness = 70000.0, damping = 40.0 }
-[[samples]]
-id = "firm"
-scene.spring = 680.0
-[[samples]]
-id = "pulse"
-scene.spring = 680.0
-scene.transient = { kind = "pulse", gain = 5.7, duration = 0.02 }
-[[phases]]
-name = "testing"
-samples = "all"
-repetitions = 2
-"""
+MINI = (Path(__file__).resolve().parents[1] / "data" / "mini.toml").read_text()
 
 
 def run(*args, **kw):
