@@ -38,6 +38,9 @@ def bridge(request):
     emu.kind = request.param
     yield emu
     stop_emulator(emu)
+    # what the bridge said (its tick periods, control frames dropped, the SDK's errors):
+    # pytest shows it under a failed test
+    print(f"{request.param} stderr:\n{emu.stderr()}")
 
 
 def test_the_self_test_passes_on_each_bridge(bridge):
@@ -56,6 +59,7 @@ def test_the_hd_bridges_two_threads_share_nothing_unguarded():
         emu.proc.send_signal(signal.SIGUSR2)
     finally:
         stop_emulator(emu)
+        print(f"hd-stub-tsan stderr:\n{emu.stderr()}")  # shown under a failure
     # the whole of stderr: the program's last line comes after every report TSan prints
     deadline = time.monotonic() + 10
     while not any(" ticks, " in line for line in emu.stderr_lines) and time.monotonic() < deadline:
