@@ -87,7 +87,8 @@ class HostClock:
     uncertainty_s : float [s]
         Half-width of the interval the true host time lies in.
     round_trip_s : float or None [s]
-        The link's fastest round trip the bound rests on (None: a device without a link).
+        The link's fastest round trip (None: a device without a link); the uncertainty
+        rests on it only where no command bounds the time from below (an estimate then).
     pairs : int
         Clock readings the mapping was fitted to.
     """
