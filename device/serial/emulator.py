@@ -126,7 +126,7 @@ class Emulator:
         self._fault_sent = False
         self._clock0 = time.monotonic()  # power-up: the device clock counts from here
         self._ran = False  # a window or playback ran at the last clock sync
-        self._turn = self._clock0  # when the serve loop last read the port [wall s]
+        self._synced = self._clock0  # when the device clock was last brought up [wall s]
         self._estop_rx: float | None = None  # the pending ESTOP arrived after this [s]
         # device time [s] the port was last seen empty: whatever is read later arrived after
         # it, so an ESTOP's wait is counted from there (an upper bound from its arrival)
@@ -144,7 +144,14 @@ class Emulator:
     # ------------------------------------------------------------------ clock, io
     def _sync(self) -> None:
         """Between windows the device clock runs on: bring the simulator's up to it (a
-        window or playback advances it itself; a scene being prepared does not)."""
+        window or playback advances it itself; a scene being prepared does not). It runs
+        only while this process runs: a wait between two calls longer than
+        :data:`INPUT_TURN_S` is this process held up (a loaded machine, its other thread),
+        and a board is never held up, so the clock slips by the excess instead of jumping
+        past frames that arrived meanwhile unread (it had tripped the watchdog while the
+        host's frames came every 32 ms)."""
+        now = time.monotonic()
+        held, self._synced = now - self._synced, now
         if self._busy() and self._running in ("window", "play"):
             self._ran = True
             return
@@ -154,10 +161,10 @@ class Emulator:
             # 20-s window on a loaded machine) is the emulator held up, not time the host
             # let pass; jumping over it tripped the watchdog between two heartbeats
             self._ran = False
-            self.sim.slipped_s = (time.monotonic() - self._clock0
-                                  - self.sim.time / self.sim.speed)
-        wall = time.monotonic() - self._clock0 - self.sim.slipped_s
-        self.sim.idle_until(wall * self.sim.speed)
+            self.sim.slipped_s = now - self._clock0 - self.sim.time / self.sim.speed
+        elif held > INPUT_TURN_S:
+            self.sim.slipped_s += held - INPUT_TURN_S
+        self.sim.idle_until((now - self._clock0 - self.sim.slipped_s) * self.sim.speed)
 
     def _now_us(self) -> int:
         self._sync()
@@ -199,13 +206,6 @@ class Emulator:
         while not self._stop.is_set():
             wait = 0.0 if self._outbox else 0.002
             r, _, _ = select.select([self.fd], [], [], wait)
-            held = time.monotonic() - self._turn - wait
-            if held > INPUT_TURN_S and not (self._busy() and self._running in ("window",
-                                                                                "play")):
-                # this process was held up (a loaded machine, its other thread): a device
-                # is not, so its clock did not run meanwhile (in a window the servo worker
-                # lets it slip itself)
-                self.sim.slipped_s += held
             if r:
                 try:
                     data = os.read(self.fd, 65536)
@@ -222,7 +222,6 @@ class Emulator:
             t = self.sim.time
             if not select.select([self.fd], [], [], 0)[0]:
                 self._rx_empty_at = t
-            self._turn = time.monotonic()
             self._commit_done()
             for _ in range(OUTBOX_PER_TURN):
                 with self._olock:
@@ -236,12 +235,12 @@ class Emulator:
                 self._flush()
             self._sync()
             sim = self.sim
+            # the host is judged on a silence this loop saw: at its last look that found
+            # the port empty, the host's last frame was older than the period (a frame
+            # waiting unread while this process was busy is no silence), as the firmware
+            # judges it
             if (not self._busy() and sim.enabled and sim.fault is None
-                    and sim.time - sim.last_heartbeat > sim.watchdog_span):
-                if select.select([self.fd], [], [], 0)[0]:
-                    # bytes are waiting: we were busy writing and the host's frames queued
-                    # up unread; read them before judging the host
-                    continue
+                    and self._rx_empty_at - sim.last_heartbeat > sim.watchdog_span):
                 sim.trip_watchdog()  # armed while output is enabled (in a window the
                 self._report_fault()  # servo loop trips it itself)
             if sim.time >= next_status:
