@@ -41,6 +41,61 @@ def pytest_configure(config):
     os.environ["HAPTICLAB_LSL_PRIVATE"] = "1"
 
 
+#: processes meant to outlive a test (session fixtures': the shared emulator, Xvfb)
+_LONG_LIVED: set[int] = set()
+
+
+def _processes() -> dict[int, tuple[int, str, str]]:
+    """Every process on this machine: pid → (parent pid, state, command line)."""
+    out = {}
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/stat", "rb") as f:
+                stat = f.read().decode(errors="replace")
+            with open(f"/proc/{d}/cmdline", "rb") as f:
+                cmd = f.read().replace(b"\0", b" ").decode(errors="replace").strip()
+        except OSError:  # gone meanwhile
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()
+        out[int(d)] = (int(fields[1]), fields[0], cmd)
+    return out
+
+
+def _descends_from_long_lived(pid: int, procs: dict) -> bool:
+    for _ in range(64):
+        if pid in _LONG_LIVED:
+            return True
+        if pid not in procs:
+            return False
+        pid = procs[pid][0]
+    return False
+
+
+@pytest.fixture(autouse=True)
+def _no_process_left_behind(request):
+    """A test leaves no process of its own running: one left spinning (an emulator, a
+    firmware build, QEMU) loads every later test, which on a 2-core machine is what
+    fails timing-sensitive ones far from their cause. Written down in
+    tests/artifacts/leftover-processes.txt with the test that left it."""
+    before = set(_processes())
+    yield
+    import time
+
+    for _ in range(50):  # what is stopping is given 1 s
+        now = _processes()
+        left = {pid: now[pid] for pid in now
+                if pid not in before and now[pid][1] != "Z" and now[pid][2]
+                and not _descends_from_long_lived(pid, now)}
+        if not left:
+            return
+        time.sleep(0.02)
+    with open(ROOT / "tests" / "artifacts" / "leftover-processes.txt", "a") as f:
+        for pid, (ppid, state, cmd) in sorted(left.items()):
+            f.write(f"{request.node.nodeid}: pid {pid} (parent {ppid}, {state}) {cmd}\n")
+
+
 #: a command's prefix that runs it in a network namespace with loopback alone, liblsl
 #: configured to stay on this machine (tools/private_net.py)
 PRIVATE_NET = [sys.executable, str(ROOT / "tools" / "private_net.py")]
@@ -105,6 +160,7 @@ def stop_emulator(emu: Emulated) -> None:
 @pytest.fixture(scope="session")
 def _shared_emulator():
     emu = start_emulator("--seed", "5")
+    _LONG_LIVED.add(emu.proc.pid)
     yield emu
     stop_emulator(emu)
 
@@ -162,6 +218,7 @@ def xdisplay():
             break
     proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1920x1200x24", "-nolisten",
                              "tcp"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _LONG_LIVED.add(proc.pid)
     for _ in range(100):
         if os.path.exists(f"/tmp/.X11-unix/X{n}"):
             break

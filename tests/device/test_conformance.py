@@ -37,6 +37,7 @@ def host(request):
     yield h
     h.close()
     stop_emulator(emu)
+    print(f"the device's stderr:\n{emu.stderr()}")  # shown when the test failed
     bad = [line for line in emu.stderr_lines if "runtime error" in line or "Sanitizer" in line]
     assert not bad, "".join(bad)
 

@@ -279,4 +279,5 @@ def test_every_state_answers_every_command_as_the_document_says(firmware):
     finally:
         host.close()
         stop_emulator(emu)
+        print(f"the device's stderr:\n{emu.stderr()}")  # shown when the test failed
     assert not wrong, "\n".join(wrong)
