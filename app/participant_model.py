@@ -80,6 +80,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from device import SimulatedHand
+from protocols.kinds import REFERENCE, phase_kind
 
 from .participants import Participant
 
@@ -306,12 +307,12 @@ class SimulatedParticipant(Participant):
         return len(self._familiar) < 2  # two familiarization windows
 
     def after_window(self, trial, sample_id, result) -> None:
-        if trial.kind == "reference":  # a real block, tapped to compare with: remember it
+        if trial.kind == REFERENCE:  # a real block, tapped to compare with: remember it
             f = felt_features(result)
             if np.all(np.isfinite(f)):
                 self.memory[sample_id] = self._perceive(f, self._mem_rng)
             return
-        if trial.kind == "free":
+        if phase_kind(trial.kind).windows == "until_done":  # familiarization
             f = felt_features(result)
             if np.all(np.isfinite(f)):
                 self._familiar.append(self._perceive(f, self._mem_rng))
@@ -338,7 +339,8 @@ class SimulatedParticipant(Participant):
             return ref.id, self._feel_scene(ref.id, ref.scene)
         if "reference" not in self.memory and self.protocol.phases:
             # a resumed session: tap the familiarization sample again before going on
-            free = [p for p in self.protocol.phases if p.kind == "free"]
+            free = [p for p in self.protocol.phases
+                    if phase_kind(p.kind).windows == "until_done"]
             if free:
                 ref = self.protocol.samples[free[0].samples[0]]
                 return "reference", self._feel_scene("reference", ref.scene)

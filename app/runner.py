@@ -31,12 +31,14 @@ from device import DeviceError, DeviceFaultError, HapticDevice
 from protocols import (
     DONE,
     PAUSED,
+    REFERENCE,
     RNG_ALGORITHM,
     Attempt,
     Protocol,
     SessionEngine,
     Trial,
     is_reference,
+    phase_kind,
     reference_item,
 )
 
@@ -265,7 +267,7 @@ class SessionRunner:
         """What the operator places for ``trial``, and what it is (never on the participant's
         screen)."""
         clear = f"nothing: remove the {self._on_device}" if self._on_device else "nothing"
-        if trial.kind == "identification":
+        if phase_kind(trial.kind).surfaces:
             return f"{clear} (the scene's surfaces are virtual)", " / ".join(trial.samples)
         sample = self.protocol.samples[trial.samples[0]]
         what = trial.placement or clear
@@ -273,9 +275,9 @@ class SessionRunner:
         return what, detail
 
     def _block_line(self, trial: Trial) -> str:
-        if trial.kind == "reference":
+        if trial.kind == REFERENCE:
             return f"real reference block: {trial.placement}"
-        if trial.kind == "identification":  # surface 1's block is not the scene's
+        if phase_kind(trial.kind).surfaces:  # surface 1's block is not the scene's
             return ""
         sample = self.protocol.samples[trial.samples[0]]
         block = trial.block or sample.block
@@ -382,9 +384,10 @@ class SessionRunner:
         """The real blocks the protocol calls for before this trial: the block's own at the
         start of each block, or all the phase's at its start."""
         phase = next(p for p in self.protocol.phases if p.name == trial.phase)
-        if phase.references == "none" or trial.kind == "free":
+        kind = phase_kind(trial.kind)
+        if phase.references == "none" or not kind.references:
             return
-        if phase.references == "block" and trial.kind != "identification":
+        if phase.references == "block" and not kind.surfaces:
             refs = [self.protocol.samples[trial.samples[0]].reference]
         else:
             refs = list(dict.fromkeys(self.protocol.samples[s].reference
@@ -398,7 +401,7 @@ class SessionRunner:
         is called). A rated trial's own block; in identification every real block of the
         phase, in the protocol's order — never one that follows from the scene (surface 1's
         block would be its answer)."""
-        if trial.kind != "identification":
+        if not phase_kind(trial.kind).surfaces:
             ref = self.protocol.samples[trial.samples[0]].reference
             return [] if ref is None else [(ref, self.protocol.samples[ref].placement or ref)]
         phase = next(p for p in self.protocol.phases if p.name == trial.phase)
@@ -412,7 +415,7 @@ class SessionRunner:
         ref = self.protocol.samples[ref_id]
         k = sum(a.status == "reference" for a in self.log)
         rtrial = dataclasses.replace(trial, item=reference_item(trial.phase, ref_id),
-                                     kind="reference",
+                                     kind=REFERENCE,
                                      samples=(ref_id,), placement=ref.placement or ref_id,
                                      attempt=0, block=trial.block)
         reason = "participant asked" if asked else ""
@@ -434,7 +437,7 @@ class SessionRunner:
             self.participant_ui.reference(rtrial, ref)
             t_start = utc_now()
             self.markers.trial(rtrial)
-            self.markers.send("trial_start", sample=ref_id, kind="reference")
+            self.markers.send("trial_start", sample=ref_id, kind=REFERENCE)
             self._windows_in_attempt = 0
             try:
                 rng = np.random.default_rng(np.random.SeedSequence(
@@ -491,7 +494,8 @@ class SessionRunner:
                 self._spilled.clear()
 
     def _attempt_windows(self, trial: Trial) -> None:
-        self._on_device = trial.placement if trial.kind != "identification" else None
+        kind = phase_kind(trial.kind)
+        self._on_device = None if kind.surfaces else trial.placement
         rng = self._rng(trial)
         t_start = utc_now()
         self.participant_ui.ready(trial)
@@ -504,33 +508,8 @@ class SessionRunner:
         # window a device error cut short is named too), and each finished window's result
         results, played = [], []
         try:
-            if trial.kind == "identification":
-                # the participant switches between the surfaces before naming them
-                # every window is kept (a surface tapped again adds one); the naming is
-                # of each surface's last window
-                visited: set[int] = set()
-                last: dict[int, Any] = {}
-                while (k := self.participant_ui.choose_surface(trial, visited)) is not None:
-                    self.console.say(f"  surface {k + 1} of {len(trial.samples)}: tapping")
-                    played.append(trial.samples[k])
-                    results.append(self._window(trial, trial.samples[k], rng))
-                    last[k] = results[-1]
-                    visited.add(k)
-                named = [last[k] for k in sorted(last)]
-            elif trial.kind == "free":
-                # familiarization: windows on the sample until the participant is done, each
-                # window's traces on disk as it ends (held in memory, a long familiarization
-                # grew by megabytes a window)
-                while True:
-                    played.append(trial.samples[0])
-                    results.append(self._spill(trial, len(results),
-                                               self._window(trial, trial.samples[0], rng)))
-                    if results[-1].faults or not self.participant_ui.keep_tapping():
-                        break  # a fault ends it: the e-stop's row names its windows
-            else:
-                for sid in trial.samples:
-                    played.append(sid)
-                    results.append(self._window(trial, sid, rng))
+            # the windows the participant is judged on (a surface's last)
+            judged = self._WINDOWS[kind.windows](self, trial, rng, results, played)
         except DeviceFaultError as exc:  # latched before the window (an e-stop between trials)
             fault = self.device.fault
             if fault is not None:
@@ -562,7 +541,7 @@ class SessionRunner:
             raise SessionInterrupted(f"{f.code} during trial {trial.trial_index}: output is off "
                                      f"and latched; once it is safe: {self._resume_line()}")
         # a surface left without a tap, then tapped on a later visit, did not time out
-        if any(r.timed_out for r in (named if trial.kind == "identification" else results)):
+        if any(r.timed_out for r in judged):
             status = self.engine.failure_status("timed_out", trial, self.log)
             self._record(trial, status, reason="no contact before the timeout",
                          t_start=t_start, result=res, results=results, played=played)
@@ -571,7 +550,7 @@ class SessionRunner:
                                 else "the item goes back into the pool"))
             return
         if any(r.saturated for r in results) and self.protocol.saturation.action == "redraw" \
-                and trial.kind != "free":
+                and kind.redraws_saturated:
             if self.audio is not None and self.protocol.saturation.tone:
                 self.audio.low_tone()
             self.console.saturated()
@@ -581,31 +560,80 @@ class SessionRunner:
                          played=played)
             return
         row: dict[str, Any] = {}
-        if trial.kind == "rated":
-            self.console.set_state("rating")
-            self.markers.send("rating_onset")
-            rating, rt = self.participant_ui.rate(trial, self.protocol.rating, res, rng)
-            if not self.protocol.rating.min <= rating <= self.protocol.rating.max:
-                raise SessionInterrupted(f"the responder gave rating {rating!r}, outside the "
-                                         f"scale {self.protocol.rating.min}–"
-                                         f"{self.protocol.rating.max}; nothing was recorded "
-                                         "for this trial")
-            row.update(rating=int(rating), response_time=round(float(rt), 3))
-            self.markers.send("response", rating=row["rating"],
-                              response_time_s=row["response_time"])
-        elif trial.kind == "identification":
-            self.console.set_state("rating")  # naming the surfaces: the operator's e acts
-            self.markers.send("rating_onset")
-            answers, rt = self.participant_ui.identify(trial, self.protocol.answer.choices,
-                                                       named, rng)
-            row.update(answer=",".join(answers), response_time=round(float(rt), 3),
-                       correct=int(list(answers) == list(trial.samples)))
-            self.markers.send("response", answer=row["answer"],
-                              response_time_s=row["response_time"])
+        if kind.response is not None:
+            row = self._RESPONSES[kind.response](self, trial, res, judged, rng)
+            assert set(row) == set(kind.columns), (kind.name, sorted(row))
         self._record(trial, "valid", t_start=t_start, result=res, results=results, played=played,
                      **row)
         self.console.result("valid", len(velocities),
                             f"rating {row['rating']}" if "rating" in row else "")
+
+    # ------------------------------------------------------------------ a kind's windows
+    # each appends every window it begins to ``played`` and each it finishes to
+    # ``results`` as it goes (a device error keeps what came before), and returns the
+    # windows the participant is judged on
+
+    def _each_sample(self, trial: Trial, rng, results: list, played: list) -> list:
+        for sid in trial.samples:
+            played.append(sid)
+            results.append(self._window(trial, sid, rng))
+        return results
+
+    def _until_done(self, trial: Trial, rng, results: list, played: list) -> list:
+        # familiarization: windows on the sample until the participant is done, each
+        # window's traces on disk as it ends (held in memory, a long familiarization grew
+        # by megabytes a window)
+        while True:
+            played.append(trial.samples[0])
+            results.append(self._spill(trial, len(results),
+                                       self._window(trial, trial.samples[0], rng)))
+            if results[-1].faults or not self.participant_ui.keep_tapping():
+                return results  # a fault ends it: the e-stop's row names its windows
+
+    def _surfaces(self, trial: Trial, rng, results: list, played: list) -> list:
+        # the participant switches between the surfaces before naming them; every window
+        # is kept (a surface tapped again adds one); the naming is of each surface's last
+        visited: set[int] = set()
+        last: dict[int, Any] = {}
+        while (k := self.participant_ui.choose_surface(trial, visited)) is not None:
+            self.console.say(f"  surface {k + 1} of {len(trial.samples)}: tapping")
+            played.append(trial.samples[k])
+            results.append(self._window(trial, trial.samples[k], rng))
+            last[k] = results[-1]
+            visited.add(k)
+        return [last[k] for k in sorted(last)]
+
+    _WINDOWS = {"each_sample": _each_sample, "until_done": _until_done, "surfaces": _surfaces}
+
+    # ------------------------------------------------------------------ a kind's response
+    # each asks the participant and returns the row's response columns (PhaseKind.columns)
+
+    def _rating(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
+        self.console.set_state("rating")
+        self.markers.send("rating_onset")
+        rating, rt = self.participant_ui.rate(trial, self.protocol.rating, res, rng)
+        if not self.protocol.rating.min <= rating <= self.protocol.rating.max:
+            raise SessionInterrupted(f"the responder gave rating {rating!r}, outside the "
+                                     f"scale {self.protocol.rating.min}–"
+                                     f"{self.protocol.rating.max}; nothing was recorded "
+                                     "for this trial")
+        row = {"rating": int(rating), "response_time": round(float(rt), 3)}
+        self.markers.send("response", rating=row["rating"],
+                          response_time_s=row["response_time"])
+        return row
+
+    def _answer(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
+        self.console.set_state("rating")  # naming the surfaces: the operator's e acts
+        self.markers.send("rating_onset")
+        answers, rt = self.participant_ui.identify(trial, self.protocol.answer.choices,
+                                                   judged, rng)
+        row = {"answer": ",".join(answers), "response_time": round(float(rt), 3),
+               "correct": int(list(answers) == list(trial.samples))}
+        self.markers.send("response", answer=row["answer"],
+                          response_time_s=row["response_time"])
+        return row
+
+    _RESPONSES = {"rating": _rating, "answer": _answer}
 
     def _spill(self, trial: Trial, k: int, res):
         """Window ``k`` of ``trial`` with its traces written now when the session records
@@ -641,6 +669,7 @@ class SessionRunner:
 
         shown = 0
         ended = False
+        surfaces = trial.kind != REFERENCE and phase_kind(trial.kind).surfaces
 
         def progress(t, partial):
             nonlocal shown, ended
@@ -648,7 +677,7 @@ class SessionRunner:
                 self.console.contact(c.velocity)
             shown = len(partial.contacts)
             self.participant_ui.progress(t, partial, w.duration)
-            if trial.kind == "identification" and not ended and self.participant_ui.moving_on():
+            if surfaces and not ended and self.participant_ui.moving_on():
                 ended = True  # the participant went to another surface, or to answer
                 dev.end_window()
 
@@ -695,7 +724,7 @@ class SessionRunner:
             # every recording its own name: a trial's windows by its index (unique per
             # attempt), a real block's tapping by its place among the session's references
             # (several may come before one trial); the recorder refuses to overwrite
-            if trial.kind == "reference":
+            if trial.kind == REFERENCE:
                 stem = f"reference-{sum(is_reference(a.item) for a in self.log) + 1:03d}"
             else:
                 stem = f"trial-{trial.trial_index:04d}"

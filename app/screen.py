@@ -22,6 +22,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable
 
+from protocols.kinds import RATED, REFERENCE, phase_kind
 from protocols.model import choice_keys
 
 from .participants import Participant
@@ -209,10 +210,8 @@ class PsychoPyScreen(Participant):
     # ------------------------------------------------------------------ screens
     def instructions(self, phase: str) -> None:
         ph = next((p for p in self.protocol.phases if p.name == phase), None)
-        kind = ph.kind if ph is not None else "rated"
-        from protocols.texts import INSTRUCTIONS_BY_KIND
-
-        text = self.texts.get("instructions", {}).get(phase) or INSTRUCTIONS_BY_KIND[kind]
+        kind = phase_kind(ph.kind) if ph is not None else RATED
+        text = self.texts.get("instructions", {}).get(phase) or kind.instructions
         n = len(ph.samples) if ph is not None else 3
         text = _fmt(text, n=n, keys=", ".join(str(i + 1) for i in range(n)))
         self._wait(["space"], lambda: self._frame(text))
@@ -221,11 +220,12 @@ class PsychoPyScreen(Participant):
     def waiting(self, trial) -> None:
         """From the end of a trial until the operator starts the next: please wait (and R for
         the real block again, when the phase has reference blocks)."""
-        if trial.kind == "reference":  # the real block is on its way (due, or asked for)
+        if trial.kind == REFERENCE:  # the real block is on its way (due, or asked for)
             self._waiting = (self.t("wait"), self.t("reference_requested"), False)
         else:
             ph = next((p for p in self.protocol.phases if p.name == trial.phase), None)
-            offer = ph is not None and ph.references != "none" and trial.kind != "free"
+            offer = (ph is not None and ph.references != "none"
+                     and phase_kind(trial.kind).references)
             notice, self._notice = self._notice, ""  # said once, on this wait
             self._waiting = (self.t("wait"), (notice + "\n" if notice else "")
                              + self.t("wait_detail") + (
@@ -285,9 +285,9 @@ class PsychoPyScreen(Participant):
     def _tap_title(self, trial, sample_id) -> str:
         """'Tap', and in identification which surface ('Surface 2') — never its name; 'Tap
         the real block' for as long as a real block is tapped."""
-        if trial.kind == "reference":
+        if trial.kind == REFERENCE:
             return self.t("reference")
-        if trial.kind == "identification" and sample_id in trial.samples:
+        if phase_kind(trial.kind).surfaces and sample_id in trial.samples:
             return f"{self.t('tap')} · {self.t('surface', i=trial.samples.index(sample_id) + 1)}"
         return self.t("tap")
 
@@ -296,9 +296,11 @@ class PsychoPyScreen(Participant):
         self._tapping = self._tap_title(trial, sample_id)
         self._surface_now, self._moving = None, False
         self._detail = (self.t("reference_detail", block=trial.placement or sample_id)
-                        if trial.kind == "reference" else
-                        self.t("done_hint") if trial.kind == "free" else "")
-        if trial.kind == "identification" and sample_id in trial.samples:
+                        if trial.kind == REFERENCE else
+                        self.t("done_hint") if phase_kind(trial.kind).windows == "until_done"
+                        else "")
+        if trial.kind != REFERENCE and phase_kind(trial.kind).surfaces \
+                and sample_id in trial.samples:
             self._surface_now = now = trial.samples.index(sample_id)
             n = len(trial.samples)
             others = ", ".join(str(i + 1) for i in range(n) if i != now)
@@ -316,7 +318,8 @@ class PsychoPyScreen(Participant):
         """During a window: the thin bar fills over the window; the cursor follows the stylus."""
         keys = self._names()
         free = self._shown_phase is not None and any(
-            p.name == self._shown_phase and p.kind == "free" for p in self.protocol.phases)
+            p.name == self._shown_phase and phase_kind(p.kind).windows == "until_done"
+            for p in self.protocol.phases)
         if free and "return" in keys:
             self._done = True
         if self._surface_now is not None and not self._moving:

@@ -21,6 +21,7 @@ from .engine import (
     reference_item,
     seed_from_entropy,
 )
+from .kinds import REFERENCE, PhaseKind, phase_kind, phase_kinds
 from .loader import BUILTIN, ProtocolError, load_protocol, parse_protocol, protocol_text
 from .model import (
     Answer,
@@ -37,6 +38,7 @@ from .model import (
 from .williams import williams_square
 
 __all__ = [
+    "PhaseKind", "phase_kind", "phase_kinds", "REFERENCE",
     "is_reference", "reference_item",
     "Answer", "Attempt", "Attempts", "BUILTIN", "DONE", "Done", "FINAL_STATUSES", "Limits",
     "LogMismatch",

@@ -56,6 +56,7 @@ import numpy as np
 
 from device.errors import HapticlabError
 
+from .kinds import phase_kind
 from .model import Phase, Protocol
 from .williams import williams_square
 
@@ -310,7 +311,7 @@ class SessionEngine:
     def _phase_items(self, phase: Phase, rng: np.random.Generator,
                      before: Item | None) -> list[Item]:
         samples = self.protocol.samples
-        if phase.kind == "identification":
+        if phase_kind(phase.kind).surfaces:  # one item of all the samples, drawn in order
             out = []
             for rep in range(1, phase.repetitions + 1):
                 order = [phase.samples[i] for i in rng.permutation(len(phase.samples))]
@@ -455,7 +456,7 @@ class SessionEngine:
         queue.insert(places[int(rng.integers(0, len(places)))], item)
 
     def _placement(self, item: Item, previous: str | None) -> str | None:
-        if item.kind == "identification":
+        if phase_kind(item.kind).surfaces:  # the scene's surfaces are virtual
             return None
         s = self.protocol.samples[item.samples[0]]
         if s.placement is not None:

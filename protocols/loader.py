@@ -25,6 +25,7 @@ from device.errors import HapticlabError
 from device.scene import AccelSinusoid, unknown_key
 
 from ._toml_lines import key_lines, line_of
+from .kinds import PhaseKind, phase_kind, phase_kinds
 from .model import (
     ENTRIES,
     NORMALIZATIONS,
@@ -464,7 +465,8 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
                              "block_order", "no_repeat", "analysis", "references"},
                  {"name", "samples"})
     name = cx.ident((*path, "name"), p["name"])
-    kind = cx.string((*path, "kind"), p.get("kind", "rated"), ("rated", "free", "identification"))
+    kind = phase_kind(cx.string((*path, "kind"), p.get("kind", phase_kinds()[0]),
+                                phase_kinds()))
     sel = p["samples"]
     if sel == "all":
         ids = tuple(s.id for s in samples.values() if s.rated)
@@ -496,33 +498,39 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
     if no_repeat:
         _check_no_repeat(cx, (*path, "no_repeat"), kind, order, reps, ids,
                          [samples[s].block for s in ids] if blocks else [None] * len(ids))
-    if kind == "identification":
+    if kind.needs == "answer":
         if answer is None:
-            raise cx.error((*path, "kind"), "an identification phase needs an [answer] table")
+            raise cx.error((*path, "kind"), f"a{_an(kind.name)} {kind.name} phase needs an "
+                           "[answer] table")
         if set(ids) != set(answer.choices):
             raise cx.error((*path, "samples"), f"the surfaces {sorted(ids)} must be the answer "
                            f"choices {sorted(answer.choices)}")
-    elif kind == "rated" and rating is None:
-        raise cx.error((*path, "kind"), "a rated phase needs a [rating] scale")
+    elif kind.needs == "rating" and rating is None:
+        raise cx.error((*path, "kind"), f"a{_an(kind.name)} {kind.name} phase needs a "
+                       "[rating] scale")
     design = _phase_design(cx, (*path, "analysis"), p.get("analysis", {}), kind, ids, samples)
-    has_refs = any(samples[s].reference for s in ids)
-    default = ("start" if kind == "identification" else "block") if has_refs else "none"
+    has_refs = any(samples[s].reference for s in ids) and kind.references
+    default = kind.default_references if has_refs else "none"
     references = cx.string((*path, "references"), p.get("references", default), REFERENCES)
     if references != "none" and not has_refs:
         raise cx.error((*path, "references"), "none of the phase's samples has a 'reference' "
                        "(the real block to compare with)")
-    return Phase(name=name, kind=kind, samples=ids, repetitions=reps, order=order,
+    return Phase(name=name, kind=kind.name, samples=ids, repetitions=reps, order=order,
                  blocks=blocks, block_order=block_order, no_repeat=no_repeat, design=design,
                  references=references)
 
 
-def _check_no_repeat(cx: _Ctx, path: tuple, kind: str, order: str, reps: int,
+def _an(word: str) -> str:
+    return "n" if word[:1] in "aeiou" else ""
+
+
+def _check_no_repeat(cx: _Ctx, path: tuple, kind: PhaseKind, order: str, reps: int,
                      ids: tuple[str, ...], blocks: list[str | None]) -> None:
     """``no_repeat`` needs a drawn order of one-sample trials and, in every block, a
     second sample to put between a sample's repetitions."""
-    if kind == "identification":
-        raise cx.error(path, "applies to rated and free phases (an identification trial "
-                       "shows every surface)")
+    if kind.surfaces:
+        raise cx.error(path, f"applies to phases of one sample a trial (a{_an(kind.name)} "
+                       f"{kind.name} trial shows every surface)")
     if order != "random":
         raise cx.error(path, "needs order = \"random\" (a fixed order is as written)")
     if reps > 1:
@@ -578,24 +586,25 @@ def _participant_fields(cx: _Ctx, raw: Any) -> dict:
     return out
 
 
-def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: str, ids: tuple[str, ...],
+def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: PhaseKind, ids: tuple[str, ...],
                   samples: Mapping[str, Sample]) -> PhaseDesign:
     """A phase's ``analysis`` table: what it measures and how it is analysed."""
     a = cx.table(path, raw, {"role", "within", "by", "normalize", "scoring"})
-    if kind == "free":
+    if kind.response is None:
         if a:
-            raise cx.error(path, "a free phase is not rated or answered: nothing to analyse")
-        return PhaseDesign(role="none", dv="none", within=(), scoring=None)
+            raise cx.error(path, f"a{_an(kind.name)} {kind.name} phase is not rated or "
+                           "answered: nothing to analyse")
+        return PhaseDesign(role="none", dv=kind.dv, within=(), scoring=None)
     role = cx.string((*path, "role"), a.get("role", "analysed"), ("analysed", "practice"))
-    if kind == "identification":
+    if kind.response == "answer":
         for key in ("within", "by", "normalize"):
             if key in a:
-                raise cx.error((*path, key), "an identification phase is scored, not "
-                               "analysed by factors; use 'scoring'")
+                raise cx.error((*path, key), f"a{_an(kind.name)} {kind.name} phase is "
+                               "scored, not analysed by factors; use 'scoring'")
         scoring = cx.string((*path, "scoring"), a.get("scoring", "all_correct"), SCORINGS)
-        return PhaseDesign(role=role, dv="answer", within=(), scoring=scoring)
+        return PhaseDesign(role=role, dv=kind.dv, within=(), scoring=scoring)
     if "scoring" in a:
-        raise cx.error((*path, "scoring"), "only an identification phase scores answers")
+        raise cx.error((*path, "scoring"), "only a phase of answers is scored")
     within = a.get("within", ["sample"])
     if not isinstance(within, list) or not within or not all(isinstance(w, str) for w in within):
         raise cx.error((*path, "within"), f"must be [\"sample\"] or a list of factor names, "

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 from device import Scene
 
+from .kinds import RATED
+
 __all__ = ["Sample", "Window", "RatingScale", "Answer", "SaturationPolicy", "Attempts", "Limits",
            "Phase", "PhaseDesign", "Protocol", "ROLES", "ENTRIES", "NORMALIZATIONS", "SCORINGS",
            "SESSION_POLICIES", "REFERENCES"]
@@ -209,8 +211,9 @@ class Phase:
     ----------
     name : str
     kind : str
-        ``rated`` (window then rating), ``free`` (tap until done; not rated) or
-        ``identification`` (one item shows all samples as surfaces to name).
+        The name of its :class:`~protocols.kinds.PhaseKind` (``rated``: a window then a
+        rating; ``free``: tap until done, not rated; ``identification``: one item shows
+        all samples as surfaces to name).
     samples : tuple of str
         Sample ids of the phase (references excluded).
     repetitions : int
@@ -230,7 +233,7 @@ class Phase:
     """
 
     name: str
-    kind: str = "rated"
+    kind: str = RATED.name
     samples: tuple[str, ...] = ()
     repetitions: int = 1
     order: str = "random"

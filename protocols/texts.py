@@ -16,20 +16,9 @@ naming.
 
 from __future__ import annotations
 
-__all__ = ["DEFAULT_TEXTS", "INSTRUCTIONS_BY_KIND", "resolve_texts", "left_in_english",
-           "english_note"]
+from .kinds import phase_kind
 
-#: phase kind → default instructions (a phase's own, by name, in ``[texts.instructions]``)
-INSTRUCTIONS_BY_KIND = {
-    "free": "Tap freely on the sample in front of you.\n\nTake your time. When you are done, "
-            "press ENTER.\n\nPress SPACE to begin.",
-    "rated": "You will tap on a series of samples, one at a time, and rate each one.\n\n"
-             "Press SPACE to begin.",
-    "identification": "One scene, {n} surfaces. Press {keys} to choose a surface and tap it;\n"
-                      "press another number at any time to go to that surface.\n"
-                      "When you have tapped them all, press N to name each one.\n\n"
-                      "Press SPACE to begin.",
-}
+__all__ = ["DEFAULT_TEXTS", "resolve_texts", "left_in_english", "english_note"]
 
 DEFAULT_TEXTS: dict[str, str] = {
     "language": "en",
@@ -73,22 +62,23 @@ def resolve_texts(overrides: dict[str, str], instructions: dict[str, str]) -> di
     return out
 
 
-#: which screens show a text: every protocol, or only one with that phase kind ("rated",
-#: "free", "identification"), rating entry ("keys", "typed", "slider"), saturated trials
-#: redrawn ("redraw") or real blocks ("references"; "several": an identification phase
-#: offering more than one, which the participant chooses between); texts of placeholders
-#: alone need no translation
+#: which screens show a text: every protocol, or only one with a phase whose kind runs its
+#: windows so ("until_done", "surfaces") or asks for that response ("rating", "answer"),
+#: rating entry ("keys", "typed", "slider"), saturated trials redrawn ("redraw") or real
+#: blocks ("references"; "several": a surfaces phase offering more than one, which the
+#: participant chooses between); texts of placeholders alone need no translation
 _SHOWN_WHEN = {
     "tap": "all", "wait": "all", "wait_detail": "all", "saturated": "redraw",
     "saturated_last": "redraw", "paused": "all",
     "paused_detail": "all", "debrief": "all", "debrief_hint": "all", "thanks": "all",
-    "done_hint": "free", "reference_offer": "references", "reference_requested": "references",
+    "done_hint": "until_done", "reference_offer": "references",
+    "reference_requested": "references",
     "reference": "references", "reference_detail": "references",
     "reference_which": "several", "reference_which_keys": "several",
     "rating_keys": "keys", "rating_chosen": "keys", "rating_typed": "typed",
-    "rating_slider": "slider", "rating_confirmed": "rated", "rating_invalid": "typed",
-    "surface": "identification", "choose": "identification", "tapped": "identification",
-    "name_hint": "identification", "switch_hint": "identification", "name": "identification",
+    "rating_slider": "slider", "rating_confirmed": "rating", "rating_invalid": "typed",
+    "surface": "surfaces", "choose": "surfaces", "tapped": "surfaces",
+    "name_hint": "answer", "switch_hint": "surfaces", "name": "answer",
 }
 
 
@@ -104,15 +94,16 @@ def left_in_english(protocol) -> list[str]:
     texts = protocol.texts
     if re.split(r"[-_]", texts.get("language", "en"))[0].lower() == "en":
         return []
-    kinds = {ph.kind for ph in protocol.phases}
+    kinds = [phase_kind(ph.kind) for ph in protocol.phases]
     offered = [ph for ph in protocol.phases if ph.references != "none"]
-    several = any(ph.kind == "identification" and len(
+    several = any(phase_kind(ph.kind).surfaces and len(
         {protocol.samples[s].reference for s in ph.samples} - {None}) > 1 for ph in offered)
-    shown = {"all", *kinds, *(("references",) if offered and any(
-        s.reference for s in protocol.samples.values()) else ()),
-        *(("several",) if several else ()),
-        *((protocol.rating.entry_mode,) if protocol.rating is not None else ()),
-        *(("redraw",) if protocol.saturation.action == "redraw" else ())}
+    shown = {"all", *(k.windows for k in kinds), *(k.response for k in kinds),
+             *(("references",) if offered and any(
+                 s.reference for s in protocol.samples.values()) else ()),
+             *(("several",) if several else ()),
+             *((protocol.rating.entry_mode,) if protocol.rating is not None else ()),
+             *(("redraw",) if protocol.saturation.action == "redraw" else ())}
     out = [k for k, when in _SHOWN_WHEN.items()
            if when in shown and texts.get(k) == DEFAULT_TEXTS[k]]
     return out + [f"instructions.{ph.name}" for ph in protocol.phases

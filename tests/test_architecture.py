@@ -288,3 +288,48 @@ def test_every_exported_error_is_raised_somewhere():
             unused.append(f"{errors[n]}.{n}")
     assert not unused, f"exported but never raised: {unused}"
     assert {"CRCStormError", "HapticlabError", "SceneError"} <= set(errors)
+
+
+def _kind_comparisons(path: Path, names: set[str]) -> list[str]:
+    """Each comparison in ``path`` of something called ``kind`` with a phase kind's name
+    (``trial.kind == "free"``, ``kind in ("rated", …)``), as ``file:line``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+    def is_kind(node) -> bool:
+        return (isinstance(node, ast.Attribute) and node.attr == "kind"
+                or isinstance(node, ast.Name) and node.id == "kind")
+
+    def named(node) -> bool:
+        if isinstance(node, ast.Constant):
+            return node.value in names
+        if isinstance(node, ast.Tuple | ast.List | ast.Set):
+            return any(named(e) for e in node.elts)
+        return False
+
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            sides = [node.left, *node.comparators]
+            if any(is_kind(s) for s in sides) and any(named(s) for s in sides):
+                out.append(f"{os.path.relpath(path, ROOT)}:{node.lineno}")
+    return out
+
+
+def test_phase_kinds_are_looked_up_not_compared():
+    """What differs between phase kinds is declared once, in protocols/kinds.py: elsewhere
+    a kind is looked up (``phase_kind(name).surfaces``), never compared by name, so a new
+    kind needs no branch anywhere else (issue 33)."""
+    from protocols.kinds import REFERENCE, phase_kinds
+
+    names = {*phase_kinds(), REFERENCE}
+    found = [hit for d in sorted(OURS) for f in sorted((ROOT / d).rglob("*.py"))
+             if f != ROOT / "protocols" / "kinds.py" for hit in _kind_comparisons(f, names)]
+    assert not found, f"phase kinds compared by name: {found}"
+
+
+def test_the_kind_checker_sees_comparisons(tmp_path):
+    bad = tmp_path / "m.py"
+    bad.write_text("if trial.kind == 'free':\n    pass\nok = kind in ('rated', 'x')\n"
+                   "fine = phase.kind == other\nalso = status == 'free'\n")
+    assert [h.rsplit(":", 1)[1] for h in _kind_comparisons(bad, {"free", "rated"})] \
+        == ["1", "3"]

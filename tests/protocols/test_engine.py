@@ -451,5 +451,5 @@ def test_no_repeat_refuses_a_sample_with_nothing_to_put_between():
     src, text = protocol_text("identification")
     phase = "kind = \"identification\"\n"
     assert phase in text
-    with pytest.raises(ProtocolError, match="applies to rated and free phases"):
+    with pytest.raises(ProtocolError, match="applies to phases of one sample a trial"):
         parse_protocol(text.replace(phase, phase + "no_repeat = true\n", 1), src)

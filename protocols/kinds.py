@@ -1,0 +1,168 @@
+"""Phase kinds, each declared once.
+
+A phase's ``kind`` says how its trials run and what a participant gives back. Everything
+that differs between kinds is stated here, in one :class:`PhaseKind` per kind, in the manner
+of PsychoPy's hardware classes (which declare what they are once, and a manager finds
+them): the protocol loader, the trial engine, the session runner, the participant's screen,
+the simulated participant and the texts look a kind up by its name (:func:`phase_kind`) and
+read its declaration; none of them compares kind names.
+
+A kind is described by a few answers, each with a small fixed vocabulary that the code
+reading it implements once (a new kind that reuses them needs no code elsewhere):
+
+``windows``
+    How an item's device windows run: ``"each_sample"`` (one window per sample of the
+    item, in order), ``"until_done"`` (windows on the item's one sample until the
+    participant says they are done) or ``"surfaces"`` (one item holds all the phase's
+    samples as surfaces; the participant goes between them, tapping each as often as
+    they like).
+``response``
+    What the participant gives after the windows: ``"rating"`` (a point on the
+    protocol's ``[rating]`` scale), ``"answer"`` (a name from ``[answer]`` for each
+    surface) or None (nothing: familiarization).
+
+The trial row's response columns, the table a protocol must have, whether the phase is
+analysed and how it is scored follow from ``response``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["PhaseKind", "RATED", "FREE", "IDENTIFICATION", "REFERENCE", "phase_kind",
+           "phase_kinds", "register"]
+
+#: the trial kind of a real reference block tapped between trials (the runner's, never a
+#: phase's): its row has status ``reference`` and no response
+REFERENCE = "reference"
+
+WINDOWS = ("each_sample", "until_done", "surfaces")
+RESPONSES = ("rating", "answer", None)
+
+
+@dataclass(frozen=True)
+class PhaseKind:
+    """What one kind of phase is.
+
+    Attributes
+    ----------
+    name : str
+        The ``kind`` a protocol file writes.
+    summary : str
+        One line on what a participant does (``protocol show``, error messages).
+    windows : str
+        How an item's windows run (module docstring): ``each_sample``, ``until_done`` or
+        ``surfaces``.
+    response : str or None
+        What the participant gives after them: ``rating``, ``answer`` or None.
+    instructions : str
+        The default instructions shown at the phase's start (``[texts.instructions]``
+        replaces them per phase). ``{n}`` is the number of samples, ``{keys}`` their keys.
+    redraws_saturated : bool
+        Whether a trial whose window saturated the drive is redrawn under the protocol's
+        ``redraw`` policy (familiarization is not measured, so it is not).
+    references : bool
+        Whether the phase's real reference blocks are tapped and offered during it.
+    """
+
+    name: str
+    summary: str
+    windows: str
+    response: str | None
+    instructions: str
+    redraws_saturated: bool = True
+    references: bool = True
+
+    def __post_init__(self) -> None:
+        if self.windows not in WINDOWS:
+            raise ValueError(f"phase kind {self.name!r}: windows must be one of {WINDOWS}, "
+                             f"got {self.windows!r}")
+        if self.response not in RESPONSES:
+            raise ValueError(f"phase kind {self.name!r}: response must be one of "
+                             f"{RESPONSES}, got {self.response!r}")
+
+    @property
+    def surfaces(self) -> bool:
+        """One item holds all the phase's samples as surfaces (no placement, no per-sample
+        order: the order of surfaces is drawn per item)."""
+        return self.windows == "surfaces"
+
+    @property
+    def needs(self) -> str | None:
+        """The protocol table the kind needs: ``rating``, ``answer`` or None."""
+        return self.response
+
+    @property
+    def dv(self) -> str:
+        """What the phase measures for analysis: ``rating``, ``answer`` or ``none``."""
+        return self.response or "none"
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The trial row's columns a valid trial of this kind fills beyond every row's."""
+        return {"rating": ("rating", "response_time"),
+                "answer": ("answer", "response_time", "correct"),
+                None: ()}[self.response]
+
+    @property
+    def default_references(self) -> str:
+        """When the real blocks are tapped unless the phase says (given it has some):
+        ``block`` (each sample's own, at its block's start) or ``start`` (all of them at
+        the phase's start: a surfaces item shows every block's sample at once)."""
+        return "start" if self.surfaces else "block"
+
+
+_KINDS: dict[str, PhaseKind] = {}
+
+
+def register(kind: PhaseKind) -> PhaseKind:
+    """Make ``kind`` known by its name (a second kind of the same name is refused)."""
+    if kind.name in _KINDS or kind.name == REFERENCE:
+        raise ValueError(f"phase kind {kind.name!r} is declared already")
+    _KINDS[kind.name] = kind
+    return kind
+
+
+def phase_kinds() -> tuple[str, ...]:
+    """The names of the declared kinds, in declaration order."""
+    return tuple(_KINDS)
+
+
+def phase_kind(name: str) -> PhaseKind:
+    """The declaration of kind ``name``.
+
+    Raises
+    ------
+    KeyError
+        Naming the declared kinds.
+    """
+    try:
+        return _KINDS[name]
+    except KeyError:
+        raise KeyError(f"no phase kind {name!r}; the kinds are "
+                       f"{', '.join(_KINDS)}") from None
+
+
+RATED = register(PhaseKind(
+    name="rated",
+    summary="a window per sample, then a rating on the protocol's scale",
+    windows="each_sample", response="rating",
+    instructions="You will tap on a series of samples, one at a time, and rate each one.\n\n"
+                 "Press SPACE to begin."))
+
+FREE = register(PhaseKind(
+    name="free",
+    summary="windows on one sample until the participant is done; not rated",
+    windows="until_done", response=None, redraws_saturated=False, references=False,
+    instructions="Tap freely on the sample in front of you.\n\nTake your time. When you "
+                 "are done, press ENTER.\n\nPress SPACE to begin."))
+
+IDENTIFICATION = register(PhaseKind(
+    name="identification",
+    summary="one scene of all the phase's samples as surfaces, each then named from the "
+            "protocol's answers",
+    windows="surfaces", response="answer",
+    instructions="One scene, {n} surfaces. Press {keys} to choose a surface and tap it;\n"
+                 "press another number at any time to go to that surface.\n"
+                 "When you have tapped them all, press N to name each one.\n\n"
+                 "Press SPACE to begin."))
