@@ -46,7 +46,9 @@ _LONG_LIVED: set[int] = set()
 
 
 def _processes() -> dict[int, tuple[int, str, str]]:
-    """Every process on this machine: pid → (parent pid, state, command line)."""
+    """Every process of this session (this run's, not the machine's other work): pid →
+    (parent pid, state, command line)."""
+    session = os.getsid(0)
     out = {}
     for d in os.listdir("/proc"):
         if not d.isdigit():
@@ -58,8 +60,9 @@ def _processes() -> dict[int, tuple[int, str, str]]:
                 cmd = f.read().replace(b"\0", b" ").decode(errors="replace").strip()
         except OSError:  # gone meanwhile
             continue
-        fields = stat[stat.rindex(")") + 2:].split()
-        out[int(d)] = (int(fields[1]), fields[0], cmd)
+        fields = stat[stat.rindex(")") + 2:].split()  # state, ppid, pgrp, session, …
+        if int(fields[3]) == session:
+            out[int(d)] = (int(fields[1]), fields[0], cmd)
     return out
 
 
@@ -91,6 +94,7 @@ def _no_process_left_behind(request):
         if not left:
             return
         time.sleep(0.02)
+    (ROOT / "tests" / "artifacts").mkdir(parents=True, exist_ok=True)
     with open(ROOT / "tests" / "artifacts" / "leftover-processes.txt", "a") as f:
         for pid, (ppid, state, cmd) in sorted(left.items()):
             f.write(f"{request.node.nodeid}: pid {pid} (parent {ppid}, {state}) {cmd}\n")
