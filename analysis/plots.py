@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["save_all"]
+__all__ = ["rating_means", "rating_pmatrix", "factorial_interactions", "confusion", "accel_traces",
+           "session_length", "figure_prefix"]
 
 
 def _plt():
@@ -239,22 +240,3 @@ def session_length(a: dict, out: Path) -> list[str]:
                  "these data)", fontsize=10)
     fig.tight_layout()
     return _save(fig, out, f"{_name(a)}_session_length")
-
-
-def save_all(data, analyses: list[dict], out: Path) -> list[str]:
-    """Every figure of every analysis (PNG and SVG); returns the file names."""
-    files = []
-    for a in analyses:
-        if isinstance(a["result"], str):
-            continue
-        if a["type"] == "oneway":
-            files += rating_means(a, out)
-            if isinstance(a["result"]["session_length"], dict):
-                files += session_length(a, out)
-            files += rating_pmatrix(a, out)
-            files += accel_traces(a, data, out)
-        elif a["type"] == "factorial":
-            files += factorial_interactions(a, out)
-        elif a["result"].get("confusion") is not None:
-            files += confusion(a, out)
-    return files

@@ -4,7 +4,8 @@ Each analysed phase of a protocol declares its design (``protocols`` writes it i
 session.json beside the protocol copy): the dependent variable, the within factors
 (``sample`` for a one-way design over the phase's samples, or factor names the samples
 carry), whether to analyse one block at a time, the normalisation, and how answers are
-scored. :func:`analyse_phase` runs the matching analysis:
+scored. :func:`analysis.analyses.analyse_phase` runs the matching analysis (each type
+reported by its module in :mod:`analysis.analyses`):
 
 * a one-way design over samples → :func:`rating_oneway`;
 * a crossed design over factors (optionally per block) → :func:`rating_factorial`;
@@ -37,7 +38,7 @@ from .stats import (
     zscore_by_subject,
 )
 
-__all__ = ["analyse_phase", "analyse_recorded", "phase_rows", "rating_oneway",
+__all__ = ["phase_rows", "rating_oneway",
            "rating_factorial", "answer_scores", "device_summary", "mean_ci", "mean_cis",
            "analysed_phases"]
 
@@ -446,47 +447,3 @@ def device_summary(data: pd.DataFrame, subject: str = SUBJECT) -> dict:
                 "by_participant": {str(k): int(x) for k, x in per_p.items()}},
             "saturations_per_sample": {str(k): int(x) for k, x in
                                        sat.groupby("sample").size().items()}}
-
-
-def analyse_phase(rows: pd.DataFrame, phase: dict, alpha: float = 0.05) -> dict:
-    """The analysis a recorded phase design calls for, on that phase's rows.
-
-    Returns
-    -------
-    dict
-        ``type`` (``oneway``, ``factorial`` or ``identification``) and ``result`` (the
-        analysis' dict), plus ``device`` (:func:`device_summary` of the phase).
-    """
-    if phase.get("dv") == "answer":
-        kind, result = "identification", answer_scores(rows, phase.get("scoring") or
-                                                       "all_correct")
-    elif list(phase.get("within") or []) == ["sample"]:
-        kind, result = "oneway", rating_oneway(rows, alpha=alpha)
-    else:
-        kind, result = "factorial", rating_factorial(rows, list(phase["within"]),
-                                                     phase.get("by"),
-                                                     phase.get("normalize") or "none")
-    return {"type": kind, "result": result, "device": device_summary(rows)}
-
-
-def analyse_recorded(data: pd.DataFrame, protocol: str, phase: str, alpha: float = 0.05) -> dict:
-    """The analysis that ``protocol``'s recorded design declares for ``phase``, on the rows
-    of ``data`` (from :func:`analysis.load_sessions`, selected or not).
-
-    Raises
-    ------
-    StatsError
-        When no session of that protocol recorded a design analysing that phase, or the
-        sessions recorded more than one design under that name.
-    """
-    designs = data.attrs.get("designs", {})
-    keys = sorted(set(data.loc[data["protocol"] == protocol, "design_key"]) - {""})
-    if not keys:
-        raise StatsError(f"no session of protocol {protocol!r} with a recorded design")
-    if len(keys) > 1:
-        raise StatsError(f"protocol {protocol!r} was recorded with {len(keys)} designs "
-                         f"({', '.join(keys)}); analyse them apart (select by design_key)")
-    match = [p for p in analysed_phases(designs[keys[0]]) if p["name"] == phase]
-    if not match:
-        raise StatsError(f"protocol {protocol!r} does not analyse a phase {phase!r}")
-    return analyse_phase(phase_rows(data, keys[0], phase), match[0], alpha)

@@ -55,7 +55,7 @@ PAPER_ID = {"all": 83.3, "group expert": 88.9, "group novice": 79.2, "repetition
 
 
 def _realism(data, protocol: str = "realism") -> dict:
-    from analysis.study import analyse_recorded
+    from analysis.analyses import analyse_recorded
 
     res = analyse_recorded(data, protocol, "testing")
     r = res["result"]
@@ -112,7 +112,7 @@ def _alike(data, protocol: str = "realism") -> list[dict]:
 
 
 def _factorial(data, protocol) -> dict:
-    from analysis.study import analyse_recorded
+    from analysis.analyses import analyse_recorded
 
     res = analyse_recorded(data, "factorial", "rating")["result"]
     out = {}
@@ -137,7 +137,7 @@ def _factorial(data, protocol) -> dict:
 
 
 def _identification(data) -> dict:
-    from analysis.study import analyse_recorded
+    from analysis.analyses import analyse_recorded
 
     res = analyse_recorded(data, "identification", "identification")["result"]
     t = {row["scope"]: row["percent"] for row in res["table"].to_dict(orient="records")}

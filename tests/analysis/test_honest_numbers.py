@@ -13,7 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import analysis as A
-from analysis.report import _p, _p_bounds, _p_digits
+from analysis.report import _p_bounds
+from analysis.report_text import p_digits as _p_digits
+from analysis.report_text import p_text as _p
 from analysis.session_format import TrialsFileError, read_trials
 from analysis.stats import mixed_oneway
 

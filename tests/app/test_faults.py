@@ -482,7 +482,7 @@ def test_text_in_report_tables_is_escaped(session, tmp_path):
     meta = json.loads((folder / "session.json").read_text())
     meta["participant"]["group"] = "a|b<script>"  # written by hand into an old session
     (folder / "session.json").write_text(json.dumps(meta))
-    from analysis.report import _table
+    from analysis.report_text import table as _table
 
     md = _table([{"x": "a|b<script>", "y": 1}])
     assert md.splitlines()[2] == "| a\\|b&lt;script&gt; | 1 |"

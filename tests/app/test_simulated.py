@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from analysis import load_sessions
-from analysis.study import analyse_recorded
+from analysis.analyses import analyse_recorded
 from app.participant_model import SimulatedParticipant, felt_features
 from device import open_device
 from protocols import load_protocol
