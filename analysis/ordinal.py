@@ -15,7 +15,8 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, special
 
-from .stats import StatsError, _check_columns, _check_values
+from .stats import StatsError
+from .stats._base import _check_columns, _check_values
 
 __all__ = ["ordinal_mixed", "MAX_ROWS"]
 

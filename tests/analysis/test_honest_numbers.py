@@ -180,7 +180,8 @@ def test_a_mixed_model_without_residual_variance_is_undefined_in_words():
 def test_the_wilcoxon_floor_allows_for_ties():
     """With ties the normal approximation goes below 2/2ⁿ: six equal positive differences
     give p = .0197 < 2/64, so the stated floor must be the smaller."""
-    from analysis.stats import _signrank_min_p, signed_rank_test
+    from analysis.stats import signed_rank_test
+    from analysis.stats.nonparametric import _signrank_min_p
 
     r = signed_rank_test(np.full(6, 0.5))
     assert r["method"] == "normal" and r["p"] < 2 / 64
