@@ -16,23 +16,20 @@ tidy DataFrame out::
 ``analysis.datasets`` holds a small committed example (the docstrings' examples run on it).
 """
 
-from . import datasets, ordinal
-from .load import LoadError, load_sessions, select_sessions, tap_velocities
-from .stats import (
-    StatsError,
-    dz_ci,
-    equivalence_ttests,
-    friedman,
-    identification_scores,
-    np2_ci,
-    p_adjust,
-    pairwise_ttests,
-    pairwise_wilcoxon,
-    participant_identification_test,
-    preflight,
-    rm_anova,
-    zscore_by_subject,
-)
+import importlib
+
+#: where each public name lives: imported on first use (PEP 562), so a part of the
+#: application that needs only the file format (analysis.session_format: the recorder,
+#: the CLI's startup) does not load pandas and SciPy with it
+_HOMES = {
+    "datasets": "", "ordinal": "",
+    "LoadError": "load", "load_sessions": "load", "select_sessions": "load",
+    "tap_velocities": "load",
+    **{name: "stats" for name in (
+        "StatsError", "dz_ci", "equivalence_ttests", "friedman", "identification_scores",
+        "np2_ci", "p_adjust", "pairwise_ttests", "pairwise_wilcoxon",
+        "participant_identification_test", "preflight", "rm_anova", "zscore_by_subject")},
+}
 
 __all__ = ["LoadError", "StatsError", "datasets", "dz_ci", "equivalence_ttests", "ordinal",
            "friedman",
@@ -40,3 +37,17 @@ __all__ = ["LoadError", "StatsError", "datasets", "dz_ci", "equivalence_ttests",
            "load_sessions", "np2_ci", "p_adjust", "pairwise_ttests", "pairwise_wilcoxon",
            "participant_identification_test", "preflight", "rm_anova", "select_sessions",
            "tap_velocities", "zscore_by_subject"]
+
+
+def __getattr__(name: str):
+    if name not in _HOMES:
+        raise AttributeError(f"module 'analysis' has no attribute {name!r}")
+    home = _HOMES[name]
+    value = (importlib.import_module(f".{name}", __name__) if not home
+             else getattr(importlib.import_module(f".{home}", __name__), name))
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -21,6 +21,7 @@ from .session_format import (
     META,
     TRIALS,
     SessionMetaError,
+    SessionStatus,
     TrialsFileError,
     read_meta,
     read_trials,
@@ -214,7 +215,7 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
                                 "phase": r["phase"], "sample": r["sample"], "reason": why})
         df = pd.DataFrame(rows)
         df["invalid_reason"] = reasons
-        rating = proto.get("rating") or (design or {}).get("scale") or {}
+        rating = (design or {}).get("scale") or {}
         df["protocol"] = proto["name"]
         df["protocol_sha256"] = proto["sha256"]
         df["design_key"] = key
@@ -378,7 +379,7 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         elif r.kind == "human" and r.simulated_plant and not sim_device:
             why = (f"a person on a simulated device ({r.device_backend}, {r.firmware}): no "
                    "physical contact; include with --sim-device")
-        elif status == "complete" and r.status != "complete":
+        elif status == "complete" and r.status != SessionStatus.COMPLETE:
             why = f"status {r.status or 'unknown'} (selected: complete sessions)"
         elif participants is not None and r.participant not in participants:
             why = "participant not selected"
@@ -415,7 +416,7 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
             continue
         policy = (designs.get(key) or {}).get("sessions", "first")
         if policy == "first":  # the first complete one; the first of any only if none is
-            done = [i for i in g.index if g.loc[i, "status"] == "complete"]
+            done = [i for i in g.index if g.loc[i, "status"] == SessionStatus.COMPLETE]
             first = done[0] if done else g.index[0]
             what = "first complete session" if done else "first session (none is complete)"
             for i in g.index:

@@ -4,8 +4,10 @@ A session folder (``<data>/sub-<participant>/ses-<n>/``) holds:
 
 ``session.json``
     Metadata, written atomically: format version, app version, the protocol (name, file,
-    SHA-256 and the **design** derived from it), the session kind and responder, seed,
-    participant, device, times, status. :data:`META_REQUIRED` lists the keys a reader needs.
+    SHA-256 and the **design** derived from it, which alone holds the rating scale and the
+    answer choices), the session kind and responder, seed, participant, device, times,
+    status (:class:`SessionStatus`). :data:`META_REQUIRED` lists the keys a reader needs;
+    :func:`read_meta` reads older formats through :func:`upgrade_meta`.
 ``protocol.toml``
     The resolved protocol file the session ran, byte for byte (its SHA-256 is in
     session.json); resume uses this copy.
@@ -25,15 +27,20 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FORMAT_VERSION", "COLUMNS", "INT_COLUMNS", "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
+__all__ = ["FORMAT_VERSION", "SessionStatus", "upgrade_meta", "COLUMNS", "INT_COLUMNS",
+           "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
            "TrialsFileError", "SessionMetaError", "TornLine", "header_line", "format_row",
            "read_trials", "read_meta", "session_kind", "canonical_bytes", "is_canonical",
            "TRIALS", "META", "PROTOCOL_COPY", "TRACES", "LOCK"]
 
-FORMAT_VERSION = 2
+#: 3: the rating scale and answer choices are written once, in the design (2 also wrote
+#: them beside it, as protocol.rating and protocol.answer_choices); 2: the design and the
+#: session kind are recorded
+FORMAT_VERSION = 3
 TRIALS, META, PROTOCOL_COPY, TRACES = "trials.tsv", "session.json", "protocol.toml", "traces"
 LOCK = "session.lock"  #: held (flock) by the one process writing the session
 
@@ -47,6 +54,22 @@ FLOAT_COLUMNS = ("peak_current", "rating", "response_time", "correct")
 #: who answered: a person (``human``), a scripted responder testing the machinery
 #: (``dry-run``), or the simulated participant model (``simulated``)
 KINDS = ("human", "dry-run", "simulated")
+
+class SessionStatus(StrEnum):
+    """How a session stands (session.json ``status``); each value is the text written."""
+
+    #: trials are being run, or the process stopped without a word (killed, power lost):
+    #: ``hapticlab resume`` continues it
+    RUNNING = "running"
+    #: every trial the engine planned has its row
+    COMPLETE = "complete"
+    #: stopped early on purpose or by a fault (the operator's abort, a device error, no
+    #: LSL recorder, Ctrl-C): ``hapticlab resume`` continues it
+    INTERRUPTED = "interrupted"
+    #: a run that Ctrl-C or a termination signal ended: the run's result says so (exit
+    #: status 130); session.json records it as ``interrupted``, resumed the same way
+    STOPPED = "stopped"
+
 
 #: dotted keys of session.json that every reader relies on
 META_REQUIRED = ("protocol.name", "protocol.sha256", "seed", "participant.id", "session",
@@ -232,6 +255,48 @@ def read_meta(path: str | Path) -> dict:
             missing.append(key)
     if missing:
         raise SessionMetaError(f"{path}: missing key(s) {', '.join(missing)}")
+    return upgrade_meta(meta, path)
+
+
+def upgrade_meta(meta: dict, path: str | Path = "session.json") -> dict:
+    """session.json of any format in this format's shape (the file is not changed).
+
+    - format 1 (no ``format_version``, no ``kind``): the kind is inferred
+      (:func:`session_kind`);
+    - format 2: ``protocol.rating`` and ``protocol.answer_choices`` (written beside the
+      design) are dropped where the design holds the same; a session with no design keeps
+      none (nothing analyses it).
+
+    ``upgraded_from`` names the format the file is in when it is older.
+
+    Raises
+    ------
+    SessionMetaError
+        When a format-2 file's two copies of the scale or the choices disagree (an edited
+        file: which one the session ran cannot be told), naming both.
+    """
+    version = meta.get("format_version", 1)
+    if not isinstance(version, int) or version > FORMAT_VERSION:
+        raise SessionMetaError(f"{path}: format_version {version!r} is newer than this "
+                               f"hapticlab reads ({FORMAT_VERSION}); update hapticlab")
+    if version == FORMAT_VERSION:
+        return meta
+    meta = {**meta, "kind": session_kind(meta), "format_version": FORMAT_VERSION,
+            "upgraded_from": version}
+    proto = dict(meta["protocol"])
+    design = proto.get("design")
+    for old, new in (("rating", "scale"), ("answer_choices", "answer_choices")):
+        if old not in proto:
+            continue
+        value = proto.pop(old)
+        if isinstance(design, dict) and value is not None:
+            held = design.get(new)
+            same = held == value if old == "answer_choices" else (
+                isinstance(held, dict) and all(held.get(k) == v for k, v in value.items()))
+            if not same:
+                raise SessionMetaError(f"{path}: protocol.{old} {value!r} disagrees with the "
+                                       f"design's {new} {held!r}; correct one of them")
+    meta["protocol"] = proto
     return meta
 
 

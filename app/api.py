@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from analysis.session_format import SessionStatus
+
 from .errors import AnalysisError, SessionFileError, UsageError
 from .guards import Terminated, close_at_exit
 
@@ -52,9 +54,10 @@ class SessionResult:
     ----------
     folder : Path
         The session folder.
-    status : str
+    status : SessionStatus
         ``complete``, ``interrupted`` (the device failed or the operator aborted; resume it)
-        or ``stopped`` (a signal or Ctrl-C; resume it).
+        or ``stopped`` (a signal or Ctrl-C; resume it). A ``str``: it compares and prints
+        as its text.
     attempts : int
         Rows recorded in trials.tsv.
     message : str
@@ -62,14 +65,14 @@ class SessionResult:
     """
 
     folder: Path
-    status: str
+    status: SessionStatus
     attempts: int
     message: str = ""
 
     @property
     def exit_code(self) -> int:
         """0 complete, 3 interrupted, 130 stopped (the CLI's exit status)."""
-        return {"complete": 0, "interrupted": 3}.get(self.status, 130)
+        return {SessionStatus.COMPLETE: 0, SessionStatus.INTERRUPTED: 3}.get(self.status, 130)
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,7 @@ class StudyResult:
 
     @property
     def complete(self) -> bool:
-        return all(s.status == "complete" for s in self.sessions)
+        return all(s.status == SessionStatus.COMPLETE for s in self.sessions)
 
 
 def _err(*args) -> None:
@@ -217,8 +220,8 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
 
     markers = runner.markers
 
-    def stopped(why: str, status: str, msg: str) -> SessionResult:
-        meta["status"] = "interrupted"
+    def stopped(why: str, status: SessionStatus, msg: str) -> SessionResult:
+        meta["status"] = SessionStatus.INTERRUPTED  # Ctrl-C too: resumed the same way
         meta.setdefault("interruptions", []).append(why)
         markers.trial(None)
         markers.send("session_end", status=status, why=why)
@@ -233,7 +236,7 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
     started = time.monotonic()
     try:
         if not markers.wait_for_consumer(lsl_wait, console.say):
-            return stopped("no LSL recorder", "interrupted",
+            return stopped("no LSL recorder", SessionStatus.INTERRUPTED,
                            f"no recorder received the LSL markers within {lsl_wait:g} s; no "
                            "trial ran. Start the recording, then resume with: hapticlab "
                            f"resume {files.folder} --lsl")
@@ -241,10 +244,10 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
                      protocol=runner.protocol.name, attempts_logged=len(runner.log))
         runner.run()
     except SessionInterrupted as exc:
-        return stopped(str(exc), "interrupted", f"session interrupted: {exc}\nresume with: "
-                       f"hapticlab resume {files.folder}")
+        return stopped(str(exc), SessionStatus.INTERRUPTED, f"session interrupted: {exc}\n"
+                       f"resume with: hapticlab resume {files.folder}")
     except (KeyboardInterrupt, Terminated) as exc:
-        return stopped(f"stopped ({type(exc).__name__})", "stopped",
+        return stopped(f"stopped ({type(exc).__name__})", SessionStatus.STOPPED,
                        "stopped; everything recorded is saved. resume with: hapticlab resume "
                        f"{files.folder}")
     except BaseException:  # an error no stop caught: the stream goes, its record is kept
@@ -254,7 +257,7 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
                 files.write_meta(meta)
         raise
     meta["times"]["finished_utc"] = utc_now()
-    meta["status"] = "complete"
+    meta["status"] = SessionStatus.COMPLETE
     summary = runner.summary(time.monotonic() - started)
     meta["summary"] = summary
     meta["link"] = runner.device.link_stats()
@@ -271,12 +274,12 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
         console.say(f"trials complete: {summary} — the participant is answering the "
                     "debrief question")
     meta["participant"]["debrief"] = runner.participant_ui.debrief()
-    markers.send("session_end", status="complete")
+    markers.send("session_end", status=SessionStatus.COMPLETE)
     markers.close()
     files.write_meta(meta)
     console.say(f"session complete: {summary}")
     runner.participant_ui.finished(summary)
-    return SessionResult(files.folder, "complete", len(runner.log),
+    return SessionResult(files.folder, SessionStatus.COMPLETE, len(runner.log),
                          f"session complete: {files.folder} ({len(runner.log)} attempts)")
 
 
@@ -518,8 +521,8 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
     try:
         meta = files.read_meta()  # as the last writer left it
         console = make_console(quiet=quiet)
-        if meta.get("status") == "complete":
-            return SessionResult(files.folder, "complete", len(files.read_rows()[0]),
+        if meta.get("status") == SessionStatus.COMPLETE:
+            return SessionResult(files.folder, SessionStatus.COMPLETE, len(files.read_rows()[0]),
                                  f"{files.folder}: the session is already complete")
         return _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                        operator_keys, lsl, lsl_wait)
@@ -595,7 +598,7 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
             meta["resumes"].append({"at_utc": utc_now(), "attempts_logged": len(runner.log),
                                     "torn_line": None if torn is None else torn.line,
                                     "device": spec, "limits": limits})
-            meta["status"] = "running"
+            meta["status"] = SessionStatus.RUNNING
             _keep_markers(meta, parts.markers)
             files.write_meta(meta)
             console.say(f"resuming {files.folder} after {len(runner.log)} attempts")
@@ -690,7 +693,7 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
                             row=(k - 1) % rows if rows else None,
                             clear_fault=clear_fault and k == 1)
             out.append(r)
-            if r.status != "complete":
+            if r.status != SessionStatus.COMPLETE:
                 break
             if progress is not None:
                 progress(f"  {protocol}: participant {k}/{participants} done "

@@ -13,6 +13,7 @@ import shlex
 import sys
 from collections.abc import Callable, Sequence
 
+from analysis.session_format import SessionStatus
 from device.errors import HapticlabError
 
 from .errors import UsageError
@@ -407,7 +408,7 @@ def _add_lsl(p: argparse.ArgumentParser) -> None:
 def _report(r, quiet: bool) -> None:
     """A complete session's line on stdout; why it stopped on stderr, even with --quiet
     (the console already said it when not quiet)."""
-    if r.status == "complete":
+    if r.status == SessionStatus.COMPLETE:
         print(r.message)
     elif quiet:
         print(f"hapticlab: {r.message}", file=sys.stderr)

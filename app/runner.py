@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.session_format import FORMAT_VERSION, PROTOCOL_COPY
+from analysis.session_format import FORMAT_VERSION, PROTOCOL_COPY, SessionStatus
 from device import DeviceError, DeviceFaultError, HapticDevice
 from protocols import (
     DONE,
@@ -101,11 +101,7 @@ def session_meta(protocol: Protocol, protocol_ref: str, participant: str, sessio
         "app": {"name": "hapticlab", "version": APP_VERSION, "git_sha": _git_sha()},
         "protocol": {"name": protocol.name, "ref": protocol_ref, "source": protocol.source,
                      "sha256": protocol.sha256, "copy": PROTOCOL_COPY,
-                     "rating": None if protocol.rating is None else
-                     {"min": protocol.rating.min, "max": protocol.rating.max},
-                     "answer_choices": None if protocol.answer is None
-                     else list(protocol.answer.choices),
-                     "design": protocol.design()},
+                     "design": protocol.design()},  # the one place of scale and choices
         "kind": kind,
         "libraries": libraries or {},
         "seed": seed,
@@ -122,7 +118,7 @@ def session_meta(protocol: Protocol, protocol_ref: str, participant: str, sessio
         "resumes": [],
         "timing": {},
         "link": {},
-        "status": "running",
+        "status": SessionStatus.RUNNING,
     }
 
 
@@ -236,7 +232,7 @@ class SessionRunner:
             self._save_notes()
             trial = self.engine.next_trial(self.log)
             if trial is DONE:
-                return "complete"
+                return SessionStatus.COMPLETE
             if trial is PAUSED:  # a pause recorded in the log (older sessions)
                 time.sleep(0.05)
                 continue

@@ -32,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.session_format import SessionStatus
+
 from ._common import emit, print_table
 
 KEY = ("trial_index", "item", "attempt", "sample", "status", "rating", "answer", "n_taps",
@@ -116,7 +118,8 @@ def _incomplete(folder: Path) -> bool:
     import json
 
     try:
-        return json.loads((folder / "session.json").read_text())["status"] != "complete"
+        return json.loads((folder / "session.json").read_text())["status"] \
+            != SessionStatus.COMPLETE
     except (FileNotFoundError, ValueError, KeyError):
         return True
 
