@@ -23,6 +23,11 @@ __all__ = ["ordinal_mixed", "MAX_ROWS"]
 #: Rows above which the fit is refused before it allocates: each likelihood evaluation
 #: holds rows × nodes doubles several times over, and the optimiser needs ~10³ of them.
 MAX_ROWS = 200_000
+#: beyond this many log-odds [logits] an estimate has run off rather than converged: the
+#: ratings separate the levels (every rating of one above the other's), the likelihood has
+#: no maximum in that direction, and a Wald SE or CI there would be a number without a
+#: meaning (an odds ratio of e^15 ≈ 3 million)
+DIVERGED_LOGITS = 15.0
 #: quadrature nodes per participant (adaptive: centred and scaled on each posterior mode)
 NODES = 20
 
@@ -83,8 +88,12 @@ class _Model:
             self._u = None
             raise FloatingPointError("a participant's posterior mode is not finite")
         _l, _d1, d2 = self._derivs(a, b, u)
+        curvature = 1 / s2 - d2  # > 0 where the log-posterior is concave, as it must be
+        if not np.all(curvature > 0):  # rounding at far-out parameters: not a point to use
+            self._u = None
+            raise FloatingPointError("a participant's posterior has no curvature at its mode")
         self._u = u
-        return u, 1.0 / np.sqrt(-(d2 - 1 / s2))
+        return u, 1.0 / np.sqrt(curvature)
 
     def nll(self, par: np.ndarray) -> tuple[float, np.ndarray]:
         """−log L and its gradient (the quadrature's nodes held where this call put them,
@@ -165,7 +174,9 @@ def ordinal_mixed(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.
         (likelihood-ratio χ²), ``dof``, ``p_unc``, ``sd_subject`` (random-intercept SD, logit
         scale), ``loglik``, ``converged``. ``attrs["thresholds"]`` and ``attrs["fixed"]``:
         estimates with SEs and 95 % Wald CIs (coefficients of each level against the first,
-        on the logit scale: positive means higher ratings).
+        on the logit scale: positive means higher ratings); an estimate beyond
+        :data:`DIVERGED_LOGITS`, or one whose SE is undefined, has None there and a
+        ``note`` saying why.
 
     Raises
     ------
@@ -223,13 +234,35 @@ def ordinal_mixed(data: pd.DataFrame, dv: str, within: str, subject: str) -> pd.
     K = len(cats)
     th_se = _threshold_se(full, rf.x)
     out.attrs["thresholds"] = [
-        {"between": f"{cats[i]:g}|{cats[i + 1]:g}", "estimate": float(t), "se": float(s)}
+        {"between": f"{cats[i]:g}|{cats[i + 1]:g}", **_wald(t, s, None)}
         for i, (t, s) in enumerate(zip(theta, th_se, strict=True))]
     out.attrs["fixed"] = [
-        {"term": f"{within}[{lv}]", "estimate": float(b), "se": float(s),
-         "ci_low": float(b - z * s), "ci_high": float(b + z * s)}
+        {"term": f"{within}[{lv}]", **_wald(b, s, z)}
         for lv, b, s in zip(levels[1:], beta, se[K - 1:K - 1 + len(beta)], strict=True)]
+    diverged = [r for r in (*out.attrs["thresholds"], *out.attrs["fixed"])
+                if str(r.get("note", "")).startswith("diverged")]
+    if diverged:
+        out["note"] = (f"{len(diverged)} estimate(s) diverged (the ratings separate some "
+                       "levels): the likelihood-ratio test compares the likelihoods' suprema "
+                       "and is still defined; those coefficients and their SEs are not")
     return out
+
+
+def _wald(estimate: float, se: float, z: float | None) -> dict:
+    """An estimate with its SE (and, given ``z``, its Wald CI); where either is not defined,
+    None and a ``note`` saying why, never a number that means nothing."""
+    row = {"estimate": float(estimate), "se": float(se)}
+    if z is not None:
+        row.update(ci_low=float(estimate - z * se), ci_high=float(estimate + z * se))
+    why = None
+    if abs(estimate) > DIVERGED_LOGITS:
+        why = (f"diverged (beyond ±{DIVERGED_LOGITS:g} log-odds: the ratings separate these "
+               "levels, so the likelihood has no maximum here): no SE or CI")
+    elif not math.isfinite(se):
+        why = "no SE or CI: the likelihood's curvature is not positive at the fit"
+    if why is not None:
+        row.update({k: None for k in row if k != "estimate"}, note=why)
+    return row
 
 
 def _threshold_se(model: _Model, par: np.ndarray) -> np.ndarray:
@@ -240,7 +273,7 @@ def _threshold_se(model: _Model, par: np.ndarray) -> np.ndarray:
     J[:, 0] = 1.0
     for c in range(1, K - 1):
         J[c, 1:c + 1] = np.exp(par[1:c + 1])
-    return np.sqrt(np.clip(np.diag(J @ cov @ J.T), 0, None))
+    return _sd(np.diag(J @ cov @ J.T))
 
 
 def _cov(model: _Model, par: np.ndarray) -> np.ndarray:
@@ -250,11 +283,19 @@ def _cov(model: _Model, par: np.ndarray) -> np.ndarray:
     H = approx_fprime(par, lambda x: model.nll(x)[1], centered=True)
     H = (H + H.T) / 2
     try:
+        np.linalg.cholesky(H)  # a maximum: positive definite, else no covariance exists
         return np.linalg.inv(H)
     except np.linalg.LinAlgError:
         return np.full((par.size, par.size), np.nan)
 
 
+def _sd(variance: np.ndarray) -> np.ndarray:
+    """√variance, NaN where the variance is not positive (it was clipped to 0 and printed
+    as an SE of 0)."""
+    return np.sqrt(np.where(variance > 0, variance, np.nan))
+
+
 def _wald_se(model: _Model, par: np.ndarray) -> np.ndarray:
-    """Standard errors of the parameters as optimised (NaN where the Hessian is singular)."""
-    return np.sqrt(np.clip(np.diag(_cov(model, par)), 0, None))
+    """Standard errors of the parameters as optimised (NaN where the Hessian is not
+    positive definite)."""
+    return _sd(np.diag(_cov(model, par)))

@@ -204,3 +204,25 @@ def test_the_ordinal_model_survives_a_participant_always_at_the_top():
     d = pd.DataFrame(rows, columns=["participant", "sample", "rating"])
     r = ordinal_mixed(d, "rating", "sample", "participant").iloc[0]
     assert np.isfinite(r["lr"]) and r["lr"] > 0 and r["converged"]
+
+
+def test_a_separated_ordinal_fit_says_its_estimates_diverged_instead_of_an_se_of_0():
+    """Found on 4 simulated participants of the realism protocol: every rating of some
+    samples lay above every rating of others, the cumulative-link model's estimates ran to
+    −46 log-odds, and the report printed SE 0 and a CI of zero width (negative variances
+    clipped to 0). An estimate that diverged has no SE or CI, and says so."""
+    import pandas as pd
+
+    from analysis.ordinal import DIVERGED_LOGITS, ordinal_mixed
+
+    rows = [{"p": f"P{i}", "s": s, "r": r} for i in range(4)
+            for s, rs in (("low", (1, 2, 1, 2)), ("high", (3, 3, 3, 3)), ("mid", (2, 1, 2, 3)))
+            for r in rs]
+    om = ordinal_mixed(pd.DataFrame(rows), "r", "s", "p")
+    high = next(f for f in om.attrs["fixed"] if f["term"] == "s[high]")
+    assert abs(high["estimate"]) > DIVERGED_LOGITS
+    assert high["se"] is None and high["ci_low"] is None and high["ci_high"] is None
+    assert high["note"].startswith("diverged")
+    assert "diverged" in om["note"].iloc[0]
+    mid = next(f for f in om.attrs["fixed"] if f["term"] == "s[mid]")  # overlaps 'low'
+    assert mid.get("note") is None and 0 < mid["se"] < 10
