@@ -21,8 +21,8 @@ from pathlib import Path
 
 from ..errors import DeviceError
 
-__all__ = ["FIRMWARE_DIR", "HOST_KINDS", "binary", "host_command", "qemu_command", "serve",
-           "QEMU_PTY"]
+__all__ = ["FIRMWARE_DIR", "HOST_KINDS", "CONFORMANCE_TARGETS", "binary", "host_command",
+           "qemu_command", "serve", "QEMU_PTY"]
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 #: builds by kind; ``board-qemu`` is the papers' board I/O built for QEMU (its peripheral
@@ -38,6 +38,12 @@ _TOOLS = {"host": _CC, "host-board": _CC, "host-san": _CC, "dhd-stub": _CC, "hd-
           "hd-stub-tsan": _CC, "qemu": _ARM, "board-qemu": _ARM}
 #: the builds that run on this machine (paced to its clock; at any speed but ``hd-stub``)
 HOST_KINDS = ("host", "host-board", "host-san", "dhd-stub", "hd-stub", "hd-stub-tsan")
+#: every device a host can open over the serial link for a session (``hapticlab device
+#: emulate --firmware KIND``): the Python emulator, then each build that serves sessions
+#: (not the ThreadSanitizer build, a check of the OpenHaptics one; QEMU's boards are
+#: opened the same way but boot for seconds, and the tests that can afford it add them).
+#: The conformance suite, the state table and the field ranges run on each.
+CONFORMANCE_TARGETS = ("python", *(k for k in HOST_KINDS if not k.endswith("-tsan")))
 #: the bridges to commercial devices, built over hapticlab's stand-ins for their SDKs: the
 #: Force Dimension bridge (its own 4-kHz servo loop through libdhd) and the OpenHaptics
 #: one (the servo tick in the HD scheduler's 1-kHz callback, real time only). Neither

@@ -18,12 +18,13 @@ import numpy as np
 import pytest
 
 from device.serial import messages as M
+from device.serial.firmware import CONFORMANCE_TARGETS
 from device.serial.framing import encode_frame
 
 from ..conftest import start_emulator, stop_emulator
 from .test_state_table import ANSWER_S, Host
 
-TARGETS = ["python", "host", "host-board", "host-san", "dhd-stub", "hd-stub"]
+TARGETS = CONFORMANCE_TARGETS  # every target, as device/serial/firmware.py lists them
 SPRING = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
 S = M.Status
 

@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 
 from device.serial import contract as C
 from device.serial import messages as M
+from device.serial.firmware import CONFORMANCE_TARGETS
 
 from ..conftest import start_emulator, stop_emulator
 from .test_state_table import Host
@@ -188,8 +189,7 @@ QEMU_FIELDS = {("SCENE_BEGIN", "surface_um"), ("SCENE_BEGIN", "spring"),
                ("SET_LIMIT", "current_ma"), ("TRACE_CONFIG", "channels")}
 
 
-@pytest.mark.parametrize("firmware", ["python", "host", "host-board", "host-san", "qemu",
-                                      "dhd-stub", "hd-stub"])
+@pytest.mark.parametrize("firmware", [*CONFORMANCE_TARGETS, "qemu"])
 def test_every_target_refuses_every_field_beyond_its_range(firmware):
     """Each bounded field of each command, in IDLE with a real sample committed: just
     beyond its range (NaN and ±inf for every f32) BAD_MESSAGE and nothing changes; at its

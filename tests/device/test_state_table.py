@@ -19,6 +19,7 @@ import serial
 
 from device.serial import messages as M
 from device.serial.contract import FAULTS
+from device.serial.firmware import CONFORMANCE_TARGETS
 from device.serial.framing import FrameDecoder
 
 from ..conftest import start_emulator, stop_emulator
@@ -258,8 +259,7 @@ def test_the_document_table_is_read_whole():
     assert rows["ZERO"]["PLAYING"] == (M.Status.OK, "IDLE")
 
 
-@pytest.mark.parametrize("firmware", ["python", "host", "host-board", "host-san", "dhd-stub",
-                                      "hd-stub"])
+@pytest.mark.parametrize("firmware", CONFORMANCE_TARGETS)
 def test_every_state_answers_every_command_as_the_document_says(firmware):
     emu = start_emulator("--firmware", firmware, "--seed", "2")
     host = Host(emu.port)
