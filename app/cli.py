@@ -56,43 +56,19 @@ def _load_protocol(path: str, device_spec: str | None = None, args=None):
 
 
 def _protocol_validate(args: argparse.Namespace) -> int:
-    p = _load_protocol(args.file, args.device, args)
-    from protocols import SessionEngine
+    from .api import validate_protocol
 
-    # the engine's own plan (any seed and counterbalance row plan as many trials)
-    williams = any(ph.block_order == "williams" for ph in p.phases)
-    n_items = len(SessionEngine(p, 0, "validate", 0 if williams else None).plan())
-    libs = ""
-    if args.device:  # the libraries its matched samples need, built on this device
-        from app.libraries import prepare_libraries
-
-        with _opener(args)(args.device) as dev:
-            info = dev.info
-            sim = info.backend == "sim"
-            found = prepare_libraries(p, dev, args.device, build=False, ref=args.file) \
-                if not sim else {}
-        if sim and any(s.scene.kind == "library" for s in p.samples.values()):
-            libs = "; matched samples: a missing library is built on first use (simulated)"
-        elif found:
-            libs = f"; libraries found for {', '.join(sorted(found))}"
-    print(f"{p.source}: valid protocol '{p.name}' — {_plural(len(p.samples), 'sample')}, "
-          f"{_plural(len(p.phases), 'phase')}, {_plural(n_items, 'trial')} without redraws"
-          + (f"; checked against device '{args.device}'{libs}" if args.device else ""))
-    if args.device:
-        from app.preflight import rendering_notes
-
-        for warning in rendering_notes(p, info):  # the device was opened above
-            print(f"warning: {warning}")
-    from protocols.texts import english_note
-
-    if note := english_note(p):
+    v = validate_protocol(args.file, device=args.device, clear_fault=args.clear_fault)
+    print(f"{v['source']}: valid protocol '{v['protocol']}' — "
+          f"{_plural(v['samples'], 'sample')}, {_plural(v['phases'], 'phase')}, "
+          f"{_plural(v['trials'], 'trial')} without redraws"
+          + (f"; checked against device '{v['device']}'"
+             + (f"; {v['libraries']}" if v["libraries"] else "") if v["device"] else ""))
+    for warning in v["warnings"]:
+        print(f"warning: {warning}")
+    for note in v["notes"]:
         print(f"note: {note}")
     return 0
-
-
-#: seconds per trial besides tapping (the operator swaps the block, the participant answers):
-#: a rule of thumb for the estimate ``protocol show`` prints; a lab measures its own
-OVERHEAD_S = 20.0
 
 
 def _plural(n: int, word: str) -> str:
@@ -100,39 +76,22 @@ def _plural(n: int, word: str) -> str:
 
 
 def _protocol_show(args: argparse.Namespace) -> int:
-    from protocols import SessionEngine
+    from .api import protocol_plan
 
-    p = _load_protocol(args.file)
-    engine = SessionEngine(p, args.seed, args.participant, args.row)
-    phases: list[dict] = []
-    no_repeat = {ph.name: ph.no_repeat for ph in p.phases}
-    for item, place in zip(engine.plan(), engine.placements(), strict=True):
-        if not phases or phases[-1]["name"] != item.phase:
-            phases.append({"name": item.phase, "no_repeat": no_repeat[item.phase],
-                           "trials": []})
-        trial = {"sample": item.samples[0] if len(item.samples) == 1 else list(item.samples),
-                 "item": item.key, "placement": place}
-        if item.block is not None:
-            trial["block"] = item.block
-        phases[-1]["trials"].append(trial)
+    plan = protocol_plan(args.file, seed=args.seed, participant=args.participant, row=args.row)
+    phases, estimate = plan["phases"], plan["duration_estimate"]
     n = sum(len(ph["trials"]) for ph in phases)
-    windows = sum(len(t["sample"]) if isinstance(t["sample"], list) else 1
-                  for ph in phases for t in ph["trials"])
-    tapping = windows * p.window.duration
-    estimate = {"tapping_s": tapping, "overhead_per_trial_s": OVERHEAD_S,
-                "total_s": tapping + n * OVERHEAD_S}
-    plan = {"protocol": p.name, "source": p.source, "sha256": p.sha256, "seed": args.seed,
-            "participant": args.participant, "phases": phases, "design": p.design(),
-            "duration_estimate": estimate}
+    windows, tapping = estimate["windows"], estimate["tapping_s"]
     if args.json:
         print(json.dumps(plan, indent=2))
         return 0
-    print(f"{p.title} ({p.source}, sha256 {p.sha256[:12]}…), seed {args.seed}")
+    print(f"{plan['title']} ({plan['source']}, sha256 {plan['sha256'][:12]}…), seed {args.seed}")
     print(f"{_plural(n, 'trial')}, {_plural(windows, 'tapping window')} of "
-          f"{p.window.duration:g} s: ≈ {estimate['total_s'] / 60:.0f} min without redraws "
-          f"({tapping / 60:.1f} min tapping + {OVERHEAD_S:g} s per trial to place and answer, "
+          f"{estimate['window_s']:g} s: ≈ {estimate['total_s'] / 60:.0f} min without redraws "
+          f"({tapping / 60:.1f} min tapping + {estimate['overhead_per_trial_s']:g} s per trial "
+          "to place and answer, "
           "a rule of thumb: time your own; reference taps and redrawn trials add to it)")
-    for ph, design in zip(phases, p.design()["phases"], strict=False):
+    for ph, design in zip(phases, plan["design"]["phases"], strict=False):
         what = {"none": "not analysed"}.get(design["role"], design["role"]) \
             if design["role"] != "analysed" else (
             f"analysed: {design['dv']}" + (f" over {' × '.join(design['within'])}"
