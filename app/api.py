@@ -36,7 +36,7 @@ from .errors import AnalysisError, SessionFileError, UsageError
 from .guards import Terminated, close_at_exit
 
 __all__ = ["SessionResult", "StudyResult", "run_session", "resume_session", "simulate_study",
-           "analyze", "session_seed", "protocol_plan", "validate_protocol", "KIND_OF",
+           "analyze", "session_seed", "protocol_plan", "validate_protocol", "power", "KIND_OF",
            "DEFAULT_SIM_DATA", "OVERHEAD_S"]
 
 _GROUP = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
@@ -759,6 +759,82 @@ def validate_protocol(protocol: str | Path, *, device: str | None = None,
     return {"protocol": p.name, "source": p.source, "samples": len(p.samples),
             "phases": len(p.phases), "trials": trials, "device": device,
             "libraries": libraries, "warnings": warnings, "notes": [note] if note else []}
+
+
+def power(protocol: str | Path, *, subjects, reps, effect: float = 1.0, alpha: float = 0.05,
+          experiments: int = 10_000, sd_trial: float | None = None,
+          sd_interaction: float = 0.5, sd_subject: float = 0.8,
+          pilot: str | Path | None = None) -> dict:
+    """Power of a paired difference and precision of a sample's mean against participants
+    and repetitions, for the last analysed rating phase of ``protocol``, by Monte-Carlo
+    (``hapticlab power``; :func:`analysis.power.power_table`).
+
+    Parameters
+    ----------
+    protocol : str or path
+        A built-in name or a protocol file.
+    subjects, reps : sequence of int
+        Participant counts (at least 2) and repetitions per cell (at least 1).
+    effect : float
+        The key contrast [scale points].
+    alpha : float
+        Significance level, Bonferroni-divided over every pair of the phase's samples.
+    experiments : int
+        Simulated experiments per cell.
+    sd_trial, sd_interaction, sd_subject : float
+        The SDs [scale points] of trial noise (default 0.9), participant × sample and
+        participant; with ``pilot`` estimated from its ratings instead.
+    pilot : path, optional
+        A folder of pilot sessions of this protocol.
+
+    Returns
+    -------
+    dict
+        ``protocol``, ``phase``, ``comparisons``, ``sd`` (the three SDs used) and
+        ``table`` (DataFrame: ``subjects``, ``reps``, ``power``, ``ci_halfwidth``).
+
+    Raises
+    ------
+    UsageError
+        Too few subjects or repetitions, a protocol without an analysed rating phase, or
+        pilot data without its ratings (each named).
+    """
+    from analysis.power import power_table, variance_components
+    from protocols import load_protocol
+
+    subjects, reps = list(subjects), list(reps)
+    if not subjects or min(subjects) < 2 or not reps or min(reps) < 1:
+        raise UsageError("need at least 2 subjects and 1 repetition")
+    p = load_protocol(protocol)
+    rated = [ph for ph in p.phases if ph.design.analysed and ph.design.dv == "rating"]
+    if not rated:
+        raise UsageError(f"power: protocol {p.name!r} has no analysed rating phase; "
+                         "power and precision are computed for rating studies")
+    phase = rated[-1]
+    comparisons = math.comb(len(phase.samples), 2)
+    sd = {"sd_trial": 0.9 if sd_trial is None else sd_trial,
+          "sd_interaction": sd_interaction, "sd_subject": sd_subject}
+    if pilot:
+        from analysis import LoadError, load_sessions
+
+        try:
+            d = load_sessions(pilot)
+        except LoadError as exc:
+            raise UsageError(str(exc)) from None
+        # the phase the protocol's design analyses (a practice phase is a first look)
+        d = d[d["valid"] & d["rating"].notna() & (d["protocol"] == p.name)
+              & (d["phase"] == phase.name)]
+        if d.empty:
+            raise UsageError(f"--pilot {pilot}: no valid ratings of {p.name!r} "
+                             f"in phase {phase.name!r}")
+        try:
+            sd = variance_components(d, sd_trial=sd_trial)
+        except ValueError as exc:
+            raise UsageError(f"--pilot {pilot}: {exc}") from None
+    table = power_table(subjects, reps, effect, alpha=alpha, comparisons=comparisons,
+                        experiments=experiments, **sd)
+    return {"protocol": p.name, "phase": phase.name, "comparisons": comparisons, "sd": sd,
+            "table": table}
 
 
 #: seconds per trial besides tapping (the operator swaps the block, the participant answers):

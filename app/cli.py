@@ -451,50 +451,24 @@ def _range(text: str) -> list[int]:
 
 
 def _power(args: argparse.Namespace) -> int:
-    from analysis.power import power_table, variance_components
+    from .api import power
 
     try:
         subjects = _range(args.subjects)[:: args.step]
         reps = _range(args.reps)
     except ValueError:
         raise UsageError("--subjects and --reps take 'A..B' or 'a,b,c'") from None
-    if not subjects or min(subjects) < 2 or not reps or min(reps) < 1:
-        raise UsageError("need at least 2 subjects and 1 repetition")
-    protocol = _load_protocol(args.protocol)
-    oneway = [p for p in protocol.phases if p.design.analysed and p.design.dv == "rating"]
-    if not oneway:
-        raise UsageError(f"power: protocol {protocol.name!r} has no analysed rating phase; "
-                         "power and precision are computed for rating studies")
-    phase = oneway[-1]
-    comparisons = math.comb(len(phase.samples), 2)
-    sd = {"sd_trial": 0.9 if args.sd_trial is None else args.sd_trial,
-          "sd_interaction": args.sd_interaction,
-          "sd_subject": args.sd_subject}
-    if args.pilot:
-        from analysis import LoadError, load_sessions
-
-        try:
-            d = load_sessions(args.pilot)
-        except LoadError as exc:
-            raise UsageError(str(exc)) from None
-        # the phase the protocol's design analyses (a practice phase is a first look)
-        d = d[d["valid"] & d["rating"].notna() & (d["protocol"] == protocol.name)
-              & (d["phase"] == phase.name)]
-        if d.empty:
-            raise UsageError(f"--pilot {args.pilot}: no valid ratings of {protocol.name!r} "
-                             f"in phase {phase.name!r}")
-        try:
-            sd = variance_components(d, sd_trial=args.sd_trial)
-        except ValueError as exc:
-            raise UsageError(f"--pilot {args.pilot}: {exc}") from None
-    t = power_table(subjects, reps, args.effect, alpha=args.alpha, comparisons=comparisons,
-                    experiments=args.experiments, **sd)
+    pw = power(args.protocol, subjects=subjects, reps=reps, effect=args.effect,
+               alpha=args.alpha, experiments=args.experiments, sd_trial=args.sd_trial,
+               sd_interaction=args.sd_interaction, sd_subject=args.sd_subject,
+               pilot=args.pilot)
+    t, sd, comparisons = pw["table"], pw["sd"], pw["comparisons"]
     if args.json:
-        print(json.dumps({"protocol": protocol.name, "phase": phase.name,
+        print(json.dumps({"protocol": pw["protocol"], "phase": pw["phase"],
                           "effect": args.effect, "comparisons": comparisons, **sd,
                           "rows": t.to_dict(orient="records")}, indent=2, allow_nan=False))
         return 0
-    print(f"{protocol.name}/{phase.name}: power of a {args.effect:g}-point paired difference at "
+    print(f"{pw['protocol']}/{pw['phase']}: power of a {args.effect:g}-point paired difference at "
           f"alpha {args.alpha:g}/{comparisons} (Bonferroni) and the 95 % CI half-width of a "
           f"sample's mean, {args.experiments} simulated experiments per cell "
           f"(sd trial {sd['sd_trial']:.2f}, subject×sample {sd['sd_interaction']:.2f}, "

@@ -32,3 +32,19 @@ def test_validate_returns_what_the_command_says():
     assert v["warnings"] == [] and v["notes"] == []
     with pytest.raises(ProtocolError, match="no-such-protocol"):
         validate_protocol("no-such-protocol")
+
+
+def test_power_is_an_api_function_with_named_refusals():
+    from app.api import power
+    from app.errors import UsageError
+
+    pw = power("realism", subjects=[5, 10], reps=[1, 2], experiments=200)
+    assert (pw["protocol"], pw["phase"], pw["comparisons"]) == ("realism", "testing", 55)
+    assert pw["sd"] == {"sd_trial": 0.9, "sd_interaction": 0.5, "sd_subject": 0.8}
+    t = pw["table"]
+    assert sorted(zip(t["subjects"], t["reps"], strict=True)) == [(5, 1), (5, 2), (10, 1), (10, 2)]
+    assert ((0 <= t["power"]) & (t["power"] <= 1)).all() and (t["ci_halfwidth"] > 0).all()
+    with pytest.raises(UsageError, match="at least 2 subjects"):
+        power("realism", subjects=[1], reps=[1])
+    with pytest.raises(UsageError, match="no analysed rating phase"):
+        power("identification", subjects=[5], reps=[1])
