@@ -36,7 +36,8 @@ from .errors import AnalysisError, SessionFileError, UsageError
 from .guards import Terminated, close_at_exit
 
 __all__ = ["SessionResult", "StudyResult", "run_session", "resume_session", "simulate_study",
-           "analyze", "session_seed", "protocol_plan", "validate_protocol", "power", "KIND_OF",
+           "analyze", "session_seed", "protocol_plan", "validate_protocol", "power",
+           "preflight", "saturation_forecast", "KIND_OF",
            "DEFAULT_SIM_DATA", "OVERHEAD_S"]
 
 _GROUP = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
@@ -835,6 +836,106 @@ def power(protocol: str | Path, *, subjects, reps, effect: float = 1.0, alpha: f
                         experiments=experiments, **sd)
     return {"protocol": p.name, "phase": phase.name, "comparisons": comparisons, "sd": sd,
             "table": table}
+
+
+def preflight_line(protocol: str | Path, *, device: str, data: str | Path, responder: str,
+                   traces: str, audio: bool) -> str:
+    """The preflight's command line again, clearing the device's latched fault (quoted for
+    a shell: a folder may hold a space)."""
+    import shlex
+
+    return shlex.join(["hapticlab", "preflight", str(protocol), "--device", device,
+                       "--data", str(data), "--responder", responder, "--traces", traces,
+                       *([] if audio else ["--no-audio"]), "--clear-fault"])
+
+
+def preflight(protocol: str | Path, *, device: str, data: str | Path = "data",
+              responder: str = "person", traces: str = "full", audio: bool = True,
+              clear_fault: bool = False) -> list:
+    """Every check a session makes before it starts (``hapticlab preflight``), each a
+    :class:`app.preflight.Check` with its line and, when it fails, what to do.
+
+    Parameters
+    ----------
+    protocol : str or path
+        A built-in name or a protocol file.
+    device : str
+        The device spec the session will open.
+    data : path
+        The data folder (room for a session, writable).
+    responder : str
+        ``person`` also checks the terminal and the display.
+    traces : str
+        The traces the session will record (its size estimate).
+    audio : bool
+        Check (and play) the sound.
+    clear_fault : bool
+        Clear a fault the device latched before (the operator's decision); a failed
+        device check suggests the command again with it.
+    """
+    from app.preflight import (
+        Check,
+        check_answers,
+        check_audio,
+        check_data_folder,
+        check_device,
+        check_display,
+        check_libraries,
+        check_limit,
+        check_protocol_on,
+        check_terminal,
+        expected_session_bytes,
+    )
+    from device import DeviceError
+    from protocols import parse_protocol, protocol_text
+    from protocols.texts import english_note
+
+    source, text = protocol_text(protocol)
+    proto = parse_protocol(text, source)
+    checks = [Check("protocol", True, f"{source}: '{proto.name}' ({proto.sha256[:12]}…)"),
+              check_data_folder(data, expected_session_bytes(proto, traces)),
+              check_answers(proto)]
+    if note := english_note(proto):
+        checks.append(Check("texts", True, note))
+    if responder == "person":
+        checks += [check_terminal(), check_display()]
+    again = preflight_line(protocol, device=device, data=data, responder=responder,
+                           traces=traces, audio=audio)
+    try:
+        with _session_device(device, 0, person=False, clear_fault=clear_fault, lsl=False,
+                             say=_err) as dev:
+            checks += [check_device(dev, device, again), check_protocol_on(text, source, dev),
+                       check_limit(proto, dev),
+                       check_libraries(proto, dev, device, protocol)]
+    except DeviceError as exc:
+        checks.append(Check("device", False, str(exc), "check the cable, the port and the "
+                            "power"))
+    checks.append(check_audio(audio, play=audio))
+    return checks
+
+
+def saturation_forecast(protocol: str | Path, *, device: str, windows: int = 12,
+                        warn: float = 0.2, clear_fault: bool = False) -> dict:
+    """How often each sample of ``protocol`` will saturate ``device``'s drive, from a
+    simulated tapper (0.11 ± 0.033 m/s) over ``windows`` windows per sample (``hapticlab
+    device check``; :func:`app.saturation_forecast.saturation_check`).
+
+    Returns
+    -------
+    dict
+        ``protocol`` (its name), ``device`` (the spec), ``info`` (the device's
+        :class:`~device.DeviceInfo`) and ``rows`` (per sample: ``tap_rate``,
+        ``trial_rate``, ``warning`` — above ``warn`` of trials —, or ``error``).
+    """
+    from app.saturation_forecast import saturation_check
+    from protocols import load_protocol
+
+    p = load_protocol(protocol)
+    with _session_device(device, 0, person=False, clear_fault=clear_fault, lsl=False,
+                         say=_err) as dev:
+        info = dev.info
+    rows = saturation_check(p, info, windows=windows, warn=warn, say=_err)
+    return {"protocol": p.name, "device": device, "info": info, "rows": rows}
 
 
 #: seconds per trial besides tapping (the operator swaps the block, the participant answers):

@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import shlex
 import sys
 from collections.abc import Callable, Sequence
 
@@ -198,17 +197,15 @@ def _device_emulate(args: argparse.Namespace) -> int:
 
 
 def _device_check(args: argparse.Namespace) -> int:
-    from app.saturation_forecast import saturation_check
+    from .api import saturation_forecast
 
-    protocol = _load_protocol(args.protocol)
-    with _opener(args)(args.device) as dev:
-        info = dev.info
-    rows = saturation_check(protocol, info, windows=args.windows, warn=args.warn,
-                            say=lambda m: print(m, file=sys.stderr))
+    f = saturation_forecast(args.protocol, device=args.device, windows=args.windows,
+                            warn=args.warn, clear_fault=args.clear_fault)
+    rows, info = f["rows"], f["info"]
     if args.json:
         print(json.dumps({"device": args.device, "rows": rows}, indent=2))
         return 0
-    print(f"{protocol.name} on {args.device} ({info.current_limit:g} A × "
+    print(f"{f['protocol']} on {args.device} ({info.current_limit:g} A × "
           f"{info.force_constant:g} N/A = {info.max_force:.2f} N), simulated tapper "
           f"0.11 ± 0.033 m/s, {args.windows} windows per sample:")
     for r in rows:
@@ -262,53 +259,13 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _preflight_again(args: argparse.Namespace) -> str:
-    """The preflight's command line again, clearing the device's latched fault (quoted)."""
-    return shlex.join(["hapticlab", "preflight", str(args.protocol), "--device", args.device,
-                       "--data", str(args.data), "--responder", args.responder, "--traces",
-                       args.traces, *(["--no-audio"] if args.no_audio else []),
-                       "--clear-fault"])
-
-
 def _preflight(args: argparse.Namespace) -> int:
     """Every check a session makes before it starts, each on its own line."""
-    from app.preflight import (
-        Check,
-        check_answers,
-        check_audio,
-        check_data_folder,
-        check_device,
-        check_display,
-        check_libraries,
-        check_limit,
-        check_protocol_on,
-        check_terminal,
-        expected_session_bytes,
-    )
-    from device import DeviceError
-    from protocols import parse_protocol, protocol_text
-    from protocols.texts import english_note
+    from .api import preflight
 
-    source, text = protocol_text(args.protocol)
-    proto = parse_protocol(text, source)
-    checks = [Check("protocol", True, f"{source}: '{proto.name}' ({proto.sha256[:12]}…)"),
-              check_data_folder(args.data, expected_session_bytes(proto, args.traces)),
-              check_answers(proto)]
-    if note := english_note(proto):
-        checks.append(Check("texts", True, note))
-    if args.responder == "person":
-        checks += [check_terminal(), check_display()]
-    try:
-        with _opener(args)(args.device) as dev:
-            again = _preflight_again(args)
-            checks += [check_device(dev, args.device, again),
-                       check_protocol_on(text, source, dev),
-                       check_limit(proto, dev), check_libraries(proto, dev, args.device,
-                                                                args.protocol)]
-    except DeviceError as exc:
-        checks.append(Check("device", False, str(exc), "check the cable, the port and the "
-                            "power"))
-    checks.append(check_audio(not args.no_audio, play=not args.no_audio))
+    checks = preflight(args.protocol, device=args.device, data=args.data,
+                       responder=args.responder, traces=args.traces, audio=not args.no_audio,
+                       clear_fault=args.clear_fault)
     for c in checks:
         print(c.line())
     bad = sum(not c.ok for c in checks)

@@ -216,7 +216,7 @@ def test_commands_built_from_values_parse_with_spaces_in_them():
     identification's keeps every option the user gave (it kept only --device)."""
     from types import SimpleNamespace
 
-    from app.cli import _preflight_again
+    from app.api import preflight_line
     from app.libraries import build_line
     from app.matching_cli import _sysid_again
     from app.runner import SessionRunner
@@ -230,7 +230,9 @@ def test_commands_built_from_values_parse_with_spaces_in_them():
     given = parser.parse_args(["preflight", "my protocols/r.toml", "--device", "serial:/dev/x",
                                "--data", "/lab data", "--responder", "scripted", "--traces",
                                "none", "--no-audio"])
-    again = parser.parse_args(shlex.split(_preflight_again(given))[1:])
+    again = parser.parse_args(shlex.split(preflight_line(
+        given.protocol, device=given.device, data=given.data, responder=given.responder,
+        traces=given.traces, audio=not given.no_audio))[1:])
     keep = ("protocol", "device", "data", "responder", "traces", "no_audio")
     assert {k: getattr(again, k) for k in keep} == {k: getattr(given, k) for k in keep}
     assert again.clear_fault
