@@ -61,7 +61,8 @@ BEH_COLUMNS = {
     "item": ("", "the trial's item: <phase>/<sample>#<repetition>"),
     "attempt": ("", "attempt number of this item (a redrawn or stopped trial runs again)"),
     "sample": ("", "the sample felt (a real block or a rendering; the protocol names them); "
-               "identification trials list the surfaces"),
+               "identification trials list the surfaces; comparison trials, the two "
+               "samples in the order felt"),
     "block": ("", "block (the factorial's material); n/a when the phase has none"),
     "factors": ("", "the sample's factor levels as recorded (name=level, semicolon-separated)"),
     "placement": ("", "what the operator placed on the device (a real sample, or a "
@@ -73,7 +74,8 @@ BEH_COLUMNS = {
     "peak_current": ("A", "largest amplifier current commanded in the window"),
     "rating": ("", "the participant's rating on the protocol's scale"),
     "response_time": ("s", "from the rating screen to the answer"),
-    "answer": ("", "identification: the materials named for the surfaces, in order"),
+    "answer": ("", "identification: the materials named for the surfaces, in order; "
+               "comparison: the sample chosen as more like real contact"),
     "correct": ("", "identification: 1 when every surface was named right, else 0"),
     "reason": ("", "why an attempt is not valid, in words"),
 }

@@ -63,7 +63,8 @@ LONG_COLUMNS = {
     "sample": ("", "sample id (a rendering or real sample; factorial sets are "
                    "<material>-<code>, one letter per factor in the order frequency, decay, "
                    "slope, L low and H high: rubber-LHL is low frequency, high decay, low "
-                   "slope; identification: the surfaces in order, joined by +)"),
+                   "slope; identification: the surfaces in order, joined by +; "
+                   "comparison: the two samples in the order felt, joined by +)"),
     "repetition": ("", "1-based repetition of the sample within its phase"),
     "trial_index": ("", "1-based position of the attempt in the session"),
     "rating": ("scale points", "the participant's rating on the protocol's scale: the "
@@ -78,7 +79,8 @@ LONG_COLUMNS = {
     "slope_per_s": ("1/s", "factorial set: the amplitude slope (peak acceleration per "
                            "incoming speed)"),
     "scale": ("", "the rating scale, min-max"),
-    "answer": ("", "identification: the names given to the surfaces, in order"),
+    "answer": ("", "identification: the names given to the surfaces, in order; "
+                   "comparison: the sample chosen as more like real contact"),
     "correct": ("0/1", "identification: 1 when every surface was named right"),
     "response_time": ("s", "from the rating screen's onset to the answer"),
     "n_taps": ("", "contacts in the trial's window"),
@@ -163,13 +165,27 @@ def _long(parts) -> pd.DataFrame:
 
 
 def _dv(phase: dict) -> str:
-    return "rating" if phase.get("dv") == "rating" else "correct"
+    return {"rating": "rating", "choice": "won"}.get(phase.get("dv"), "correct")
+
+
+def _won(rows: pd.DataFrame) -> pd.DataFrame:
+    """A comparison's choices as one row per sample felt: ``sample`` and ``won`` (1 when it
+    was the one chosen), so a participant's mean of ``won`` per sample is the share of
+    its comparisons that sample won."""
+    rows = rows.copy()
+    rows.attrs = {}  # the loaded data's (designs, files): not the rows', and concat compares
+    felt = rows["sample"].str.split("+", expand=True)
+    parts = [rows.assign(sample=felt[i], won=(rows["answer"] == felt[i]).astype(float))
+             for i in range(felt.shape[1])]
+    return pd.concat(parts, ignore_index=True)
 
 
 def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd.DataFrame, dict]:
     """One row per participant, one column per cell; returns (table, column → meaning)."""
     dv = _dv(phase)
     cell = "repetition" if dv == "correct" else "sample"
+    if dv == "won":
+        rows = _won(rows)
     vals = pd.to_numeric(rows[dv], errors="coerce")
     r = rows.assign(**{dv: vals}).dropna(subset=[dv])
     w = (r.groupby(["participant", cell], observed=True)[dv].mean().unstack(cell))
@@ -202,9 +218,10 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
         new = _safe(name) if safe else name
         rename[c] = new
         what = (f"proportion correct in repetition {c}" if cell == "repetition" else
+                f"share of its comparisons sample {c} won" if dv == "won" else
                 f"mean {dv} of sample {c} over its repetitions")
         scale = design.get("scale") or {}
-        unit = ("0/1" if dv == "correct" else
+        unit = ("0/1" if dv == "correct" else "proportion" if dv == "won" else
                 f"scale points ({scale['min']}–{scale['max']})" if scale else "scale points")
         meaning[new] = (unit, what + ("" if new == str(name) else f" (column {name})"))
         if normalized:

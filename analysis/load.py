@@ -115,6 +115,11 @@ def _invalid(row: dict, phase: dict | None, design: dict | None) -> str:
             return f"answer names {', '.join(bad)}, not among {', '.join(choices)}"
         if row["correct"] not in ("0", "1"):
             return f"correct is {row['correct']!r}, not 0 or 1"
+    elif phase.get("dv") == "choice":
+        felt = row["sample"].split("+")
+        if row["answer"] not in felt:
+            return (f"the choice {row['answer']!r} is not one of the samples felt "
+                    f"({', '.join(felt)})" if row["answer"] else "a valid trial without a choice")
     return ""
 
 

@@ -29,7 +29,9 @@ from .stats import (
     friedman,
     identification_scores,
     mixed_oneway,
+    order_bias,
     p_adjust,
+    pair_preferences,
     pairwise_ttests,
     pairwise_wilcoxon,
     participant_identification_test,
@@ -38,9 +40,8 @@ from .stats import (
     zscore_by_subject,
 )
 
-__all__ = ["phase_rows", "rating_oneway",
-           "rating_factorial", "answer_scores", "device_summary", "mean_ci", "mean_cis",
-           "analysed_phases"]
+__all__ = ["phase_rows", "rating_oneway", "rating_factorial", "answer_scores", "choice_scores",
+           "device_summary", "mean_ci", "mean_cis", "analysed_phases"]
 
 SUBJECT = "participant"
 
@@ -388,6 +389,50 @@ def simple_effects(data: pd.DataFrame, dv: str, factors: list[str], subject: str
                                       "p_unc", "np2"])
     out.insert(7, "p_holm", p_adjust(out["p_unc"].to_numpy(), "holm"))
     return out
+
+
+def choice_scores(data: pd.DataFrame, levels: list[str] | None = None,
+                  subject: str = SUBJECT) -> dict:
+    """Paired comparisons (a ``comparison`` phase): for each pair of samples, which was
+    chosen (both orders pooled; exact binomial test against 1/2, Holm over the pairs); for
+    each sample, the share of its comparisons it won; and the bias towards the sample felt
+    first.
+
+    Parameters
+    ----------
+    data : DataFrame
+        The phase's rows (:func:`analysis.load_sessions`): ``sample`` holds the pair as
+        felt (``first+second``), ``answer`` the sample chosen.
+    levels : list of str, optional
+        The phase's samples in the protocol's order (the pairs are written in it).
+
+    Returns
+    -------
+    dict
+        ``pairs`` (:func:`analysis.stats.pair_preferences`), ``samples`` (per sample:
+        ``wins``, ``n``, ``prop_won``, best first), ``order``
+        (:func:`analysis.stats.order_bias`), ``n_subjects`` and ``n_choices``.
+    """
+    d = data[data["valid"]].copy()
+    if d.empty:
+        raise StatsError("no valid choices")
+    felt = d["sample"].str.split("+", expand=True)
+    if felt.shape[1] != 2 or felt.isna().any().any():
+        raise StatsError("a comparison trial felt two samples; some rows name another count")
+    d["first"], d["second"] = felt[0], felt[1]
+    pairs = pair_preferences(d, "first", "second", "answer", levels=levels)
+    order = order_bias(d, "first", "second", "answer")
+    names = list(levels) if levels is not None else list(
+        dict.fromkeys([*d["first"], *d["second"]]))
+    samples = []
+    for s in names:
+        n = int(((d["first"] == s) | (d["second"] == s)).sum())
+        if n:
+            wins = int((d["answer"] == s).sum())
+            samples.append({"sample": s, "wins": wins, "n": n, "prop_won": wins / n})
+    samples.sort(key=lambda r: -r["prop_won"])
+    return {"pairs": pairs, "samples": samples, "order": order,
+            "n_subjects": int(d[subject].nunique()), "n_choices": int(len(d))}
 
 
 def answer_scores(data: pd.DataFrame, scoring: str = "all_correct",

@@ -441,9 +441,13 @@ def _power(args: argparse.Namespace) -> int:
     return 0
 
 
+#: what a command's protocol argument takes
+PROTOCOL_HELP = "a built-in name (realism, factorial, identification, comparison) or a file"
+
+
 def _add_session_parsers(sub) -> None:
     r = sub.add_parser("run", help="run a session: a person at the screen, or a dry run")
-    r.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    r.add_argument("protocol", help=PROTOCOL_HELP)
     r.add_argument("--participant", required=True, help="participant id, e.g. P01")
     r.add_argument("--device", default=None, help="serial:PORT (the lab's device), sim or "
                    "sim:RATE; required when a person answers")
@@ -478,7 +482,7 @@ def _add_session_parsers(sub) -> None:
     _add_lsl(r)
     r.set_defaults(func=_run)
     pf = sub.add_parser("preflight", help="every check a session makes before it starts")
-    pf.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    pf.add_argument("protocol", help=PROTOCOL_HELP)
     pf.add_argument("--device", required=True, help="serial:PORT, sim or sim:RATE")
     pf.add_argument("--data", default="data", help="data folder to check (default ./data)")
     pf.add_argument("--responder", choices=("person", "scripted", "simulated"),
@@ -502,7 +506,7 @@ def _add_session_parsers(sub) -> None:
     _add_lsl(rs)
     rs.set_defaults(func=_resume)
     s = sub.add_parser("simulate", help="run a whole study with simulated participants")
-    s.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    s.add_argument("protocol", help=PROTOCOL_HELP)
     s.add_argument("--participants", type=int, default=9, help="simulated participants "
                    "(default 9)")
     s.add_argument("--seed", type=int, default=0, help="study seed (session seeds derive from it)")
@@ -542,7 +546,7 @@ def build_parser() -> argparse.ArgumentParser:
     dl.add_argument("--json", action="store_true", help="print the list as JSON")
     dl.set_defaults(func=_device_list)
     ck = dsub.add_parser("check", help="predict how often each virtual sample saturates")
-    ck.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    ck.add_argument("protocol", help=PROTOCOL_HELP)
     ck.add_argument("--device", default="sim", help="device spec: sim (default), sim:RATE or "
                     "serial:PORT")
     ck.add_argument("--windows", type=int, default=12, help="5-s windows per sample")
@@ -572,7 +576,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_parsers(dsub, sub, _matching, _add_clear_fault)
 
     pw = sub.add_parser("power", help="Monte-Carlo power and precision for session length")
-    pw.add_argument("protocol", help="realism, factorial, identification, or a protocol file")
+    pw.add_argument("protocol", help=PROTOCOL_HELP)
     pw.add_argument("--subjects", default="5..30", help="participant counts: A..B (with "
                     "--step) or a list 5,10,20 (default 5..30)")
     pw.add_argument("--step", type=int, default=5, help="step over the subjects range")
@@ -620,7 +624,8 @@ def build_parser() -> argparse.ArgumentParser:
     pr = sub.add_parser("protocol", help="protocol files (validate, show)")
     psub = pr.add_subparsers(dest="protocol_command", required=True, metavar="ACTION")
     pv = psub.add_parser("validate", help="check a protocol file; exit 0 when valid")
-    pv.add_argument("file", help="built-in name (realism, factorial, identification) or a path")
+    pv.add_argument("file", help="built-in name (realism, factorial, identification, "
+                    "comparison) or a path")
     pv.add_argument("--device", help="also check forces and currents against this device")
     _add_clear_fault(pv)
     pv.set_defaults(func=_protocol_validate)

@@ -384,6 +384,15 @@ class SimulatedParticipant(Participant):
             + rng.normal(0.0, self.person.rating_noise)
         return int(np.clip(round(y), lo, hi)), float(rng.lognormal(math.log(1.5), 0.3))
 
+    def choose(self, trial, results, rng) -> tuple[int, float]:
+        """The sample whose felt features lay nearer what it remembers of real contact
+        (the familiarization block, or the samples' real reference), each perceived with
+        fresh noise; a coin where nothing could be compared."""
+        _key, ref = self._reference(trial)
+        d = np.array([self.distance(felt_features(r), ref, rng) for r in results])
+        k = int(rng.integers(0, len(d))) if np.isnan(d).any() else int(np.argmin(d))
+        return k, float(rng.lognormal(math.log(1.8), 0.3))
+
     def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:
         # each name's real block: the protocol's reference of the surface of that name (tapped
         # before the test, and remembered then)

@@ -89,6 +89,12 @@ class Participant:
         """(a name for each surface in order, response time [s])."""
         raise NotImplementedError(f"{type(self).__name__} does not identify")
 
+    def choose(self, trial, results, rng: np.random.Generator) -> tuple[int, float]:
+        """Comparison: which of the trial's samples felt more like real contact (its index
+        in ``trial.samples``, whose windows' ``results`` are in the same order), response
+        time [s]."""
+        raise NotImplementedError(f"{type(self).__name__} does not choose")
+
     def pause(self, fault: bool = False) -> None:
         """The operator paused the session (``fault``: an e-stop or the watchdog)."""
 
@@ -114,6 +120,9 @@ class ScriptedResponder(Participant):
 
     def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:
         return [str(c) for c in rng.permutation(list(choices))], float(rng.uniform(3.0, 8.0))
+
+    def choose(self, trial, results, rng) -> tuple[int, float]:
+        return int(rng.integers(0, len(trial.samples))), float(rng.uniform(0.8, 2.5))
 
     def debrief(self) -> str:
         return "scripted responder: no criteria"

@@ -629,7 +629,20 @@ class SessionRunner:
                           response_time_s=row["response_time"])
         return row
 
-    _RESPONSES = {"rating": _rating, "answer": _answer}
+    def _choice(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
+        self.console.set_state("rating")  # choosing: the operator's e acts, as when rating
+        self.markers.send("rating_onset")
+        k, rt = self.participant_ui.choose(trial, judged, rng)
+        if k not in range(len(trial.samples)):
+            raise SessionInterrupted(f"the responder chose {k!r}, not one of the "
+                                     f"{len(trial.samples)} samples felt; nothing was "
+                                     "recorded for this trial")
+        row = {"answer": trial.samples[k], "response_time": round(float(rt), 3)}
+        self.markers.send("response", answer=row["answer"],
+                          response_time_s=row["response_time"])
+        return row
+
+    _RESPONSES = {"rating": _rating, "answer": _answer, "choice": _choice}
 
     def _spill(self, trial: Trial, k: int, res):
         """Window ``k`` of ``trial`` with its traces written now when the session records

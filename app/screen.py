@@ -287,8 +287,11 @@ class PsychoPyScreen(Participant):
         the real block' for as long as a real block is tapped."""
         if trial.kind == REFERENCE:
             return self.t("reference")
-        if phase_kind(trial.kind).surfaces and sample_id in trial.samples:
+        kind = phase_kind(trial.kind)
+        if kind.surfaces and sample_id in trial.samples:
             return f"{self.t('tap')} · {self.t('surface', i=trial.samples.index(sample_id) + 1)}"
+        if kind.items == "pairs" and sample_id in trial.samples:
+            return f"{self.t('tap')} · {self.t('pair', i=trial.samples.index(sample_id) + 1)}"
         return self.t("tap")
 
     def before_window(self, trial, sample_id, device, rng) -> None:
@@ -482,6 +485,13 @@ class PsychoPyScreen(Participant):
             self.t("choose", keys=keys), self.t("tapped", list=tapped)
             + (f"   — {self.t('name_hint')}" if len(visited) == n else ""), cursor=True))
         return None if key == "n" else int(key.removeprefix("num_")) - 1
+
+    def choose(self, trial, results, rng) -> tuple[int, float]:
+        """Which of the two felt more real: 1 or 2 (number row or keypad), one key press."""
+        keys = {"1": 0, "num_1": 0, "2": 1, "num_2": 1}
+        key, rt = self._wait(keys, lambda: self._frame(self.t("choice"),
+                                                       self.t("choice_keys")))
+        return keys[key], rt
 
     def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:
         """Each surface named with the number key shown beside each name."""

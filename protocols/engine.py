@@ -106,7 +106,8 @@ class ResumeMismatch(HapticlabError, ValueError):
 
 @dataclass(frozen=True)
 class Item:
-    """One queued unit of work (a sample repetition, or an identification repetition)."""
+    """One queued unit of work: a sample's repetition, an identification's (all the samples)
+    or a comparison's (an ordered pair)."""
 
     key: str
     phase: str
@@ -125,7 +126,7 @@ class Trial:
     item : str
         Stable key of the queued item (``phase/sample#repetition``); log attempts by it.
     phase, kind : str
-        Phase name and kind (``rated``, ``free``, ``identification``).
+        Phase name and kind (a :func:`~protocols.kinds.phase_kind` name, or ``reference``).
     trial_index : int
         1-based position of this attempt in the session.
     attempt : int
@@ -311,7 +312,17 @@ class SessionEngine:
     def _phase_items(self, phase: Phase, rng: np.random.Generator,
                      before: Item | None) -> list[Item]:
         samples = self.protocol.samples
-        if phase_kind(phase.kind).surfaces:  # one item of all the samples, drawn in order
+        items = phase_kind(phase.kind).items
+        if items == "pairs":  # both orders of every pair, each repetition, in a drawn order
+            pairs = [(a, b) for a in phase.samples for b in phase.samples if a != b]
+            out = []
+            for rep in range(1, phase.repetitions + 1):
+                order = [pairs[i] for i in rng.permutation(len(pairs))] \
+                    if phase.order == "random" else pairs
+                out += [Item(f"{phase.name}/{a}+{b}#{rep}", phase.name, phase.kind, (a, b),
+                             None, rep) for a, b in order]
+            return out
+        if items == "all":  # one item of all the samples, drawn in order
             out = []
             for rep in range(1, phase.repetitions + 1):
                 order = [phase.samples[i] for i in rng.permutation(len(phase.samples))]

@@ -10,6 +10,11 @@ read its declaration; none of them compares kind names.
 A kind is described by a few answers, each with a small fixed vocabulary that the code
 reading it implements once (a new kind that reuses them needs no code elsewhere):
 
+``items``
+    How the phase's samples make its items: ``"each"`` (one item per sample, in blocks,
+    in a drawn or fixed order), ``"all"`` (one item of all the samples, their order drawn
+    per item) or ``"pairs"`` (one item per ordered pair of samples: both orders of every
+    pair, so the order a pair is felt in is balanced).
 ``windows``
     How an item's device windows run: ``"each_sample"`` (one window per sample of the
     item, in order), ``"until_done"`` (windows on the item's one sample until the
@@ -19,7 +24,8 @@ reading it implements once (a new kind that reuses them needs no code elsewhere)
 ``response``
     What the participant gives after the windows: ``"rating"`` (a point on the
     protocol's ``[rating]`` scale), ``"answer"`` (a name from ``[answer]`` for each
-    surface) or None (nothing: familiarization).
+    surface), ``"choice"`` (which of the item's samples felt more real) or None (nothing:
+    familiarization).
 
 The trial row's response columns, the table a protocol must have, whether the phase is
 analysed and how it is scored follow from ``response``.
@@ -29,15 +35,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["PhaseKind", "RATED", "FREE", "IDENTIFICATION", "REFERENCE", "phase_kind",
-           "phase_kinds", "register"]
+__all__ = ["PhaseKind", "RATED", "FREE", "IDENTIFICATION", "COMPARISON", "REFERENCE",
+           "phase_kind", "phase_kinds", "register"]
 
 #: the trial kind of a real reference block tapped between trials (the runner's, never a
 #: phase's): its row has status ``reference`` and no response
 REFERENCE = "reference"
 
+ITEMS = ("each", "all", "pairs")
 WINDOWS = ("each_sample", "until_done", "surfaces")
-RESPONSES = ("rating", "answer", None)
+RESPONSES = ("rating", "answer", "choice", None)
 
 
 @dataclass(frozen=True)
@@ -50,9 +57,10 @@ class PhaseKind:
         The ``kind`` a protocol file writes.
     summary : str
         One line on what a participant does (``protocol show``, error messages).
+    items : str
+        How the samples make items (module docstring): ``each``, ``all`` or ``pairs``.
     windows : str
-        How an item's windows run (module docstring): ``each_sample``, ``until_done`` or
-        ``surfaces``.
+        How an item's windows run: ``each_sample``, ``until_done`` or ``surfaces``.
     response : str or None
         What the participant gives after them: ``rating``, ``answer`` or None.
     instructions : str
@@ -72,8 +80,15 @@ class PhaseKind:
     instructions: str
     redraws_saturated: bool = True
     references: bool = True
+    items: str = "each"
 
     def __post_init__(self) -> None:
+        if self.items not in ITEMS:
+            raise ValueError(f"phase kind {self.name!r}: items must be one of {ITEMS}, "
+                             f"got {self.items!r}")
+        if (self.items == "all") != (self.windows == "surfaces"):
+            raise ValueError(f"phase kind {self.name!r}: an item of all the samples is "
+                             "felt as surfaces, and only such an item is")
         if self.windows not in WINDOWS:
             raise ValueError(f"phase kind {self.name!r}: windows must be one of {WINDOWS}, "
                              f"got {self.windows!r}")
@@ -89,8 +104,9 @@ class PhaseKind:
 
     @property
     def needs(self) -> str | None:
-        """The protocol table the kind needs: ``rating``, ``answer`` or None."""
-        return self.response
+        """The protocol table the kind needs: ``rating``, ``answer`` or None (a choice
+        between the item's samples needs none)."""
+        return self.response if self.response in ("rating", "answer") else None
 
     @property
     def dv(self) -> str:
@@ -102,6 +118,7 @@ class PhaseKind:
         """The trial row's columns a valid trial of this kind fills beyond every row's."""
         return {"rating": ("rating", "response_time"),
                 "answer": ("answer", "response_time", "correct"),
+                "choice": ("answer", "response_time"),  # the sample chosen
                 None: ()}[self.response]
 
     @property
@@ -161,8 +178,18 @@ IDENTIFICATION = register(PhaseKind(
     name="identification",
     summary="one scene of all the phase's samples as surfaces, each then named from the "
             "protocol's answers",
-    windows="surfaces", response="answer",
+    items="all", windows="surfaces", response="answer",
     instructions="One scene, {n} surfaces. Press {keys} to choose a surface and tap it;\n"
                  "press another number at any time to go to that surface.\n"
                  "When you have tapped them all, press N to name each one.\n\n"
+                 "Press SPACE to begin."))
+
+COMPARISON = register(PhaseKind(
+    name="comparison",
+    summary="two samples felt one after the other, then which felt more like real contact "
+            "(two-alternative forced choice)",
+    items="pairs", windows="each_sample", response="choice", references=False,
+    instructions="You will tap on two samples, one after the other, and say which felt "
+                 "more like touching a real object: press 1 for the first, 2 for the "
+                 "second. You must choose one, even when they feel alike.\n\n"
                  "Press SPACE to begin."))

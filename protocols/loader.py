@@ -46,7 +46,7 @@ from .model import (
 
 __all__ = ["ProtocolError", "BUILTIN", "load_protocol", "parse_protocol", "protocol_text"]
 
-BUILTIN = ("realism", "factorial", "identification")
+BUILTIN = ("realism", "factorial", "identification", "comparison")
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _MISSING = object()
 
@@ -192,8 +192,6 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
     window = _window(cx, data.get("window", {}))
     rating = _rating(cx, data["rating"]) if "rating" in data else None
     answer = _answer(cx, data["answer"]) if "answer" in data else None
-    if rating is None and answer is None:
-        raise cx.error((), "a protocol needs a [rating] scale or an [answer] table")
     saturation = _saturation(cx, data.get("saturation", {}))
     attempts = _attempts(cx, data.get("attempts", {}))
     op = cx.table(("operator",), data.get("operator", {}), {"placeholders"})
@@ -227,6 +225,10 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
                    for i, raw in enumerate(_array(cx, ("phases",), data["phases"])))
     if not phases:
         raise cx.error(("phases",), "needs at least one phase")
+    if rating is None and answer is None and not any(
+            phase_kind(ph.kind).response == "choice" for ph in phases):
+        raise cx.error((), "a protocol needs a [rating] scale, an [answer] table or a "
+                       "phase that asks for a choice (kind = \"comparison\")")
     names = [p.name for p in phases]
     for i, n in enumerate(names):
         if names.index(n) != i:
@@ -508,6 +510,18 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
     elif kind.needs == "rating" and rating is None:
         raise cx.error((*path, "kind"), f"a{_an(kind.name)} {kind.name} phase needs a "
                        "[rating] scale")
+    if kind.items == "pairs":
+        if len(ids) < 2:
+            raise cx.error((*path, "samples"), f"a{_an(kind.name)} {kind.name} phase pairs "
+                           f"its samples: it needs two at least, got {list(ids)}")
+        if blocks is not None:
+            raise cx.error((*path, "blocks"), f"a{_an(kind.name)} {kind.name} phase's "
+                           "trials are pairs, drawn across the phase: it has no blocks")
+        real = [sid for sid in ids if samples[sid].is_real]
+        if real:
+            raise cx.error((*path, "samples"), f"{real}: a{_an(kind.name)} {kind.name} "
+                           "phase compares renderings, felt one after the other on the same "
+                           "block; a real sample cannot be swapped in between the two")
     design = _phase_design(cx, (*path, "analysis"), p.get("analysis", {}), kind, ids, samples)
     has_refs = any(samples[s].reference for s in ids) and kind.references
     default = kind.default_references if has_refs else "none"
@@ -528,9 +542,9 @@ def _check_no_repeat(cx: _Ctx, path: tuple, kind: PhaseKind, order: str, reps: i
                      ids: tuple[str, ...], blocks: list[str | None]) -> None:
     """``no_repeat`` needs a drawn order of one-sample trials and, in every block, a
     second sample to put between a sample's repetitions."""
-    if kind.surfaces:
+    if kind.items != "each":
         raise cx.error(path, f"applies to phases of one sample a trial (a{_an(kind.name)} "
-                       f"{kind.name} trial shows every surface)")
+                       f"{kind.name} trial has {'every surface' if kind.surfaces else 'two'})")
     if order != "random":
         raise cx.error(path, "needs order = \"random\" (a fixed order is as written)")
     if reps > 1:
@@ -596,6 +610,13 @@ def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: PhaseKind, ids: tuple[s
                            "answered: nothing to analyse")
         return PhaseDesign(role="none", dv=kind.dv, within=(), scoring=None)
     role = cx.string((*path, "role"), a.get("role", "analysed"), ("analysed", "practice"))
+    if kind.response == "choice":
+        for key in ("within", "by", "normalize", "scoring"):
+            if key in a:
+                raise cx.error((*path, key), f"a{_an(kind.name)} {kind.name} phase is "
+                               "analysed by its pairs (which sample was chosen); only 'role' "
+                               "applies")
+        return PhaseDesign(role=role, dv=kind.dv, within=(), scoring=None)
     if kind.response == "answer":
         for key in ("within", "by", "normalize"):
             if key in a:

@@ -47,6 +47,9 @@ DEFAULT_TEXTS: dict[str, str] = {
     "switch_hint": "another surface: {keys}",
     "name": "Surface {i} is …",
     "names": "{names}",
+    "pair": "sample {i} of 2",
+    "choice": "Which felt more like touching a real object?",
+    "choice_keys": "1 = the first        2 = the second",
     "paused": "Paused",
     "paused_detail": "The experimenter will continue shortly.",
     "debrief": "What made a sample feel real or not?",
@@ -62,8 +65,9 @@ def resolve_texts(overrides: dict[str, str], instructions: dict[str, str]) -> di
     return out
 
 
-#: which screens show a text: every protocol, or only one with a phase whose kind runs its
-#: windows so ("until_done", "surfaces") or asks for that response ("rating", "answer"),
+#: which screens show a text: every protocol, or only one with a phase whose kind makes its
+#: items so ("pairs"), runs its windows so ("until_done", "surfaces") or asks for that
+#: response ("rating", "answer", "choice"),
 #: rating entry ("keys", "typed", "slider"), saturated trials redrawn ("redraw") or real
 #: blocks ("references"; "several": a surfaces phase offering more than one, which the
 #: participant chooses between); texts of placeholders alone need no translation
@@ -79,6 +83,7 @@ _SHOWN_WHEN = {
     "rating_slider": "slider", "rating_confirmed": "rating", "rating_invalid": "typed",
     "surface": "surfaces", "choose": "surfaces", "tapped": "surfaces",
     "name_hint": "answer", "switch_hint": "surfaces", "name": "answer",
+    "pair": "pairs", "choice": "choice", "choice_keys": "choice",
 }
 
 
@@ -98,7 +103,8 @@ def left_in_english(protocol) -> list[str]:
     offered = [ph for ph in protocol.phases if ph.references != "none"]
     several = any(phase_kind(ph.kind).surfaces and len(
         {protocol.samples[s].reference for s in ph.samples} - {None}) > 1 for ph in offered)
-    shown = {"all", *(k.windows for k in kinds), *(k.response for k in kinds),
+    shown = {"all", *(k.items for k in kinds), *(k.windows for k in kinds),
+             *(k.response for k in kinds),
              *(("references",) if offered and any(
                  s.reference for s in protocol.samples.values()) else ()),
              *(("several",) if several else ()),

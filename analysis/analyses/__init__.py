@@ -8,7 +8,8 @@ registered type that :attr:`~analysis.analyses.base.AnalysisType.matches` it:
 
 - ``identification`` (:mod:`.identification`): ``dv = "answer"``;
 - ``oneway`` (:mod:`.oneway`): ratings, ``within = ["sample"]``;
-- ``factorial`` (:mod:`.factorial`): ratings over two or three factors.
+- ``factorial`` (:mod:`.factorial`): ratings over two or three factors;
+- ``comparison`` (:mod:`.comparison`): ``dv = "choice"``, paired comparisons.
 
 A new type is a module that builds an ``AnalysisType`` and a line in :data:`TYPES`.
 """
@@ -22,6 +23,7 @@ import pandas as pd
 from ..stats import StatsError
 from ..study import analysed_phases, device_summary, phase_rows
 from .base import AnalysisType, ResultNotReported, report_entry
+from .comparison import COMPARISON
 from .factorial import FACTORIAL
 from .identification import IDENTIFICATION
 from .oneway import ONEWAY
@@ -30,7 +32,7 @@ __all__ = ["AnalysisType", "ResultNotReported", "TYPES", "analysis_for", "analys
            "analyse_phase", "analyse_recorded", "report_entry", "save_figures"]
 
 #: the analysis types, in the order a phase design is matched against them
-TYPES: tuple[AnalysisType, ...] = (IDENTIFICATION, ONEWAY, FACTORIAL)
+TYPES: tuple[AnalysisType, ...] = (IDENTIFICATION, ONEWAY, FACTORIAL, COMPARISON)
 
 
 def analysis_for(phase: dict) -> AnalysisType:

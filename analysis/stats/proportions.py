@@ -1,5 +1,6 @@
-"""Identification scores: percent correct against chance, over answers and with each
-participant as the unit."""
+"""Proportions against chance: identification scores (percent correct, over answers and with
+each participant as the unit) and paired comparisons (which of two was chosen, per pair,
+and the bias towards the first or the second felt)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,10 @@ import pandas as pd
 from scipy import special, stats
 
 from ._base import StatsError, _check_columns, _tol
+from .multicomp import p_adjust
 
-__all__ = ["identification_scores", "participant_identification_test"]
+__all__ = ["identification_scores", "participant_identification_test", "pair_preferences",
+           "order_bias"]
 
 
 # --------------------------------------------------------------------- identification
@@ -155,3 +158,110 @@ def participant_identification_test(data: pd.DataFrame, subject: str, correct: s
                                        "mean_percent_b": 100 * float(b.mean()),
                                        "U": float(res.statistic), "p_mwu": float(res.pvalue)}
     return out
+
+
+# --------------------------------------------------------------------- paired comparisons
+def _pairs_of(data: pd.DataFrame, first: str, second: str, chosen: str) -> pd.DataFrame:
+    _check_columns(data, [first, second, chosen])
+    d = data[[first, second, chosen]].astype(str)
+    if d.empty:
+        raise StatsError("no choices to analyse")
+    bad = d[(d[chosen] != d[first]) & (d[chosen] != d[second])]
+    if len(bad):
+        r = bad.iloc[0]
+        raise StatsError(f"{len(bad)} choice(s) name neither sample of their pair, first: "
+                         f"{r[chosen]!r} of {r[first]!r} and {r[second]!r}")
+    same = d[d[first] == d[second]]
+    if len(same):
+        raise StatsError(f"a pair of {same.iloc[0][first]!r} with itself")
+    return d
+
+
+def pair_preferences(data: pd.DataFrame, first: str, second: str, chosen: str,
+                     levels: list[str] | None = None, padjust: str = "holm") -> pd.DataFrame:
+    """Which sample of each pair was chosen (two-alternative forced choice), both orders of
+    presentation pooled, with a two-sided exact binomial test of each pair against 1/2.
+
+    Parameters
+    ----------
+    data : DataFrame, one row per choice
+    first, second : str
+        Columns naming the sample felt first and the one felt second.
+    chosen : str
+        Column naming the sample chosen (one of the two).
+    levels : list of str, optional
+        The samples' order: each pair is written with the earlier one as ``A``. Default:
+        their order of first appearance.
+    padjust : str
+        Correction over the pairs (:func:`p_adjust`): ``holm`` (default), ``bonf``,
+        ``fdr_bh`` or ``none``.
+
+    Returns
+    -------
+    DataFrame, one row per pair presented
+        ``A``, ``B``, ``n`` (choices between them), ``chose_A``, ``prop_A`` (the share that
+        chose ``A``), ``A_first`` (choices made with ``A`` felt first), ``p_unc`` (exact
+        binomial, two-sided, as R's ``binom.test(chose_A, n, 0.5)``) and ``p_corr``.
+
+    Notes
+    -----
+    Each choice counts as independent: a person's repeated choices of one pair are not
+    told apart (with one choice per order and person, as the comparison protocol has, a
+    pair's n is twice the number of people).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> d = pd.DataFrame({"first": ["a", "b", "a", "b", "a", "b"],
+    ...                   "second": ["b", "a", "b", "a", "b", "a"],
+    ...                   "chosen": ["a", "a", "a", "a", "a", "b"]})
+    >>> pair_preferences(d, "first", "second", "chosen")[["A", "B", "n", "chose_A", "p_unc"]]
+       A  B  n  chose_A    p_unc
+    0  a  b  6        5  0.21875
+    """
+    d = _pairs_of(data, first, second, chosen)
+    seen = list(dict.fromkeys([*d[first], *d[second]]))
+    order = list(levels) if levels is not None else seen
+    missing = [s for s in seen if s not in order]
+    if missing:
+        raise StatsError(f"samples {missing} are not among the levels {order}")
+    rank = {s: i for i, s in enumerate(order)}
+    rows = []
+    a_of = [min(f, s, key=rank.__getitem__) for f, s in zip(d[first], d[second], strict=True)]
+    b_of = [max(f, s, key=rank.__getitem__) for f, s in zip(d[first], d[second], strict=True)]
+    d = d.assign(_A=a_of, _B=b_of)
+    for (a, b), g in d.groupby(["_A", "_B"], sort=False):
+        n, k = len(g), int((g[chosen] == a).sum())
+        rows.append({"A": a, "B": b, "n": n, "chose_A": k, "prop_A": k / n,
+                     "A_first": int((g[first] == a).sum()),
+                     "p_unc": float(stats.binomtest(k, n, 0.5).pvalue)})
+    out = pd.DataFrame(rows)
+    out = out.sort_values(["A", "B"], key=lambda c: c.map(rank), ignore_index=True)
+    out["p_corr"] = p_adjust(out["p_unc"].to_numpy(), padjust)
+    out.attrs["padjust"] = padjust
+    return out
+
+
+def order_bias(data: pd.DataFrame, first: str, second: str, chosen: str) -> pd.DataFrame:
+    """How often the sample felt first was chosen, against 1/2 (two-sided exact binomial, as
+    R's ``binom.test``): a bias of the procedure, not of the samples, which a design with
+    both orders of every pair cancels in each pair's proportion.
+
+    Returns
+    -------
+    DataFrame, one row
+        ``n``, ``chose_first``, ``prop_first``, ``p_unc``.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> d = pd.DataFrame({"f": ["a", "b", "a", "b"], "s": ["b", "a", "b", "a"],
+    ...                   "c": ["a", "b", "a", "a"]})
+    >>> order_bias(d, "f", "s", "c")
+       n  chose_first  prop_first  p_unc
+    0  4            3        0.75  0.625
+    """
+    d = _pairs_of(data, first, second, chosen)
+    n, k = len(d), int((d[chosen] == d[first]).sum())
+    return pd.DataFrame([{"n": n, "chose_first": k, "prop_first": k / n,
+                          "p_unc": float(stats.binomtest(k, n, 0.5).pvalue)}])

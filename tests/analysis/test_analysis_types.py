@@ -19,7 +19,8 @@ def test_a_phase_design_finds_its_type():
     assert analysis_for({"dv": "answer", "scoring": "all_correct"}).name == "identification"
     assert analysis_for({"dv": "rating", "within": ["sample"]}).name == "oneway"
     assert analysis_for({"dv": "rating", "within": ["frequency", "decay"]}).name == "factorial"
-    assert [t.name for t in TYPES] == ["identification", "oneway", "factorial"]
+    assert analysis_for({"dv": "choice", "within": []}).name == "comparison"
+    assert [t.name for t in TYPES] == ["identification", "oneway", "factorial", "comparison"]
     with pytest.raises(KeyError, match="identification, oneway, factorial"):
         analysis_type("staircase")
 
@@ -71,4 +72,4 @@ def test_each_registered_type_declares_everything_the_report_asks_of_it():
     for t in TYPES:
         for f in (t.matches, t.analyse, t.entry, t.methods, t.summary, t.markdown, t.figures):
             assert callable(f), (t.name, f)
-        assert t.captions, t.name
+        assert all(isinstance(v, str) for v in t.captions.values()), t.name

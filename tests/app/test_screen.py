@@ -359,3 +359,27 @@ def test_layout_scales_with_the_window(xdisplay, shots, size):
         assert abs(scr._text.height / h - 0.042) < 1e-6
     finally:
         scr.close()
+
+
+PAIR = SimpleNamespace(phase="pairs", samples=("pulse_firm", "soft_spring"), trial_index=4,
+                       attempt=1, kind="comparison")
+
+
+def test_a_comparison_titles_its_two_windows_and_takes_one_key_of_1_or_2(xdisplay, shots):
+    """The comparison kind (issue 33): each window says which of the two it is, and the
+    choice is one press of 1 or 2 (number row or keypad); any other key is ignored."""
+    scr = make("comparison", Keys([], ["3", "n"], [], ["num_2"]))
+    try:
+        assert scr._tap_title(PAIR, "pulse_firm") == "Tap · sample 1 of 2"
+        assert scr._tap_title(PAIR, "soft_spring") == "Tap · sample 2 of 2"
+        k, rt = scr.choose(PAIR, [None, None], None)
+        assert k == 1 and rt >= 0
+        assert scr.drawn_text[:2] == ["Which felt more like touching a real object?",
+                                      "1 = the first        2 = the second"]
+        scr.screenshot(shots / "comparison-choice.png",
+                       text="Which felt more like touching a real object?",
+                       small="1 = the first        2 = the second")
+        std, _ = image_stats(shots / "comparison-choice.png")
+        assert std > 5  # text was drawn, not a blank window
+    finally:
+        scr.close()

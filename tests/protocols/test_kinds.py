@@ -4,8 +4,9 @@ from pathlib import Path
 
 import pytest
 
-from protocols import ProtocolError, parse_protocol
+from protocols import ProtocolError, SessionEngine, load_protocol, parse_protocol
 from protocols.kinds import (
+    COMPARISON,
     FREE,
     IDENTIFICATION,
     RATED,
@@ -16,8 +17,8 @@ from protocols.kinds import (
 )
 
 
-def test_the_three_kinds_of_the_papers_are_declared():
-    assert phase_kinds() == ("rated", "free", "identification")
+def test_the_three_kinds_of_the_papers_and_the_comparison_are_declared():
+    assert phase_kinds() == ("rated", "free", "identification", "comparison")
     assert phase_kind("rated") is RATED
     assert (RATED.windows, RATED.response, RATED.columns) == (
         "each_sample", "rating", ("rating", "response_time"))
@@ -60,3 +61,47 @@ def test_the_loader_offers_the_declared_kinds_and_asks_for_what_a_kind_needs():
     with pytest.raises(ProtocolError, match="a rated phase needs a \\[rating\\] scale"):
         parse_protocol(no_scale.replace("{kind}", "rated"))
     assert parse_protocol(no_scale.replace("{kind}", "free")).phases[0].kind == "free"
+
+
+def test_a_comparison_felt_both_orders_of_every_pair_once_per_repetition():
+    """The new kind end to end starts here: its items are ordered pairs."""
+    assert (COMPARISON.items, COMPARISON.windows, COMPARISON.response, COMPARISON.needs) == (
+        "pairs", "each_sample", "choice", None)
+    p = load_protocol("comparison")
+    phase = next(ph for ph in p.phases if ph.kind == "comparison")
+    items = [i for i in SessionEngine(p, 7, "P01").plan() if i.phase == phase.name]
+    pairs = [i.samples for i in items]
+    k = len(phase.samples)
+    assert len(pairs) == k * (k - 1) == 20 and len(set(pairs)) == 20
+    assert {tuple(sorted(x)) for x in pairs} == {
+        (a, b) for a in phase.samples for b in phase.samples if a < b}
+    assert pairs != sorted(pairs)  # drawn, not as written
+    assert pairs == [i.samples for i in SessionEngine(p, 7, "P01").plan()
+                     if i.phase == phase.name]  # the same seed, the same order
+    assert {i.key.split("#")[1] for i in items} == {"1"}
+
+
+PAIRS = MINI.replace("{kind}", "comparison").replace(
+    'id = "wood"\nscene.material', 'id = "wood"\nrated = false\nscene.material')
+
+
+@pytest.mark.parametrize("change, message", [
+    (('samples = "all"', 'samples = ["firm"]'), r"pairs its samples: it needs two at least"),
+    (('samples = "all"', 'samples = ["firm", "wood"]'), r"\['wood'\]: a comparison phase "
+                                                       r"compares renderings"),
+    (('repetitions = 2', 'repetitions = 2\nno_repeat = true'), r"a comparison trial has two"),
+    (('repetitions = 2', 'repetitions = 2\nanalysis.within = ["sample"]'),
+     r"analysed by its pairs"),
+])
+def test_what_a_comparison_phase_cannot_be_is_named(change, message):
+    assert change[0] in PAIRS
+    with pytest.raises(ProtocolError, match=message):
+        parse_protocol(PAIRS.replace(*change))
+
+
+def test_a_protocol_of_choices_needs_no_scale():
+    text = PAIRS.replace(SCALE, "").replace('samples = "all"', 'samples = ["firm", "pulse"]')
+    assert parse_protocol(text).phases[0].kind == "comparison"
+    with pytest.raises(ProtocolError, match="a \\[rating\\] scale, an \\[answer\\] table or a "
+                                            "phase that asks for a choice"):
+        parse_protocol(MINI.replace(SCALE, "").replace("{kind}", "free"))

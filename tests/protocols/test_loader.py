@@ -114,8 +114,8 @@ BAD = [
     (_mutate("[[phases]]", "[operator]\nplaceholders = [\"A\"]\n\n[[phases]]"), 19,
      "operator.placeholders", "at least two distinct"),
     (_mutate('id = "wood"', 'id = "wo od"'), 10, "samples[0].id", "must be letters"),
-    (_mutate('[rating]\nmin = 1\nmax = 7\nquestion = "How real?"\n', ""), None, "",
-     "needs a [rating] scale or an [answer]"),
+    (_mutate('[rating]\nmin = 1\nmax = 7\nquestion = "How real?"\n', ""), 14,
+     "phases[0].kind", "a rated phase needs a [rating] scale"),
 ]
 
 
