@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["run_demo", "simulate_study", "STUDY"]
+__all__ = ["run_demo", "simulate_demo_study", "STUDY"]
 
 #: (protocol, participants, id prefix, group) of the demo study, as in the papers.
 #: Identification: 6 experts and 8 novices (Table 3: 18 and 24 answers of 3 each).
@@ -28,8 +28,9 @@ class StudyStopped(RuntimeError):
         self.rc = rc
 
 
-def simulate_study(data: str | Path, seed: int) -> dict[str, float]:
-    """Simulate every session of :data:`STUDY` into ``data``; returns seconds per stage."""
+def simulate_demo_study(data: str | Path, seed: int) -> dict[str, float]:
+    """Simulate every session of :data:`STUDY` (the demo's four groups, each by
+    :func:`app.api.simulate_study`) into ``data``; returns seconds per stage."""
     from app.api import simulate_study as simulate
 
     times = {}
@@ -55,7 +56,7 @@ def run_demo(seed: int = 1, out: str | Path = "out/demo") -> int:
             shutil.rmtree(d)
     t0 = time.perf_counter()
     try:
-        simulate_study(data, seed)
+        simulate_demo_study(data, seed)
     except StudyStopped as exc:
         return exc.rc
     t_sim = time.perf_counter() - t0

@@ -20,14 +20,14 @@ BUDGET_S = 180.0
 
 def main(args) -> int:
     from analysis.report import analyze
-    from app.demo import simulate_study
+    from app.demo import simulate_demo_study
 
     runs: dict[str, list[float]] = {}
     for _ in range(max(1, min(args.repeats, 3))):
         with tempfile.TemporaryDirectory() as tmp:
             data = Path(tmp) / "data"
             total = time.perf_counter()
-            for stage, s in simulate_study(data, seed=1).items():
+            for stage, s in simulate_demo_study(data, seed=1).items():
                 runs.setdefault(stage, []).append(s)
             t0 = time.perf_counter()
             analyze(data, Path(tmp) / "report")

@@ -173,19 +173,19 @@ def run_seed(seed: int, root: Path) -> dict:
     again without the saturation cap (same participants: same seed)."""
     from analysis import load_sessions
     from app.api import simulate_study as simulate
-    from app.demo import simulate_study
+    from app.demo import simulate_demo_study
     from protocols import load_protocol
 
     data = root / f"seed-{seed}"
     t0 = time.perf_counter()
-    simulate_study(data, seed)
+    simulate_demo_study(data, seed)
     d = load_sessions(data)
     out = {"seed": seed, "realism": _realism(d), "alike": _alike(d),
            "factorial": _factorial(d, load_protocol("factorial")),
            "identification": _identification(d)}
     free = root / f"seed-{seed}-uncapped"
     simulate(_uncapped_realism(root), 9, seed=seed * 10, data=free, prefix="R",
-             traces="contacts")  # the demo's realism seed (app.demo.simulate_study)
+             traces="contacts")  # the demo's realism seed (app.demo.simulate_demo_study)
     out["realism_uncapped"] = _realism(load_sessions(free), "realism_uncapped")
     out["seconds"] = time.perf_counter() - t0
     return out
