@@ -450,7 +450,24 @@ class Link:
                     return self._acks.pop(seq)
             self.stats["timeouts"] += 1
         raise DeviceTimeoutError(f"{self.port}: no acknowledgement of {type(msg).__name__} "
-                                 f"after {self.retries + 1} tries of {timeout * 1e3:.0f} ms")
+                                 f"after {self.retries + 1} tries of {timeout * 1e3:.0f} ms "
+                                 f"({self._listening()})")
+
+    def _listening(self) -> str:
+        """What this host heard lately, to tell a silent device from a host that was not
+        listening (a busy computer holding this process up): when the last frame was
+        handled, when the native reader last took bytes, how late the watcher ran."""
+        now = time.monotonic()
+        parts = [f"the last frame handled {now - self._last_rx:.2f} s ago"]
+        if self._native is not None:
+            ns = self._native.stats().get("last_rx_ns") or 0
+            if ns:
+                parts.append(f"bytes last read by the native reader "
+                             f"{(time.monotonic_ns() - ns) / 1e9:.2f} s ago")
+        recent = list(self._stalls)[-64:]
+        if recent:
+            parts.append(f"this host's watcher up to {max(recent) * 1e3:.0f} ms late")
+        return "; ".join(parts)
 
     def hello(self, protocol: int = PROTOCOL_VERSION) -> M.HelloAck:
         """Open a host session: HELLO until HELLO_ACK (ProtocolMismatchError if none).

@@ -742,3 +742,30 @@ def test_an_acknowledgement_is_awaited_in_the_devices_time():
         with pytest.raises(DeviceTimeoutError, match="EStop after 4 tries of 100 ms"):
             dev.link.request(M.EStop())
         release.set()
+
+
+def test_an_unanswered_command_says_what_this_host_heard_meanwhile(emulator_factory):
+    """A loaded run of issue 29 failed on 'no acknowledgement of EStop after 4 tries of
+    200 ms' from the OpenHaptics stand-in, whose own account showed its tick on time and no
+    frame dropped; the message could not tell a silent device from a host not listening.
+    It now says when this host last handled a frame, when its native reader last took
+    bytes, and how late its watcher ran. A frozen device: the frames stopped with it."""
+    from device.serial import messages as M
+    from device.serial.backend import DeviceTimeoutError
+
+    emu = emulator_factory(7)
+    dev = open_device(f"serial:{emu.port}")
+    try:
+        emu.proc.send_signal(signal.SIGSTOP)
+        with pytest.raises((DeviceTimeoutError, DeviceGoneError)) as err:
+            dev.link.request(M.EStop())
+        text = str(err.value)
+        if isinstance(err.value, DeviceTimeoutError):  # (gone first on a very busy host)
+            m = re.search(r"the last frame handled ([\d.]+) s ago", text)
+            assert m and float(m.group(1)) >= 0.7, text  # four 200-ms tries, then more
+            assert "watcher up to" in text
+            if dev.link.native:
+                assert "bytes last read by the native reader" in text
+    finally:
+        emu.proc.send_signal(signal.SIGCONT)
+        dev.close()
