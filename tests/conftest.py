@@ -12,6 +12,8 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
+from .hostwatch import HostWatch
+
 settings.register_profile("ci", deadline=None, max_examples=60,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile("ci")
@@ -39,6 +41,23 @@ def pytest_configure(config):
     if "HAPTICLAB_LIBRARIES" not in os.environ:
         os.environ["HAPTICLAB_LIBRARIES"] = tempfile.mkdtemp(prefix="hapticlab-libraries-")
     os.environ["HAPTICLAB_LSL_PRIVATE"] = "1"
+    _HOST_WATCH.start()
+
+
+#: what the machine did while each test ran (tests/hostwatch.py), told when one fails
+_HOST_WATCH = HostWatch()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    if report.failed:
+        import time
+
+        to_monotonic = time.monotonic() - time.time()
+        report.sections.append(("host during this test", _HOST_WATCH.summary(
+            call.start + to_monotonic, call.stop + to_monotonic)))
 
 
 #: processes meant to outlive a test (session fixtures': the shared emulator, Xvfb)
