@@ -48,7 +48,7 @@ import numpy as np
 import pandas as pd
 
 from .load import LoadError, load_sessions, select_sessions
-from .session_format import META, TRIALS, read_meta, read_trials
+from .session_format import META, TRIALS, SessionRecord, read_meta, read_trials
 
 __all__ = ["export_bids", "BIDS_VERSION", "bids_label"]
 
@@ -289,8 +289,8 @@ def _session(folder: Path, typed: pd.DataFrame, labels: dict, tasks: dict, peopl
     if len(raw) != len(typed):  # both without a torn last line: one row per attempt
         raise LoadError(f"{folder / TRIALS}: {len(raw)} rows, but {len(typed)} were loaded")
     pid = str(typed["participant"].iloc[0])
-    sub, ses = labels[pid], str(int(meta["session"]))
-    proto = meta["protocol"]["name"]
+    sub, ses = labels[pid], str(meta.session)
+    proto = meta.protocol.name
     task = re.sub(r"[^A-Za-z0-9]", "", proto) or "task"
     known = tasks.setdefault(task.lower(), {"task": task, "protocol": proto, "meta": meta})
     if known["protocol"] != proto:
@@ -304,7 +304,7 @@ def _session(folder: Path, typed: pd.DataFrame, labels: dict, tasks: dict, peopl
                         "them apart (--since/--until) or renumber one")
     names[key] = str(folder)
     where = folder / TRIALS
-    start = _utc(str(meta.get("times", {}).get("created_utc") or ""), str(folder / META)) or \
+    start = _utc(meta.times.created_utc or "", str(folder / META)) or \
         min((t for r in raw if (t := _utc(r["t_start"], str(where)))), default=None)
     base = out / f"sub-{sub}" / f"ses-{ses}" / "beh"
     base.mkdir(parents=True, exist_ok=True)
@@ -346,17 +346,17 @@ def _session(folder: Path, typed: pd.DataFrame, labels: dict, tasks: dict, peopl
     p = base / f"{stem}_events.tsv"
     _write_tsv(p, ev)
     res["files"].append(p)
-    group = (meta.get("participant") or {}).get("group", "") or ""
+    group = meta.participant.group
     person = people.setdefault(pid, {"participant_id": f"sub-{sub}", "hapticlab_id": pid,
                                      "group": group})
     if person["group"] != group:
         raise LoadError(f"participant '{pid}' is in group '{person['group']}' in one session "
                         f"and '{group}' in {folder}: BIDS has one group per participant")
-    device = meta.get("device") or {}
+    device = meta.device
     visits.setdefault(sub, []).append({
         "session_id": f"ses-{ses}",
         "acq_time": start.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z" if start else None,
-        "protocol": proto, "kind": meta.get("kind"), "status": meta.get("status"),
+        "protocol": proto, "kind": meta.kind, "status": str(meta.status),
         "device": " ".join(x for x in (device.get("model"), device.get("serial_number"))
                            if x) or None,
         "hapticlab_folder": str(folder)})
@@ -376,9 +376,9 @@ def _sessions_json(out: Path) -> Path:
     return p
 
 
-def _scale(meta: dict) -> dict:
+def _scale(meta: SessionRecord) -> dict:
     """The rating scale's levels from the recorded design (empty: none recorded)."""
-    scale = meta["protocol"].get("design", {}).get("scale") or {}
+    scale = meta.protocol.scale
     lo, hi = scale.get("min"), scale.get("max")
     if lo is None or hi is None:
         return {}

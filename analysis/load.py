@@ -21,11 +21,11 @@ from .session_format import (
     META,
     TRIALS,
     SessionMetaError,
+    SessionRecord,
     SessionStatus,
     TrialsFileError,
     read_meta,
     read_trials,
-    session_kind,
 )
 
 __all__ = ["load_sessions", "select_sessions", "LoadError", "tap_velocities", "SESSION_COLUMNS",
@@ -61,14 +61,14 @@ def _design_key(design: dict | None) -> str:
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:12]
 
 
-def _device(meta: dict) -> dict[str, str]:
+def _device(meta: SessionRecord) -> dict[str, str]:
     """What a session recorded of its device: backend, model and serial number, firmware,
     whether the device was simulated (1: the ``sim`` backend, the emulator or a firmware
     build with its simulated plant — nobody touched a physical surface), and the transient
     libraries it played (sample=sha256, first 12 hex digits)."""
-    d = meta.get("device") or {}
+    d = meta.device
     model, serial = str(d.get("model") or ""), str(d.get("serial_number") or "")
-    libs = meta.get("libraries") or {}
+    libs = meta.libraries
     backend, firmware = str(d.get("backend") or ""), str(d.get("firmware") or "")
     return {"device_backend": backend,
             "device_id": " ".join(x for x in (model, serial and f"#{serial}") if x),
@@ -193,21 +193,21 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
         for f in (mpath, tpath):
             if f.exists():
                 files[str(f.relative_to(root))] = hashlib.sha256(f.read_bytes()).hexdigest()
-        proto = meta["protocol"]
-        design = proto.get("design")
+        proto = meta.protocol
+        design = proto.design
         key = _design_key(design)
         if key:
             designs.setdefault(key, design)
-        kind = session_kind(meta)
-        status = meta.get("status", "")
+        kind = meta.kind
+        status = str(meta.status)
         device = _device(meta)
         sessions.append({
-            "session_dir": str(folder), "participant": str(meta["participant"]["id"]),
-            "session": int(meta["session"]), "protocol": proto["name"],
-            "protocol_sha256": proto["sha256"], "kind": kind,
-            "responder": meta.get("responder", ""), "status": status,
-            "created_utc": (meta.get("times") or {}).get("created_utc") or "",
-            "seed": meta.get("seed"), "rows": len(rows),
+            "session_dir": str(folder), "participant": meta.participant.id,
+            "session": meta.session, "protocol": proto.name,
+            "protocol_sha256": proto.sha256, "kind": kind,
+            "responder": meta.responder or "", "status": status,
+            "created_utc": meta.times.created_utc or "",
+            "seed": meta.seed, "rows": len(rows),
             "valid_rows": sum(r["status"] == "valid" for r in rows), "design_key": key,
             "folder_participant": _folder_id(folder), **device})
         if not rows:
@@ -220,17 +220,17 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
                                 "phase": r["phase"], "sample": r["sample"], "reason": why})
         df = pd.DataFrame(rows)
         df["invalid_reason"] = reasons
-        rating = (design or {}).get("scale") or {}
-        df["protocol"] = proto["name"]
-        df["protocol_sha256"] = proto["sha256"]
+        rating = proto.scale
+        df["protocol"] = proto.name
+        df["protocol_sha256"] = proto.sha256
         df["design_key"] = key
-        df["seed"] = meta.get("seed")
-        df["group"] = (meta["participant"].get("group") or "")
+        df["seed"] = meta.seed
+        df["group"] = meta.participant.group
         df["scale"] = f"{rating['min']}-{rating['max']}" if rating else ""
         for c, v in device.items():
             df[c] = v
         df["kind"] = kind
-        df["responder"] = meta.get("responder", "") if kind != "human" else "person"
+        df["responder"] = (meta.responder or "") if kind != "human" else "person"
         df["session_status"] = status
         df["session_dir"] = str(folder)
         frames.append(df)

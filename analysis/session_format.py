@@ -3,11 +3,13 @@
 A session folder (``<data>/sub-<participant>/ses-<n>/``) holds:
 
 ``session.json``
-    Metadata, written atomically: format version, app version, the protocol (name, file,
-    SHA-256 and the **design** derived from it, which alone holds the rating scale and the
-    answer choices), the session kind and responder, seed, participant, device, times,
-    status (:class:`SessionStatus`). :data:`META_REQUIRED` lists the keys a reader needs;
-    :func:`read_meta` reads older formats through :func:`upgrade_meta`.
+    Metadata, one :class:`SessionRecord` (read and written by its fields, never by key),
+    written atomically: format version, app version, the protocol (name, file, SHA-256 and
+    the **design** derived from it, which alone holds the rating scale and the answer
+    choices), the session kind and responder, seed, participant, device, times, status
+    (:class:`SessionStatus`). :data:`META_REQUIRED` lists the keys a reader needs;
+    :func:`read_meta` reads older formats through :func:`upgrade_meta`; keys it does not
+    know are kept.
 ``protocol.toml``
     The resolved protocol file the session ran, byte for byte (its SHA-256 is in
     session.json); resume uses this copy.
@@ -26,12 +28,14 @@ everything else is text.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
-__all__ = ["FORMAT_VERSION", "SessionStatus", "upgrade_meta", "COLUMNS", "INT_COLUMNS",
+__all__ = ["FORMAT_VERSION", "SessionStatus", "SessionRecord", "ProtocolRecord",
+           "ParticipantRecord", "TimesRecord", "upgrade_meta", "COLUMNS", "INT_COLUMNS",
            "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
            "TrialsFileError", "SessionMetaError", "TornLine", "header_line", "format_row",
            "read_trials", "read_meta", "session_kind", "canonical_bytes", "is_canonical",
@@ -228,13 +232,251 @@ def _get(meta: dict, dotted: str) -> Any:
     return cur
 
 
-def read_meta(path: str | Path) -> dict:
-    """session.json as a dict, checked for :data:`META_REQUIRED`.
+def _whole(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+#: what a field's value must be, in words, and the test of it
+_TEXT = ("text", lambda v: isinstance(v, str))
+_OBJECT = ("an object", lambda v: isinstance(v, dict))
+_LIST = ("a list", lambda v: isinstance(v, list))
+_WHOLE = ("a whole number", _whole)
+
+
+@dataclass(kw_only=True)
+class _Record:
+    """A part of session.json with its own fields; keys this hapticlab does not know are
+    kept in ``extra`` and written back as they came. A field whose value is None and whose
+    name is in ``_OMIT`` is not written (it was not there)."""
+
+    extra: dict = field(default_factory=dict)
+
+    _CHECKS: ClassVar[dict[str, tuple[str, Callable[[Any], bool]]]] = {}
+    _OMIT: ClassVar[tuple[str, ...]] = ()
+    _PARTS: ClassVar[dict[str, type]] = {}
+
+    @classmethod
+    def _from(cls, d: Any, where: str, path: Path | str) -> Any:
+        if not isinstance(d, dict):
+            raise SessionMetaError(f"{path}: {where or 'the file'} is not an object")
+        names = [f.name for f in fields(cls) if f.name != "extra"]
+        kw: dict[str, Any] = {}
+        for name in names:
+            if name not in d:
+                continue
+            v = d[name]
+            key = f"{where}.{name}" if where else name
+            if name in cls._PARTS:
+                v = cls._PARTS[name]._from(v, key, path)
+            elif name in cls._CHECKS and v is not None:
+                words, ok = cls._CHECKS[name]
+                if not ok(v):
+                    raise SessionMetaError(f"{path}: {key} is {v!r}; expected {words}")
+            kw[name] = v
+        return cls(**kw, extra={k: v for k, v in d.items() if k not in names})
+
+    def to_json(self) -> dict:
+        """The JSON object of this part (statuses as their text)."""
+        out = dict(self.extra)
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "extra" or (v is None and f.name in self._OMIT):
+                continue
+            out[f.name] = v.to_json() if isinstance(v, _Record) else v
+        return out
+
+
+@dataclass(kw_only=True)
+class ProtocolRecord(_Record):
+    """The protocol a session ran: its name, the file's SHA-256, where it came from, the
+    copy's name in the folder, and the design derived from it (the one place of the
+    rating scale and the answer choices)."""
+
+    name: str
+    sha256: str
+    ref: str | None = None
+    source: str | None = None
+    copy: str | None = None
+    design: dict | None = None
+
+    _CHECKS = {"name": _TEXT, "sha256": _TEXT, "ref": _TEXT, "source": _TEXT, "copy": _TEXT,
+               "design": _OBJECT}
+    _OMIT = ("ref", "source", "copy", "design")
+
+    @property
+    def scale(self) -> dict:
+        """The rating scale (``min``, ``max``, ``question``, ...); empty when none."""
+        return dict((self.design or {}).get("scale") or {})
+
+
+@dataclass(kw_only=True)
+class ParticipantRecord(_Record):
+    """Who took part: the ID, the counterbalancing row, the group, the details asked at the
+    start (``info``) and the debrief's answer."""
+
+    id: str
+    counterbalance_row: int | None = None
+    group: str = ""
+    info: dict | None = None
+    debrief: Any = None
+
+    _CHECKS = {"counterbalance_row": _WHOLE, "group": _TEXT, "info": _OBJECT}
+    _OMIT = ("info", "debrief")
+
+    @classmethod
+    def _from(cls, d: Any, where: str, path: Path | str) -> ParticipantRecord:
+        rec = super()._from(d, where, path)
+        if not isinstance(rec.id, (str, int)) or isinstance(rec.id, bool):
+            raise SessionMetaError(f"{path}: {where}.id is {rec.id!r}; expected text")
+        rec.id = str(rec.id)
+        rec.group = rec.group or ""
+        return rec
+
+
+@dataclass(kw_only=True)
+class TimesRecord(_Record):
+    """When the session was created and finished (ISO 8601, UTC; None: not finished)."""
+
+    created_utc: str | None = None
+    finished_utc: str | None = None
+
+    _CHECKS = {"created_utc": _TEXT, "finished_utc": _TEXT}
+
+
+@dataclass(kw_only=True)
+class SessionRecord(_Record):
+    """session.json: what a session is, and how it stands. The recorder writes it
+    (:meth:`to_json`), every reader reads it (:func:`read_meta`), older files through
+    :func:`upgrade_meta`; keys it does not know are kept (``extra``).
+
+    Attributes
+    ----------
+    protocol, participant, times : the parts above
+    session : int
+        The session's number for this participant (``ses-<n>``).
+    seed : int
+        The recorded seed every random draw of the session comes from.
+    status : SessionStatus
+    kind : str
+        Who answered (:data:`KINDS`).
+    device : dict
+        The spec it was opened with (``spec``) and what the device said of itself.
+    libraries : dict
+        The transient libraries played, by sample (file and SHA-256).
+    resumes, interruptions, notes, warnings : list
+        Each resume (when, after how many attempts, on which device); why each run
+        stopped early; the operator's notes; what the device could not do as asked.
+    traces_mode : str or None
+        ``full``, ``decimated`` or ``none`` (None: not recorded, before format 2).
+    limits : dict or None
+        The current limit applied and why.
+    summary : str or None
+        The words a complete session ended with.
+    lsl : dict or None
+        The markers' stream and each run of it.
+    """
+
+    protocol: ProtocolRecord
+    participant: ParticipantRecord
+    session: int
+    seed: int
+    status: SessionStatus
+    kind: str = "dry-run"
+    format_version: int = FORMAT_VERSION
+    upgraded_from: int | None = None
+    app: dict = field(default_factory=dict)
+    libraries: dict = field(default_factory=dict)
+    rng: str | None = None
+    device: dict = field(default_factory=dict)
+    ui: str | None = None
+    responder: str | None = None
+    audio: bool = False
+    packages: dict | None = None
+    python: str | None = None
+    os: str | None = None
+    times: TimesRecord = field(default_factory=TimesRecord)
+    resumes: list = field(default_factory=list)
+    timing: dict = field(default_factory=dict)
+    link: dict = field(default_factory=dict)
+    traces_mode: str | None = None
+    limits: dict | None = None
+    summary: str | None = None
+    lsl: dict | None = None
+    interruptions: list | None = None
+    notes: list | None = None
+    warnings: list | None = None
+
+    _CHECKS = {"session": _WHOLE, "seed": _WHOLE, "kind": ("one of " + ", ".join(KINDS),
+                                                         lambda v: v in KINDS),
+               "format_version": _WHOLE, "upgraded_from": _WHOLE, "app": _OBJECT,
+               "libraries": _OBJECT, "rng": _TEXT, "device": _OBJECT, "ui": _TEXT,
+               "responder": _TEXT, "audio": ("true or false", lambda v: isinstance(v, bool)),
+               "packages": _OBJECT, "python": _TEXT, "os": _TEXT, "resumes": _LIST,
+               "timing": _OBJECT, "link": _OBJECT, "traces_mode": _TEXT, "limits": _OBJECT,
+               "summary": _TEXT, "lsl": _OBJECT, "interruptions": _LIST, "notes": _LIST,
+               "warnings": _LIST}
+    _OMIT = ("upgraded_from", "rng", "ui", "responder", "packages", "python", "os",
+             "traces_mode", "limits", "summary", "lsl", "interruptions", "notes", "warnings")
+    _PARTS = {"protocol": ProtocolRecord, "participant": ParticipantRecord,
+              "times": TimesRecord}
+
+    @classmethod
+    def from_json(cls, meta: dict, path: Path | str = META) -> SessionRecord:
+        """The record of session.json's object ``meta`` in any format (upgraded).
+
+        Raises
+        ------
+        SessionMetaError
+            Naming the file and the key: a key every reader needs missing, a value of the
+            wrong type, a status this format does not name, a newer format.
+        """
+        if not isinstance(meta, dict):
+            raise SessionMetaError(f"{path}: expected a JSON object, got "
+                                   f"{type(meta).__name__}")
+        missing = []
+        for key in META_REQUIRED:
+            try:
+                _get(meta, key)
+            except KeyError:
+                missing.append(key)
+        if missing:
+            raise SessionMetaError(f"{path}: missing key(s) {', '.join(missing)}")
+        meta = upgrade_meta(meta, path)
+        rec = cls._from({"kind": session_kind(meta), **meta}, "", path)
+        try:
+            rec.status = SessionStatus(rec.status)
+        except ValueError:
+            raise SessionMetaError(f"{path}: status is {rec.status!r}; expected one of "
+                                   f"{', '.join(s.value for s in SessionStatus)}") from None
+        return rec
+
+    @property
+    def device_spec(self) -> str:
+        """The device spec the session was opened with (``serial:/dev/ttyACM0``)."""
+        return str(self.device.get("spec") or "")
+
+    def interrupted(self, why: str) -> None:
+        """A run stopped early (``why``): resumed as any interruption."""
+        self.status = SessionStatus.INTERRUPTED
+        self.interruptions = [*(self.interruptions or []), why]
+
+    def add_notes(self, notes: list[str]) -> None:
+        """The operator's notes, after any earlier ones."""
+        self.notes = [*(self.notes or []), *notes]
+
+    def add_warnings(self, warnings: list[str]) -> None:
+        """What the device could not do as asked, each once, after any earlier ones."""
+        self.warnings = list(dict.fromkeys([*(self.warnings or []), *warnings]))
+
+
+def read_meta(path: str | Path) -> SessionRecord:
+    """session.json's record, checked and upgraded (:meth:`SessionRecord.from_json`).
 
     Raises
     ------
     SessionMetaError
-        Naming the file and what is wrong (missing, not JSON, a missing key).
+        Naming the file and what is wrong (missing, not JSON, a missing key or a value of
+        the wrong type).
     """
     path = Path(path)
     if path.exists() and not path.is_file():
@@ -245,17 +487,7 @@ def read_meta(path: str | Path) -> dict:
         raise SessionMetaError(f"{path}: no session.json — not a session folder") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise SessionMetaError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(meta, dict):
-        raise SessionMetaError(f"{path}: expected a JSON object, got {type(meta).__name__}")
-    missing = []
-    for key in META_REQUIRED:
-        try:
-            _get(meta, key)
-        except KeyError:
-            missing.append(key)
-    if missing:
-        raise SessionMetaError(f"{path}: missing key(s) {', '.join(missing)}")
-    return upgrade_meta(meta, path)
+    return SessionRecord.from_json(meta, path)
 
 
 def upgrade_meta(meta: dict, path: str | Path = "session.json") -> dict:

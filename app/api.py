@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.session_format import SessionStatus
+from analysis.session_format import SessionRecord, SessionStatus
 
 from .errors import AnalysisError, SessionFileError, UsageError
 from .guards import Terminated, close_at_exit
@@ -209,11 +209,12 @@ def _markers(lsl: bool, protocol: str, participant: str, seed: int, dev, say):
                        "device": f"{dev.info.backend} {dev.info.serial_number}"}, say)
 
 
-def _keep_markers(meta: dict, markers) -> None:
+def _keep_markers(meta: SessionRecord, markers) -> None:
     """This run of the markers' stream in session.json (updated in place as it runs)."""
     if markers.active:
-        meta.setdefault("lsl", {"stream": markers.stream, "runs": []})["runs"].append(
-            markers.run)
+        if meta.lsl is None:
+            meta.lsl = {"stream": markers.stream, "runs": []}
+        meta.lsl["runs"].append(markers.run)
 
 
 def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResult:
@@ -223,8 +224,7 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
     markers = runner.markers
 
     def stopped(why: str, status: SessionStatus, msg: str) -> SessionResult:
-        meta["status"] = SessionStatus.INTERRUPTED  # Ctrl-C too: resumed the same way
-        meta.setdefault("interruptions", []).append(why)
+        meta.interrupted(why)  # Ctrl-C too: resumed the same way
         markers.trial(None)
         markers.send("session_end", status=status, why=why)
         markers.close()
@@ -258,24 +258,23 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
             with suppress(Exception):
                 files.write_meta(meta)
         raise
-    meta["times"]["finished_utc"] = utc_now()
-    meta["status"] = SessionStatus.COMPLETE
+    meta.times.finished_utc = utc_now()
+    meta.status = SessionStatus.COMPLETE
     summary = runner.summary(time.monotonic() - started)
-    meta["summary"] = summary
-    meta["link"] = runner.device.link_stats()
+    meta.summary = summary
+    meta.link = runner.device.link_stats()
     if runner.timing:  # live pacing (the simulator in live mode): achieved servo rate
         rates = [t["achieved_rate_hz"] for t in runner.timing]
-        meta["timing"] = {"achieved_rate_hz_median": float(np.median(rates)),
+        meta.timing = {"achieved_rate_hz_median": float(np.median(rates)),
                           "lateness_p99_s_max": max(t["lateness_p99_s"] for t in runner.timing),
                           "slipped_s_total": sum(t.get("slipped_s", 0.0) for t in runner.timing)}
     if runner.warnings:  # what the device could not do as asked, once each
-        meta["warnings"] = list(dict.fromkeys([*meta.get("warnings", []),
-                                               *runner.warnings.values()]))
+        meta.add_warnings(list(runner.warnings.values()))
     files.write_meta(meta)  # the trials are complete and durable before the debrief
     if runner.console.interactive or runner.participant_ui.name == "person":
         console.say(f"trials complete: {summary} — the participant is answering the "
                     "debrief question")
-    meta["participant"]["debrief"] = runner.participant_ui.debrief()
+    meta.participant.debrief = runner.participant_ui.debrief()
     markers.send("session_end", status=SessionStatus.COMPLETE)
     markers.close()
     files.write_meta(meta)
@@ -438,10 +437,9 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                                     device, "psychopy" if responder == "person" else "none",
                                     responder, parts.sound is not None, group,
                                     KIND_OF[responder], libraries)
-                meta["traces_mode"] = traces
-                meta["limits"] = limits
-                if info is not None:
-                    meta["participant"]["info"] = info
+                meta.traces_mode = traces
+                meta.limits = limits
+                meta.participant.info = info
                 _keep_markers(meta, parts.markers)
                 files.write_meta(meta)
                 parts.console.say(f"session {folder} (seed {seed})")
@@ -471,17 +469,17 @@ def _earlier_sessions(data: Path, participant: str, protocol: str) -> list[str]:
         except (SessionMetaError, OSError):
             out.append(f"{folder.name} (session.json unreadable)")
             continue
-        if (meta.get("protocol") or {}).get("name") != protocol:
+        if meta.protocol.name != protocol:
             continue
-        created = str((meta.get("times") or {}).get("created_utc") or "")[:10]
-        out.append(f"{folder.name} ({meta.get('status', 'unknown')}, {meta.get('kind', '')}"
+        created = (meta.times.created_utc or "")[:10]
+        out.append(f"{folder.name} ({meta.status}, {meta.kind}"
                    f"{', ' + created if created else ''})")
     return out
 
 
-def _check_rows(files, meta: dict, rows: list[dict]) -> None:
+def _check_rows(files, meta: SessionRecord, rows: list[dict]) -> None:
     """Every recorded row belongs to this session (participant and session number)."""
-    pid, ses = str(meta["participant"]["id"]), str(meta["session"])
+    pid, ses = meta.participant.id, str(meta.session)
     for i, r in enumerate(rows, start=2):
         for col, want in (("participant", pid), ("session", ses)):
             if r[col] != want:
@@ -523,7 +521,7 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
     try:
         meta = files.read_meta()  # as the last writer left it
         console = make_console(quiet=quiet)
-        if meta.get("status") == SessionStatus.COMPLETE:
+        if meta.status == SessionStatus.COMPLETE:
             return SessionResult(files.folder, SessionStatus.COMPLETE, len(files.read_rows()[0]),
                                  f"{files.folder}: the session is already complete")
         return _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
@@ -540,7 +538,7 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
     from app.runner import SessionRunner, utc_now
     from protocols import LogMismatch, ResumeMismatch, SessionEngine, parse_protocol
 
-    ref = meta["protocol"].get("ref", "")
+    ref = meta.protocol.ref or ""
     if files.protocol.exists():
         text, source = files.protocol.read_text(encoding="utf-8"), str(files.protocol)
     else:  # written before sessions kept their protocol copy
@@ -548,17 +546,16 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
 
         source, text = protocol_text(ref)
     proto = parse_protocol(text, source)
-    if proto.sha256 != meta["protocol"]["sha256"]:
+    if proto.sha256 != meta.protocol.sha256:
         raise ResumeMismatch(f"cannot resume: {source} changed since the session started "
-                             f"(sha256 {meta['protocol']['sha256'][:12]}… then, "
+                             f"(sha256 {meta.protocol.sha256[:12]}… then, "
                              f"{proto.sha256[:12]}… now)")
-    proto = with_libraries(proto, meta.get("libraries", {}))
-    p = meta["participant"]
-    validate_participant(p["id"], new=False)
-    engine = SessionEngine(proto, meta["seed"], p["id"], p.get("counterbalance_row"))
-    engine.check_resume({"protocol_sha256": meta["protocol"]["sha256"], "seed": meta["seed"],
-                         "participant": p["id"],
-                         "counterbalance_row": p.get("counterbalance_row")})
+    proto = with_libraries(proto, meta.libraries)
+    p = meta.participant
+    validate_participant(p.id, new=False)
+    engine = SessionEngine(proto, meta.seed, p.id, p.counterbalance_row)
+    engine.check_resume({"protocol_sha256": meta.protocol.sha256, "seed": meta.seed,
+                         "participant": p.id, "counterbalance_row": p.counterbalance_row})
     data_folder_ready(files.folder)
     torn = files.set_aside_torn()
     if torn is not None:
@@ -568,25 +565,25 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
         console.say(done)
     rows, _ = files.read_rows()
     _check_rows(files, meta, rows)
-    responder = meta.get("responder", "scripted")
+    responder = meta.responder or "scripted"
     if responder not in KIND_OF:
-        responder = "person" if meta.get("ui") == "psychopy" else "scripted"
-    spec = device or meta["device"]["spec"]
-    with _session_device(spec, meta["seed"], responder == "person", clear_fault, lsl,
+        responder = "person" if meta.ui == "psychopy" else "scripted"
+    spec = device or meta.device_spec
+    with _session_device(spec, meta.seed, responder == "person", clear_fault, lsl,
                          console.say) as dev:
-        limits = _apply_limit(proto, dev, (meta.get("limits") or {}).get("current_limit_a"))
-        check_recorded(meta.get("libraries", {}), dev)
+        limits = _apply_limit(proto, dev, (meta.limits or {}).get("current_limit_a"))
+        check_recorded(meta.libraries, dev)
         keys = operator_keys if operator_keys is not None else responder == "person"
-        with _session_parts(dev, proto, responder=responder, seed=meta["seed"],
-                            group=p.get("group", ""), fullscreen=fullscreen,
-                            audio=meta.get("audio", False) if audio is None else audio,
+        with _session_parts(dev, proto, responder=responder, seed=meta.seed,
+                            group=p.group, fullscreen=fullscreen,
+                            audio=meta.audio if audio is None else audio,
                             keys=keys, quiet=quiet, console=console, lsl=lsl,
-                            participant=p["id"], say=console.say) as parts:
+                            participant=p.id, say=console.say) as parts:
             console = parts.console
             runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
-                                   participant_ui=parts.ui, participant=p["id"],
-                                   session=meta["session"], seed=meta["seed"], console=console,
-                                   audio=parts.sound, traces=meta.get("traces_mode", "full"),
+                                   participant_ui=parts.ui, participant=p.id,
+                                   session=meta.session, seed=meta.seed, console=console,
+                                   audio=parts.sound, traces=meta.traces_mode or "full",
                                    meta=meta, markers=parts.markers)
             runner.load_log()
             try:
@@ -597,10 +594,10 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                 console.say(f"replaying {len(rows)} recorded attempts for the simulated "
                             "participant's memory")
                 runner.replay(rows)
-            meta["resumes"].append({"at_utc": utc_now(), "attempts_logged": len(runner.log),
+            meta.resumes.append({"at_utc": utc_now(), "attempts_logged": len(runner.log),
                                     "torn_line": None if torn is None else torn.line,
                                     "device": spec, "limits": limits})
-            meta["status"] = SessionStatus.RUNNING
+            meta.status = SessionStatus.RUNNING
             _keep_markers(meta, parts.markers)
             files.write_meta(meta)
             console.say(f"resuming {files.folder} after {len(runner.log)} attempts")

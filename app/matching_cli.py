@@ -275,7 +275,7 @@ def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
                 raise type(exc)(f"{exc}. {kept()}; continue with: {again}") from None
             raise
         path = lib.save(out)
-        errs = lib.meta["inversion"]["in_window_error"]
+        errs = lib.provenance["inversion"]["in_window_error"]
         print(f"wrote {path}: {len(lib.velocities)} transients for {args.source} on "
               f"{args.device} ({lib.velocities.min():.3f}–{lib.velocities.max():.3f} m/s), "
               f"{args.method} inversion, in-window error median {np.median(errs):.2f} (through "
@@ -331,13 +331,13 @@ def library_show(args: argparse.Namespace, open_spec) -> int:
         with open_spec(args.device) as dev:
             info = dev.info
     lib = TransientLibrary.load(args.file, info)
-    meta = lib.meta
-    print(f"{args.file}: format {meta['format_version']}, sha256 {lib.sha256[:16]}…")
-    print(f"  device  {meta['device']['model']} serial {meta['device']['serial_number']} at "
+    made = lib.provenance
+    print(f"{args.file}: format {made['format_version']}, sha256 {lib.sha256[:16]}…")
+    print(f"  device  {made['device']['model']} serial {made['device']['serial_number']} at "
           f"{lib.rate_hz:g} Hz")
-    print(f"  source  {meta['source']['sample']} ({meta['source']['taps_recorded']} clean taps "
-          f"from {meta['source']['windows']} windows)")
-    inv = meta["inversion"]
+    print(f"  source  {made['source']['sample']} ({made['source']['taps_recorded']} clean taps "
+          f"from {made['source']['windows']} windows)")
+    inv = made["inversion"]
     print(f"  inverse {inv['method']}, λ = {inv['lambda']:g}, band {inv['band_hz']} Hz; "
           f"in-window error median {np.median(inv['in_window_error']):.2f}")
     print(f"  entries {len(lib.velocities)}: " + ", ".join(f"{v:.3f}" for v in lib.velocities)
@@ -353,7 +353,7 @@ def library_show(args: argparse.Namespace, open_spec) -> int:
         ax[0].set_xlabel("time after contact [ms]")
         ax[0].set_ylabel("force [N]")
         ax[0].legend()
-        ax[0].set_title(f"transients for {meta['source']['sample']}")
+        ax[0].set_title(f"transients for {made['source']['sample']}")
         ax[1].plot(lib.velocities, np.abs(lib.forces).max(axis=1), "o-")
         ax[1].set_xlabel("incoming speed [m/s]")
         ax[1].set_ylabel("peak force [N]")

@@ -33,6 +33,7 @@ from analysis.session_format import (
     TRACES,
     TRIALS,
     SessionMetaError,
+    SessionRecord,
     TornLine,
     TrialsFileError,
     canonical_bytes,
@@ -194,13 +195,15 @@ class SessionFiles:
             raise io_error(exc, "cannot set an unrecorded trace aside") from None
         return moved
 
-    def write_meta(self, meta: dict) -> None:
+    def write_meta(self, meta: SessionRecord) -> None:
+        """session.json from ``meta``, atomically (the old file or the new, never half)."""
         try:
-            atomic_write(self.meta, json.dumps(meta, indent=2, sort_keys=True).encode("utf-8"))
+            atomic_write(self.meta, json.dumps(meta.to_json(), indent=2,
+                                               sort_keys=True).encode("utf-8"))
         except OSError as exc:
             raise io_error(exc, "cannot write session.json") from None
 
-    def read_meta(self) -> dict:
+    def read_meta(self) -> SessionRecord:
         try:
             return read_meta(self.meta)
         except SessionMetaError as exc:

@@ -26,7 +26,15 @@ from typing import Any
 
 import numpy as np
 
-from analysis.session_format import FORMAT_VERSION, PROTOCOL_COPY, SessionStatus
+from analysis.session_format import (
+    FORMAT_VERSION,
+    PROTOCOL_COPY,
+    ParticipantRecord,
+    ProtocolRecord,
+    SessionRecord,
+    SessionStatus,
+    TimesRecord,
+)
 from device import DeviceError, DeviceFaultError, HapticDevice
 from protocols import (
     DONE,
@@ -94,32 +102,29 @@ def _versions() -> dict[str, str]:
 def session_meta(protocol: Protocol, protocol_ref: str, participant: str, session: int, seed: int,
                  counterbalance_row: int | None, device: HapticDevice, device_spec: str,
                  ui: str, responder: str, audio: bool, group: str = "", kind: str = "dry-run",
-                 libraries: dict | None = None) -> dict:
-    """The metadata DESIGN.md asks for, at session start."""
-    return {
-        "format_version": FORMAT_VERSION,
-        "app": {"name": "hapticlab", "version": APP_VERSION, "git_sha": _git_sha()},
-        "protocol": {"name": protocol.name, "ref": protocol_ref, "source": protocol.source,
-                     "sha256": protocol.sha256, "copy": PROTOCOL_COPY,
-                     "design": protocol.design()},  # the one place of scale and choices
-        "kind": kind,
-        "libraries": libraries or {},
-        "seed": seed,
-        "rng": RNG_ALGORITHM + "; per attempt: SeedSequence([seed, trial_index, attempt])",
-        "participant": {"id": participant, "counterbalance_row": counterbalance_row,
-                        "group": group},
-        "session": session,
-        "device": {"spec": device_spec, **device.info.to_dict()},
-        "ui": ui, "responder": responder, "audio": audio,
-        "packages": _versions(),
-        "python": sys.version.split()[0],
-        "os": platform.platform(),
-        "times": {"created_utc": utc_now(), "finished_utc": None},
-        "resumes": [],
-        "timing": {},
-        "link": {},
-        "status": SessionStatus.RUNNING,
-    }
+                 libraries: dict | None = None) -> SessionRecord:
+    """The record DESIGN.md asks for, at session start."""
+    return SessionRecord(
+        format_version=FORMAT_VERSION,
+        app={"name": "hapticlab", "version": APP_VERSION, "git_sha": _git_sha()},
+        protocol=ProtocolRecord(name=protocol.name, ref=protocol_ref, source=protocol.source,
+                                sha256=protocol.sha256, copy=PROTOCOL_COPY,
+                                design=protocol.design()),  # the one place of scale, choices
+        kind=kind,
+        libraries=libraries or {},
+        seed=seed,
+        rng=RNG_ALGORITHM + "; per attempt: SeedSequence([seed, trial_index, attempt])",
+        participant=ParticipantRecord(id=participant, counterbalance_row=counterbalance_row,
+                                      group=group),
+        session=session,
+        device={"spec": device_spec, **device.info.to_dict()},
+        ui=ui, responder=responder, audio=audio,
+        packages=_versions(),
+        python=sys.version.split()[0],
+        os=platform.platform(),
+        times=TimesRecord(created_utc=utc_now(), finished_utc=None),
+        status=SessionStatus.RUNNING,
+    )
 
 
 @dataclass(kw_only=True)
@@ -153,7 +158,7 @@ class SessionRunner:
     #: what the device could not do as asked (a simulated contact that chattered), by its
     #: first words: each is said to the operator once and kept in session.json
     warnings: dict[str, str] = field(default_factory=dict)
-    meta: dict | None = None  # session.json's content (notes are added to it)
+    meta: SessionRecord | None = None  # session.json's record (notes are added to it)
     markers: MarkerSink = field(default_factory=MarkerSink)
     _expected: list[dict] | None = None  # while replaying: the recorded rows still to meet
     _durations: list[float] = field(default_factory=list)
@@ -369,7 +374,7 @@ class SessionRunner:
     def _save_notes(self) -> None:
         notes = self.console.take_notes()
         if notes and self.meta is not None:
-            self.meta.setdefault("notes", []).extend(notes)
+            self.meta.add_notes(notes)
             self.files.write_meta(self.meta)
 
     # ------------------------------------------------------------------ reference blocks

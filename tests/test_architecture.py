@@ -333,3 +333,41 @@ def test_the_kind_checker_sees_comparisons(tmp_path):
                    "fine = phase.kind == other\nalso = status == 'free'\n")
     assert [h.rsplit(":", 1)[1] for h in _kind_comparisons(bad, {"free", "rated"})] \
         == ["1", "3"]
+
+
+def _raw_meta_uses(path: Path) -> list[str]:
+    """``meta["key"]`` and ``meta.get("key")`` on a name ending in ``meta`` (session.json
+    read as a dict), as ``path:line``."""
+    hits = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        target = None
+        if isinstance(node, ast.Subscript) and isinstance(node.slice, ast.Constant) \
+                and isinstance(node.slice.value, str):
+            target = node.value
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+                and node.func.attr in ("get", "setdefault", "pop"):
+            target = node.func.value
+        name = (target.id if isinstance(target, ast.Name) else target.attr
+                if isinstance(target, ast.Attribute) else "")
+        if name.endswith("meta"):
+            hits.append(f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}:"
+                        f"{node.lineno}")
+    return hits
+
+
+def test_session_json_is_read_and_written_through_its_record():
+    """session.json has one owner, ``SessionRecord`` in analysis/session_format.py: the
+    recorder, the runner, the API, the loader and the BIDS export use its fields, never
+    its keys, so a key renamed or retyped changes one file (issue 33). A transient
+    library's own record of how it was made is another file's, named ``provenance``."""
+    own = ROOT / "analysis" / "session_format.py"
+    found = [hit for d in sorted(OURS) for f in sorted((ROOT / d).rglob("*.py"))
+             if f != own for hit in _raw_meta_uses(f)]
+    assert not found, f"session.json read or written by key: {found}"
+
+
+def test_the_record_checker_sees_keys(tmp_path):
+    bad = tmp_path / "m.py"
+    bad.write_text("a = meta['seed']\nb = self.meta.get('kind')\nc = meta.seed\n"
+                   "d = row['seed']\ne = files.meta\nmeta.setdefault('notes', [])\n")
+    assert [h.rsplit(":", 1)[1] for h in _raw_meta_uses(bad)] == ["1", "2", "6"]

@@ -77,23 +77,23 @@ class TransientLibrary:
         Ascending incoming speeds.
     forces : ndarray (n, L) [N]
         Transient per speed at the servo rate.
-    meta : dict
-        ``device`` (DeviceInfo dict), ``servo_rate_hz``, ``model`` (identified TF),
-        ``inversion`` (method, λ, band, tapers, in-window errors), ``source`` (sample
-        scene and recordings), ``pipeline``.
+    provenance : dict
+        How it was made (the file's ``meta_json``): ``device`` (DeviceInfo dict),
+        ``servo_rate_hz``, ``model`` (identified TF), ``inversion`` (method, λ, band,
+        tapers, in-window errors), ``source`` (sample scene and recordings), ``pipeline``.
     """
 
     velocities: np.ndarray
     forces: np.ndarray
-    meta: dict = field(default_factory=dict)
+    provenance: dict = field(default_factory=dict)
 
     @property
     def rate_hz(self) -> float:
-        return float(self.meta["servo_rate_hz"])
+        return float(self.provenance["servo_rate_hz"])
 
     @property
     def sha256(self) -> str:
-        return _digest(self.velocities, self.forces, self.meta)
+        return _digest(self.velocities, self.forces, self.provenance)
 
     @property
     def nbytes(self) -> int:
@@ -110,7 +110,7 @@ class TransientLibrary:
         path.parent.mkdir(parents=True, exist_ok=True)
         buf = io.BytesIO()
         np.savez(buf, velocities=self.velocities.astype("<f8"), forces=self.forces.astype("<f8"),
-                 meta_json=np.array(_canonical(self.meta)), sha256=np.array(self.sha256))
+                 meta_json=np.array(_canonical(self.provenance)), sha256=np.array(self.sha256))
         atomic_write(path, buf.getvalue())
         return path
 
@@ -121,18 +121,18 @@ class TransientLibrary:
         try:
             with np.load(path, allow_pickle=False) as z:
                 v, f = z["velocities"], z["forces"]
-                meta = json.loads(str(z["meta_json"]))
+                provenance = json.loads(str(z["meta_json"]))
                 stored = str(z["sha256"])
         except FileNotFoundError:
             raise LibraryError(f"{path}: no such library file") from None
         except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
             raise LibraryError(f"{path}: corrupt, or not a transient library file ({exc})"
                                ) from None
-        version = meta.get("format_version")
+        version = provenance.get("format_version")
         if version != FORMAT_VERSION:
             raise LibraryError(f"{path}: library format version {version!r}; this hapticlab "
                                f"reads version {FORMAT_VERSION}")
-        lib = cls(np.asarray(v, float), np.asarray(f, float), meta)
+        lib = cls(np.asarray(v, float), np.asarray(f, float), provenance)
         if lib.sha256 != stored:
             raise LibraryError(f"{path}: content hash mismatch (stored {stored[:12]}…, computed "
                                f"{lib.sha256[:12]}…): the file is corrupt or was edited")
@@ -141,7 +141,7 @@ class TransientLibrary:
         return lib
 
     def check_device(self, device: DeviceInfo, where: str = "library") -> None:
-        made = self.meta.get("device", {})
+        made = self.provenance.get("device", {})
         mine = (device.model, device.serial_number, float(device.servo_rate_hz))
         theirs = (made.get("model"), made.get("serial_number"),
                   float(made.get("servo_rate_hz", -1)))
@@ -368,7 +368,7 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
         targets = [taps[i].accel - taps[i].velocity * per_speed for i in pick]
         superposed = {"scene": under.to_dict(), "taps": len(own)}
     invs = [invert(dm, a, method, lam=lam, band=band) for a in targets]
-    meta: dict[str, Any] = {
+    provenance: dict[str, Any] = {
         "format_version": FORMAT_VERSION,
         "pipeline": PIPELINE_VERSION,
         "device": {**info.to_dict(), "servo_rate_hz": float(info.servo_rate_hz)},
@@ -382,9 +382,9 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
                    "taps_recorded": len(taps), "tap_times_s": [taps[i].t for i in pick]},
     }
     if superposed is not None:
-        meta["superposed_on"] = superposed
+        provenance["superposed_on"] = superposed
     return TransientLibrary(np.array([taps[i].velocity for i in pick]),
-                            np.stack([v.force for v in invs]), meta)
+                            np.stack([v.force for v in invs]), provenance)
 
 
 # --------------------------------------------------------------------- the library store

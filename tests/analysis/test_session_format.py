@@ -1,7 +1,9 @@
-"""session.json: statuses as named values, the scale written once, older formats read
-through one upgrade step (analysis/session_format.py)."""
+"""session.json: one typed record (SessionRecord) with statuses as named values, the scale
+written once, values of the wrong type named, older formats read through one upgrade step
+(analysis/session_format.py)."""
 
 import json
+import re
 
 import pytest
 
@@ -32,9 +34,58 @@ def test_a_status_is_a_named_value_written_as_its_text():
     assert [s.value for s in SessionStatus] == ["running", "complete", "interrupted", "stopped"]
 
 
+def _written():
+    """session.json as the recorder writes it: every key of the record present."""
+    m = _meta()
+    m["protocol"].update(ref="realism", source="protocols/realism.toml", copy="protocol.toml")
+    m["participant"].update(counterbalance_row=None, group="")
+    m.update(app={"name": "hapticlab"}, libraries={}, rng="PCG64", device={"spec": "sim"},
+             ui="none", responder="simulated", audio=False, packages={}, python="3.11",
+             os="Linux", times={"created_utc": "2026-11-28T09:00:00Z", "finished_utc": None},
+             resumes=[], timing={}, link={})
+    return m
+
+
 def test_this_format_is_read_as_written(tmp_path):
-    (tmp_path / "session.json").write_text(json.dumps(_meta()))
-    assert read_meta(tmp_path / "session.json") == _meta()
+    (tmp_path / "session.json").write_text(json.dumps(_written()))
+    record = read_meta(tmp_path / "session.json")
+    assert record.to_json() == _written()
+    assert record.status is SessionStatus.COMPLETE and record.participant.id == "P01"
+    assert record.protocol.scale == DESIGN["scale"] and record.device_spec == "sim"
+
+
+def test_keys_this_hapticlab_does_not_know_are_kept(tmp_path):
+    """A newer minor writer's key (or a lab's own) survives a resume's write-back."""
+    m = _written()
+    m["lab_note"] = {"room": 3}
+    m["participant"]["handedness"] = "left"
+    (tmp_path / "session.json").write_text(json.dumps(m))
+    assert read_meta(tmp_path / "session.json").to_json() == m
+
+
+@pytest.mark.parametrize(("where", "value", "message"), [
+    ("session", "two", "session is 'two'; expected a whole number"),
+    ("seed", True, "seed is True; expected a whole number"),
+    ("status", "paused", "status is 'paused'; expected one of running, complete, "
+                         "interrupted, stopped"),
+    ("device", "sim", "device is 'sim'; expected an object"),
+    ("times", "today", "times is not an object"),
+    ("participant", "P01", "missing key(s) participant.id"),
+    ("kind", "robot", "kind is 'robot'; expected one of human, dry-run, simulated"),
+])
+def test_a_value_of_the_wrong_type_is_named_with_its_key(tmp_path, where, value, message):
+    m = _written()
+    m[where] = value
+    (tmp_path / "session.json").write_text(json.dumps(m))
+    with pytest.raises(SessionMetaError, match=re.escape(message)):
+        read_meta(tmp_path / "session.json")
+
+
+def test_a_participant_id_written_as_a_number_is_read_as_text(tmp_path):
+    m = _written()
+    m["participant"]["id"] = 7
+    (tmp_path / "session.json").write_text(json.dumps(m))
+    assert read_meta(tmp_path / "session.json").participant.id == "7"
 
 
 def test_format_2_loses_its_second_copy_of_the_scale_and_choices(tmp_path):
@@ -42,9 +93,10 @@ def test_format_2_loses_its_second_copy_of_the_scale_and_choices(tmp_path):
     old = _meta(2, rating={"min": 1, "max": 7}, answer_choices=["rubber", "wood"])
     (tmp_path / "session.json").write_text(json.dumps(old))
     meta = read_meta(tmp_path / "session.json")
-    assert meta["format_version"] == FORMAT_VERSION and meta["upgraded_from"] == 2
-    assert "rating" not in meta["protocol"] and "answer_choices" not in meta["protocol"]
-    assert meta["protocol"]["design"] == DESIGN
+    assert meta.format_version == FORMAT_VERSION and meta.upgraded_from == 2
+    assert "rating" not in meta.protocol.extra and "answer_choices" not in meta.protocol.extra
+    assert meta.protocol.design == DESIGN
+    assert meta.to_json()["upgraded_from"] == 2
     assert old["protocol"]["rating"] == {"min": 1, "max": 7}  # the caller's dict is kept
     # a protocol without a scale wrote rating = null, which says nothing either way
     assert "rating" not in upgrade_meta(_meta(2, rating=None))["protocol"]
@@ -59,12 +111,15 @@ def test_two_copies_that_disagree_are_named_not_chosen_between(tmp_path):
         upgrade_meta(_meta(2, answer_choices=["wood", "rubber"]))
 
 
-def test_format_1_gets_its_kind_from_how_it_ran():
+def test_format_1_gets_its_kind_from_how_it_ran(tmp_path):
     old = _meta(None)
     del old["kind"]
     old["ui"] = "psychopy"
     meta = upgrade_meta(old)
     assert meta["kind"] == "human" and meta["upgraded_from"] == 1
+    old["ui"], old["responder"] = "none", "simulated"
+    (tmp_path / "session.json").write_text(json.dumps(old))
+    assert read_meta(tmp_path / "session.json").kind == "simulated"
 
 
 def test_a_newer_format_asks_for_a_newer_hapticlab(tmp_path):

@@ -286,7 +286,7 @@ def test_a_library_is_built_explicitly_into_the_store_and_found_there(realism):
     SimDevice(seed=6).load_scene(realism.samples["matched_soft"].scene)
     assert path.stat().st_mtime_ns == mtime  # found, not rebuilt
     lib = TransientLibrary.load(path, dev.info)
-    assert lib.meta["source"]["sample"] == "wood_on_foam"
+    assert lib.provenance["source"]["sample"] == "wood_on_foam"
     assert 8 <= len(lib.velocities) <= 12
     # peak force grows with the incoming speed (momentum), roughly linearly
     peaks = np.abs(lib.forces).max(axis=1)
@@ -467,8 +467,8 @@ def test_a_library_played_over_a_spring_can_leave_the_springs_share_out(ident, r
     spring = replace(realism.samples["matched_firm"].scene, transient=None)
     lib = build_library(SimDevice(seed=8), source, entries=4, windows=2, model=ident.model,
                         under=spring)
-    assert lib.meta["superposed_on"]["taps"] >= 2
-    assert lib.meta["superposed_on"]["scene"]["spring"] == spring.spring
+    assert lib.provenance["superposed_on"]["taps"] >= 2
+    assert lib.provenance["superposed_on"]["scene"]["spring"] == spring.spring
     dev = SimDevice(seed=8)
     taps = segment_taps(record_taps(dev, source, 2, TAP_SECONDS))
     own = segment_taps(record_taps(dev, spring, 2, TAP_SECONDS))
