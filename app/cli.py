@@ -21,11 +21,10 @@ __all__ = ["main", "build_parser"]
 
 
 def _device_selftest(args: argparse.Namespace) -> int:
-    from device import open_device
-    from device.suite import run_selftest
+    from .api import device_selftest
 
-    _opener(args)(args.spec).close()  # a bad spec or an absent device: one line, exit 2
-    report = run_selftest(args.spec, lambda: open_device(args.spec))
+    # a bad spec or an absent device: one line, exit 2
+    report = device_selftest(args.spec, clear_fault=args.clear_fault)
     if args.json:
         print(json.dumps(report, indent=2))
     else:
@@ -111,14 +110,10 @@ def _protocol_show(args: argparse.Namespace) -> int:
 def _device_list(args: argparse.Namespace) -> int:
     """Serial ports and the simulated device, without opening any port (opening one can
     reset a board)."""
-    from serial.tools import list_ports
+    from .api import device_list
 
-    from device import backends
-
-    ports = [{"spec": f"serial:{p.device}", "description": p.description or "",
-              "hwid": p.hwid or ""} for p in sorted(list_ports.comports(), key=lambda p: p.device)]
-    found = {"backends": list(backends()), "ports": ports,
-             "simulated": [{"spec": "sim", "description": "the simulated device (no hardware)"}]}
+    found = device_list()
+    ports = found["ports"]
     if args.json:
         print(json.dumps(found, indent=2))
         return 0
@@ -136,21 +131,9 @@ def _device_list(args: argparse.Namespace) -> int:
 def _opener(args: argparse.Namespace) -> Callable:
     """``open(spec)`` for a command: the device opened, and a fault it latched before (an
     e-stop, a watchdog) cleared when the operator said so with ``--clear-fault``."""
-    def open_spec(spec: str):
-        from device import open_device
+    from .api import open_device_for
 
-        dev = open_device(spec)
-        if getattr(args, "clear_fault", False) and dev.fault is not None:
-            print(f"hapticlab: clearing the latched {dev.fault.code} fault of {spec} "
-                  "(--clear-fault)", file=sys.stderr)
-            try:
-                dev.clear_fault()
-            except HapticlabError:
-                dev.close()
-                raise
-        return dev
-
-    return open_spec
+    return lambda spec: open_device_for(spec, clear_fault=getattr(args, "clear_fault", False))
 
 
 def _add_clear_fault(p: argparse.ArgumentParser) -> None:
@@ -172,28 +155,9 @@ def _matching(args: argparse.Namespace) -> int:
 
 
 def _device_emulate(args: argparse.Namespace) -> int:
-    if not 0 < args.speed <= 20:
-        raise UsageError(f"--speed must be in (0, 20] (device seconds per wall second), "
-                         f"got {args.speed:g}")
-    if args.firmware != "python":
-        from device.serial.firmware import REAL_TIME_ONLY, serve
+    from .api import emulate
 
-        if args.rate != 10_000.0:
-            raise UsageError("the firmware's servo runs at its build's own rate (10 kHz; the "
-                             "bridges 4 and 1 kHz): --rate applies to --firmware python only")
-        if args.firmware == "qemu" and args.speed != 1.0:
-            raise UsageError("the firmware under QEMU runs at the pace of its counted "
-                             "instructions and its sleeps: --speed applies to "
-                             "--firmware python, host, host-board, host-san and dhd-stub")
-        if args.firmware in REAL_TIME_ONLY and args.speed != 1.0:
-            raise UsageError(f"--firmware {args.firmware} runs in real time, in the HD "
-                             "scheduler's clock: --speed must be 1")
-        return serve(args.firmware, args.seed, args.speed)
-    from device.serial.emulator import main as emulate
-
-    if not 1_000 <= args.rate <= 20_000:
-        raise UsageError(f"--rate must be 1,000–20,000 Hz, got {args.rate:g}")
-    return emulate(args.rate, args.seed, args.speed)
+    return emulate(args.firmware, rate=args.rate, seed=args.seed, speed=args.speed)
 
 
 def _device_check(args: argparse.Namespace) -> int:
@@ -534,6 +498,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="print the version and exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
+    from .api import EMULATORS
+
     dev = sub.add_parser("device", help="device tools (list, selftest, check, emulate, sysid, "
                          "fit-grasp)")
     dsub = dev.add_subparsers(dest="device_command", required=True, metavar="ACTION")
@@ -556,12 +522,12 @@ def build_parser() -> argparse.ArgumentParser:
     ck.set_defaults(func=_device_check)
     em = dsub.add_parser("emulate", help="serve the wire protocol on a pseudo-terminal "
                          "(simulated plant); prints the port first")
-    em.add_argument("--rate", type=float, default=10_000.0, help="servo rate [Hz]")
+    em.add_argument("--rate", type=float, default=None, help="servo rate of the Python "
+                    "emulator [Hz] (default 10,000; the firmware runs at its build's own)")
     em.add_argument("--seed", type=int, default=0, help="seed of the simulated plant and "
                     "tapping (default 0)")
     em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
-    em.add_argument("--firmware", choices=("python", "host", "host-board", "host-san", "qemu",
-                                           "dhd-stub", "hd-stub", "hd-stub-tsan"),
+    em.add_argument("--firmware", choices=tuple(EMULATORS),
                     default="python",
                     help="what serves the port (protocol 2): the Python emulator, or the C "
                     "reference firmware built for this machine (host-board: with the "
