@@ -43,16 +43,6 @@ def _device_selftest(args: argparse.Namespace) -> int:
     return 0 if report["failed"] == 0 else 1
 
 
-def _load_protocol(path: str, device_spec: str | None = None, args=None):
-    from protocols import load_protocol
-
-    info = None
-    if device_spec:
-        with _opener(args)(device_spec) as dev:
-            info = dev.info
-    return load_protocol(path, device=info)
-
-
 def _protocol_validate(args: argparse.Namespace) -> int:
     from .api import validate_protocol
 
@@ -128,14 +118,6 @@ def _device_list(args: argparse.Namespace) -> int:
     return 0
 
 
-def _opener(args: argparse.Namespace) -> Callable:
-    """``open(spec)`` for a command: the device opened, and a fault it latched before (an
-    e-stop, a watchdog) cleared when the operator said so with ``--clear-fault``."""
-    from .api import open_device_for
-
-    return lambda spec: open_device_for(spec, clear_fault=getattr(args, "clear_fault", False))
-
-
 def _add_clear_fault(p: argparse.ArgumentParser) -> None:
     p.add_argument("--clear-fault", action="store_true",
                    help="clear a fault the device latched before (an e-stop, the watchdog), "
@@ -146,12 +128,12 @@ def _matching(args: argparse.Namespace) -> int:
     from app import matching_cli as mc
 
     if args.action == "sysid":
-        return mc.device_sysid(args, _opener(args))
+        return mc.device_sysid(args)
     if args.action == "fit-grasp":
         return mc.device_fit_grasp(args)
     if args.action == "library-build":
-        return mc.library_build(args, _opener(args), _load_protocol)
-    return mc.library_show(args, _opener(args))
+        return mc.library_build(args)
+    return mc.library_show(args)
 
 
 def _device_emulate(args: argparse.Namespace) -> int:

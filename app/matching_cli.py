@@ -1,4 +1,5 @@
-"""Command-line actions for acceleration matching and the grasp model (with their plots)."""
+"""Command-line actions for acceleration matching and the grasp model: what the functions
+of :mod:`app.matching` return, printed and plotted, and the operator's prompt at a fault."""
 
 from __future__ import annotations
 
@@ -11,9 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from device.errors import DeviceError, DeviceFaultError, HapticlabError
-
-from .errors import UsageError
+from device.errors import DeviceFaultError
 
 __all__ = ["device_sysid", "device_fit_grasp", "library_build", "library_show"]
 
@@ -42,82 +41,22 @@ def _sysid_again(args: argparse.Namespace) -> str:
     return shlex.join([*cmd, "--clear-fault"])
 
 
-def _opened(record, what: str):
-    """``record`` after saying whether it resumes an earlier run (``what``: the kept
-    measurements' noun, "measurements" or "of 12 sweeps")."""
-    if record.set_aside:
-        print(f"hapticlab: not resuming from {record.path} ({record.set_aside}): "
-              "measuring afresh", file=sys.stderr)
-    elif record.resumed:
-        print(f"hapticlab: resuming: {record.resumed} {what} kept from an earlier run "
-              f"({record.path}; --restart measures everything again)", file=sys.stderr)
-    return record
+def _say(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
 
 
-def device_sysid(args: argparse.Namespace, open_spec) -> int:
-    from device.matching.library import (
-        PIPELINE_VERSION,
-        BuildRecord,
-        sysid_record_path,
-        usable_band,
-    )
-    from device.matching.measure import MeasurementFault, Pace
-    from device.matching.sysid import identify, sweep_seconds
+def device_sysid(args: argparse.Namespace) -> int:
+    from .matching import identify_device
 
-    with open_spec(args.device) as dev:
-        band = usable_band(dev.info.servo_rate_hz)
-        n = len(args.levels) * args.repeats
-        # finished sweeps are kept until the model is fitted, so a fault (cleared at the
-        # prompt, or by running the command again) costs one sweep, never the others
-        info = dev.info
-        key = {"sysid": 1, "pipeline": PIPELINE_VERSION,
-               "device": [info.model, info.serial_number, info.servo_rate_hz],
-               "levels": [float(v) for v in args.levels], "repeats": args.repeats,
-               "band_hz": [float(v) for v in band],
-               "sweep_s": sweep_seconds(info.servo_rate_hz, band)}
-        record = _opened(BuildRecord.open(sysid_record_path(info), key, restart=args.restart),
-                         f"of {n} sweeps")
-        pace = Pace([sweep_seconds(info.servo_rate_hz, band)] * n, record.count, _step_line)
-
-        def kept() -> str:
-            return f"{record.count} of {n} sweeps are kept in {record.path}"
-
-        try:
-            idn = identify(dev, levels=tuple(args.levels), repeats=args.repeats, band=band,
-                           order=args.order, relative_degree=args.relative_degree,
-                           delay=None if args.delay is None else args.delay * 1e-3,
-                           record=record, on_fault=fault_prompt(dev, kept), pace=pace)
-        except MeasurementFault as exc:
-            raise DeviceError(f"{exc}; {kept()}. Once it is safe, continue with: "
-                              f"{_sysid_again(args)}") from None
-    m = idn.model
-    e = idn.etfe.in_band(band)
-    report = {"device": args.device, "rate_hz": idn.rate_hz, "levels_n": list(idn.levels),
-              "repeats": idn.repeats, "model": m.to_dict(),
-              "coherence": {"min": float(e.coherence.min()), "median": float(np.median(
-                  e.coherence))},
-              "resonance_hz": float(e.freq[np.argmax(np.abs(e.H))])}
+    report = identify_device(args.device, levels=tuple(args.levels), repeats=args.repeats,
+                             order=args.order, relative_degree=args.relative_degree,
+                             delay_ms=args.delay, restart=args.restart,
+                             clear_fault=args.clear_fault, say=_say, on_fault=fault_prompt,
+                             on_step=_step_line, again=_sysid_again(args))
+    idn = report.pop("_idn")
+    m, band = idn.model, report["model"]["band_hz"]
     if args.png:
-        plt = _agg()
-        fig, ax = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
-        for lvl, est in idn.per_level.items():
-            b = est.in_band(band)
-            ax[0].semilogx(b.freq, 20 * np.log10(np.abs(b.H)), lw=0.7, alpha=0.6,
-                           label=f"ETFE {lvl:g} N")
-        ax[0].semilogx(e.freq, 20 * np.log10(np.abs(e.H)), "k", lw=1.2, label="ETFE mean")
-        ax[0].semilogx(e.freq, 20 * np.log10(np.abs(m.response(e.freq))), "r--",
-                       label=f"model {m.order}/{m.relative_degree}, τ={m.delay * 1e3:.3g} ms")
-        ax[0].set_ylabel("|a/F| [dB re 1 (m/s²)/N]")
-        ax[0].legend(fontsize=7)
-        ax[1].semilogx(e.freq, np.degrees(np.unwrap(np.angle(e.H))), "k")
-        ax[1].semilogx(e.freq, np.degrees(np.unwrap(np.angle(m.response(e.freq)))), "r--")
-        ax[1].set_ylabel("phase [deg]")
-        ax[2].semilogx(e.freq, e.coherence, "k")
-        ax[2].set_ylabel("coherence")
-        ax[2].set_xlabel("frequency [Hz]")
-        fig.suptitle(f"force → acceleration, {args.device} (hand holding the stylus)")
-        fig.tight_layout()
-        fig.savefig(args.png, dpi=110)
+        _plot_sysid(idn, band, args.device, args.png)
         report["png"] = str(args.png)
     if args.json:
         print(json.dumps(report, indent=2))
@@ -127,54 +66,59 @@ def device_sysid(args: argparse.Namespace, open_spec) -> int:
               f"{band[0]:g}–{band[1]:g} Hz: {m.err_db_rms:.2f} dB rms ({m.err_db_max:.2f} max), "
               f"{m.err_deg_rms:.1f}° rms ({m.err_deg_max:.1f}° max); resonance "
               f"{report['resonance_hz']:.0f} Hz; coherence ≥ {report['coherence']['min']:.2f}")
-    record.discard()  # the model is out: the sweeps are no longer needed
     return 0
 
 
-def device_fit_grasp(args: argparse.Namespace) -> int:
-    from device.matching.grasp import PUBLISHED, TISSUE, GraspRig, identify_grasp
+def _plot_sysid(idn, band, device: str, png: Path) -> None:
+    plt = _agg()
+    m = idn.model
+    e = idn.etfe.in_band(band)
+    fig, ax = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+    for lvl, est in idn.per_level.items():
+        b = est.in_band(band)
+        ax[0].semilogx(b.freq, 20 * np.log10(np.abs(b.H)), lw=0.7, alpha=0.6,
+                       label=f"ETFE {lvl:g} N")
+    ax[0].semilogx(e.freq, 20 * np.log10(np.abs(e.H)), "k", lw=1.2, label="ETFE mean")
+    ax[0].semilogx(e.freq, 20 * np.log10(np.abs(m.response(e.freq))), "r--",
+                   label=f"model {m.order}/{m.relative_degree}, τ={m.delay * 1e3:.3g} ms")
+    ax[0].set_ylabel("|a/F| [dB re 1 (m/s²)/N]")
+    ax[0].legend(fontsize=7)
+    ax[1].semilogx(e.freq, np.degrees(np.unwrap(np.angle(e.H))), "k")
+    ax[1].semilogx(e.freq, np.degrees(np.unwrap(np.angle(m.response(e.freq)))), "r--")
+    ax[1].set_ylabel("phase [deg]")
+    ax[2].semilogx(e.freq, e.coherence, "k")
+    ax[2].set_ylabel("coherence")
+    ax[2].set_xlabel("frequency [Hz]")
+    fig.suptitle(f"force → acceleration, {device} (hand holding the stylus)")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
 
-    if not args.simulated:
-        raise UsageError("only --simulated grasp impacts are available; a real grasping "
-                         "interface needs its own recording driver")
-    if args.impacts < 3:
-        raise UsageError(f"--impacts {args.impacts}: a line through m, c and k against grasp "
-                         "force fitted to fewer than 3 impacts has no residual to judge it by")
-    if args.seed < 0:
-        raise UsageError(f"--seed must be >= 0, got {args.seed}")
-    tissue = TISSUE if args.rig == "tissue" else None
-    rig = GraspRig(tissue=tissue)
-    result = identify_grasp(rig.impacts(args.impacts, args.seed), estimate=args.estimate)
-    result["rig"] = {"kind": args.rig, "tissue": list(tissue) if tissue else None}
-    result["published"] = {"m": dict(zip(("intercept", "slope"), PUBLISHED.m, strict=True)),
-                           "c": dict(zip(("intercept", "slope"), PUBLISHED.c, strict=True)),
-                           "k": dict(zip(("intercept", "slope"), PUBLISHED.k, strict=True))}
-    # the published rig draws its impacts from the published lines: how far a fit lands
-    # from them is the estimator's error on this seed (a round trip); the tissue rig adds a
-    # mode the fitted model lacks: what a second-order fit makes of such impacts
-    result["error_vs_published"] = {
-        p: {part: result[p][part] / result["published"][p][part] - 1.0
-            for part in ("intercept", "slope")} for p in ("m", "c", "k")}
-    result["seed"] = args.seed
+
+def device_fit_grasp(args: argparse.Namespace) -> int:
+    from .matching import fit_grasp
+
+    result = fit_grasp(impacts=args.impacts, seed=args.seed, rig=args.rig,
+                       estimate=args.estimate, simulated=args.simulated)
     if args.json:
         print(json.dumps(result, indent=2))
+        return 0
+    for p, unit in (("m", "kg"), ("c", "N·s/m"), ("k", "N/m")):
+        r, pub, err = result[p], result["published"][p], result["error_vs_published"][p]
+        print(f"{p} = {r['intercept']:.5g} {r['slope']:+.4g}·F_g {unit}   (published "
+              f"{pub['intercept']:g} {pub['slope']:+g}·F_g: intercept "
+              f"{err['intercept']:+.1%}, slope {err['slope']:+.1%})")
+    fp = result["fit_percent"]
+    print(f"fit % median {fp['median']:.1f} ({args.estimate}); by estimate: "
+          + ", ".join(f"{k} {v:.1f}" for k, v in fp["by_estimate"].items()))
+    tissue = result["rig"]["tissue"]
+    if tissue is None:
+        print("the published rig draws its impacts from the published lines, so these "
+              "differences are the estimator's error on this seed (a round trip)")
     else:
-        for p, unit in (("m", "kg"), ("c", "N·s/m"), ("k", "N/m")):
-            r, pub, err = result[p], result["published"][p], result["error_vs_published"][p]
-            print(f"{p} = {r['intercept']:.5g} {r['slope']:+.4g}·F_g {unit}   (published "
-                  f"{pub['intercept']:g} {pub['slope']:+g}·F_g: intercept "
-                  f"{err['intercept']:+.1%}, slope {err['slope']:+.1%})")
-        fp = result["fit_percent"]
-        print(f"fit % median {fp['median']:.1f} ({args.estimate}); by estimate: "
-              + ", ".join(f"{k} {v:.1f}" for k, v in fp["by_estimate"].items()))
-        if tissue is None:
-            print("the published rig draws its impacts from the published lines, so these "
-                  "differences are the estimator's error on this seed (a round trip)")
-        else:
-            print(f"the tissue rig's handle is the published model with a mode it does not "
-                  f"have ({tissue[0]:g} of its mass at {tissue[1]:g}× its frequency, damping "
-                  f"ratio {tissue[2]:g}; sized so the manual fit % is in the paper's range): "
-                  "these differences are what a second-order fit makes of such impacts")
+        print(f"the tissue rig's handle is the published model with a mode it does not "
+              f"have ({tissue[0]:g} of its mass at {tissue[1]:g}× its frequency, damping "
+              f"ratio {tissue[2]:g}; sized so the manual fit % is in the paper's range): "
+              "these differences are what a second-order fit makes of such impacts")
     return 0
 
 
@@ -191,7 +135,7 @@ def _step_line(step) -> None:
           file=sys.stderr, flush=True)
 
 
-def fault_prompt(device, kept: Callable[[], str]) -> Callable:
+def fault_prompt(device, kept: Callable[[], str]) -> Callable | None:
     """``on_fault`` for a person at the terminal: one line on what happened and what to do,
     then ``c`` clears the fault and measures again, ``q`` stops (what was measured is kept).
     Without a terminal there is nobody to confirm: the job stops at once."""
@@ -227,110 +171,47 @@ def fault_prompt(device, kept: Callable[[], str]) -> Callable:
     return on_fault
 
 
-def library_build(args: argparse.Namespace, open_spec, load_protocol) -> int:
-    from device.matching.library import (
-        BuildRecord,
-        MeasurementFault,
-        build_key,
-        build_library,
-        library_path,
-        record_path,
-    )
+def library_build(args: argparse.Namespace) -> int:
+    from .matching import build_library_file
 
-    protocol = load_protocol(args.protocol)
-    if args.source not in protocol.samples or not protocol.samples[args.source].is_real:
-        real = [k for k, s in protocol.samples.items() if s.is_real]
-        raise UsageError(f"--source must be a real sample of {protocol.source}: "
-                         f"{', '.join(real)}; got {args.source!r}")
-    if args.entries < 2 or args.windows < 1:
-        raise UsageError("--entries must be >= 2 and --windows >= 1")
-    source = protocol.samples[args.source].scene
     again = "hapticlab " + shlex.join(["library", "build", "--device", args.device,
                                        "--protocol", args.protocol, "--source", args.source,
                                        "--entries", str(args.entries), "--windows",
                                        str(args.windows), "--method", args.method,
                                        *(["--out", str(args.out)] if args.out else []),
                                        "--clear-fault"])
-    with open_spec(args.device) as dev:
-        out = args.out or library_path(dev.info, source)
-        key = build_key(dev.info, source, entries=args.entries, windows=args.windows)
-        record = _opened(BuildRecord.open(record_path(out), key, restart=args.restart),
-                         "measurements")
 
-        def kept() -> str:
-            return f"{record.count} finished measurements are kept in {record.path}"
+    def written(r: dict) -> None:
+        lo, hi = r["speeds_m_s"]
+        print(f"wrote {r['path']}: {r['entries']} transients for {r['source']} on "
+              f"{r['device']} ({lo:.3f}–{hi:.3f} m/s), {r['method']} inversion, in-window "
+              f"error median {r['in_window_error_median']:.2f} (through the identified "
+              "model, ‖reply − tap‖ / ‖tap‖ over the window: 0 reproduces each tap's "
+              "acceleration exactly, 1 is no better than playing nothing; the verification "
+              f"below says how close it comes on the device); sha256 {r['sha256'][:16]}…",
+              flush=True)
 
-        print(f"building the {args.source} library on {args.device}: 12 sweeps (~40 s), "
-              f"{args.windows} tapping windows of 5 s; hold the stylus during the sweeps, "
-              "tap the real sample during the windows", file=sys.stderr, flush=True)
-        try:
-            lib = build_library(dev, source, entries=args.entries, method=args.method,
-                                windows=args.windows, record=record,
-                                on_fault=fault_prompt(dev, kept), on_step=_step_line)
-        except MeasurementFault as exc:
-            raise DeviceError(f"{exc}. {kept()}; once it is safe, continue with: {again}"
-                              ) from None
-        except HapticlabError as exc:
-            if record.count:
-                raise type(exc)(f"{exc}. {kept()}; continue with: {again}") from None
-            raise
-        path = lib.save(out)
-        errs = lib.provenance["inversion"]["in_window_error"]
-        print(f"wrote {path}: {len(lib.velocities)} transients for {args.source} on "
-              f"{args.device} ({lib.velocities.min():.3f}–{lib.velocities.max():.3f} m/s), "
-              f"{args.method} inversion, in-window error median {np.median(errs):.2f} (through "
-              "the identified model, ‖reply − tap‖ / ‖tap‖ over the window: 0 reproduces each "
-              "tap's acceleration exactly, 1 is no better than playing nothing; the "
-              f"verification below says how close it comes on the device); sha256 "
-              f"{lib.sha256[:16]}…")
-        if args.verify:
-            _verify(dev, protocol, args, path, record.windows)
-    record.discard()
+    r = build_library_file(args.device, protocol=args.protocol, source=args.source,
+                           entries=args.entries, windows=args.windows, method=args.method,
+                           out=args.out, verify=args.verify, restart=args.restart,
+                           clear_fault=args.clear_fault, say=_say, on_fault=fault_prompt,
+                           on_step=_step_line, on_written=written, again=again)
+    v = r.get("verification")
+    if v is not None and "not_verified" in v:
+        print(f"not verified ({v['not_verified']}); the library is written")
+    elif v is not None:
+        print(f"spectral distance to the real {args.source} taps (RMS dB over 10–500 Hz; 0 dB: "
+              f"the same spectra, 6 dB: a factor of two): with the library "
+              f"{v['matched_db']:.1f} dB — {v['verdict']}; the spring alone, the baseline, "
+              f"{v['spring_db']:.1f} dB ({v['matched_taps']} and {v['spring_taps']} taps)")
     return 0
 
 
-def _verify(dev, protocol, args, path: Path, real) -> None:
-    """Tap the protocol's matched sample with the new library and its spring alone, and
-    say how close each comes to the real taps the build recorded."""
-    import dataclasses
+def library_show(args: argparse.Namespace) -> int:
+    from .matching import describe_library
 
-    from device.matching.compare import verify_library
-    from device.matching.measure import MeasurementFault, Pace
-
-    matched = next((s.scene for s in protocol.samples.values()
-                    if s.scene.transient is not None and s.scene.transient.kind == "library"
-                    and s.scene.transient.source == args.source), None)
-    if matched is None:
-        print(f"not verified: no sample of {protocol.source} plays the {args.source} library")
-        return
-    play = dataclasses.replace(matched, transient=dataclasses.replace(matched.transient,
-                                                                      path=str(path)))
-    spring = dataclasses.replace(matched, transient=None)
-    print(f"verifying: {args.verify} tapping windows on '{matched.name}' (its spring and the "
-          f"library × {matched.transient.attenuation:g}) and {args.verify} on its spring "
-          "alone; tap as on the real sample", file=sys.stderr, flush=True)
-    pace = Pace([5.0] * (2 * args.verify), 0, _step_line)
-    try:
-        v = verify_library(dev, real, play, spring, args.verify,
-                           on_fault=fault_prompt(dev, lambda: "the library is written"),
-                           pace=pace)
-    except (MeasurementFault, ValueError) as exc:
-        print(f"not verified ({exc}); the library is written")
-        return
-    print(f"spectral distance to the real {args.source} taps (RMS dB over 10–500 Hz; 0 dB: the "
-          f"same spectra, 6 dB: a factor of two): with the library {v.matched_db:.1f} dB — "
-          f"{v.verdict()}; the spring alone, the baseline, {v.spring_db:.1f} dB "
-          f"({v.matched_taps} and {v.spring_taps} taps)")
-
-
-def library_show(args: argparse.Namespace, open_spec) -> int:
-    from device.matching.library import TransientLibrary
-
-    info = None
-    if args.device:
-        with open_spec(args.device) as dev:
-            info = dev.info
-    lib = TransientLibrary.load(args.file, info)
+    lib = describe_library(args.file, device=args.device, clear_fault=args.clear_fault,
+                           say=_say)
     made = lib.provenance
     print(f"{args.file}: format {made['format_version']}, sha256 {lib.sha256[:16]}…")
     print(f"  device  {made['device']['model']} serial {made['device']['serial_number']} at "
