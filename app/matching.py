@@ -79,7 +79,7 @@ def identify_device(device: str = "sim", *, levels: tuple[float, ...] = (0.5, 1.
         usable_band,
     )
     from device.matching.measure import MeasurementFault, Pace
-    from device.matching.sysid import identify, sweep_seconds
+    from device.matching.sysid import identify_system, sweep_seconds
 
     say = say or _quiet
     with _open(device, clear_fault, say) as dev:
@@ -101,7 +101,7 @@ def identify_device(device: str = "sim", *, levels: tuple[float, ...] = (0.5, 1.
             return f"{record.count} of {n} sweeps are kept in {record.path}"
 
         try:
-            idn = identify(dev, levels=tuple(levels), repeats=repeats, band=band,
+            idn = identify_system(dev, levels=tuple(levels), repeats=repeats, band=band,
                            order=order, relative_degree=relative_degree,
                            delay=None if delay_ms is None else delay_ms * 1e-3,
                            record=record, on_fault=on_fault and on_fault(dev, kept),

@@ -215,7 +215,7 @@ class HapticDevice(ABC):
 
     def end_window(self) -> None:
         """End the running window now, before its duration is up: the participant moved on
-        (in identification, to another surface). Call it from that window's
+        (in a material-identification trial, to another surface). Call it from that window's
         ``on_progress``: a request names no window, so one sent from another thread as a
         window ends could reach the next. :meth:`run_window` then returns what was recorded
         up to the tick the device ended on, the output staying on (homed). Between windows
@@ -247,7 +247,7 @@ class HapticDevice(ABC):
 
         A device whose link is too narrow to stream every channel at every servo tick (a
         1-Mbaud UART) thins its traces out; asking only for what a measurement needs
-        (identification needs ``accel`` alone) lets it stream those at every tick.
+        (system identification needs ``accel`` alone) lets it stream those at every tick.
 
         Parameters
         ----------

@@ -17,7 +17,7 @@ class DeviceInfo:
     backend : str
         Registered backend name.
     model, serial_number, firmware : str
-        Identification.
+        What the device says it is.
     servo_rate_hz : float [Hz]
         Servo and sampling rate.
     current_limit : float [A]

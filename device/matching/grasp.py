@@ -7,7 +7,7 @@ handle responds as m·ẍ + c·ẋ + k·x = F with m, c, k linear in the grasp f
 
 so a(s)/F(s) = K·s² / (T²s² + 2ζTs + 1) with K = 1/k, T = √(m/k), ζ = c / (2√(km)).
 
-Identification of one impact from the measured contact force F(t) and acceleration a(t):
+The fit of one impact from the measured contact force F(t) and acceleration a(t):
 
 1. damped frequency F_d from the FFT peak of a(t);
 2. settling time T_s: where the envelope (half-cycle extrema) falls to 15 % of its peak;
@@ -235,7 +235,7 @@ class GraspRig:
 
     def impact(self, rng: np.random.Generator, grasp_force: float, peak_force: float) -> Impact:
         """One impact: the continuous half-sine contact force integrated at 100× the rate
-        (a different path from the identification's first-order hold), then sampled."""
+        (a different path from the fit's first-order hold), then sampled."""
         m, c, k = self.model.at(grasp_force)
         n = int(round(self.window * self.rate_hz))
         pre = 10
@@ -268,7 +268,7 @@ class GraspRig:
 
 @dataclass
 class ImpactFit:
-    """Identification of one impact.
+    """The second-order model fitted to one impact.
 
     Attributes
     ----------

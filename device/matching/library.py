@@ -1,11 +1,11 @@
 """Transient libraries: record taps on a real sample, invert them, play them back.
 
-Pipeline (:func:`build_library`): identify the device (:func:`~device.matching.sysid.identify`)
-→ record tapping windows on the real sample → segment contacts at the encoder's
-position threshold (the device's contact events) → 100-ms acceleration windows with
-their incoming speeds, keeping taps not followed by another contact inside the window →
-an even spread of speeds → invert each (:func:`~device.matching.inversion.invert`) →
-:class:`TransientLibrary`.
+Pipeline (:func:`build_library`): identify the device as a system
+(:func:`~device.matching.sysid.identify_system`) → record tapping windows on the real
+sample → segment contacts at the encoder's position threshold (the device's contact
+events) → 100-ms acceleration windows with their incoming speeds, keeping taps not
+followed by another contact inside the window → an even spread of speeds → invert each
+(:func:`~device.matching.inversion.invert`) → :class:`TransientLibrary`.
 
 File format (``.npz``, version 1): arrays ``velocities`` (n) [m/s], ``forces`` (n, L) [N],
 ``meta_json`` (UTF-8 JSON: format version, device identity and servo rate, the
@@ -42,7 +42,7 @@ from ..scene import LibraryTransient, Scene, TransientTable
 from .inversion import METHODS, discretize, invert
 from .measure import MeasurementFault, OnFault, OnStep, Pace, measured
 from .record import BuildRecord
-from .sysid import TFModel, accel_at_every_tick, identify, sweep_seconds
+from .sysid import TFModel, accel_at_every_tick, identify_system, sweep_seconds
 
 __all__ = ["TransientLibrary", "LibraryError", "build_library", "usable_band", "record_taps",
            "segment_taps", "even_spread", "library_dir", "library_path", "find_library",
@@ -252,7 +252,7 @@ def even_spread(velocities: np.ndarray, n: int) -> np.ndarray:
     return np.array(sorted(chosen, key=lambda i: v[i]))
 
 
-#: the identification a library build runs: sweep force levels [N] and repeats per level
+#: the system identification a library build runs: sweep force levels [N] and repeats per level
 SWEEP_LEVELS = (0.5, 1.0, 1.5)
 SWEEP_REPEATS = 4
 #: a tapping window's length [s]
@@ -285,7 +285,7 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
     Parameters
     ----------
     device : HapticDevice
-        Needs ``play_force`` for identification (unless ``model`` is given).
+        Needs ``play_force`` for system identification (unless ``model`` is given).
     source : Scene
         The real sample whose taps the library reproduces.
     entries : int
@@ -345,7 +345,7 @@ def build_library(device, source: Scene, entries: int = 12, method: str = "regul
                + [TAP_SECONDS] * windows * (1 if under is None else 2))
     pace = Pace(nominal, 0 if record is None else record.count, on_step)
     if model is None:
-        model = identify(device, SWEEP_LEVELS, SWEEP_REPEATS, order=order,
+        model = identify_system(device, SWEEP_LEVELS, SWEEP_REPEATS, order=order,
                          relative_degree=relative_degree, band=band, record=record,
                          on_fault=on_fault, pace=pace).model
     dm = discretize(model, info.servo_rate_hz)

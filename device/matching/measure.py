@@ -1,6 +1,6 @@
 """One measurement at a time: what a fault costs, and how far a long job has come.
 
-Identification and library builds are sequences of measurements (a swept sine, a tapping
+System identification and library builds are sequences of measurements (a swept sine, a tapping
 window) of a few seconds each. A fault during one (the watchdog, an e-stop, the device's
 own button) spoils that measurement only: :func:`measured` hands it to the caller's
 ``on_fault``, which tells the operator what happened and clears the fault on their word,

@@ -3,7 +3,7 @@
 1. :func:`swept_sine` — an exponential sweep over the band, extended beyond it with
    cosine fades (so the band's ends are not biased by the fade) and followed by
    silence (so the response has decayed inside the record).
-2. :func:`identify` — plays the sweep on a device while the hand holds the stylus, at
+2. :func:`identify_system` — plays the sweep on a device while the hand holds the stylus, at
    several force levels with repeats.
 3. :func:`etfe` — empirical transfer function estimate: synchronous average of the
    repeats, ratio of DFTs smoothed over neighbouring frequencies, and the coherence
@@ -28,7 +28,7 @@ from .measure import OnFault, Pace, measured
 from .record import BuildRecord
 
 __all__ = ["Sweep", "swept_sine", "ETFE", "etfe", "TFModel", "fit_transfer_function",
-           "identify", "Identification", "accel_at_every_tick", "sweep_seconds"]
+           "identify_system", "SystemIdentification", "accel_at_every_tick", "sweep_seconds"]
 
 
 @contextmanager
@@ -54,7 +54,7 @@ def accel_at_every_tick(device) -> Iterator[float]:
         if got < rate * (1 - 1e-9):
             raise DeviceError(f"{device.info.model}: its link carries the accelerometer at "
                               f"{got:g} Hz, not at every servo tick ({rate:g} Hz); "
-                              "identification and matching need every tick (a faster link: "
+                              "system identification and matching need every tick (a faster link: "
                               "USB, or a UART at a higher baud rate)")
         yield rate
     finally:
@@ -342,8 +342,9 @@ def fit_transfer_function(est: ETFE, order: int = 7, relative_degree: int = 4,
 
 
 @dataclass
-class Identification:
-    """Result of :func:`identify`: the averaged estimate, the per-level estimates, the fit."""
+class SystemIdentification:
+    """Result of :func:`identify_system`: the averaged estimate, the per-level estimates,
+    the fit."""
 
     etfe: ETFE
     per_level: dict[float, ETFE]
@@ -354,12 +355,12 @@ class Identification:
     meta: dict = field(default_factory=dict)
 
 
-def identify(device, levels: tuple[float, ...] = (0.5, 1.0, 1.5), repeats: int = 4,
+def identify_system(device, levels: tuple[float, ...] = (0.5, 1.0, 1.5), repeats: int = 4,
              band: tuple[float, float] = (10.0, 500.0), duration: float = 2.5,
              order: int = 7, relative_degree: int = 4, delay: float | None = None,
              smooth_hz: float = 2.0, zeros_at_origin: int = 0, *,
              record: BuildRecord | None = None, on_fault: OnFault | None = None,
-             pace: Pace | None = None) -> Identification:
+             pace: Pace | None = None) -> SystemIdentification:
     """Identify force → acceleration on ``device`` while the hand holds the stylus.
 
     Plays :func:`swept_sine` at each force level ``repeats`` times (device.play_force),
@@ -401,14 +402,14 @@ def identify(device, levels: tuple[float, ...] = (0.5, 1.0, 1.5), repeats: int =
     est = ETFE(freq, H, coh)
     model = fit_transfer_function(est, order, relative_degree, delay, band,
                                   zeros_at_origin=zeros_at_origin)
-    return Identification(est, per_level, model, rate, tuple(levels), repeats,
+    return SystemIdentification(est, per_level, model, rate, tuple(levels), repeats,
                           {"device": device.info.to_dict(), "duration_s": duration,
                            "band_hz": list(band)})
 
 
 def sweep_seconds(rate_hz: float, band: tuple[float, float] = (10.0, 500.0),
                   duration: float = 2.5) -> float:
-    """How long one identification sweep plays [s of device time]."""
+    """How long one system-identification sweep plays [s of device time]."""
     return len(swept_sine(rate_hz, band, duration).force) / rate_hz
 
 

@@ -155,7 +155,7 @@ class TapPlan:
 
 @dataclass
 class HoldPlan:
-    """The hand holding the stylus still at ``height`` [m] (for identification runs)."""
+    """The hand holding the stylus still at ``height`` [m] (for system-identification runs)."""
 
     height: float
 

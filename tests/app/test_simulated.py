@@ -299,7 +299,7 @@ def test_aluminum_300_hz_is_beyond_the_simulated_device():
     inverse of the identified model, as for the matched library) would need more than 3×
     the force the current limit allows (3.0 N) at the mean tap speed."""
     from device.matching.inversion import discretize, invert
-    from device.matching.sysid import identify
+    from device.matching.sysid import identify_system
     from device.scene import Ringing
     from device.sim.backend import SimDevice
 
@@ -316,7 +316,7 @@ def test_aluminum_300_hz_is_beyond_the_simulated_device():
 
     dev = SimDevice(seed=20_260_001)
     rate = dev.info.servo_rate_hz
-    dm = discretize(identify(dev).model, rate)
+    dm = discretize(identify_system(dev).model, rate)
     t = np.arange(int(0.1 * rate)) / rate
     target = Ringing(-200.0, 60.0, 300.0).acceleration(t, 1.0)  # aluminum-HLL, per m/s
     force = np.abs(invert(dm, target, "regularized").force).max() * 0.11  # N at 0.11 m/s

@@ -32,7 +32,7 @@ from device.matching.sysid import (
     ETFE,
     etfe,
     fit_transfer_function,
-    identify,
+    identify_system,
     swept_sine,
     true_response,
 )
@@ -46,7 +46,7 @@ RATE = 10_000.0
 
 @pytest.fixture(scope="module")
 def ident():
-    return identify(SimDevice(seed=1))
+    return identify_system(SimDevice(seed=1))
 
 
 @pytest.fixture(scope="module")
@@ -388,7 +388,7 @@ def test_identification_refuses_a_device_that_thins_its_accelerometer_out():
     from types import SimpleNamespace
 
     from device import DeviceError, open_device
-    from device.matching.sysid import identify
+    from device.matching.sysid import identify_system
 
     with open_device("sim") as sim:
         info = sim.info
@@ -405,7 +405,7 @@ def test_identification_refuses_a_device_that_thins_its_accelerometer_out():
                              play_force=play_force)
     with pytest.raises(DeviceError, match="carries the accelerometer at 2500 Hz, not at every "
                                           "servo tick \\(10000 Hz\\)"):
-        identify(narrow)
+        identify_system(narrow)
     assert asked == [("accel",), None]
 
 
