@@ -94,7 +94,9 @@ def _err(*args) -> None:
     print(*args, file=sys.stderr, flush=True)
 
 
-def _participant(responder: str, protocol, seed: int, group: str, fullscreen: bool):
+def _make_responder(responder: str, protocol, seed: int, group: str, fullscreen: bool):
+    """What answers a session's trials, for the ``responder`` named (``person``,
+    ``simulated`` or ``scripted``)."""
     if responder == "person":
         from app.screen import PsychoPyScreen
 
@@ -185,7 +187,7 @@ def _session_device(spec: str, seed: int, person: bool, clear_fault: bool, lsl: 
 class _Parts:
     """What a session runs with beside its device, closed together."""
 
-    ui: Any
+    responder: Any
     sound: Any
     console: Any
     markers: Any
@@ -199,7 +201,7 @@ def _session_parts(dev, proto, *, responder: str, seed: int, group: str, fullscr
     session (run or resume) on ``dev``, each closed when it ends."""
     from app.console import make_console
 
-    parts = _Parts(_participant(responder, proto, seed, group, fullscreen), None, console,
+    parts = _Parts(_make_responder(responder, proto, seed, group, fullscreen), None, console,
                    None)
     try:
         parts.sound = _audio(audio, dev.info.backend, say)
@@ -208,7 +210,7 @@ def _session_parts(dev, proto, *, responder: str, seed: int, group: str, fullscr
         parts.markers = _markers(lsl, proto.name, participant, seed, dev, parts.console.say)
         yield parts
     finally:
-        for part in (parts.ui, parts.sound, parts.console, parts.markers):
+        for part in (parts.responder, parts.sound, parts.console, parts.markers):
             if part is not None:
                 part.close()
 
@@ -301,15 +303,15 @@ def _drive(runner, files, meta, console, lsl_wait: float = 300.0) -> SessionResu
     if runner.warnings:  # what the device could not do as asked, once each
         meta.add_warnings(list(runner.warnings.values()))
     files.write_meta(meta)  # the trials are complete and durable before the debrief
-    if runner.console.interactive or runner.participant_ui.name == "person":
+    if runner.console.interactive or runner.responder.name == "person":
         console.say(f"trials complete: {summary} — the participant is answering the "
                     "debrief question")
-    meta.participant.debrief = runner.participant_ui.debrief()
+    meta.participant.debrief = runner.responder.debrief()
     markers.send("session_end", status=SessionStatus.COMPLETE)
     markers.close()
     files.write_meta(meta)
     console.say(f"session complete: {summary}")
-    runner.participant_ui.finished(summary)
+    runner.responder.finished(summary)
     return SessionResult(files.folder, SessionStatus.COMPLETE, len(runner.log),
                          f"session complete: {files.folder} ({len(runner.log)} attempts)")
 
@@ -474,7 +476,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 files.write_meta(meta)
                 parts.console.say(f"session {folder} (seed {seed})")
                 runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
-                                       participant_ui=parts.ui, participant=participant,
+                                       responder=parts.responder, participant=participant,
                                        session=n, seed=seed, console=parts.console,
                                        audio=parts.sound, traces=traces, meta=meta,
                                        markers=parts.markers)
@@ -611,7 +613,7 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                             participant=p.id, say=console.say) as parts:
             console = parts.console
             runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
-                                   participant_ui=parts.ui, participant=p.id,
+                                   responder=parts.responder, participant=p.id,
                                    session=meta.session, seed=meta.seed, console=console,
                                    audio=parts.sound, traces=meta.traces_mode or "full",
                                    meta=meta, markers=parts.markers)
@@ -620,7 +622,7 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                 engine.next_trial(runner.log)
             except LogMismatch as exc:
                 raise SessionFileError(f"{files.trials}: {exc}") from None
-            if parts.ui.stateful:  # its answers depend on what it felt: bring it where it was
+            if parts.responder.stateful:  # its answers depend on what it felt: bring it back
                 console.say(f"replaying {len(rows)} recorded attempts for the simulated "
                             "participant's memory")
                 runner.replay(rows)

@@ -82,7 +82,7 @@ import numpy as np
 from device import SimulatedHand
 from protocols.kinds import REFERENCE, phase_kind
 
-from .participants import Participant
+from .participants import Responder
 
 __all__ = ["SimulatedParticipant", "felt_features", "name_surfaces", "FEATURES", "JND"]
 
@@ -260,7 +260,7 @@ class Person:
                        rhythm=float(rng.uniform(0.6, 1.6)))
 
 
-class SimulatedParticipant(Participant):
+class SimulatedParticipant(Responder):
     """Taps, feels and answers as the model in the module docstring.
 
     Parameters

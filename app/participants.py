@@ -1,6 +1,6 @@
 """Who answers in a session: a person at the screen, a scripted responder, a simulated person.
 
-:class:`Participant` is what the runner asks of all of them, with a default for every
+:class:`Responder` is what the runner asks of all of them, with a default for every
 question that a kind of participant has no use for, so the runner calls every hook
 unconditionally. Every choice a non-human participant makes comes from the generator it is
 handed, which the runner derives from (session seed, trial index, attempt): a resumed
@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Participant", "ScriptedResponder", "RESPONDERS"]
+__all__ = ["Responder", "ScriptedResponder", "RESPONDERS"]
 
 #: who answers: a person (``person``, at the PsychoPy screen), random answers to test the
 #: machinery (``scripted``), or the simulated participant model (``simulated``)
 RESPONDERS = ("person", "scripted", "simulated")
 
 
-class Participant:
+class Responder:
     """What the runner asks of whoever answers (defaults: nothing to show, one window)."""
 
     name = "participant"
@@ -109,7 +109,7 @@ class Participant:
         """Release what the participant holds (a window)."""
 
 
-class ScriptedResponder(Participant):
+class ScriptedResponder(Responder):
     """Answers at random from the generator it is given: for dry runs of the machinery,
     not a model of anyone (see the simulated participant for that)."""
 

@@ -54,7 +54,7 @@ from . import __version__
 from .console import PlainConsole
 from .errors import DataFolderError, SessionFileError
 from .markers import MarkerSink
-from .participants import Participant
+from .participants import Responder
 from .recorder import SessionFiles
 
 __all__ = ["SessionRunner", "SessionInterrupted", "session_meta", "utc_now"]
@@ -136,7 +136,7 @@ class SessionRunner:
     protocol, engine : the protocol and its session engine
     device : HapticDevice
     files : SessionFiles
-    participant_ui : Participant
+    responder : Responder
         Who answers (a person's screen, a scripted or simulated participant).
     markers : MarkerSink
         Where the session's events go as markers (:mod:`app.markers`; default: nowhere).
@@ -146,7 +146,7 @@ class SessionRunner:
     engine: SessionEngine
     device: HapticDevice
     files: SessionFiles
-    participant_ui: Participant
+    responder: Responder
     participant: str
     session: int
     seed: int
@@ -297,18 +297,18 @@ class SessionRunner:
         v.block = self._block_line(trial)
         rest = len(self.engine.remaining(self.log))
         v.left_s = (float(np.median(self._durations)) * rest) if self._durations else None
-        self.participant_ui.waiting(trial)
+        self.responder.waiting(trial)
         self.console.place(trial, self._total(), done, what, detail)
         self.console.set_state("placing")
         while True:
             self._save_notes()
             if self.console.interactive and self.device.fault is not None:
                 self._fault_pause(self.device.fault)  # an e-stop pressed between trials
-                self.participant_ui.waiting(trial)
+                self.responder.waiting(trial)
                 self.console.place(trial, self._total(), done, what, detail)
                 self.console.set_state("placing")
-            if self.participant_ui.poll() == "reference":
-                ref = self.participant_ui.choose_reference(trial, self._real_blocks(trial))
+            if self.responder.poll() == "reference":
+                ref = self.responder.choose_reference(trial, self._real_blocks(trial))
                 if ref is not None:
                     self.console.say(f"the participant asks for the real block: {ref}")
                     self._reference(trial, ref, asked=True)
@@ -316,14 +316,14 @@ class SessionRunner:
                     v.block = self._block_line(trial)
                     self.console.place(trial, self._total(), done, what, detail)
                     self.console.set_state("placing")
-                self.participant_ui.waiting(trial)
+                self.responder.waiting(trial)
             action = self.console.poll(0.03)
             if action is None:
                 continue
             if action == "pause":
                 action = self._paused(trial)
                 if action == "resume":  # back to placing: r starts the trial, nothing else
-                    self.participant_ui.waiting(trial)
+                    self.responder.waiting(trial)
                     self.console.set_state("placing")
                     self.console.say(f"p: resumed; trial {trial.trial_index} starts with r")
                     continue
@@ -332,7 +332,7 @@ class SessionRunner:
     def _paused(self, trial: Trial) -> str:
         self.console.set_state("paused")
         self.console.say(f"p: paused before trial {trial.trial_index} — p resumes, q stops")
-        self.participant_ui.pause()
+        self.responder.pause()
         while True:
             self._save_notes()
             a = self.console.poll(0.03)
@@ -347,7 +347,7 @@ class SessionRunner:
         self.console.say(f"{fault.code.upper()}: output is off and latched ({fault.message}). "
                          "Make it safe, then press c to clear it and continue, or q to stop and "
                          "save")
-        self.participant_ui.pause(fault=True)
+        self.responder.pause(fault=True)
         while True:
             self._save_notes()
             a = self.console.poll(0.03)
@@ -421,21 +421,21 @@ class SessionRunner:
                                      attempt=0, block=trial.block)
         reason = "participant asked" if asked else ""
         while True:
-            self.participant_ui.waiting(rtrial)
+            self.responder.waiting(rtrial)
             self.console.view.block = self._block_line(rtrial)
             self.console.place(rtrial, self._total(), len(self.engine.outcomes(self.log)),
                                ref.placement or ref_id, "real reference block (compare with it)")
             self.console.set_state("reference")
             while self.console.poll(0.03) != "go":
                 self._save_notes()
-                self.participant_ui.poll()
+                self.responder.poll()
                 if self.console.interactive and self.device.fault is not None:
                     self._fault_pause(self.device.fault)
-                    self.participant_ui.waiting(rtrial)
+                    self.responder.waiting(rtrial)
                     self.console.set_state("reference")
             self.console.set_state("trial")
             self._on_device = ref.placement or ref_id
-            self.participant_ui.reference(rtrial, ref)
+            self.responder.reference(rtrial, ref)
             t_start = utc_now()
             self.markers.trial(rtrial)
             self.markers.send("trial_start", sample=ref_id, kind=REFERENCE)
@@ -499,7 +499,7 @@ class SessionRunner:
         self._on_device = None if kind.surfaces else trial.placement
         rng = self._rng(trial)
         t_start = utc_now()
-        self.participant_ui.ready(trial)
+        self.responder.ready(trial)
         self.markers.trial(trial)
         self.markers.send("trial_start", sample=trial.sample, kind=trial.kind)
         self.console.set_state("trial")
@@ -556,7 +556,7 @@ class SessionRunner:
                 self.audio.low_tone()
             self.console.saturated()
             status = self.engine.saturated_status(trial, self.log)
-            self.participant_ui.saturated(trial, comes_back=status == "saturated")
+            self.responder.saturated(trial, comes_back=status == "saturated")
             self._record(trial, status, t_start=t_start, result=res, results=results,
                          played=played)
             return
@@ -588,7 +588,7 @@ class SessionRunner:
             played.append(trial.samples[0])
             results.append(self._spill(trial, len(results),
                                        self._window(trial, trial.samples[0], rng)))
-            if results[-1].faults or not self.participant_ui.keep_tapping():
+            if results[-1].faults or not self.responder.keep_tapping():
                 return results  # a fault ends it: the e-stop's row names its windows
 
     def _surfaces(self, trial: Trial, rng, results: list, played: list) -> list:
@@ -596,7 +596,7 @@ class SessionRunner:
         # is kept (a surface tapped again adds one); the naming is of each surface's last
         visited: set[int] = set()
         last: dict[int, Any] = {}
-        while (k := self.participant_ui.choose_surface(trial, visited)) is not None:
+        while (k := self.responder.choose_surface(trial, visited)) is not None:
             self.console.say(f"  surface {k + 1} of {len(trial.samples)}: tapping")
             played.append(trial.samples[k])
             results.append(self._window(trial, trial.samples[k], rng))
@@ -612,7 +612,7 @@ class SessionRunner:
     def _rating(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
         self.console.set_state("rating")
         self.markers.send("rating_onset")
-        rating, rt = self.participant_ui.rate(trial, self.protocol.rating, res, rng)
+        rating, rt = self.responder.rate(trial, self.protocol.rating, res, rng)
         if not self.protocol.rating.min <= rating <= self.protocol.rating.max:
             raise SessionInterrupted(f"the responder gave rating {rating!r}, outside the "
                                      f"scale {self.protocol.rating.min}–"
@@ -626,7 +626,7 @@ class SessionRunner:
     def _answer(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
         self.console.set_state("rating")  # naming the surfaces: the operator's e acts
         self.markers.send("rating_onset")
-        answers, rt = self.participant_ui.identify(trial, self.protocol.answer.choices,
+        answers, rt = self.responder.identify(trial, self.protocol.answer.choices,
                                                    judged, rng)
         row = {"answer": ",".join(answers), "response_time": round(float(rt), 3),
                "correct": int(list(answers) == list(trial.samples))}
@@ -637,7 +637,7 @@ class SessionRunner:
     def _choice(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
         self.console.set_state("rating")  # choosing: the operator's e acts, as when rating
         self.markers.send("rating_onset")
-        k, rt = self.participant_ui.choose(trial, judged, rng)
+        k, rt = self.responder.choose(trial, judged, rng)
         if k not in range(len(trial.samples)):
             raise SessionInterrupted(f"the responder chose {k!r}, not one of the "
                                      f"{len(trial.samples)} samples felt; nothing was "
@@ -676,7 +676,7 @@ class SessionRunner:
         self._windows_in_attempt += 1
         dev.reseed([*(reseed or [self.seed, trial.trial_index, trial.attempt,
                                  trial.samples.index(sample_id)]), k])
-        self.participant_ui.before_window(trial, sample_id, dev, rng)
+        self.responder.before_window(trial, sample_id, dev, rng)
         dev.home()
         self.markers.send("homed", sample=sample_id, window=k)
         w = self.protocol.window
@@ -690,8 +690,8 @@ class SessionRunner:
             for c in partial.contacts[shown:]:  # live incoming speeds for the operator
                 self.console.contact(c.velocity)
             shown = len(partial.contacts)
-            self.participant_ui.progress(t, partial, w.duration)
-            if surfaces and not ended and self.participant_ui.moving_on():
+            self.responder.progress(t, partial, w.duration)
+            if surfaces and not ended and self.responder.moving_on():
                 ended = True  # the participant went to another surface, or to answer
                 dev.end_window()
 
@@ -717,7 +717,7 @@ class SessionRunner:
             if (said := text.split(" (")[0]) not in self.warnings:
                 self.warnings[said] = text
                 self.console.say(f"warning: {text}")
-        self.participant_ui.after_window(trial, sample_id, res)  # what a simulated person felt
+        self.responder.after_window(trial, sample_id, res)  # what a simulated person felt
         return res
 
     # ------------------------------------------------------------------ recording

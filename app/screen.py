@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable
 from protocols.kinds import RATED, REFERENCE, phase_kind
 from protocols.model import choice_keys
 
-from .participants import Participant
+from .participants import Responder
 
 __all__ = ["PsychoPyScreen", "info_dialog"]
 
@@ -61,7 +61,7 @@ def _fmt(text: str, **kw) -> str:
     return text.format_map(Keep(**kw))
 
 
-class PsychoPyScreen(Participant):
+class PsychoPyScreen(Responder):
     """A person at the PsychoPy window; also answers the runner's participant questions.
 
     Parameters

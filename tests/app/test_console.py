@@ -226,12 +226,12 @@ def test_device_check_reports_saturation_by_sample():
 
 
 def test_familiarization_runs_until_the_participant_is_done(tmp_path):
-    from app.participants import Participant
+    from app.participants import Responder
     from app.recorder import SessionFiles, new_session_dir, read_trials
     from app.runner import SessionRunner
     from protocols import SessionEngine, load_protocol
 
-    class ThreeWindows(Participant):
+    class ThreeWindows(Responder):
         n = 0
 
         def keep_tapping(self):
@@ -245,7 +245,7 @@ def test_familiarization_runs_until_the_participant_is_done(tmp_path):
     folder, n = new_session_dir(tmp_path, "P01")
     dev = open_device("sim", seed=1)
     runner = SessionRunner(protocol=p, engine=SessionEngine(p, 1, "P01"), device=dev,
-                           files=SessionFiles(folder), participant_ui=ThreeWindows(),
+                           files=SessionFiles(folder), responder=ThreeWindows(),
                            participant="P01", session=n, seed=1, traces="none")
     trial = runner.engine.next_trial([])
     runner._attempt(trial)

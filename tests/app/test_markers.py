@@ -152,7 +152,7 @@ def test_an_estop_is_marked_at_the_device_time_it_zeroed_output(tmp_path):
     dev = open_device("sim", seed=4)
     sink = Recorded()
     runner = SessionRunner(protocol=p, engine=SessionEngine(p, 4, "P01"), device=dev,
-                           files=files, participant_ui=_estop_after_first_tap(),
+                           files=files, responder=_estop_after_first_tap(),
                            participant="P01", session=1, seed=4, traces="full", markers=sink)
     runner._attempt(runner.engine.next_trial(runner.log))  # window 1: no e-stop
     with pytest.raises(SessionInterrupted, match="estop"):
@@ -367,7 +367,7 @@ def test_a_marker_that_cannot_be_sent_never_stops_the_session(tmp_path):
     sink._say = said.append
     runner = SessionRunner(protocol=p, engine=SessionEngine(p, 4, "P01"),
                            device=open_device("sim", seed=4), files=files,
-                           participant_ui=ScriptedResponder(), participant="P01", session=1,
+                           responder=ScriptedResponder(), participant="P01", session=1,
                            seed=4, traces="none", markers=sink)
     for _ in range(2):
         runner._attempt(runner.engine.next_trial(runner.log))

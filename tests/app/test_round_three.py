@@ -44,7 +44,7 @@ def _session(tmp: Path, p, ui, seed: int, console=None) -> tuple[Path, list[dict
     if p.limits.max_current is not None:
         dev.set_current_limit(p.limits.max_current)
     runner = SessionRunner(protocol=p, engine=SessionEngine(p, seed, "P01"), device=dev,
-                           files=files, participant_ui=ui, participant="P01", session=n,
+                           files=files, responder=ui, participant="P01", session=n,
                            seed=seed, traces="full",
                            **({"console": console} if console else {}))
     assert runner.run() == "complete"
@@ -464,10 +464,10 @@ def test_a_person_on_the_simulated_device_is_paced_by_the_wall_clock():
     """Issue 30 (10): unpaced, a person's familiarization on `sim` produced 910 taps in 13 s.
     The session opens the simulator live when a person sits at it (its windows then report
     their pacing, which session.json keeps as `timing`), and unpaced for a program."""
-    from app.api import _open
+    from app.api import open_device_for
 
     for person, paced in ((True, True), (False, False)):
-        with _open("sim", 1, person=person) as dev:
+        with open_device_for("sim", seed=1, person=person) as dev:
             dev.load_scene(Scene("firm", spring=680.0))
             dev.home()
             res = dev.run_window(0.1, from_first_contact=False)
@@ -501,7 +501,7 @@ def test_familiarization_writes_each_window_as_it_ends(tmp_path):
     files = SessionFiles(folder)
     files.start("")
     runner = SessionRunner(protocol=p, engine=SessionEngine(p, 4, "P01"),
-                           device=open_device("sim", seed=4), files=files, participant_ui=ui,
+                           device=open_device("sim", seed=4), files=files, responder=ui,
                            participant="P01", session=1, seed=4, traces="full")
     trial = runner.engine.next_trial([])
     assert trial.kind == "free"
@@ -549,7 +549,7 @@ def _familiarization(tmp_path, ui_of):
     dev = open_device("sim", seed=4)
     ui = ui_of(folder / "traces")
     runner = SessionRunner(protocol=p, engine=SessionEngine(p, 4, "P01"), device=dev,
-                           files=files, participant_ui=ui, participant="P01", session=1,
+                           files=files, responder=ui, participant="P01", session=1,
                            seed=4, traces="full")
     trial = runner.engine.next_trial([])
     with pytest.raises(SessionInterrupted):
@@ -569,7 +569,7 @@ def test_an_estop_during_familiarization_sets_its_early_traces_aside(tmp_path):
         f"{stem}-0.npz", f"{stem}-1.npz"]
     assert not list((folder / "traces").glob("trial-*.npz"))
     dev.clear_fault()
-    runner.participant_ui = TapsFourTimes(folder / "traces")
+    runner.responder = TapsFourTimes(folder / "traces")
     runner._attempt(trial)  # the same trial again: its own files, its row
     rows, _ = read_trials(folder / "trials.tsv")
     assert rows[-1]["trace_file"] == f"traces/{stem}-*.npz" and rows[-1]["status"] == "valid"

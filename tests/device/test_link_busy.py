@@ -179,7 +179,7 @@ def test_a_participant_who_takes_long_to_answer_meets_no_watchdog(own_emulator, 
     with open_device(f"serial:{own_emulator.port}") as dev:
         ui = SlowToAnswer(dev, LEASE_S + 4 * dev.info.watchdog_s)
         runner = SessionRunner(protocol=p, engine=SessionEngine(p, 3, "P01"), device=dev,
-                               files=files, participant_ui=ui, participant="P01", session=n,
+                               files=files, responder=ui, participant="P01", session=n,
                                seed=3)
         try:
             status = runner.run()
