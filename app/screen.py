@@ -14,10 +14,19 @@ is the same at 1024×768 and 1920×1080. The realism protocol shows text only; p
 height. Keys that mean nothing on a screen are ignored; the key buffer is cleared before
 each screen, so a double press counts once. ``keys`` can be injected (tests, scripted
 demos): a callable returning newly pressed keys, each a name or a (name, modifiers) pair.
+
+The screen log: with ``HAPTICLAB_SCREEN_LOG`` naming a file, every screen the participant
+sees is appended to it as one line when it is first shown (the time on the perf-counter
+clock [s], a tab, its texts joined by `` | ``), and again whenever its text changes. A
+screen that clears the key buffer is logged on its first frame after the clearing, so a
+key pressed once its line is there counts: a program driving the screen (the test-day
+tests) waits for the line instead of sleeping, and a lab can see afterwards what was shown
+and when.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from collections.abc import Callable, Iterable
@@ -121,6 +130,9 @@ class PsychoPyScreen(Responder):
         self._tapping = ""  # the title while tapping ('Tap', 'Tap · Surface 2')
         self._detail = ""  # and the line below it
         self.debrief_text = ""
+        log = os.environ.get("HAPTICLAB_SCREEN_LOG")
+        self._log = open(log, "a", encoding="utf-8", buffering=1) if log else None  # noqa: SIM115
+        self._logged: tuple[str, ...] | None = None  # the texts of the last screen logged
 
     # ------------------------------------------------------------------ drawing
     @staticmethod
@@ -134,6 +146,16 @@ class PsychoPyScreen(Responder):
 
     def _flush(self) -> None:
         self._keys()  # drop everything pressed so far: a double press counts once
+        self._logged = None  # the next frame is logged: keys count from there
+
+    def _log_frame(self) -> None:
+        """The screen log's line for this frame, when its texts differ from the last one's
+        (or keys were cleared since)."""
+        shown = tuple(self.drawn_text)
+        if self._log is not None and shown != self._logged:
+            self._logged = shown
+            flat = " | ".join(t.replace("\n", " / ") for t in shown)
+            self._log.write(f"{self._clock():.3f}\t{flat}\n")
 
     def _frame(self, text: str, small: str = "", cursor: bool = False, progress: float = 0.0,
                flip: bool = True, slider: bool = False,
@@ -165,6 +187,7 @@ class PsychoPyScreen(Responder):
             self._bar.draw()
         if flip:
             self.win.flip()
+            self._log_frame()
 
     def _draw_scale(self, points: str, low: str, high: str) -> None:
         from psychopy import visual
@@ -541,6 +564,9 @@ class PsychoPyScreen(Responder):
 
     def close(self) -> None:
         self.win.close()
+        if self._log is not None:
+            self._log.close()
+            self._log = None
 
 
 def _default_texts() -> dict:

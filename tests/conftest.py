@@ -344,11 +344,59 @@ def terminal():
 
 
 class Participant:
-    """A person at the PsychoPy window: real X key events (xdotool) and screenshots."""
+    """A person at the PsychoPy window: real X key events (xdotool) and screenshots, and
+    the screen log (``HAPTICLAB_SCREEN_LOG``, app/screen.py) to wait on: a screen's line
+    is there once it is up and counts the keys pressed from then on."""
 
-    def __init__(self, display: str):
+    def __init__(self, display: str, log: Path | None = None):
         self.display = display
         self.env = {**os.environ, "DISPLAY": display}
+        self.log = log
+        self._seen = 0  # screen-log lines already waited past
+
+    def app_env(self) -> dict:
+        """What the application's environment needs to write this person's screen log."""
+        return {"HAPTICLAB_SCREEN_LOG": str(self.log)} if self.log is not None else {}
+
+    def screens(self) -> list[str]:
+        """The screen log's lines so far (each: time, a tab, the screen's texts)."""
+        if self.log is None or not self.log.exists():
+            return []
+        return self.log.read_text(encoding="utf-8").splitlines()
+
+    def mark(self) -> None:
+        """What was shown so far is waited past: :meth:`sees` looks at newer screens."""
+        self._seen = len(self.screens())
+
+    def showing(self, text: str, limit: float = 180.0) -> str:
+        """Wait until the screen up now (the log's last line) says ``text``; its line."""
+        import time
+
+        end = time.monotonic() + limit
+        while time.monotonic() < end:
+            lines = self.screens()
+            if lines and text in lines[-1]:
+                self._seen = len(lines)
+                return lines[-1]
+            time.sleep(0.05)
+        raise AssertionError(f"the screen up is not one saying {text!r} after {limit:g} s; "
+                             f"the last screens: {self.screens()[-5:]}")
+
+    def sees(self, text: str, limit: float = 180.0) -> str:
+        """Wait until a screen shown after the last one waited for says ``text``; that
+        screen's line. ``limit`` [s] bounds an application that died, it is no deadline."""
+        import time
+
+        end = time.monotonic() + limit
+        while time.monotonic() < end:
+            lines = self.screens()
+            for i in range(self._seen, len(lines)):
+                if text in lines[i]:
+                    self._seen = i + 1
+                    return lines[i]
+            time.sleep(0.05)
+        raise AssertionError(f"no screen saying {text!r} within {limit:g} s; the screens "
+                             f"since the last one waited for: {self.screens()[self._seen:]}")
 
     def window(self, timeout: float = 30.0) -> str:
         import time
@@ -393,4 +441,5 @@ def participant(xdisplay):
 
     if shutil.which("xdotool") is None:
         pytest.fail("xdotool is missing: `make test` installs it from Debian's packages")
-    return Participant(xdisplay)
+    return Participant(xdisplay, Path(tempfile.mkdtemp(prefix="hapticlab-screens-")) /
+                       "screens.log")

@@ -383,3 +383,32 @@ def test_a_comparison_titles_its_two_windows_and_takes_one_key_of_1_or_2(xdispla
         assert std > 5  # text was drawn, not a blank window
     finally:
         scr.close()
+
+
+def test_the_screen_log_has_a_line_per_screen_and_one_where_keys_start_to_count(
+        xdisplay, tmp_path, monkeypatch):
+    """HAPTICLAB_SCREEN_LOG: a line when what the screen says changes, and one on the first
+    frame after the key buffer is cleared even when the text is the same (the second
+    'please wait'), so a program waiting for the line knows its keys count; frames that say
+    the same (a progress bar filling) write nothing."""
+    log = tmp_path / "screens.log"
+    monkeypatch.setenv("HAPTICLAB_SCREEN_LOG", str(log))
+    # one batch of keys per look: the clearing of each wait and of the rating, five polls
+    scr = make("realism", Keys(*[[]] * 8, ["3"], ["return"]))
+    try:
+        scr.waiting(TRIAL)
+        for _ in range(5):
+            scr.poll()  # the same screen, kept alive
+        scr.waiting(TRIAL)  # the next trial's wait: keys cleared, the same words
+        scr.rate(TRIAL, scr.protocol.rating, None, None)
+    finally:
+        scr.close()
+    lines = log.read_text(encoding="utf-8").splitlines()
+    times = [float(ln.split("\t")[0]) for ln in lines]
+    said = [ln.split("\t")[1] for ln in lines]
+    assert times == sorted(times)
+    assert [s.split(" | ")[0] for s in said[:2]] == ["Please wait", "Please wait"]
+    # the rating: its first frame (nothing chosen), 3 chosen, 3 confirmed
+    question = scr.protocol.rating.question
+    assert [s.split(" | ")[0] for s in said[2:]] == [question] * 3
+    assert "Your rating: 3" in said[3] and len(lines) == 5

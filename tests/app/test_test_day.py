@@ -26,13 +26,17 @@ def shots(artifacts):
     return d
 
 
-def env(display: str | None = None) -> dict:
+def env(display: str | None = None, participant=None) -> dict:
+    """The application's environment: with ``participant``, the screen log it writes
+    (``HAPTICLAB_SCREEN_LOG``), which the test waits on instead of sleeping."""
     import os
 
     e = {k: os.environ[k] for k in ("PATH", "HOME", "HAPTICLAB_LIBRARIES", "TERM")
          if k in os.environ}
     if display:
         e["DISPLAY"] = display
+    if participant is not None:
+        e.update(participant.app_env())
     return e
 
 
@@ -64,11 +68,11 @@ def press_until(participant, t, limit: float = 180.0):
 def name_three_and_finish(participant, t) -> None:
     """Identification's end as a person does it: surfaces named 1, 2, 3, a one-letter
     debrief, and the session exits cleanly."""
-    for name in ("1", "2", "3"):
-        time.sleep(0.5)
+    for i, name in enumerate(("1", "2", "3"), start=1):
+        participant.sees(f"Surface {i} is …")  # up: its keys count from here
         participant.press(name)
     t.wait("the participant is answering the debrief question")
-    time.sleep(0.5)
+    participant.sees("What made a sample feel real")
     participant.press("x", "Return")
     assert t.exit_code(90) == 0
 
@@ -81,14 +85,14 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     data = tmp_path / "data"
     t = terminal("person", [*PY, "run", str(TEST_DAY), "--participant", "P01", "--device",
                             "sim", "--no-audio", "--seed", "7", "--data", str(data),
-                            "--info-dialog"], env(xdisplay), cwd=tmp_path)
+                            "--info-dialog"], env(xdisplay, participant), cwd=tmp_path)
     # the participant information dialog (PsychoPy's, Qt) comes first
     end = time.monotonic() + 30
     while time.monotonic() < end and not subprocess.run(
             ["xdotool", "search", "--onlyvisible", "--name", "Participant"], env=participant.env,
             capture_output=True, text=True).stdout.strip():
         time.sleep(0.2)
-    time.sleep(0.5)
+    time.sleep(0.5)  # Qt's dialog writes no screen log: drawn, for the screenshot
     participant.screenshot(shots / "info-dialog.png", window=False)
     subprocess.run(["xdotool", "type", "31"], env=participant.env, check=True)
     subprocess.run(["xdotool", "key", "Return"], env=participant.env, check=True)
@@ -108,25 +112,24 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     # (paced: a person on sim is live)
     until("space", "placing: r ready")
     assert "rating #2" in t.screen()
-    time.sleep(0.8)
+    participant.showing("Please wait")
     participant.screenshot(shots / "between-trials-session.png")
     t.keys("ngrip steady")
     t.keys("\r")
     t.wait("note saved: grip steady")
     t.keys("e")  # E-STOP between trials: the session pauses, the window stays up
     t.wait("press c to clear it")
-    time.sleep(0.8)
+    participant.showing("Paused")
     participant.screenshot(shots / "estop-pause.png")
     t.keys("c")
     t.wait("fault cleared by the operator")
     t.keys("r")
     t.wait("rating: e E-STOP")  # the rating screen is up: e acts here too, at once
     t.keys("e")
-    time.sleep(0.5)
-    assert "key 'e' ignored" not in t.screen()
     participant.press("1", "0", "Return")  # 10, typed and confirmed
     t.wait("rating 10")
     t.wait("fault: c clear")  # the e-stop latched: the session holds before the next trial
+    assert "key 'e' ignored" not in t.screen()
     t.save_png(shots / "operator-estop-at-rating.png",
                "operator terminal — e pressed on the rating screen")
     t.keys("c")
@@ -134,18 +137,17 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     participant.press("r")  # the participant asks for the real block again
     t.wait("the participant asks for the real block")
     t.wait("reference: r ready")
-    time.sleep(0.5)
+    participant.showing("The experimenter is placing the real block")
     participant.screenshot(shots / "reference-requested.png")
     t.keys("r")
     for k in range(3):
         t.wait("placing: r ready")
-        time.sleep(0.3)
+        participant.mark()  # this trial's rating screen is still to come
         t.keys("r")
-        t.wait("rating: e E-STOP")  # the window ran in real time; the rating screen is up
-        time.sleep(0.3)
+        participant.sees("Type a number")  # the window ran in real time; the rating is up
         participant.press(str(4 + k), "Return")
-    time.sleep(1.5)
     t.wait("the participant is answering the debrief question")
+    participant.sees("What made a sample feel real")
     assert "session complete" not in t.screen()  # not while the participant still types
     # shifted punctuation as a person types it: X reports ( ! ? % by their own names
     participant.press("shift+a", "space", "s", "u", "d", "d", "e", "n", "space", "s", "t", "o",
@@ -186,17 +188,20 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
     data = tmp_path / "data"
     t = terminal("person", [*PY, "run", str(proto), "--participant", "P05", "--device",
                             f"serial:{emu.port}", "--no-audio", "--seed", "5", "--data",
-                            str(data)], env(xdisplay), cwd=tmp_path)
+                            str(data)], env(xdisplay, participant), cwd=tmp_path)
     t.wait("placing: r ready")
     t.keys("r")
 
     until = press_until(participant, t)
     until("space", "trial: e E-STOP")  # the instructions, then the scene
+    # each surface is tapped for about a second (the person's pace, not a wait for the
+    # program), then another one's key ends its window at once
     until("1", "surface 1 of 3: tapping")  # its window: 20 s from its first contact
     time.sleep(1.0)
     until("3", "surface 3 of 3: tapping")  # to surface 3, now
-    time.sleep(1.0)
+    participant.showing("Surface 3")
     participant.screenshot(shots / "identification-switched.png")
+    time.sleep(1.0)
     until("2", "surface 2 of 3: tapping")
     time.sleep(1.0)
     until("n", "rating: e E-STOP")  # all three tapped: to naming, now
@@ -225,7 +230,7 @@ def test_a_person_chooses_which_real_block_to_tap_again(xdisplay, terminal, part
     data = tmp_path / "data"
     t = terminal("person", [*PY, "run", str(proto), "--participant", "P06", "--device", "sim",
                             "--no-audio", "--seed", "6", "--data", str(data)],
-                 env(xdisplay), cwd=tmp_path)
+                 env(xdisplay, participant), cwd=tmp_path)
 
     until = press_until(participant, t)
     for block in ("rubber", "wood", "aluminum"):  # references = "start": each real block
@@ -236,7 +241,7 @@ def test_a_person_chooses_which_real_block_to_tap_again(xdisplay, terminal, part
             until("space", "trial: e E-STOP")  # the phase's instructions come first
     t.wait("placing: r ready")  # the scene is next: the participant asks first
     participant.press("r")
-    time.sleep(1.0)
+    participant.showing("Which real block would you like to tap again?")
     participant.screenshot(shots / "identification-which-block-x.png")
     until("2", "the participant asks for the real block: wood-real")
     screen = t.wait("reference: r ready")
@@ -275,23 +280,25 @@ def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp
     t.keys("r")  # familiarization: one window for the scripted responder
     t.wait("#2 (attempt 1)")
     t.keys("r")
-    time.sleep(0.5)
+    t.wait("trial: e E-STOP")
     t.keys("s")  # during trial 2's window
     t.wait("key 's' ignored: trial")
     t.wait("#3 (attempt 1)")
-    time.sleep(1.5)
+    # settled: the runner waits for r (a trial started or skipped without it would have
+    # left this state, and the next trial's would come with one more row)
+    t.wait("placing: r ready")
     assert len(rows_of(folder)) == 2  # trial 3 neither skipped nor started without r
     assert [r["status"] for r in rows_of(folder)] == ["valid", "valid"]
     t.keys("rr")  # a double r: one trial
     t.wait("key 'r' ignored")
     t.wait("#4 (attempt 1)")
-    time.sleep(1.5)
+    t.wait("placing: r ready")
     assert len(rows_of(folder)) == 3
     t.keys("p")
     t.wait("p: paused before trial 4")
     t.keys("p")
     t.wait("trial 4 starts with r")
-    time.sleep(1.5)
+    t.wait("placing: r ready")
     assert len(rows_of(folder)) == 3  # un-pausing did not start the trial
     t.keys("s")
     t.wait("s: skipped trial 4")
@@ -299,10 +306,10 @@ def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp
     t.keys("u")
     t.wait("u: re-queued trial 5")
     t.keys("r")
-    time.sleep(0.6)
+    t.wait("trial: e E-STOP")
     t.keys("e")  # E-STOP in the middle of a window
     t.wait("press c to clear it")
-    time.sleep(0.5)
+    t.wait("fault: c clear")
     t.keys("c")
     t.wait("fault cleared by the operator; the trial runs again")
     t.wait("(attempt 2)")
@@ -345,7 +352,7 @@ def test_the_devices_estop_button_pauses_and_holds_until_released(emulator_facto
     t.keys("r")  # familiarization
     t.wait("#2 (attempt 1)")
     t.keys("r")
-    time.sleep(0.6)
+    t.wait("trial: e E-STOP")
     os.kill(emu.proc.pid, signal.SIGUSR1)  # the button, during trial 2's window
     screen = t.wait("press c to clear it")
     assert "the device's own e-stop button was pressed" in screen
