@@ -21,11 +21,11 @@ from pathlib import Path
 
 from ..errors import DeviceError
 
-__all__ = ["FIRMWARE_DIR", "HOST_KINDS", "CONFORMANCE_TARGETS", "binary", "host_command",
+__all__ = ["FIRMWARE_DIR", "HOST_BUILDS", "CONFORMANCE_TARGETS", "binary", "host_command",
            "qemu_command", "serve", "QEMU_PTY"]
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
-#: builds by kind; ``board-qemu`` is the papers' board I/O built for QEMU (its peripheral
+#: the builds, by name; ``board-qemu`` is the papers' board I/O built for QEMU (its peripheral
 #: traffic is what the tests check; it has no plant, so it serves no session)
 _TARGETS = {"host": "build/hlfw-host", "host-board": "build/hlfw-host-board",
             "host-san": "build/hlfw-host-san",
@@ -37,13 +37,13 @@ _CC = ("cc", "build-essential")
 _TOOLS = {"host": _CC, "host-board": _CC, "host-san": _CC, "dhd-stub": _CC, "hd-stub": _CC,
           "hd-stub-tsan": _CC, "qemu": _ARM, "board-qemu": _ARM}
 #: the builds that run on this machine (paced to its clock; at any speed but ``hd-stub``)
-HOST_KINDS = ("host", "host-board", "host-san", "dhd-stub", "hd-stub", "hd-stub-tsan")
+HOST_BUILDS = ("host", "host-board", "host-san", "dhd-stub", "hd-stub", "hd-stub-tsan")
 #: every device a host can open over the serial link for a session (``hapticlab device
-#: emulate --firmware KIND``): the Python emulator, then each build that serves sessions
+#: emulate --firmware BUILD``): the Python emulator, then each build that serves sessions
 #: (not the ThreadSanitizer build, a check of the OpenHaptics one; QEMU's boards are
 #: opened the same way but boot for seconds, and the tests that can afford it add them).
 #: The conformance suite, the state table and the field ranges run on each.
-CONFORMANCE_TARGETS = ("python", *(k for k in HOST_KINDS if not k.endswith("-tsan")))
+CONFORMANCE_TARGETS = ("python", *(k for k in HOST_BUILDS if not k.endswith("-tsan")))
 #: the bridges to commercial devices, built over hapticlab's stand-ins for their SDKs: the
 #: Force Dimension bridge (its own 4-kHz servo loop through libdhd) and the OpenHaptics
 #: one (the servo tick in the HD scheduler's 1-kHz callback, real time only). Neither
@@ -65,8 +65,8 @@ QEMU_ICOUNT = "shift=3,sleep=on"
 QEMU_PTY = re.compile(r"char device redirected to (/dev/pts/\d+)")
 
 
-def binary(kind: str) -> Path:
-    """The firmware build ``kind`` (``host``, ``host-board``, ``qemu`` or ``board-qemu``),
+def binary(build: str) -> Path:
+    """The firmware build ``build`` (``host``, ``host-board``, ``qemu`` or ``board-qemu``),
     brought up to date by ``make`` (used as it is where there is no compiler).
 
     Raises
@@ -75,36 +75,36 @@ def binary(kind: str) -> Path:
         No such build, no compiler (the message names the Debian package), or the build
         failed (with the compiler's last lines).
     """
-    if kind not in _TARGETS:
-        raise DeviceError(f"firmware build '{kind}' does not exist; choose "
+    if build not in _TARGETS:
+        raise DeviceError(f"firmware build '{build}' does not exist; choose "
                           f"{', '.join(_TARGETS)}")
-    path = FIRMWARE_DIR / _TARGETS[kind]
-    tool, package = _TOOLS[kind]
+    path = FIRMWARE_DIR / _TARGETS[build]
+    tool, package = _TOOLS[build]
     if shutil.which(tool) is None or shutil.which("make") is None:
         if path.exists():
             return path  # built before, on a machine with the compiler
-        raise DeviceError(f"the {kind} firmware is not built and {tool} or make is missing: "
+        raise DeviceError(f"the {build} firmware is not built and {tool} or make is missing: "
                           f"install Debian's {package} and make (`make test` does), then "
-                          f"`make -C firmware {_TARGETS[kind]}`")
+                          f"`make -C firmware {_TARGETS[build]}`")
     # make rebuilds only what changed, so an edited source never runs as a stale binary
-    run = subprocess.run(["make", "-C", str(FIRMWARE_DIR), _TARGETS[kind]],
+    run = subprocess.run(["make", "-C", str(FIRMWARE_DIR), _TARGETS[build]],
                          capture_output=True, text=True)
     if run.returncode != 0 or not path.exists():
         tail = "\n".join((run.stdout + run.stderr).strip().splitlines()[-8:])
-        raise DeviceError(f"building the {kind} firmware failed:\n{tail}")
+        raise DeviceError(f"building the {build} firmware failed:\n{tail}")
     return path
 
 
-def host_command(seed: int = 0, speed: float = 1.0, kind: str = "host") -> list[str]:
-    """The command line of host build ``kind`` (``host``; ``host-board`` with the
+def host_command(seed: int = 0, speed: float = 1.0, build: str = "host") -> list[str]:
+    """The command line of host build ``build`` (``host``; ``host-board`` with the
     STM32F405's resources and link width; ``host-san``, the board's, under ASan and UBSan,
     which stop it at the first error), paced at ``speed`` × real time; it prints its pty
     as its first line."""
-    return [str(binary(kind)), "--seed", str(int(seed)), "--speed", repr(float(speed))]
+    return [str(binary(build)), "--seed", str(int(seed)), "--speed", repr(float(speed))]
 
 
-def qemu_command(kind: str = "qemu", *extra: str) -> list[str]:
-    """qemu-system-arm running Cortex-M build ``kind`` with its USART1 on a new pty (QEMU
+def qemu_command(build: str = "qemu", *extra: str) -> list[str]:
+    """qemu-system-arm running Cortex-M build ``build`` with its USART1 on a new pty (QEMU
     prints the pty's path: :data:`QEMU_PTY`); ``extra`` options go before the kernel."""
     if shutil.which("qemu-system-arm") is None:
         raise DeviceError("qemu-system-arm is missing: install Debian's qemu-system-arm "
@@ -112,19 +112,19 @@ def qemu_command(kind: str = "qemu", *extra: str) -> list[str]:
     monitor = () if "-monitor" in extra else ("-monitor", "none")
     return ["qemu-system-arm", "-M", "netduinoplus2", "-accel", "tcg,thread=single",
             "-icount", QEMU_ICOUNT, "-nographic", *monitor, "-serial", "pty", *extra,
-            "-kernel", str(binary(kind))]
+            "-kernel", str(binary(build))]
 
 
-def serve(kind: str, seed: int = 0, speed: float = 1.0) -> int:
-    """Run firmware build ``kind`` until SIGINT/SIGTERM, printing its pty first (the host
+def serve(build: str, seed: int = 0, speed: float = 1.0) -> int:
+    """Run firmware build ``build`` until SIGINT/SIGTERM, printing its pty first (the host
     build at ``speed`` × real time; QEMU at the pace of its counted instructions and its
     sleeps, :data:`QEMU_ICOUNT`)."""
     import os
     import signal
     import sys
 
-    if kind in HOST_KINDS:
-        cmd = host_command(seed, speed, kind)
+    if build in HOST_BUILDS:
+        cmd = host_command(seed, speed, build)
         sys.stdout.flush()
         os.execv(cmd[0], cmd)  # the binary prints its port and handles the signals itself
     proc = subprocess.Popen(qemu_command(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
