@@ -38,7 +38,8 @@ from .guards import Terminated, close_at_exit
 __all__ = ["SessionResult", "StudyResult", "run_session", "resume_session", "simulate_study",
            "analyze", "session_seed", "protocol_plan", "validate_protocol", "power",
            "preflight", "saturation_forecast", "open_device_for", "device_selftest",
-           "device_list", "emulate", "EMULATORS", "KIND_OF",
+           "device_list", "emulate", "EMULATORS", "benchmark", "BENCHMARKS",
+           "BENCH_OPTIONS", "KIND_OF",
            "DEFAULT_SIM_DATA", "OVERHEAD_S"]
 
 _GROUP = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
@@ -1067,6 +1068,39 @@ def emulate(firmware: str = "python", *, rate: float | None = None, seed: int = 
     if not 1_000 <= rate <= 20_000:
         raise UsageError(f"--rate must be 1,000–20,000 Hz, got {rate:g}")
     return serve_python(rate, seed, speed)
+
+
+#: the benchmarks (``hapticlab bench WHAT``), each a module of ``benchmarks/``
+BENCHMARKS = ("sim", "accuracy", "matching", "link", "crash", "analysis", "demo", "energy",
+              "orderings", "causes", "factorial", "tick")
+#: the benchmarks' options and their defaults (each benchmark reads those it uses; the
+#: CLI's ``bench --help`` says which)
+BENCH_OPTIONS = {"json": False, "repeats": 5, "fuzz": 100_000, "kills": 1000, "points": None,
+                 "seeds": None, "firmware": None, "load": None, "targets": None,
+                 "seconds": 60.0, "baseline": False, "no_window": False}
+
+
+def benchmark(what: str, **options) -> int:
+    """Run benchmark ``what`` (one of :data:`BENCHMARKS`), which prints its table (JSON
+    rows with ``json=True``) with ratios against a baseline run in the same process; its
+    exit status.
+
+    Raises
+    ------
+    UsageError
+        No such benchmark, or an option not in :data:`BENCH_OPTIONS`.
+    """
+    import argparse
+    import importlib
+
+    if what not in BENCHMARKS:
+        raise UsageError(f"no benchmark named {what!r}; available: {', '.join(BENCHMARKS)}")
+    unknown = sorted(set(options) - set(BENCH_OPTIONS))
+    if unknown:
+        raise UsageError(f"benchmark option(s) {', '.join(unknown)} do not exist; the "
+                         f"options: {', '.join(BENCH_OPTIONS)}")
+    module = importlib.import_module(f"benchmarks.{what}")
+    return module.main(argparse.Namespace(what=what, **{**BENCH_OPTIONS, **options}))
 
 
 def protocol_plan(protocol: str | Path, *, seed: int, participant: str = "P00",

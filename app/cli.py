@@ -165,15 +165,9 @@ def _device_check(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    import importlib
+    from .api import BENCH_OPTIONS, benchmark
 
-    try:
-        module = importlib.import_module(f"benchmarks.{args.what}")
-    except ModuleNotFoundError:
-        raise UsageError(f"no benchmark named {args.what!r}; "
-                         "available: sim, accuracy, matching, link, crash, analysis, demo, "
-                         "energy, orderings, causes, factorial, tick") from None
-    return module.main(args)
+    return benchmark(args.what, **{k: getattr(args, k) for k in BENCH_OPTIONS})
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -587,6 +581,8 @@ def build_parser() -> argparse.ArgumentParser:
     ps.add_argument("--json", action="store_true", help="print the plan as JSON")
     ps.set_defaults(func=_protocol_show)
 
+    from .api import BENCH_OPTIONS
+
     b = sub.add_parser("bench", help="speed and speed-vs-accuracy benchmarks")
     b.add_argument("what", help="which benchmark: sim, accuracy (every scene, tap and servo "
                    "rate against 100 kHz), matching, link, crash, analysis, demo, energy, "
@@ -595,10 +591,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "what would change them), "
                    "tick (the firmware's servo tick on the Cortex-M4)")
     b.add_argument("--json", action="store_true", help="print JSON rows")
-    b.add_argument("--repeats", type=int, default=5, help="timing repeats (median reported)")
-    b.add_argument("--fuzz", type=int, default=100_000,
+    b.add_argument("--repeats", type=int, default=BENCH_OPTIONS["repeats"],
+                   help="timing repeats (median reported)")
+    b.add_argument("--fuzz", type=int, default=BENCH_OPTIONS["fuzz"],
                    help="link: mutated frames to push through the decoder")
-    b.add_argument("--kills", type=int, default=1000, help="crash: kill -9 count")
+    b.add_argument("--kills", type=int, default=BENCH_OPTIONS["kills"], help="crash: kill -9 count")
     b.add_argument("--points", default=None, help="crash: kill after every write point "
                    "('all') or the listed ones ('3,17')")
     b.add_argument("--seeds", default=None, help="orderings: study seeds (default "
@@ -610,7 +607,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "latency per target under that load")
     b.add_argument("--targets", default=None, help="link --load: python, host, host-board, "
                    "qemu (default all four)")
-    b.add_argument("--seconds", type=float, default=60.0,
+    b.add_argument("--seconds", type=float, default=BENCH_OPTIONS["seconds"],
                    help="link --load: session traffic per target and load [s]")
     b.add_argument("--baseline", action="store_true", help="link --load: also run each cell "
                    "with reading and heartbeats in Python threads")
