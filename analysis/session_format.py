@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from enum import StrEnum
 from pathlib import Path
 from typing import Any, ClassVar
@@ -247,9 +247,13 @@ _WHOLE = ("a whole number", _whole)
 class _Record:
     """A part of session.json with its own fields; keys this hapticlab does not know are
     kept in ``extra`` and written back as they came. A field whose value is None and whose
-    name is in ``_OMIT`` is not written (it was not there)."""
+    name is in ``_OMIT`` is not written (it was not there), unless it came as null. A null
+    where a field has a value of its own (an object, a list) reads as that value; a null
+    where the field has none (the seed) is an error naming the key."""
 
     extra: dict = field(default_factory=dict)
+    #: known keys that came as null and are written back so (the others' null is None)
+    _nulls: set = field(default_factory=set, repr=False, compare=False)
 
     _CHECKS: ClassVar[dict[str, tuple[str, Callable[[Any], bool]]]] = {}
     _OMIT: ClassVar[tuple[str, ...]] = ()
@@ -259,28 +263,39 @@ class _Record:
     def _from(cls, d: Any, where: str, path: Path | str) -> Any:
         if not isinstance(d, dict):
             raise SessionMetaError(f"{path}: {where or 'the file'} is not an object")
-        names = [f.name for f in fields(cls) if f.name != "extra"]
+        known = [f for f in fields(cls) if not f.name.startswith("_") and f.name != "extra"]
         kw: dict[str, Any] = {}
-        for name in names:
-            if name not in d:
+        nulls = set()
+        for f in known:
+            if f.name not in d:
                 continue
-            v = d[name]
-            key = f"{where}.{name}" if where else name
-            if name in cls._PARTS:
-                v = cls._PARTS[name]._from(v, key, path)
-            elif name in cls._CHECKS and v is not None:
-                words, ok = cls._CHECKS[name]
+            v = d[f.name]
+            key = f"{where}.{f.name}" if where else f.name
+            if v is None:  # a null where the field has a value of its own: that value
+                if f.default is MISSING and f.default_factory is MISSING:
+                    raise SessionMetaError(f"{path}: {key} is null; expected "
+                                           f"{cls._CHECKS.get(f.name, ('a value',))[0]}")
+                if f.default is None:
+                    nulls.add(f.name)  # written back as it came
+                    kw[f.name] = None
+                continue
+            if f.name in cls._PARTS:
+                v = cls._PARTS[f.name]._from(v, key, path)
+            elif f.name in cls._CHECKS:
+                words, ok = cls._CHECKS[f.name]
                 if not ok(v):
                     raise SessionMetaError(f"{path}: {key} is {v!r}; expected {words}")
-            kw[name] = v
-        return cls(**kw, extra={k: v for k, v in d.items() if k not in names})
+            kw[f.name] = v
+        names = {f.name for f in known}
+        return cls(**kw, extra={k: v for k, v in d.items() if k not in names}, _nulls=nulls)
 
     def to_json(self) -> dict:
         """The JSON object of this part (statuses as their text)."""
         out = dict(self.extra)
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name == "extra" or (v is None and f.name in self._OMIT):
+            if f.name in ("extra", "_nulls") or (
+                    v is None and f.name in self._OMIT and f.name not in self._nulls):
                 continue
             out[f.name] = v.to_json() if isinstance(v, _Record) else v
         return out
@@ -367,7 +382,7 @@ class SessionRecord(_Record):
         Each resume (when, after how many attempts, on which device); why each run
         stopped early; the operator's notes; what the device could not do as asked.
     traces_mode : str or None
-        ``full``, ``decimated`` or ``none`` (None: not recorded, before format 2).
+        ``full``, ``contacts`` or ``none`` (None: not recorded, before format 2).
     limits : dict or None
         The current limit applied and why.
     summary : str or None

@@ -1031,8 +1031,8 @@ def emulate(firmware: str = "python", *, rate: float | None = None, seed: int = 
         machine (``host``, ``host-board``, ``host-san``), under QEMU (``qemu``), or a bridge
         over a commercial SDK's stand-in (``dhd-stub``, ``hd-stub``, ``hd-stub-tsan``).
     rate : float, optional
-        The Python emulator's servo rate [Hz], 1,000–20,000 (default 10,000); the firmware
-        runs at its build's own.
+        The Python emulator's servo rate [Hz], 1,000–20,000 (default 10,000); a build runs
+        at its own (:data:`EMULATORS`), and refuses one given.
     seed : int
         Seed of the simulated plant and tapping.
     speed : float
@@ -1051,9 +1051,10 @@ def emulate(firmware: str = "python", *, rate: float | None = None, seed: int = 
     if firmware != "python":
         from device.serial.firmware import REAL_TIME_ONLY, serve
 
-        if rate is not None and rate != EMULATORS[firmware]:
-            raise UsageError("the firmware's servo runs at its build's own rate (10 kHz; the "
-                             "bridges 4 and 1 kHz): --rate applies to --firmware python only")
+        if rate is not None:
+            raise UsageError(f"the firmware's servo runs at its build's own rate "
+                             f"({EMULATORS[firmware]:,.0f} Hz for {firmware}): --rate applies "
+                             "to --firmware python only")
         if firmware == "qemu" and speed != 1.0:
             raise UsageError("the firmware under QEMU runs at the pace of its counted "
                              "instructions and its sleeps: --speed applies to "

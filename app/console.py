@@ -112,6 +112,7 @@ class PlainConsole:
         v = self.view
         v.phase, v.trial, v.total, v.done = trial.phase, trial.trial_index, total, done
         v.place, v.detail = what, detail
+        v.taps.clear()  # the live view's taps are this attempt's
         self.say(f"[{done}/{total}] {trial.phase} #{trial.trial_index} (attempt {trial.attempt})"
                  f": place {what}" + (f" — {detail}" if detail else ""))
 

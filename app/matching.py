@@ -26,9 +26,12 @@ FaultAsk = Callable[[Any, Callable[[], str]], Callable | None]
 
 
 def _open(device: str, clear_fault: bool, say: Say | None):
+    """The device, a fault it latched cleared when asked, and said (``say``, else stderr:
+    a cleared fault is never silent)."""
     from .api import open_device_for
 
-    return open_device_for(device, clear_fault=clear_fault, say=say)
+    return open_device_for(device, clear_fault=clear_fault,
+                           say=None if say is _quiet else say)
 
 
 def _opened(record, what: str, say: Say) -> Any:

@@ -67,7 +67,7 @@ def main(args) -> int:
     from device.matching.sysid import (
         etfe,
         fit_transfer_function,
-        identify,
+        identify_system,
         swept_sine,
         true_response,
     )
@@ -79,7 +79,7 @@ def main(args) -> int:
     proto = load_protocol("realism")
     source = proto.samples["wood_on_foam"].scene
     rate = 10_000.0
-    idn = identify(SimDevice(seed=101))
+    idn = identify_system(SimDevice(seed=101))
     dev = SimDevice(seed=101, noise=False)
     train = segment_taps(record_taps(SimDevice(seed=202, noise=False), source, 12))
     held = segment_taps(record_taps(SimDevice(seed=303, noise=False), source, 4))

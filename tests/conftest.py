@@ -436,10 +436,9 @@ class Participant:
 
 
 @pytest.fixture
-def participant(xdisplay):
+def participant(xdisplay, tmp_path):
     import shutil
 
     if shutil.which("xdotool") is None:
         pytest.fail("xdotool is missing: `make test` installs it from Debian's packages")
-    return Participant(xdisplay, Path(tempfile.mkdtemp(prefix="hapticlab-screens-")) /
-                       "screens.log")
+    return Participant(xdisplay, tmp_path / "screens.log")

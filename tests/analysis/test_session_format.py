@@ -126,3 +126,22 @@ def test_a_newer_format_asks_for_a_newer_hapticlab(tmp_path):
     (tmp_path / "session.json").write_text(json.dumps(_meta(FORMAT_VERSION + 1)))
     with pytest.raises(SessionMetaError, match="newer than this hapticlab reads"):
         read_meta(tmp_path / "session.json")
+
+
+def test_a_null_is_written_back_read_as_empty_or_refused_by_name(tmp_path):
+    """A hand-edited or foreign file: a null where a key is optional comes back as null
+    (a resume rewrites the file); a null where the record has a value of its own (the
+    device, the libraries, the times) reads as that empty value, as the readers before the
+    record took it; a null seed is refused, naming the key."""
+    m = _written()
+    m.update(limits=None, device=None, libraries=None, times=None)
+    (tmp_path / "session.json").write_text(json.dumps(m))
+    record = read_meta(tmp_path / "session.json")
+    assert record.to_json()["limits"] is None
+    assert record.device == {} and record.device_spec == "" and record.libraries == {}
+    assert record.times.created_utc is None
+    m = _written()
+    m["seed"] = None
+    (tmp_path / "session.json").write_text(json.dumps(m))
+    with pytest.raises(SessionMetaError, match="seed is null; expected a whole number"):
+        read_meta(tmp_path / "session.json")
