@@ -1,22 +1,29 @@
-"""The backend-independent device suite, run unchanged against every backend:
-``sim`` and ``serial:<pty>`` (the emulator on a pseudo-terminal), back to back."""
+"""The backend-independent device suite, run unchanged against every registered backend
+(``device.backends()``): ``sim``, and ``serial:<pty>`` on the emulator on a pseudo-terminal.
+A backend registered without a way into this suite fails it, never skips it."""
 
 import numpy as np
 import pytest
 
-from device import open_device
+from device import backends, open_device
 from device.base import HapticDevice
 from device.suite import CHECKS, CheckFailed, run_selftest
 
-BACKENDS = {"sim": lambda: open_device("sim", seed=5)}
+#: how the suite reaches an instance of each registered backend, from the test's request
+#: (a new backend adds itself here)
+REACH = {
+    "sim": lambda request: lambda: open_device("sim", seed=5),
+    "serial": lambda request: (lambda port: lambda: open_device(f"serial:{port}"))(
+        request.getfixturevalue("emulator").port),
+}
 
 
-@pytest.fixture(params=["sim", "serial"])
+@pytest.fixture(params=backends())
 def opener(request):
-    if request.param == "sim":
-        return BACKENDS["sim"]
-    port = request.getfixturevalue("emulator").port
-    return lambda: open_device(f"serial:{port}")
+    if request.param not in REACH:
+        pytest.fail(f"the registered backend {request.param!r} has no way into the device "
+                    "suite: add it to REACH in tests/device/test_backend_suite.py")
+    return REACH[request.param](request)
 
 
 @pytest.mark.parametrize("check", sorted(CHECKS))
@@ -107,7 +114,7 @@ def test_checks_catch_a_device_that_breaks_its_contract(lie, check):
 
 
 def test_selftest_summary_shape():
-    report = run_selftest("sim", BACKENDS["sim"])
+    report = run_selftest("sim", REACH["sim"](None))
     assert report["backend"] == "sim"
     assert report["passed"] == len(CHECKS) and report["failed"] == 0
     assert [r["name"] for r in report["checks"]] == list(CHECKS)
