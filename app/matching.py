@@ -30,8 +30,7 @@ def _open(device: str, clear_fault: bool, say: Say | None):
     a cleared fault is never silent)."""
     from .api import open_device_for
 
-    return open_device_for(device, clear_fault=clear_fault,
-                           say=None if say is _quiet else say)
+    return open_device_for(device, clear_fault=clear_fault, say=say)
 
 
 def _opened(record, what: str, say: Say) -> Any:
@@ -84,7 +83,7 @@ def identify_device(device: str = "sim", *, levels: tuple[float, ...] = (0.5, 1.
     from device.matching.measure import MeasurementFault, Pace
     from device.matching.sysid import identify_system, sweep_seconds
 
-    say = say or _quiet
+    tell = say or _quiet  # progress; a cleared fault is said even without ``say``
     with _open(device, clear_fault, say) as dev:
         band = usable_band(dev.info.servo_rate_hz)
         n = len(levels) * repeats
@@ -97,7 +96,7 @@ def identify_device(device: str = "sim", *, levels: tuple[float, ...] = (0.5, 1.
                "band_hz": [float(v) for v in band],
                "sweep_s": sweep_seconds(info.servo_rate_hz, band)}
         record = _opened(BuildRecord.open(sysid_record_path(info), key, restart=restart),
-                         f"of {n} sweeps", say)
+                         f"of {n} sweeps", tell)
         pace = Pace([sweep_seconds(info.servo_rate_hz, band)] * n, record.count, on_step)
 
         def kept() -> str:
@@ -209,7 +208,7 @@ def build_library_file(device: str = "sim", *, protocol: str = "realism",
     )
     from protocols import load_protocol
 
-    say = say or _quiet
+    tell = say or _quiet  # progress; a cleared fault is said even without ``say``
     proto = load_protocol(protocol)
     if source not in proto.samples or not proto.samples[source].is_real:
         real = [k for k, s in proto.samples.items() if s.is_real]
@@ -222,12 +221,12 @@ def build_library_file(device: str = "sim", *, protocol: str = "realism",
         target = out or library_path(dev.info, scene)
         key = build_key(dev.info, scene, entries=entries, windows=windows)
         record = _opened(BuildRecord.open(record_path(target), key, restart=restart),
-                         "measurements", say)
+                         "measurements", tell)
 
         def kept() -> str:
             return f"{record.count} finished measurements are kept in {record.path}"
 
-        say(f"building the {source} library on {device}: 12 sweeps (~40 s), {windows} "
+        tell(f"building the {source} library on {device}: 12 sweeps (~40 s), {windows} "
             "tapping windows of 5 s; hold the stylus during the sweeps, tap the real sample "
             "during the windows")
         try:
@@ -252,7 +251,7 @@ def build_library_file(device: str = "sim", *, protocol: str = "realism",
             on_written(result)
         if verify:
             result["verification"] = _verify(dev, proto, source, verify, path,
-                                             record.windows, say, on_fault, on_step)
+                                             record.windows, tell, on_fault, on_step)
     record.discard()
     return result
 
