@@ -1,12 +1,13 @@
 """``hapticlab bench link --load 0,1,2,4``: the link on a busy computer.
 
 For each device target (the Python emulator, the host-built firmware, the host build with
-the board's resources, the STM32F405 build under QEMU) and each number N of competing
-CPU-bound processes of normal priority, a session's traffic runs for ``--seconds``: windows
-streaming every trace channel, each drawn on a PsychoPy window as the runner draws it (the
-tap screen during the window, the rating screen between windows), an e-stop from another
-thread (as the operator's key reader sends it) every fifth window, alternating between a
-window and a playback. Measured:
+the board's resources, the STM32F405 build under QEMU; on request the bridges over the
+Force Dimension and OpenHaptics stand-ins, ``dhd-stub`` and ``hd-stub``) and each number N
+of competing CPU-bound processes of normal priority, a session's traffic runs for
+``--seconds``: windows streaming every trace channel, each drawn on a PsychoPy window as
+the runner draws it (the tap screen during the window, the rating screen between windows),
+an e-stop from another thread (as the operator's key reader sends it) every fifth window,
+alternating between a window and a playback. Measured:
 
 * the gaps between the host's frames **as the device saw them** (LINK_REPORT: p50, p99,
   p99.9 from 2-ms bins, and the exact maximum, in device time), and as the host wrote
@@ -40,7 +41,8 @@ import numpy as np
 from ._common import emit, print_table
 
 TARGETS = {"python": (), "host": ("--firmware", "host"),
-           "host-board": ("--firmware", "host-board"), "qemu": ("--firmware", "qemu")}
+           "host-board": ("--firmware", "host-board"), "qemu": ("--firmware", "qemu"),
+           "dhd-stub": ("--firmware", "dhd-stub"), "hd-stub": ("--firmware", "hd-stub")}
 _HOG = "while True: pass"
 
 

@@ -443,7 +443,13 @@ class HapticDevice(ABC):
     def _check_fault(self) -> None:
         f = self.fault
         if f is not None:
-            raise DeviceFaultError(f"fault latched ({f.code}): clear it first")
+            raise DeviceFaultError(f"fault latched ({f.code}): clear it first"
+                                   + self._fault_account(f.code))
+
+    def _fault_account(self, code: str) -> str:
+        """What this backend can add to a latched fault's message (a device's own account
+        of a watchdog fault: who fell silent); empty when nothing."""
+        return ""
 
     # ----------------------------------------------------------- conveniences
     def __enter__(self) -> HapticDevice:

@@ -245,6 +245,7 @@ class SerialDevice(HapticDevice):
         self.port = port
         self._fault: FaultEvent | None = None
         self._estop_sent = False  # this host's ESTOP since the last clear (else: the device's)
+        self._fault_told = False  # a watchdog fault's account was given (_fault_account)
         self._output = 0.0
         self._scene_id = 0
         self._window_id = 0
@@ -313,6 +314,7 @@ class SerialDevice(HapticDevice):
                    "emergency stop (latched): output zeroed" if self._estop_sent else
                    "the device's own e-stop button was pressed: output zeroed")
             self._fault = FaultEvent(msg.time_us * 1e-6, code, why)
+            self._fault_told = False
             self._output = 0.0
 
     @staticmethod
@@ -378,8 +380,9 @@ class SerialDevice(HapticDevice):
     def _command(self, msg: M.Message, timeout: float | None = None) -> None:
         status = self.link.request(msg, timeout)
         if status == M.Status.FAULT_LATCHED:
-            raise DeviceFaultError(f"fault latched ({self._fault.code if self._fault else '?'}):"
-                                   " clear it first")
+            code = self._fault.code if self._fault else "?"
+            raise DeviceFaultError(f"fault latched ({code}): clear it first"
+                                   + self._fault_account(code))
         if status != M.Status.OK:
             raise DeviceError(f"{self.port}: device refused {type(msg).__name__}: "
                               f"{M.Status.NAMES.get(status, status)}")
@@ -437,6 +440,34 @@ class SerialDevice(HapticDevice):
             except DeviceError:
                 out["device_saw"] = None
         return out
+
+    def _fault_account(self, code: str) -> str:
+        """For a watchdog fault, once: who fell silent, as this host's heartbeat thread and
+        the device each counted it since the link opened (or was last reset). A host that
+        wrote its frames on time while the device saw a long gap points at the path between
+        them (the port's driver, a bridge's link thread); a late heartbeat or a lapsed
+        lease points at this computer."""
+        if code != "watchdog" or self._fault_told:
+            return ""
+        self._fault_told = True
+        try:
+            st = self.link_stats()
+        except DeviceError:
+            return ""
+        hb, saw = st.get("heartbeats") or {}, st.get("device_saw") or {}
+        parts = []
+        if hb.get("native"):
+            parts.append(f"while heartbeating, this host wrote its frames at most "
+                         f"{hb['gap_max_ms']:.1f} ms apart "
+                         f"(its heartbeat thread woke at most {hb['wake_late_max_ms']:.1f} ms "
+                         f"late, {hb['lease_lapses']} lease lapse(s), longest write "
+                         f"{hb['write_max_ms']:.1f} ms)")
+        elif hb:
+            parts.append(f"this host's heartbeats ran in Python threads "
+                         f"({hb['lease_lapses']} lease lapse(s))")
+        if saw.get("gap_max_ms") is not None:
+            parts.append(f"the device saw them at most {saw['gap_max_ms']:.1f} ms apart")
+        return f" [{'; '.join(parts)}]" if parts else ""
 
     def estop_bound_s(self) -> float | None:
         """The longest an ESTOP may take to zero this device's output, from the frame's

@@ -32,6 +32,10 @@ void hl_host_take_input(int master);
 /* --realtime: SCHED_FIFO at `priority` and all memory locked, where the system grants
  * them; otherwise the stated fallback (normal scheduling) on stderr. Returns 1 if granted */
 int hl_host_realtime(int priority);
+/* SCHED_FIFO at `priority` for the calling thread alone (no memory locked: a thread of a
+ * program under ThreadSanitizer must not lock its shadow memory), where the system grants
+ * it; either answer on stderr, naming `what`. Returns 1 if granted */
+int hl_host_thread_realtime(int priority, const char *what);
 uint64_t hl_host_now_ns(void); /* CLOCK_MONOTONIC [ns] */
 /* the serial number HELLO_ACK names: <prefix>-<the device's own number> where the HAL
  * knows it (a bridge's SDK, after hal_io_init), else <prefix>-<seed> */

@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <pthread.h>
 #include <sched.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -121,6 +122,20 @@ int hl_host_realtime(int priority)
                 strerror(errno));
     }
     fprintf(stderr, "real-time scheduling: SCHED_FIFO at priority %d\n", priority);
+    return 1;
+}
+
+int hl_host_thread_realtime(int priority, const char *what)
+{
+    struct sched_param p = {.sched_priority = priority};
+    int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);
+    if (rc != 0) {
+        fprintf(stderr, "real-time scheduling not granted to %s (%s): it runs at normal "
+                "priority, and a busy computer can hold it up (give the user rtprio in "
+                "/etc/security/limits.conf, or CAP_SYS_NICE)\n", what, strerror(rc));
+        return 0;
+    }
+    fprintf(stderr, "real-time scheduling: %s at SCHED_FIFO priority %d\n", what, priority);
     return 1;
 }
 

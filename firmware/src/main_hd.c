@@ -32,6 +32,10 @@
 #ifndef HL_SERIAL_PREFIX
 #define HL_SERIAL_PREFIX "HD"
 #endif
+/* SCHED_FIFO priority of the link's thread: the host link's (device/serial/native.py's
+ * RT_PRIORITY), so neither side of the pty waits for the other */
+#define HL_LINK_RT_PRIORITY 20
+
 #ifndef HL_HOST_WHAT
 #define HL_HOST_WHAT "OpenHaptics bridge"
 #endif
@@ -99,10 +103,6 @@ int main(int argc, char **argv)
         return 1;
     }
     hl_host_signals(&stop_flag, &button);
-    if (args.realtime) {
-        fprintf(stderr, "%s: --realtime does nothing here: the HD scheduler sets its own "
-                "thread's priority\n", argv[0]);
-    }
 
     char serial[16];
     sim_hal_init(args.seed); /* opens the device (src/io_hd.c), which tells its serial number */
@@ -116,6 +116,17 @@ int main(int argc, char **argv)
                 hdGetErrorString(e.errorCode));
         stop_servo(tick);
         return 1;
+    }
+    /* The link's thread at the host link's real-time priority, whatever --realtime says:
+     * the servo's callback runs on in the HD scheduler's thread while this thread is held
+     * up, so a held-up link thread is a silence the watchdog judges. Measured at normal
+     * priority (`hapticlab bench link --load 2 --targets hd-stub`, 2 cores): frames 657 ms
+     * apart as the device saw them, and a spurious watchdog fault. Not the scheduler's own
+     * thread: the HD scheduler sets that one's priority. */
+    hl_host_thread_realtime(HL_LINK_RT_PRIORITY, "the link's thread");
+    if (args.realtime) {
+        fprintf(stderr, "%s: --realtime: the HD scheduler sets its own thread's priority, and "
+                "the link's thread asks for real time anyway\n", argv[0]);
     }
     printf("%s\n", path);
     fflush(stdout);

@@ -10,6 +10,7 @@ test_contract.py).
 from __future__ import annotations
 
 import json
+import os
 import re
 import signal
 import subprocess
@@ -258,6 +259,35 @@ def test_realtime_is_asked_for_and_its_answer_said():
     assert granted != refused, err
     m = re.search(r"hlfw-dhd-stub: (\d+) ticks,", err)
     assert m and int(m.group(1)) > 0, err
+
+
+def test_the_openhaptics_bridges_link_thread_asks_for_real_time():
+    """The HD scheduler's callback ticks on while the bridge's link thread is held up, so
+    that thread asks for SCHED_FIFO at the host link's priority (without --realtime) and
+    says the answer; the scheduler's own thread is left as the HD API made it. Checked
+    on the running process: the main thread's policy, and every other thread's."""
+    from device.serial.native import RT_PRIORITY
+
+    binary = FIRMWARE_DIR / "build" / "hlfw-hd-stub"
+    proc = subprocess.Popen([str(binary)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout.readline().startswith("/dev/")
+        main = os.sched_getscheduler(proc.pid)
+        others = [os.sched_getscheduler(int(t)) for t in os.listdir(f"/proc/{proc.pid}/task")
+                  if int(t) != proc.pid]
+        prio = os.sched_getparam(proc.pid).sched_priority
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=30)
+    granted = f"the link's thread at SCHED_FIFO priority {RT_PRIORITY}" in err
+    refused = "not granted to the link's thread" in err and "rtprio" in err
+    assert granted != refused, err
+    if granted:
+        assert (main, prio) == (os.SCHED_FIFO, RT_PRIORITY), err
+    else:
+        assert main == os.SCHED_OTHER, err
+    assert others and all(p == os.SCHED_OTHER for p in others), others
 
 
 @pytest.mark.parametrize("kind", sorted(RATES))

@@ -21,6 +21,7 @@ from app.participants import ScriptedResponder
 from app.recorder import SessionFiles, new_session_dir, read_trials
 from app.runner import SessionRunner
 from device import Scene, open_device
+from device.errors import DeviceFaultError
 from device.serial.native import load
 from protocols import SessionEngine, parse_protocol
 
@@ -74,6 +75,7 @@ def test_the_python_thread_link_is_starved_by_the_same_hold(own_emulator):
 HUNG = r"""
 import ctypes, sys
 from device import Scene, open_device
+from device.errors import DeviceFaultError
 with open_device("serial:" + sys.argv[1]) as dev:
     dev.load_scene(Scene("firm", spring=680.0))
     dev.home()
@@ -121,6 +123,17 @@ def test_the_lease_ends_the_heartbeats_after_its_stated_second(own_emulator):
         assert seen["frames"] <= LEASE_S / (t_wd / 4) + 5, seen
         _wait_for(lambda: dev.fault is not None, what="the watchdog fault")
         assert dev.fault.code == "watchdog"
+        # the refusal says who fell silent, once: here the device saw this host's frames
+        # stop for the hold (3 s) less the lease (1 s), far over T_wd
+        with pytest.raises(DeviceFaultError) as told:
+            dev.run_window(0.1)
+        msg = str(told.value)
+        assert "this host wrote its frames at most" in msg, msg
+        gap = float(re.search(r"the device saw them at most ([\d.]+) ms apart", msg)[1])
+        assert gap > 1e3 * (3.0 - LEASE_S) * 0.9, msg
+        with pytest.raises(DeviceFaultError) as again:
+            dev.run_window(0.1)
+        assert "device saw" not in str(again.value)
         dev.clear_fault()
 
 
@@ -221,6 +234,7 @@ def test_the_device_reports_what_it_saw_of_the_host(own_emulator):
 NO_RT = r"""
 import json, sys
 from device import Scene, open_device
+from device.errors import DeviceFaultError
 with open_device("serial:" + sys.argv[1]) as dev:
     dev.load_scene(Scene("firm", spring=680.0))
     dev.home()
