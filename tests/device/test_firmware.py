@@ -473,8 +473,8 @@ def _real_samples():
 
 def _tap_physics(device, scene) -> dict:
     """What tapping ``scene`` feels like, from 3 five-second windows: a ringing block's
-    frequency and decay (fitted as Table 1 was), and any sample's peak acceleration in
-    the 20 ms after a contact per m/s of incoming speed (median over taps)."""
+    frequency and decay (fitted as Table 1 was), and each tap's incoming speed [m/s] with
+    its peak acceleration in the 20 ms after the contact per m/s of that speed [1/s]."""
     from device.matching.library import record_taps, segment_taps
     from device.matching.vibration import fit_vibration
 
@@ -483,7 +483,8 @@ def _tap_physics(device, scene) -> dict:
     taps = segment_taps(results)
     n = int(0.02 * rate)
     out = {"taps": len(taps),
-           "gain": float(np.median([np.max(np.abs(t.accel[:n])) / t.velocity for t in taps]))}
+           "gains": sorted((t.velocity, float(np.max(np.abs(t.accel[:n])) / t.velocity))
+                           for t in taps)}
     ring = scene.material.ringing
     if ring is not None:
         fit = fit_vibration(taps, rate, band=(0.5 * ring.frequency, 2 * ring.frequency),
@@ -492,15 +493,42 @@ def _tap_physics(device, scene) -> dict:
     return out
 
 
+#: the slowest tap whose peak acceleration scales with its speed [m/s] (see below)
+PROPORTIONAL_FROM = 0.065
+
+
+def _gain_against(wire: list, sim: list) -> tuple[float, int]:
+    """The median over the wire's taps of each one's gain against the simulator's at the
+    same speed (interpolated between the simulator's taps, each speed's median; never
+    extrapolated), over taps from :data:`PROPORTIONAL_FROM`; and how many taps that was."""
+    s = [(v, g) for v, g in sim if v >= PROPORTIONAL_FROM]
+    sv = np.unique([v for v, _ in s])
+    sg = np.array([np.median([g for v, g in s if v == u]) for u in sv])
+    w = [(v, g) for v, g in wire if PROPORTIONAL_FROM <= v and sv[0] <= v <= sv[-1]]
+    ratios = [g / np.interp(v, sv, sg) for v, g in w]
+    return float(np.median(ratios)) if ratios else float("nan"), len(ratios)
+
+
 @pytest.mark.parametrize("firmware", ["host", "python"])
 def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
     """The same protocol gives the same physics over the wire as on `sim`: each real sample
     tapped through the emulated device (at twice real time, a clock the test does not
     need the host to keep) against the simulator.
 
-    Measured (3 windows, seed 4): peak acceleration per speed within 5 % (aluminum's
-    excepted: its 1-kHz ringing sampled at 10 kHz through chattering taps spreads
-    2,000–3,500 s⁻¹ on either side, so it is not compared). The ringing's fit spreads
+    Peak acceleration per speed is compared tap by tap against the simulator's at the
+    same speed, from 0.065 m/s (:data:`PROPORTIONAL_FROM`). Slower taps on wood and
+    aluminum peak in one of two ways, depending on the phase the contact meets: the
+    contact's own transient at 1.5–2.5 ms, about the same height whatever the speed
+    (wood ≈ 55 m/s², 1,200–1,700 s⁻¹ per speed), or the ring, in proportion to speed
+    (wood ≈ 440 s⁻¹, aluminum ≈ 1,950). From 0.065 m/s every tap measured was
+    proportional (the simulator, seeds 1–4; the host build quiet and beside two
+    CPU-bound processes). A median over all taps compared the mix of slow and fast taps,
+    not the physics: beside two CPU-bound processes the host build drew more slow taps
+    (12 of 22, against 6 of 23 on `sim`), and wood's median went from 443 to 611–718
+    s⁻¹ in three loaded runs (628 in a quiet one). Matched by speed, the host build and
+    the Python emulator, quiet and beside two processes, came within 0.97–1.03 of `sim`
+    on every sample over 7–23 taps, aluminum included (before, its two branches,
+    2,000–3,500 s⁻¹, kept it out of the comparison). The ringing's fit spreads
     because of how it is estimated, not because of the wire. The simulator spreads just
     as much when only its seed changes (seeds 1–12, wood): 620–627 Hz in 8 seeds and
     555–557 Hz in 4, against the 592 Hz it renders, with decay 339–985 1/s against 600.
@@ -514,10 +542,10 @@ def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
     the host's commands land in the simulated hand's cycle. So the wire draws another
     set of taps from the same distribution: wood 617–625 Hz in 6 of 8 host runs and
     556–558 Hz in 2; decay 399–1127. The bounds admit the estimator's spread
-    (frequency 12 %, decay 60 %, gain 10 %). Before the firmware's plant modelled the
-    simulator's stylus and derived blocks, the host build rang wood at 300 Hz and
-    aluminum at 547 Hz (−52 % and −47 %), and rubber's taps peaked 26 % low: the
-    frequency and gain bounds still catch that.
+    (frequency 12 %, decay 60 %, gain 10 %, at least 5 taps matched). Before the
+    firmware's plant modelled the simulator's stylus and derived blocks, the host build
+    rang wood at 300 Hz and aluminum at 547 Hz (−52 % and −47 %), and rubber's taps
+    peaked 26 % low: the frequency and gain bounds still catch that.
     """
     from device.sim.backend import SimDevice
 
@@ -536,5 +564,6 @@ def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
         if "f" in s:
             assert w["f"] == pytest.approx(s["f"], rel=0.12), (sid, w, s)
             assert w["B"] == pytest.approx(s["B"], rel=0.60), (sid, w, s)
-        if sid != "aluminum-real":
-            assert w["gain"] == pytest.approx(s["gain"], rel=0.10), (sid, w, s)
+        ratio, n = _gain_against(w["gains"], s["gains"])
+        assert n >= 5, (sid, n, w, s)
+        assert ratio == pytest.approx(1.0, abs=0.10), (sid, ratio, w, s)
