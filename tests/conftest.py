@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
-from .hostwatch import HostWatch
+from .hostwatch import HostWatch, busiest, cpu_by_process
 
 settings.register_profile("ci", deadline=None, max_examples=60,
                           suppress_health_check=[HealthCheck.too_slow])
@@ -49,6 +49,15 @@ _HOST_WATCH = HostWatch()
 
 
 @pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_call(item):
+    item.stash[_CPU_BEFORE] = cpu_by_process()  # a few ms: read back only when it fails
+    yield
+
+
+_CPU_BEFORE = pytest.StashKey[dict]()
+
+
+@pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
     outcome = yield
     report = outcome.get_result()
@@ -56,8 +65,11 @@ def pytest_runtest_makereport(item, call):
         import time
 
         to_monotonic = time.monotonic() - time.time()
-        report.sections.append(("host during this test", _HOST_WATCH.summary(
-            call.start + to_monotonic, call.stop + to_monotonic)))
+        watch = _HOST_WATCH.summary(call.start + to_monotonic, call.stop + to_monotonic)
+        if call.when == "call" and _CPU_BEFORE in item.stash:
+            watch += "; " + busiest(item.stash[_CPU_BEFORE], cpu_by_process(),
+                                    call.stop - call.start)
+        report.sections.append(("host during this test", watch))
 
 
 #: processes meant to outlive a test (session fixtures': the shared emulator, Xvfb)

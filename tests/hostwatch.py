@@ -49,6 +49,34 @@ def _pressure_us() -> int | None:
     return next((int(x[6:]) for x in first if x.startswith("total=")), None)
 
 
+def cpu_by_process() -> dict[int, tuple[str, float]]:
+    """Every process's name and CPU time so far (user + system [s]), from ``/proc``: the
+    machine's, not only this run's (the work a test competed with)."""
+    out = {}
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/stat") as f:
+                text = f.read()
+        except OSError:  # gone meanwhile
+            continue
+        name = text[text.index("(") + 1:text.rindex(")")]
+        fields = text[text.rindex(")") + 2:].split()
+        out[int(d)] = (name, (int(fields[11]) + int(fields[12])) * _TICK_S)
+    return out
+
+
+def busiest(before: dict[int, tuple[str, float]], after: dict[int, tuple[str, float]],
+            span: float, n: int = 6) -> str:
+    """The ``n`` processes that used the most CPU between two :func:`cpu_by_process`
+    snapshots ``span`` seconds apart, in words (a process started meanwhile counts from 0)."""
+    used = sorted(((t - before.get(pid, (name, 0.0))[1], pid, name)
+                   for pid, (name, t) in after.items()), reverse=True)[:n]
+    return ("CPU used over the test's " + f"{span:.1f} s, most first: " + ", ".join(
+        f"{name} ({pid}) {t:.1f} s" for t, pid, name in used if t > 0))
+
+
 class HostWatch:
     """A daemon thread keeping the last :data:`KEEP_S` of samples
     ``(t [s], lateness [s], steal per CPU [s], pressure [µs])``."""

@@ -132,6 +132,10 @@ class Emulator:
         # it, so an ESTOP's wait is counted from there (an upper bound from its arrival)
         self._rx_empty_at = 0.0
         self.frames_in = 0
+        # for the account at exit: the longest wall time [s] between two turns of the serve
+        # loop, and between two writes to the pty (what a host sees as the device's silence)
+        self.longest_turn = self.longest_write_gap = 0.0
+        self._wrote_at = self._clock0
         self._link_reset(None)
         self._trace_config(limits.channels, 1)
         #: the trace ring: chunks (and the WINDOW_DONE behind them) waiting for the link,
@@ -198,12 +202,19 @@ class Emulator:
                 self._stop.set()  # the host side is gone
                 self._tx.clear()
                 return
+            if n:
+                now = time.monotonic()
+                self.longest_write_gap = max(self.longest_write_gap, now - self._wrote_at)
+                self._wrote_at = now
             del self._tx[:n]
 
     # ------------------------------------------------------------------ loop
     def serve_forever(self) -> None:
         next_status = 0.0  # device time [s]
+        turn = time.monotonic()
         while not self._stop.is_set():
+            now = time.monotonic()
+            self.longest_turn, turn = max(self.longest_turn, now - turn), now
             wait = 0.0 if self._outbox else 0.002
             r, _, _ = select.select([self.fd], [], [], wait)
             if r:
@@ -776,5 +787,9 @@ def main(rate_hz: float = 10_000.0, seed: int = 0, speed: float = 1.0) -> int:
     finally:
         os.close(master)
         os.close(slave)
+        print(f"emulator: {emu.frames_in} frames in, {emu.tx_dropped} bytes dropped for a host "
+              f"that did not read, {emu.records_lost} trace records lost; its serve loop's "
+              f"longest turn {emu.longest_turn * 1e3:.0f} ms, longest between two writes "
+              f"{emu.longest_write_gap * 1e3:.0f} ms", file=sys.stderr, flush=True)
     return 0
 

@@ -227,6 +227,7 @@ def test_every_target_refuses_every_field_beyond_its_range(firmware):
     finally:
         host.close()
         stop_emulator(emu)
+        print(emu.stderr())  # shown when the test fails: the target's own account at exit
     assert not wrong, "\n".join(wrong)
     sanitizer = [line for line in emu.stderr_lines if "runtime error" in line
                  or "Sanitizer" in line]

@@ -557,6 +557,7 @@ def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
             wire = {sid: _tap_physics(dev, sc) for sid, sc in scenes.items()}
     finally:
         stop_emulator(emu)
+        print(emu.stderr())  # shown when the test fails: the target's own account at exit
     sim = {sid: _tap_physics(SimDevice(seed=4), sc) for sid, sc in scenes.items()}
     for sid in scenes:
         w, s = wire[sid], sim[sid]
