@@ -495,6 +495,10 @@ def _tap_physics(device, scene) -> dict:
 
 #: the slowest tap whose peak acceleration scales with its speed [m/s] (see below)
 PROPORTIONAL_FROM = 0.065
+#: the fewest taps from that speed a sample's gain is judged on, and how many more rounds
+#: of 3 windows the wire gets to draw them (beside two CPU-bound processes, the host build
+#: once drew 4 of 23 aluminum taps that fast in its 3 windows)
+MIN_MATCHED, EXTRA_ROUNDS = 5, 3
 
 
 def _gain_against(wire: list, sim: list) -> tuple[float, int]:
@@ -542,7 +546,8 @@ def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
     the host's commands land in the simulated hand's cycle. So the wire draws another
     set of taps from the same distribution: wood 617–625 Hz in 6 of 8 host runs and
     556–558 Hz in 2; decay 399–1127. The bounds admit the estimator's spread
-    (frequency 12 %, decay 60 %, gain 10 %, at least 5 taps matched). Before the
+    (frequency 12 %, decay 60 %, gain 10 %, at least 5 taps matched; a sample whose first
+    3 windows give fewer is tapped again, up to 3 more times, and its gains pooled). Before the
     firmware's plant modelled the simulator's stylus and derived blocks, the host build
     rang wood at 300 Hz and aluminum at 547 Hz (−52 % and −47 %), and rubber's taps
     peaked 26 % low: the frequency and gain bounds still catch that.
@@ -551,14 +556,20 @@ def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
 
     scenes = _real_samples()
     assert set(scenes) == {"wood", "wood_on_foam", "foam", "rubber-real", "aluminum-real"}
+    sim = {sid: _tap_physics(SimDevice(seed=4), sc) for sid, sc in scenes.items()}
     emu = start_emulator("--firmware", firmware, "--seed", "4", "--speed", "2")
     try:
         with SerialDevice(emu.port) as dev:
-            wire = {sid: _tap_physics(dev, sc) for sid, sc in scenes.items()}
+            wire = {}
+            for sid, sc in scenes.items():
+                wire[sid] = w = _tap_physics(dev, sc)
+                for _ in range(EXTRA_ROUNDS):  # how many taps come fast is the wire's draw
+                    if _gain_against(w["gains"], sim[sid]["gains"])[1] >= MIN_MATCHED:
+                        break
+                    w["gains"] = sorted(w["gains"] + _tap_physics(dev, sc)["gains"])
     finally:
         stop_emulator(emu)
         print(emu.stderr())  # shown when the test fails: the target's own account at exit
-    sim = {sid: _tap_physics(SimDevice(seed=4), sc) for sid, sc in scenes.items()}
     for sid in scenes:
         w, s = wire[sid], sim[sid]
         assert w["taps"] >= 15 and s["taps"] >= 15, (sid, w, s)
@@ -566,5 +577,5 @@ def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
             assert w["f"] == pytest.approx(s["f"], rel=0.12), (sid, w, s)
             assert w["B"] == pytest.approx(s["B"], rel=0.60), (sid, w, s)
         ratio, n = _gain_against(w["gains"], s["gains"])
-        assert n >= 5, (sid, n, w, s)
+        assert n >= MIN_MATCHED, (sid, n, w, s)
         assert ratio == pytest.approx(1.0, abs=0.10), (sid, ratio, w, s)
