@@ -48,13 +48,14 @@ def pytest_configure(config):
 _HOST_WATCH = HostWatch()
 
 
+#: each test's CPU-by-process snapshot from before its call (hostwatch.cpu_by_process)
+_CPU_BEFORE = pytest.StashKey[dict]()
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_call(item):
     item.stash[_CPU_BEFORE] = cpu_by_process()  # a few ms: read back only when it fails
     yield
-
-
-_CPU_BEFORE = pytest.StashKey[dict]()
 
 
 @pytest.hookimpl(hookwrapper=True)

@@ -73,7 +73,7 @@ def busiest(before: dict[int, tuple[str, float]], after: dict[int, tuple[str, fl
     snapshots ``span`` seconds apart, in words (a process started meanwhile counts from 0)."""
     used = sorted(((t - before.get(pid, (name, 0.0))[1], pid, name)
                    for pid, (name, t) in after.items()), reverse=True)[:n]
-    return ("CPU used over the test's " + f"{span:.1f} s, most first: " + ", ".join(
+    return (f"CPU used over the test's {span:.1f} s, most first: " + ", ".join(
         f"{name} ({pid}) {t:.1f} s" for t, pid, name in used if t > 0))
 
 
