@@ -78,8 +78,8 @@ def rating_pmatrix(a: dict, out: Path) -> list[str]:
 
     # bands, not a continuous map: p = .04 and .06 lie on either side of α and must look so
     bounds = [0, 0.001, 0.01, 0.05, 1.0]
-    cmap = ListedColormap(["#08306b", "#2171b5", "#6baed6", "#f0f0f0"])
-    cmap.set_bad("white")
+    cmap = ListedColormap(["#08306b", "#2171b5", "#6baed6", "#f0f0f0"]).with_extremes(
+        bad="white")
     im = ax.imshow(m.to_numpy(dtype=float), cmap=cmap, norm=BoundaryNorm(bounds, cmap.N))
     ax.set_xticks(range(len(order)), order, rotation=60, ha="right")
     ax.set_yticks(range(len(order)), order)
