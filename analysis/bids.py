@@ -48,7 +48,15 @@ import numpy as np
 import pandas as pd
 
 from .load import LoadError, load_sessions, select_sessions
-from .session_format import META, TRIALS, SessionRecord, read_meta, read_trials
+from .session_format import (
+    META,
+    TRIALS,
+    SessionPathError,
+    SessionRecord,
+    inside_session,
+    read_meta,
+    read_trials,
+)
 
 __all__ = ["export_bids", "BIDS_VERSION", "bids_label"]
 
@@ -281,6 +289,18 @@ def export_bids(data_dir: str | Path, out: str | Path, **filters) -> dict:
     return res
 
 
+def _trace_files(folder: Path, pattern: str, where: str) -> list[Path]:
+    """The trace files a row names (a glob for several windows), each checked to be in the
+    session folder once links are followed."""
+    files = sorted(folder.glob(pattern))
+    for f in files:
+        try:
+            inside_session(folder, f.relative_to(folder))
+        except SessionPathError as exc:
+            raise LoadError(f"{where}: {exc}") from None
+    return files
+
+
 def _session(folder: Path, typed: pd.DataFrame, labels: dict, tasks: dict, people: dict,
              visits: dict, names: dict, out: Path, res: dict) -> None:
     """One session folder into the dataset (see :func:`export_bids`)."""
@@ -315,7 +335,7 @@ def _session(folder: Path, typed: pd.DataFrame, labels: dict, tasks: dict, peopl
     for line, r in enumerate(raw, start=2):
         got = []
         if r["trace_file"]:
-            files = sorted(folder.glob(r["trace_file"]))  # a glob for several windows
+            files = _trace_files(folder, r["trace_file"], f"{where}:{line}")
             res["traces_missing"] += 0 if files else 1
             begun = _utc(r["t_start"], f"{where}:{line}")
             for f in files:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
+import os
 import re
 from pathlib import Path
 
@@ -19,11 +20,14 @@ from .session_format import (
     INT_COLUMNS,
     KINDS,
     META,
+    TRACES,
     TRIALS,
     SessionMetaError,
+    SessionPathError,
     SessionRecord,
     SessionStatus,
     TrialsFileError,
+    inside_session,
     read_meta,
     read_trials,
 )
@@ -123,6 +127,42 @@ def _invalid(row: dict, phase: dict | None, design: dict | None) -> str:
     return ""
 
 
+def session_files(root: Path) -> list[Path]:
+    """Every ``session.json`` under ``root``, in path order, at any depth.
+
+    A link to a folder outside ``root`` is followed (sessions kept on another disk); a link
+    to a folder inside it is an alias of a folder read anyway and is not read twice, nor is
+    any folder reached again through a loop of links. A session's ``traces/`` is not
+    searched (it holds recordings, never sessions).
+    """
+    root = Path(root)
+    top = root.resolve()
+    seen: set[str] = set()
+    found: list[Path] = []
+
+    def walk(folder: Path, real: Path) -> None:
+        if str(real) in seen:
+            return
+        seen.add(str(real))
+        try:
+            entries = sorted(os.scandir(folder), key=lambda e: e.name)
+        except OSError as exc:
+            raise LoadError(f"{folder}: cannot be read ({exc.strerror})") from None
+        names = {e.name for e in entries}
+        if META in names:
+            found.append(folder / META)
+        for e in entries:
+            if not e.is_dir() or (e.name == TRACES and META in names):
+                continue
+            target = Path(os.path.realpath(e.path))
+            if e.is_symlink() and (target == top or top in target.parents):
+                continue  # an alias of a folder inside root: read there
+            walk(folder / e.name, target)
+
+    walk(root, top)
+    return sorted(found)
+
+
 def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
     """All attempts of all sessions under ``path``, one row per attempt.
 
@@ -177,7 +217,7 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
     if not root.is_dir():
         raise LoadError(f"{root}: not a folder")
     frames, torn, files, sessions, designs, invalid = [], {}, {}, [], {}, []
-    for mpath in sorted(root.rglob(META)):
+    for mpath in session_files(root):
         folder = mpath.parent
         try:
             meta = read_meta(mpath)
@@ -186,7 +226,8 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
         tpath = folder / TRIALS
         try:
             rows, t = read_trials(tpath)
-        except TrialsFileError as exc:
+            inside_session(folder, TRACES)  # the recordings too are the session's own
+        except (TrialsFileError, SessionPathError) as exc:
             raise LoadError(str(exc)) from None
         if t is not None:
             torn[str(tpath)] = t.text

@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .session_format import inside_session
+
 __all__ = ["rating_means", "rating_pmatrix", "factorial_interactions", "confusion", "accel_traces",
            "session_length", "figure_prefix"]
 
@@ -191,6 +193,7 @@ def accel_traces(a: dict, data: pd.DataFrame, out: Path, speed: float = 0.11) ->
             if not path.exists() or "*" in row.trace_file:
                 continue
             try:
+                inside_session(row.session_dir, row.trace_file)  # not through a link out
                 tap = _tap_near(path, speed)
             except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
                 skipped.append(str(path))  # a truncated or foreign file: not this figure's
@@ -215,7 +218,8 @@ def accel_traces(a: dict, data: pd.DataFrame, out: Path, speed: float = 0.11) ->
         ax.set_xlabel("ms after contact", fontsize=8)
     for ax in axes[:, 0]:
         ax.set_ylabel("m/s²", fontsize=8)
-    note = f" ({len(skipped)} unreadable trace files skipped)" if skipped else ""
+    note = (f" ({len(skipped)} trace files unreadable or linked out of their session folder "
+            "skipped)" if skipped else "")
     fig.suptitle(f"{a['id']}: contact acceleration per sample, scaled to {speed} m/s incoming "
                  f"speed{note}", fontsize=10)
     fig.tight_layout()

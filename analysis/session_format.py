@@ -39,7 +39,8 @@ __all__ = ["FORMAT_VERSION", "SessionStatus", "SessionRecord", "ProtocolRecord",
            "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
            "TrialsFileError", "SessionMetaError", "TornLine", "header_line", "format_row",
            "read_trials", "read_meta", "session_kind", "canonical_bytes", "is_canonical",
-           "TRIALS", "META", "PROTOCOL_COPY", "TRACES", "LOCK"]
+           "TRIALS", "META", "PROTOCOL_COPY", "TRACES", "LOCK", "ROW_STATUSES",
+           "SessionPathError", "inside_session"]
 
 #: 3: the rating scale and answer choices are written once, in the design (2 also wrote
 #: them beside it, as protocol.rating and protocol.answer_choices); 2: the design and the
@@ -54,6 +55,14 @@ COLUMNS = ("participant", "session", "phase", "trial_index", "item", "attempt", 
            "trace_file")
 INT_COLUMNS = ("session", "trial_index", "attempt", "n_taps")
 FLOAT_COLUMNS = ("peak_current", "rating", "response_time", "correct")
+
+#: every status a row of trials.tsv may carry, as the recorder writes it (lower case): the
+#: attempt statuses of :mod:`protocols.engine` and its control entries (a pause, a resume, a
+#: reference block tapped). The engine keeps the same list (analysis imports nothing of
+#: ours; a test holds the two equal).
+ROW_STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "timed_out",
+                "excluded_timeout", "aborted_device", "excluded_device", "skipped", "estop",
+                "paused", "resumed", "reference")
 
 #: who answered: a person (``human``), a scripted responder testing the machinery
 #: (``dry-run``), or the simulated participant model (``simulated``)
@@ -87,6 +96,44 @@ class TrialsFileError(ValueError):
 
 class SessionMetaError(ValueError):
     """session.json is missing, not JSON, or lacks a key every reader needs (named)."""
+
+
+class SessionPathError(ValueError):
+    """A session's file would be read or written outside its folder: a symbolic link that
+    leads out of it, or a name in trials.tsv that climbs out (``../``, an absolute path)."""
+
+
+def inside_session(folder: str | Path, name: str | Path) -> Path:
+    """``folder/name``, checked to stay in the session folder once every link is followed.
+
+    A session folder's files are the session's own: a link inside the folder to another of
+    its files is followed; one that leads out of it (or a name with ``..`` or an absolute
+    path) is refused, so that nothing outside is read as the session's or written over.
+    The folder itself may be reached through links (a data folder on another disk).
+
+    Raises
+    ------
+    SessionPathError
+        Naming the path, where it leads, and what to do.
+    """
+    folder = Path(folder)
+    path = folder / name
+    root = folder.resolve()
+    real = path.resolve()
+    if real == root or root in real.parents:
+        return path
+    rel = Path(name)
+    if rel.is_absolute() or ".." in rel.parts:
+        how = f"names {real}"
+    else:
+        steps = [folder.joinpath(*rel.parts[:i]) for i in range(1, len(rel.parts) + 1)]
+        link = next((p for p in steps if p.is_symlink()), path)
+        how = f"is a link to {real}" if link == path else \
+            f"goes through the link {link} (to {link.resolve()})"
+    raise SessionPathError(f"{path}: {how}, outside the session folder {folder}; a "
+                           "session's files are its own and are read and written only "
+                           "inside it — copy the file into the folder in place of the link "
+                           "(nothing was read or written through it)")
 
 
 @dataclass(frozen=True)
@@ -178,6 +225,10 @@ def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
         For a wrong header, or a malformed line that is not the last.
     """
     path = Path(path)
+    try:
+        inside_session(path.parent, path.name)
+    except SessionPathError as exc:
+        raise TrialsFileError(str(exc)) from None
     if not path.exists():
         return [], None
     if not path.is_file():  # a FIFO or a device would block the read for ever
@@ -219,8 +270,29 @@ def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
                 break
             raise TrialsFileError(f"{path}:{no}: corrupt line ({len(fields)} fields, expected "
                                   f"{len(COLUMNS)}): {line[:80]!r}")
+        _check_row(row, path, no)
         rows.append(row)
     return rows, torn
+
+
+def _check_row(row: dict, path: Path, no: int) -> None:
+    """A complete row's status is one this format writes, and its whole-number columns are
+    whole numbers (or empty): anything else is an edited file, named with its line."""
+    status = row["status"]
+    if status not in ROW_STATUSES:
+        canon = status.strip().lower()
+        hint = (f"; the recorder writes {canon!r} (lower case, no spaces): an edit or a "
+                "spreadsheet changed it — correct the file" if canon in ROW_STATUSES else "")
+        raise TrialsFileError(f"{path}:{no}: status {status!r} is not one of "
+                              f"{', '.join(ROW_STATUSES)}{hint}")
+    for c in ("session", "n_taps"):
+        v = row[c]
+        if v and not (v.isascii() and v.isdigit()):
+            raise TrialsFileError(f"{path}:{no}: {c} {v!r} is not a whole number")
+    trace = row["trace_file"]
+    if trace and (trace.startswith(("/", "\\")) or ".." in trace.replace("\\", "/").split("/")):
+        raise TrialsFileError(f"{path}:{no}: trace_file {trace!r} names a file outside the "
+                              f"session folder; the recorder writes {TRACES}/<name>")
 
 
 def _get(meta: dict, dotted: str) -> Any:
@@ -494,6 +566,10 @@ def read_meta(path: str | Path) -> SessionRecord:
         the wrong type).
     """
     path = Path(path)
+    try:
+        inside_session(path.parent, path.name)
+    except SessionPathError as exc:
+        raise SessionMetaError(str(exc)) from None
     if path.exists() and not path.is_file():
         raise SessionMetaError(f"{path}: not a regular file ({_kind(path)})")
     try:

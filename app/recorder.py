@@ -7,6 +7,10 @@
 * ``session.json`` — metadata, written atomically (temporary file, fsync, rename, fsync of
   the folder), rewritten at start, on resume and at the end.
 * ``protocol.toml`` — the protocol file the session runs, copied byte for byte.
+* Every file is the session's own: a link that leads out of the folder (to another
+  session's trials, a shared disk, someone's file) is refused by name before anything is
+  read or written (:meth:`SessionFiles.check_own`), and a trials.tsv hard-linked to another
+  name (a backup made with ``cp -al``) gets its own copy before rows are appended to it.
 * ``traces/`` — per attempt, the device's raw streams as compressed NumPy (``.npz``), also
   written atomically, each recording its own file: the recorder never overwrites one. A
   trace no row names (the process stopped between the two) is moved to
@@ -33,12 +37,14 @@ from analysis.session_format import (
     TRACES,
     TRIALS,
     SessionMetaError,
+    SessionPathError,
     SessionRecord,
     TornLine,
     TrialsFileError,
     canonical_bytes,
     format_row,
     header_line,
+    inside_session,
     is_canonical,
     read_meta,
     read_trials,
@@ -87,18 +93,45 @@ class SessionFiles:
         self.protocol = self.folder / PROTOCOL_COPY
         self.traces = self.folder / TRACES
 
+    #: what a session folder holds besides the traces (the torn lines set aside, the lock)
+    _OWN = (TRIALS, META, PROTOCOL_COPY, TRACES, LOCK, "trials.torn.tsv")
+
+    def check_own(self) -> None:
+        """Every file this session reads or writes stays in its folder once links are
+        followed: its files, ``traces/`` and every trace in it.
+
+        Raises
+        ------
+        SessionFileError
+            Naming the link and where it leads (nothing was read or written through it).
+        """
+        try:
+            for name in self._OWN:
+                inside_session(self.folder, name)
+            for sub in (self.traces, self.traces / "unrecorded"):
+                if sub.is_dir():
+                    for f in sorted(sub.iterdir()):
+                        inside_session(self.folder, f.relative_to(self.folder))
+        except SessionPathError as exc:
+            raise SessionFileError(str(exc)) from None
+
     # ------------------------------------------------------------------ one writer
     def lock(self) -> None:
         """Become the one process writing this session (an exclusive ``flock`` on
-        ``session.lock``, released by the kernel when the process ends, even by kill -9).
+        ``session.lock``, released by the kernel when the process ends, even by kill -9),
+        once :meth:`check_own` found no file leading out of the folder.
 
         Raises
         ------
         SessionInUseError
             Naming the process that holds it and since when.
+        SessionFileError
+            A file of the session is a link out of its folder.
         """
+        self.check_own()
         try:
-            fd = os.open(self.folder / LOCK, os.O_RDWR | os.O_CREAT, 0o666)
+            # O_NOFOLLOW: a link put there after the check is not followed either
+            fd = os.open(self.folder / LOCK, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o666)
         except OSError as exc:
             raise io_error(exc, "cannot take the session's lock") from None
         try:
@@ -140,7 +173,8 @@ class SessionFiles:
         """Make trials.tsv canonical before a resume appends to it: a missing or empty file
         gets its header (a crash or a full disk before the first row); CRLF or CR endings
         and a byte-order mark (a spreadsheet saved it) are rewritten as this format writes
-        them. Returns what was done, for the operator."""
+        them; a file hard-linked to another name gets its own copy (the other is left as it
+        was). Returns what was done, for the operator."""
         done = []
         try:
             if not self.trials.exists() or self.trials.stat().st_size == 0:
@@ -152,6 +186,11 @@ class SessionFiles:
                     atomic_write(self.trials, canonical_bytes(rows))
                     done.append("rewrote trials.tsv with LF line endings and no byte-order "
                                 "mark")
+            if self.trials.exists() and os.stat(self.trials).st_nlink > 1:
+                atomic_write(self.trials, self.trials.read_bytes())  # a new inode: its own
+                done.append("trials.tsv was a hard link shared with another name (a backup?): "
+                            "the session now has its own copy, and the other name keeps the "
+                            "rows it had")
         except OSError as exc:
             raise io_error(exc, "cannot repair trials.tsv") from None
         done += self._set_aside_unrecorded_traces()
