@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint venv clean system-deps screens contract
+.PHONY: demo test lint venv clean system-deps screens contract docs
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -12,7 +12,7 @@ $(PY):
 
 # setup.py builds the link's native threads (firmware/src/hostlink.c) with the package
 $(STAMP): pyproject.toml setup.py firmware/src/hostlink.c firmware/include/hl_hostlink.h | $(PY)
-	$(PY) -m pip install --quiet -e '.[test,ui,lsl]'
+	$(PY) -m pip install --quiet -e '.[test,ui,lsl,docs]'
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -64,10 +64,17 @@ lint: $(STAMP)
 # threads' fallback, which a busy computer starves. Rebuild it rather than test without it.
 test: $(STAMP) system-deps
 	$(VENV)/bin/ruff check .
+	$(MAKE) docs
 	$(MAKE) -C firmware test
 	@$(PY) -c 'import sys; from device.serial.native import load; sys.exit(load()[0] is None)' \
 	  || $(PY) -m pip install --quiet --no-deps -e .
 	$(PY) -m pytest -q --durations=15
+
+# The documentation site (docs/, Sphinx + MyST) into docs/_build/html: warnings are errors and
+# every cross-reference must resolve (-n), so a broken link or a stale name fails the build.
+# No linkcheck: the machines that build it reach no network beyond the package registries.
+docs: $(STAMP)
+	$(PY) -m sphinx -W --keep-going -n -q -b html docs docs/_build/html
 
 # The wire contract (device/serial/contract.py) into the files made from it: the firmware's
 # include/hl_contract.h and the tables of docs/wire-protocol.md, then the test vectors
