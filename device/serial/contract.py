@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 __all__ = ["Field", "Spec", "SPECS", "BY_TYPE", "BY_NAME", "STATES", "STATE_TABLE", "check",
-           "RangeError", "gate", "render_header", "render_doc", "FAULTS"]
+           "RangeError", "gate", "render_header", "render_doc", "FAULTS", "CAPABILITIES"]
 
 CODES = {"u8": "B", "u16": "H", "u32": "I", "u64": "Q", "i16": "h", "i32": "i", "f32": "f"}
 _INT_RANGE = {"u8": (0, 2**8 - 1), "u16": (0, 2**16 - 1), "u32": (0, 2**32 - 1),
@@ -38,6 +38,15 @@ LIMIT_NAMES = ("table_items", "play_items", "channels", "max_decimation", "curre
 
 #: fault codes (FAULT.code, STATUS.fault, WINDOW_DONE.fault): code → name
 FAULTS = {1: "watchdog", 2: "estop", 3: "nonfinite", 4: "device"}
+
+#: what a device is and can do (LIMITS.capabilities): bit → name. ``simulated_contact``:
+#: the stylus and what it touches are simulated (a plant in software: the Python emulator,
+#: the firmware's host and QEMU builds, the bridges over the SDK stand-ins): nobody touches
+#: a physical surface. ``seeded``: that simulation draws its randomness from a seed fixed
+#: when the device started, so the same seed gives the same run. Whether the stylus has an
+#: accelerometer is ``LIMITS.channels`` bit 5, the servo rate ``HELLO_ACK.servo_rate_hz``:
+#: each said once. Bits not named here are 0 (a later bit is appended, never reused).
+CAPABILITIES = {0: "simulated_contact", 1: "seeded"}
 
 
 @dataclass(frozen=True)
@@ -235,7 +244,9 @@ SPECS: tuple[Spec, ...] = (
         F("max_decimation", "u16", "servo ticks", 1, 65_535),
         F("link_bytes_s", "u32", "B/s; 0: no limit"),
         F("tick_p99_us", "u32", "µs of wall time; 0: not measured"),
-        F("tick_max_us", "u32", "µs of wall time; 0: not measured")), versions=(2,)),
+        F("tick_max_us", "u32", "µs of wall time; 0: not measured"),
+        F("capabilities", "u32", "bit mask: 0 simulated contact, 1 seeded")),
+         versions=(2,)),
     Spec(0x83, "PONG", "device", (F("stamp", "u32", "host µs, echoed"),)),
     Spec(0x90, "CONTACT", "device", (
         F("window_id", "u16"), F("tick", "u32", "window tick"),
@@ -442,6 +453,9 @@ def render_header() -> str:
     out += ["", "/* fault codes */"]
     for code, fname in FAULTS.items():
         out.append(f"#define HL_FAULT_CODE_{fname.upper()} {code}u")
+    out += ["", "/* capabilities (LIMITS.capabilities) */"]
+    for bit, cname in CAPABILITIES.items():
+        out.append(f"#define HL_CAP_{cname.upper()} (1u << {bit})")
     out += ["", f"#define HL_MAX_SURFACE_UM {MAX_SURFACE_UM}",
             f"#define HL_CHUNK_ITEMS {CHUNK_ITEMS}u", "",
             "/* body layouts: {type, fixed bytes, item bytes, offset of the u16 count (or -1),",

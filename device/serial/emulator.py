@@ -41,10 +41,13 @@ _FAULT = {name: code for code, name in M.FaultCode.NAMES.items()} | {
 #: field ranges the device enforces (docs/wire-protocol.md §4): HOME's clearance [µm],
 #: a window's duration and first-contact timeout [ms]
 #: the resources LIMITS advertises: table and playback [i16 items], the trace ring
-#: [records], the channels recorded (all ten, the simulator's true_* included)
+#: [records], the channels recorded (all ten, the simulator's true_* included); a
+#: simulated plant drawing its randomness from the seed it was started with
 LIMITS = M.Limits(table_items=1_000_000, play_items=4_194_304, ring_records=65_536,
                   channels=(1 << len(M.Channel.NAMES)) - 1, max_decimation=100,
-                  link_bytes_s=0)
+                  link_bytes_s=0,
+                  capabilities=sum(1 << b for b, n in contract.CAPABILITIES.items()
+                                   if n in ("simulated_contact", "seeded")))
 #: frames from the outbox (trace chunks, the WINDOW_DONE behind them) per turn of the
 #: serve loop, so that a command arriving during a stream is read between frames
 OUTBOX_PER_TURN = 16

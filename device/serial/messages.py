@@ -383,7 +383,8 @@ class Limits(Message):
     is no limit (USB, a pty); tick_p99_us and tick_max_us: the 99th percentile and the
     longest of its servo's tick periods since it started [µs of wall time], where a servo
     loop runs on a computer's clock (the host builds, the bridges), 0 where not measured
-    (a board's timer interrupt, the Python emulator)."""
+    (a board's timer interrupt, the Python emulator); capabilities: what the device is and
+    can do, a bit mask (:data:`~device.serial.contract.CAPABILITIES`; :meth:`can`)."""
 
     NAME = "LIMITS"
     table_items: int = 0
@@ -394,6 +395,13 @@ class Limits(Message):
     link_bytes_s: int = 0
     tick_p99_us: int = 0
     tick_max_us: int = 0
+    capabilities: int = 0
+
+    def can(self, name: str) -> bool:
+        """Whether the device states capability ``name`` (a value of
+        :data:`~device.serial.contract.CAPABILITIES`, e.g. ``"simulated_contact"``)."""
+        bit = {v: k for k, v in C.CAPABILITIES.items()}[name]
+        return bool(self.capabilities >> bit & 1)
 
 
 @dataclass(frozen=True)

@@ -67,7 +67,7 @@ def _examples() -> list[tuple[str, M.Message]]:
         ("position", M.Position(9, 777, -5000)),
         # version 2
         ("trace_config", M.TraceConfig(0x7F, 4)),
-        ("limits", M.Limits(16384, 16384, 1024, 0x7F, 100, 100_000)),
+        ("limits", M.Limits(16384, 16384, 1024, 0x7F, 100, 100_000, 0, 0, 3)),
         ("trace_chunk", M.TraceChunk(9, 0x05, 40, 2, (0.25, -1.0, 0.5, 2.0))),
         ("trace_lost", M.TraceLost(9, 1024, 35)),
         ("link_query", M.LinkQuery(1)),

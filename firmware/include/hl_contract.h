@@ -47,6 +47,10 @@
 #define HL_FAULT_CODE_NONFINITE 3u
 #define HL_FAULT_CODE_DEVICE 4u
 
+/* capabilities (LIMITS.capabilities) */
+#define HL_CAP_SIMULATED_CONTACT (1u << 0)
+#define HL_CAP_SEEDED (1u << 1)
+
 #define HL_MAX_SURFACE_UM 500000
 #define HL_CHUNK_ITEMS 480u
 
@@ -75,7 +79,7 @@
     {0x42u, 1u, 0u, -1, 0u, 0}, \
     {0x80u, 3u, 0u, -1, 0u, 0}, \
     {0x81u, 87u, 0u, -1, 0u, 0}, \
-    {0x82u, 28u, 0u, -1, 0u, 0}, \
+    {0x82u, 32u, 0u, -1, 0u, 0}, \
     {0x83u, 4u, 0u, -1, 0u, 0}, \
     {0x90u, 10u, 0u, -1, 0u, 0}, \
     {0x91u, 14u, 0u, -1, 0u, 0}, \

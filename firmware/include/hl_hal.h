@@ -63,5 +63,9 @@ void hal_plant_scene(float surface_m, int real_sample, const hal_sample *sample)
 void hal_plant_home(float height_m);
 enum { HAL_TASK_REST = 0, HAL_TASK_TAP = 1, HAL_TASK_HOLD = 2 };
 void hal_plant_task(int task);
+/* what the device is (LIMITS.capabilities, the HL_CAP_ bits of hl_contract.h): a build with
+ * the simulated plant (src/hal_plant.c) states simulated contact, seeded; one without it
+ * (src/hal_noplant.c: the board, the bridges on a vendor's SDK) states neither */
+uint32_t hal_capabilities(void);
 
 #endif

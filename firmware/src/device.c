@@ -571,7 +571,7 @@ static void send_hello_ack(void)
     copy_str(p + 32, D.serial, 16);
     copy_str(p + 48, "hlfw-2.0 " HL_BUILD, 16);
     send(0x81, b, sizeof b, 1);
-    uint8_t l[28];
+    uint8_t l[32];
     uint32_t p99 = 0, longest = 0;
     hal_tick_periods_us(&p99, &longest); /* measured where a computer's clock drives it */
     p = put_u32(l, HL_TABLE_ITEMS);
@@ -581,7 +581,8 @@ static void send_hello_ack(void)
     p = put_u16(p, HL_MAX_DECIMATION);
     p = put_u32(p, hal_link_bytes_s()); /* measured where it can be (the QEMU build) */
     p = put_u32(p, p99);
-    put_u32(p, longest);
+    p = put_u32(p, longest);
+    put_u32(p, hal_capabilities());
     send(0x82, l, sizeof l, 1);
 }
 

@@ -11,3 +11,4 @@ void hal_plant_scene(float surface_m, int real_sample, const hal_sample *sample)
 }
 void hal_plant_home(float height_m) { (void)height_m; }
 void hal_plant_task(int task) { (void)task; }
+uint32_t hal_capabilities(void) { return 0u; } /* a physical contact, no simulation */

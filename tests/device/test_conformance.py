@@ -17,6 +17,7 @@ import zlib
 import numpy as np
 import pytest
 
+from device.serial import contract as C
 from device.serial import messages as M
 from device.serial.firmware import CONFORMANCE_TARGETS
 from device.serial.framing import encode_frame
@@ -96,6 +97,15 @@ def spring_homed(host: Host) -> None:
     assert host.ask(SPRING) == S.OK
     assert host.ask(M.SceneCommit(1, 0)) == S.OK
     assert host.ask(M.Home(20_000)) == S.OK
+
+
+@pytest.mark.integration
+@pytest.mark.firmware
+def test_limits_say_the_contact_is_simulated_and_seeded(host):
+    """Issue 54, item 1: what a device is comes over the wire (LIMITS.capabilities), not
+    from its name. Every target here is a simulated plant started from a seed."""
+    assert host.limits.can("simulated_contact") and host.limits.can("seeded")
+    assert host.limits.capabilities >> len(C.CAPABILITIES) == 0  # no bit it has no name for
 
 
 @deadline_kept

@@ -68,6 +68,7 @@ def test_the_firmware_negotiates_version_2_and_advertises_its_limits(firmware_ho
         assert dev.link.version == 2
         lim = dev.link.limits
         assert lim.channels == 0x7F and lim.ring_records == 8192 and lim.max_decimation == 100
+        assert lim.can("simulated_contact") and lim.can("seeded")  # its plant, from --seed
         assert dev.info.firmware.startswith("hlfw-2.0 host")
         # a playback longer than the device holds is refused by name, before any upload
         with pytest.raises(DeviceError, match="holds 1048576"):
@@ -355,6 +356,7 @@ def test_the_board_build_drives_the_papers_device_peripherals_under_qemu(tmp_pat
         with SerialDevice(port) as dev:
             assert dev.info.firmware == "hlfw-2.0 board"
             assert dev.info.serial_number == "F405-QEMU"
+            assert dev.link.limits.capabilities == 0  # the papers' device: a physical contact
             dev.load_scene(Scene("firm", spring=680.0))
             dev.home()
             res = dev.play_force(np.full(480, 0.1))
