@@ -1089,19 +1089,19 @@ def benchmark(what: str, **options) -> int:
     Raises
     ------
     UsageError
-        No such benchmark, or an option not in :data:`BENCH_OPTIONS`.
+        No such benchmark, an option not in :data:`BENCH_OPTIONS`, a bad value of one, or
+        one the benchmark does not read (:func:`benchmarks._options.check_options`).
     """
     import argparse
     import importlib
 
     if what not in BENCHMARKS:
         raise UsageError(f"no benchmark named {what!r}; available: {', '.join(BENCHMARKS)}")
-    unknown = sorted(set(options) - set(BENCH_OPTIONS))
-    if unknown:
-        raise UsageError(f"benchmark option(s) {', '.join(unknown)} do not exist; the "
-                         f"options: {', '.join(BENCH_OPTIONS)}")
+    from benchmarks._options import check_options
+
+    options = check_options(what, options, BENCH_OPTIONS)  # every value, before anything runs
     module = importlib.import_module(f"benchmarks.{what}")
-    return module.main(argparse.Namespace(what=what, **{**BENCH_OPTIONS, **options}))
+    return module.main(argparse.Namespace(what=what, **options))
 
 
 def protocol_plan(protocol: str | Path, *, seed: int, participant: str = "P00",

@@ -35,6 +35,7 @@ import numpy as np
 from analysis.session_format import SessionStatus
 
 from ._common import emit, print_table
+from ._options import parse_points
 
 KEY = ("trial_index", "item", "attempt", "sample", "status", "rating", "answer", "n_taps",
        "tap_velocities")
@@ -200,8 +201,7 @@ def kill_at_points(protocol: str = "realism", seed: int = 1, points: str = "all"
         raise RuntimeError(f"the reference session failed: {r.stderr}")
     kinds = [line.split("\t")[0] for line in log.read_text().splitlines()]
     reference = _rows(_sessions(ref)[-1])
-    chosen = range(1, len(kinds) + 1) if points == "all" else [int(x) for x in
-                                                                points.split(",")]
+    chosen = parse_points(points, len(kinds)) or range(1, len(kinds) + 1)
     jobs = [(k, False) for k in chosen] + [(k, True) for k in chosen
                                            if torn and kinds[k - 1] == "write"]
     with ThreadPoolExecutor(max_workers=workers) as pool:
