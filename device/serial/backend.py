@@ -221,6 +221,30 @@ def _wire_table(table: TransientTable, where: str) -> tuple[np.ndarray, np.ndarr
     return v, np.clip(q, -32767, 32767).astype("<i2")
 
 
+
+#: what each fault means to the operator (contract.FAULTS); 5–9 are a commercial device's own
+#: safety cutting its forces, as its bridge reads it from the vendor's SDK
+_FAULT_WHY = {
+    "watchdog": "the device heard nothing from this computer for {wd} and zeroed its output "
+                "(the computer was held up, or the cable is loose)",
+    "nonfinite": "the device computed a current that is not a finite number (a simulated "
+                 "device: its stylus left every physical bound) and zeroed its output",
+    "device": "the device's own I/O failed (a bridge's SDK refused a position reading or a "
+              "force, or its servo loop was held up past its bound) and it zeroed its output; "
+              "check the device's cable and power, then clear the fault",
+    "force_button": "the device's own force button (or dead-man switch) turned its forces "
+                    "off: output zeroed; clear the fault, then home again to turn them on",
+    "velocity_limit": "the device's own velocity limit turned its forces off (the stylus moved "
+                      "faster than the device allows): output zeroed",
+    "force_limit": "the device's own force or force-impulse limit turned its forces off: "
+                   "output zeroed; check the ratings the bridge was built with",
+    "motor_heat": "the device's motors are too warm and it turned its forces off: let it cool "
+                  "before clearing the fault",
+    "calibration": "the device is not calibrated (or lost its calibration), so its heights "
+                   "are not absolute: output zeroed; calibrate it as its bridge says, then "
+                   "clear the fault",
+}
+
 class SerialDevice(HapticDevice):
     """Driver for a device on a serial port (or any pyserial URL).
 
@@ -301,18 +325,13 @@ class SerialDevice(HapticDevice):
         elif isinstance(msg, M.Fault):
             code = M.FaultCode.NAMES.get(msg.code, f"fault {msg.code}")
             wd = f"{self._info.watchdog_s * 1e3:g} ms" if hasattr(self, "_info") else "T_wd"
-            why = (f"the device heard nothing from this computer for {wd} and zeroed its "
-                   "output (the computer was held up, or the cable is loose)"
-                   if code == "watchdog" else
-                   "the device computed a current that is not a finite number (a simulated "
-                   "device: its stylus left every physical bound) and zeroed its output"
-                   if code == "nonfinite" else
-                   "the device's own I/O failed (a bridge's SDK refused a position reading "
-                   "or a force, or its servo loop was held up past its bound) and it zeroed "
-                   "its output; check the device's cable and power, then clear the fault"
-                   if code == "device" else
-                   "emergency stop (latched): output zeroed" if self._estop_sent else
-                   "the device's own e-stop button was pressed: output zeroed")
+            why = _FAULT_WHY.get(code, f"the device reports a fault this host does not "
+                                 f"know (code {msg.code}) and zeroed its output")
+            if code == "watchdog":
+                why = why.format(wd=wd)
+            elif code == "estop":
+                why = ("emergency stop (latched): output zeroed" if self._estop_sent else
+                       "the device's own e-stop button was pressed: output zeroed")
             self._fault = FaultEvent(msg.time_us * 1e-6, code, why)
             self._fault_told = False
             self._output = 0.0

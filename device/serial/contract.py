@@ -36,8 +36,12 @@ _INT_RANGE = {"u8": (0, 2**8 - 1), "u16": (0, 2**16 - 1), "u32": (0, 2**32 - 1),
 #: the device's resources a bound may name, and where a host finds each
 LIMIT_NAMES = ("table_items", "play_items", "channels", "max_decimation", "current_limit_ma")
 
-#: fault codes (FAULT.code, STATUS.fault, WINDOW_DONE.fault): code → name
-FAULTS = {1: "watchdog", 2: "estop", 3: "nonfinite", 4: "device"}
+#: fault codes (FAULT.code, STATUS.fault, WINDOW_DONE.fault): code → name. 5–9 are the
+#: causes a commercial device's own safety reports (the bridges, docs/howto/run-on-your-device.md):
+#: its force button or dead-man switch, its velocity limit, its force or impulse limit, its
+#: motors' temperature, and a calibration it lacks or lost
+FAULTS = {1: "watchdog", 2: "estop", 3: "nonfinite", 4: "device", 5: "force_button",
+          6: "velocity_limit", 7: "force_limit", 8: "motor_heat", 9: "calibration"}
 
 #: what a device is and can do (LIMITS.capabilities): bit → name. ``simulated_contact``:
 #: the stylus and what it touches are simulated (a plant in software: the Python emulator,

@@ -45,6 +45,11 @@ class FaultCode:
     ESTOP = 2
     NONFINITE = 3  #: the servo computed a current that is not finite
     DEVICE = 4  #: the device's own I/O failed (a bridge's SDK call, a servo held up)
+    FORCE_BUTTON = 5  #: a commercial device's force button or dead-man switch cut its forces
+    VELOCITY_LIMIT = 6  #: the device's own velocity limit cut its forces
+    FORCE_LIMIT = 7  #: the device's own force or force-impulse limit cut its forces
+    MOTOR_HEAT = 8  #: the device's motors are too warm: it cut its forces
+    CALIBRATION = 9  #: the device is not calibrated (or lost it): its heights are not absolute
     NAMES: ClassVar[dict[int, str]] = dict(C.FAULTS)
 
 

@@ -37,7 +37,11 @@ int32_t bridge_counts(double height_m);
  * after it is enabled, as the device core ramps the axis's force */
 void bridge_hold(int on, double a, double a0, double b, double b0, double out[2]);
 /* a reading or a command failed, or the servo loop was held up past its bound: the next
- * tick's hal_io_ok() is 0, so the device latches a device fault and output goes off */
+ * tick's hal_io_fault() is HL_FAULT_DEVICE, so the device latches a device fault and output
+ * goes off */
 void bridge_io_failed(void);
+/* the device reports a fault of its own (HL_FAULT_FORCE_BUTTON ... HL_FAULT_CALIBRATION,
+ * hl_device.h): latched at the next tick, the first cause reported naming it */
+void bridge_fault(uint8_t code);
 
 #endif

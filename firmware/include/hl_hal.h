@@ -26,9 +26,12 @@ float hal_accel_read(void);        /* stylus acceleration [m/s^2], up positive *
 void hal_amp_enable(int on);       /* the amplifier's enable line: on only while output is
                                       enabled and no fault is latched (every tick) */
 void hal_watchdog_kick(void);      /* the hardware watchdog (the servo tick proves liveness) */
-int hal_io_ok(void);               /* 0 when the servo side's own I/O failed (a bridge's SDK
-                                      call, a servo loop held up past its bound): latches a
-                                      device fault, read every tick; 1 on a board and a plant */
+uint8_t hal_io_fault(void);        /* read every tick: HL_FAULT_NONE, or the fault the servo
+                                      side's own I/O reports, latched at once: HL_FAULT_DEVICE
+                                      when it failed (a bridge's SDK call, a servo loop held
+                                      up past its bound), or the cause a commercial device
+                                      gives for cutting its own forces (HL_FAULT_FORCE_BUTTON
+                                      ... HL_FAULT_CALIBRATION); none on a board and a plant */
 int hal_estop_pressed(void);       /* the operator's e-stop button, read every tick: pressed
                                       (or its wire broken) latches ESTOP, and CLEAR_FAULT is
                                       refused until it is released */

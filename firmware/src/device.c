@@ -385,8 +385,10 @@ void hl_servo_tick(void)
     if (hal_estop_pressed()) {
         latch_fault(HL_FAULT_ESTOP); /* the operator's button */
     }
-    if (!hal_io_ok()) {
-        latch_fault(HL_FAULT_DEVICE); /* a reading or command failed: never render on */
+    uint8_t io_fault = hal_io_fault();
+    if (io_fault != HL_FAULT_NONE) {
+        latch_fault(io_fault); /* a reading or command failed, or the device cut its forces:
+                                  never render on */
     }
     if (D.enabled && watchdog_expired()) {
         latch_fault(HL_FAULT_WATCHDOG); /* armed while output is enabled */

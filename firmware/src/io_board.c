@@ -144,4 +144,4 @@ void hal_amp_enable(int on)
 }
 
 int hal_estop_pressed(void) { return (int)((GPIO_IDR(PORT_C) >> 13) & 1u); }
-int hal_io_ok(void) { return 1; } /* its peripherals report no failure */
+uint8_t hal_io_fault(void) { return HL_FAULT_NONE; } /* its peripherals report none */

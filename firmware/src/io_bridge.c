@@ -54,15 +54,22 @@ void bridge_hold(int on, double a, double a0, double b, double b0, double out[2]
     out[1] = hold_axis(b, b0, gain);
 }
 
-static volatile int io_failed;
+static uint8_t io_fault; /* set and read in the thread that runs the servo tick */
 
-void bridge_io_failed(void) { io_failed = 1; }
-
-int hal_io_ok(void)
+void bridge_fault(uint8_t code)
 {
-    int ok = !io_failed;
-    io_failed = 0; /* a failure is reported once; one that lasts is reported every tick */
-    return ok;
+    if (io_fault == HL_FAULT_NONE) { /* the first cause this tick names the fault */
+        io_fault = code;
+    }
+}
+
+void bridge_io_failed(void) { bridge_fault(HL_FAULT_DEVICE); }
+
+uint8_t hal_io_fault(void)
+{
+    uint8_t f = io_fault;
+    io_fault = HL_FAULT_NONE; /* reported once; a cause that lasts is reported every tick */
+    return f;
 }
 
 float hal_accel_read(void) { return 0.0f; } /* no accelerometer: not recorded */

@@ -34,7 +34,7 @@ void hal_current_set(float amps)
 float hal_accel_read(void) { return plant_accel(); }
 void hal_amp_enable(int on) { amp_on = on != 0; }
 int hal_estop_pressed(void) { return estop_button; }
-int hal_io_ok(void) { return 1; }
+uint8_t hal_io_fault(void) { return HL_FAULT_NONE; }
 const char *hal_serial_number(void) { return NULL; } /* named by its seed */
 
 float sim_current(void) { return last_current; }

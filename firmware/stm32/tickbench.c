@@ -48,7 +48,7 @@ void hal_amp_enable(int on) { (void)on; }
 /* the e-stop button as the board reads it (GPIOC IDR bit 13; QEMU reads 0: released) */
 int hal_estop_pressed(void) { return (int)((REG(0x40020810u) >> 13) & 1u); }
 void hal_watchdog_kick(void) {}
-int hal_io_ok(void) { return 1; }
+uint8_t hal_io_fault(void) { return 0; }
 size_t hal_uart_read(uint8_t *buf, size_t cap)
 {
     size_t n = 0;

@@ -44,6 +44,22 @@ def bridge(request):
     print(f"{request.param} stderr:\n{emu.stderr()}")
 
 
+def test_every_fault_a_device_can_latch_is_told_in_words():
+    """A commercial device's own safety (its force button, velocity and force limits, warm
+    motors, a calibration it lacks) reaches the host as a fault of its own code, and the host
+    says what each means; a code this host does not know is still said to be a fault."""
+    from device.serial.backend import _FAULT_WHY
+    from device.serial.contract import FAULTS
+
+    assert set(FAULTS.values()) - {"estop"} == set(_FAULT_WHY)
+    assert {5: "force_button", 6: "velocity_limit", 7: "force_limit", 8: "motor_heat",
+            9: "calibration"}.items() <= FAULTS.items()  # appended: 1-4 keep their meaning
+    assert "force button" in _FAULT_WHY["force_button"]
+    assert "not calibrated" in _FAULT_WHY["calibration"]
+
+
+@pytest.mark.integration
+@pytest.mark.firmware
 def test_the_self_test_passes_on_each_bridge(bridge):
     assert_selftest_passes(bridge.port)
 
