@@ -1,0 +1,471 @@
+"""The API's sessions: run, resume and simulate them, and check before one starts
+(``hapticlab run``, ``resume``, ``simulate``, ``preflight``)."""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from analysis.session_format import SessionStatus
+
+from ..errors import SessionFileError, UsageError
+from ._say import to_stderr
+from ._session import (
+    apply_limit,
+    check_rows,
+    drive,
+    earlier_sessions,
+    keep_markers,
+    session_parts,
+)
+from .devices import emulated_spec, session_device
+from .results import SessionResult, StudyResult
+
+__all__ = ["KIND_OF", "DEFAULT_SIM_DATA", "run_session", "resume_session", "session_seed",
+           "simulate_study", "preflight", "preflight_line"]
+
+_GROUP = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
+
+#: the session kind each responder gives
+KIND_OF = {"person": "human", "scripted": "dry-run", "simulated": "simulated"}
+#: where simulated studies go unless told otherwise (never beside people's data)
+DEFAULT_SIM_DATA = "sim-data"
+
+
+def _responder(responder: str) -> str:
+    if responder not in KIND_OF:
+        raise UsageError(f"responder must be one of {', '.join(KIND_OF)}, got {responder!r}")
+    return responder
+
+
+def run_session(protocol: str | Path, participant: str, *, device: str,
+                data: str | Path = "data", responder: str = "person", seed: int | None = None,
+                row: int | None = None, group: str = "", traces: str = "full",
+                audio: bool = True, fullscreen: bool = False, quiet: bool = False,
+                operator_keys: bool | None = None, clear_fault: bool = False,
+                info_fields: dict | None = None, new_session: bool = False,
+                say: Callable[[str], None] | None = None, lsl: bool = False,
+                lsl_wait: float = 300.0) -> SessionResult:
+    """Run one session to the end (or until it is stopped) and record it.
+
+    Parameters
+    ----------
+    protocol : str or Path
+        A built-in protocol name (``realism``, ``factorial``, ``identification``) or a file.
+    participant : str
+        Participant id (letters, digits, ``_``, ``-``; at most 32).
+    device : str
+        Device spec: ``sim``, ``sim:RATE``, ``serial:PORT``.
+    data : path
+        Data folder; the session goes to ``data/sub-<participant>/ses-<n>/``.
+    responder : {'person', 'scripted', 'simulated'}
+        Who answers: a person at the PsychoPy screen (a ``human`` session), random answers
+        (a ``dry-run``), or the simulated participant model (``simulated``).
+    seed : int, optional
+        Session seed (drawn and recorded when None).
+    row : int, optional
+        Counterbalance row for Williams-ordered block orders.
+    group : str
+        Participant group label (e.g. ``expert``).
+    traces : {'full', 'contacts', 'none'}
+        Raw device streams kept per attempt.
+    audio : bool
+        Masking noise, tap cue and saturation tone.
+    fullscreen : bool
+        The participant's window fills the screen.
+    quiet : bool
+        No console lines.
+    operator_keys : bool, optional
+        Read operator keys from the terminal (default: when a person answers; refused
+        without a terminal).
+    clear_fault : bool
+        Clear a fault the device latched before the session (the operator's decision).
+    info_fields : dict, optional
+        Ask the participant's details in a dialog first (the protocol's ``[participant]
+        fields`` when it declares them, else these); stored in session.json.
+    new_session : bool
+        A person who already has sessions of this protocol in ``data`` gets another only
+        with this (the error lists what exists, and how to resume an unfinished one); for
+        a dry run or a simulated participant what exists is said, and the session runs.
+    say : callable, optional
+        Where messages for the operator go (default: stderr).
+    lsl : bool
+        Send the session's events as markers on Lab Streaming Layer (:mod:`app.markers`).
+    lsl_wait : float [s]
+        With ``lsl``, how long to wait for a recorder to receive the markers before the
+        first trial; without one the session stops there (resumable, nothing lost).
+
+    Returns
+    -------
+    SessionResult
+    """
+    from app.console import make_console
+    from app.ids import validate_participant
+    from app.libraries import prepare_libraries, with_libraries
+    from app.preflight import (
+        PreflightError,
+        check_answers,
+        check_device,
+        check_display,
+        check_protocol_on,
+        check_terminal,
+        data_folder_ready,
+        expected_session_bytes,
+        failed,
+    )
+    from app.recorder import SessionFiles, new_session_dir
+    from app.runner import SessionRunner, session_meta
+    from protocols import SessionEngine, parse_protocol, protocol_text, seed_from_entropy
+    from protocols.texts import english_note
+
+    responder = _responder(responder)
+    if traces not in ("full", "contacts", "none"):
+        raise UsageError(f"traces must be full, contacts or none, got {traces!r}")
+    participant = validate_participant(participant)
+    if group and not _GROUP.match(group):
+        raise UsageError(f"group {group!r}: use letters, digits, '_', '-' or '.' (at most 32)")
+    source, text = protocol_text(protocol)
+    proto = parse_protocol(text, source)
+    seed = seed_from_entropy() if seed is None else seed
+    if not isinstance(seed, int) or seed < 0:
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
+    engine = SessionEngine(proto, seed, participant, row)
+    console = make_console(quiet=quiet)
+    say = say or console.say
+    earlier = earlier_sessions(Path(data), participant, proto.name)
+    if earlier:
+        listed = "; ".join(earlier)
+        if responder == "person" and not new_session:
+            raise UsageError(f"participant {participant} already has {proto.name} session(s) "
+                             f"in {data}: {listed}. Check the participant id; start another "
+                             "session with --new-session, or continue an unfinished one with: "
+                             "hapticlab resume FOLDER")
+        say(f"participant {participant} already has {proto.name} session(s): {listed}; "
+            "this one is the next")
+    if responder == "person" and (note := english_note(proto)):
+        say(f"note: {note}")
+    keys = operator_keys if operator_keys is not None else responder == "person"
+    # before any device or window opens: nothing starts that cannot be kept or answered
+    data_folder_ready(data, expected_session_bytes(proto, traces))
+    early = [check_answers(proto)]
+    if keys:
+        early.append(check_terminal())
+    if responder == "person":
+        early.append(check_display())
+    if failed(early):
+        raise PreflightError(failed(early))
+    with session_device(device, seed, responder == "person", clear_fault, lsl, say) as dev:
+        again = (f"hapticlab run {protocol} --participant {participant} --device {device} "
+                 "--clear-fault (with the session's other options)")
+        checks = [check_device(dev, device, again), check_protocol_on(text, source, dev)]
+        if failed(checks):
+            raise PreflightError(failed(checks))
+        limits = apply_limit(proto, dev)
+        libraries = prepare_libraries(proto, dev, device, say, ref=str(protocol))
+        proto = with_libraries(proto, libraries)
+        info = None
+        if info_fields:  # the participant's details, asked before the window opens
+            from app.screen import info_dialog
+
+            info = info_dialog(dict(proto.participant_fields or info_fields))
+            if info is None:
+                raise UsageError("the participant information dialog was cancelled; nothing "
+                                 "was recorded")
+        files = None
+        try:
+            with session_parts(dev, proto, responder=responder, seed=seed, group=group,
+                                fullscreen=fullscreen, audio=audio, keys=keys, quiet=quiet,
+                                console=console, lsl=lsl, participant=participant,
+                                say=say) as parts:
+                folder, n = new_session_dir(Path(data), participant)
+                files = SessionFiles(folder)
+                files.lock()
+                files.start(text)
+                meta = session_meta(proto, str(protocol), participant, n, seed, row, dev,
+                                    device, "psychopy" if responder == "person" else "none",
+                                    responder, parts.sound is not None, group,
+                                    KIND_OF[responder], libraries)
+                meta.traces_mode = traces
+                meta.limits = limits
+                meta.participant.info = info
+                keep_markers(meta, parts.markers)
+                files.write_meta(meta)
+                parts.console.say(f"session {folder} (seed {seed})")
+                runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
+                                       responder=parts.responder, participant=participant,
+                                       session=n, seed=seed, console=parts.console,
+                                       audio=parts.sound, traces=traces, meta=meta,
+                                       markers=parts.markers)
+                return drive(runner, files, meta, parts.console, lsl_wait)
+        finally:
+            if files is not None:
+                files.release()
+
+
+def resume_session(folder: str | Path, *, device: str | None = None, audio: bool | None = None,
+                   clear_fault: bool = False, fullscreen: bool = False, quiet: bool = False,
+                   operator_keys: bool | None = None, lsl: bool = False,
+                   lsl_wait: float = 300.0) -> SessionResult:
+    """Continue an interrupted session exactly where it stopped.
+
+    The session keeps its kind and responder; the protocol is the copy in the session
+    folder (so resuming works from any working directory, and editing the original file
+    changes nothing), with the library files recorded at the start.
+
+    Parameters
+    ----------
+    folder : path
+        The session folder (``.../sub-P01/ses-1``).
+    device : str, optional
+        Another device spec than the recorded one (e.g. the same device on another port).
+    audio : bool, optional
+        Default: as recorded.
+    clear_fault : bool
+        Clear a latched e-stop or watchdog fault first (the operator's decision).
+    fullscreen, quiet, operator_keys, lsl, lsl_wait
+        As :func:`run_session` (a resume with ``lsl`` is a new run of the markers' stream,
+        recorded beside the earlier ones in session.json).
+    """
+    from app.console import make_console
+    from app.recorder import SessionFiles
+
+    files = SessionFiles(Path(folder))
+    files.read_meta()  # a session folder (a named error otherwise), before anything is written
+    files.lock()  # one writer: a second resume of this session stops here
+    try:
+        meta = files.read_meta()  # as the last writer left it
+        console = make_console(quiet=quiet)
+        if meta.status == SessionStatus.COMPLETE:
+            return SessionResult(files.folder, SessionStatus.COMPLETE, len(files.read_rows()[0]),
+                                 f"{files.folder}: the session is already complete")
+        return _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
+                       operator_keys, lsl, lsl_wait)
+    finally:
+        files.release()
+
+
+def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
+            operator_keys, lsl, lsl_wait) -> SessionResult:
+    from app.ids import validate_participant
+    from app.libraries import check_recorded, with_libraries
+    from app.preflight import data_folder_ready
+    from app.runner import SessionRunner, utc_now
+    from protocols import LogMismatch, ResumeMismatch, SessionEngine, parse_protocol
+
+    ref = meta.protocol.ref or ""
+    if files.protocol.exists():
+        text, source = files.protocol.read_text(encoding="utf-8"), str(files.protocol)
+    else:  # written before sessions kept their protocol copy
+        from protocols import protocol_text
+
+        source, text = protocol_text(ref)
+    proto = parse_protocol(text, source)
+    if proto.sha256 != meta.protocol.sha256:
+        raise ResumeMismatch(f"cannot resume: {source} changed since the session started "
+                             f"(sha256 {meta.protocol.sha256[:12]}… then, "
+                             f"{proto.sha256[:12]}… now)")
+    proto = with_libraries(proto, meta.libraries)
+    p = meta.participant
+    validate_participant(p.id, new=False)
+    engine = SessionEngine(proto, meta.seed, p.id, p.counterbalance_row)
+    engine.check_resume({"protocol_sha256": meta.protocol.sha256, "seed": meta.seed,
+                         "participant": p.id, "counterbalance_row": p.counterbalance_row})
+    data_folder_ready(files.folder)
+    torn = files.set_aside_torn()
+    if torn is not None:
+        console.say(f"set aside a torn last line of trials.tsv (line {torn.line}, kept in "
+                    "trials.torn.tsv): the attempt it belonged to will run again")
+    for done in files.repair():
+        console.say(done)
+    rows, _ = files.read_rows()
+    check_rows(files, meta, rows)
+    responder = meta.responder or "scripted"
+    if responder not in KIND_OF:
+        responder = "person" if meta.ui == "psychopy" else "scripted"
+    spec = device or meta.device_spec
+    with session_device(spec, meta.seed, responder == "person", clear_fault, lsl,
+                         console.say) as dev:
+        limits = apply_limit(proto, dev, (meta.limits or {}).get("current_limit_a"))
+        check_recorded(meta.libraries, dev)
+        keys = operator_keys if operator_keys is not None else responder == "person"
+        with session_parts(dev, proto, responder=responder, seed=meta.seed,
+                            group=p.group, fullscreen=fullscreen,
+                            audio=meta.audio if audio is None else audio,
+                            keys=keys, quiet=quiet, console=console, lsl=lsl,
+                            participant=p.id, say=console.say) as parts:
+            console = parts.console
+            runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
+                                   responder=parts.responder, participant=p.id,
+                                   session=meta.session, seed=meta.seed, console=console,
+                                   audio=parts.sound, traces=meta.traces_mode or "full",
+                                   meta=meta, markers=parts.markers)
+            runner.load_log()
+            try:
+                engine.next_trial(runner.log)
+            except LogMismatch as exc:
+                raise SessionFileError(f"{files.trials}: {exc}") from None
+            if parts.responder.stateful:  # its answers depend on what it felt: bring it back
+                console.say(f"replaying {len(rows)} recorded attempts for the simulated "
+                            "participant's memory")
+                runner.replay(rows)
+            meta.resumes.append({"at_utc": utc_now(), "attempts_logged": len(runner.log),
+                                    "torn_line": None if torn is None else torn.line,
+                                    "device": spec, "limits": limits})
+            meta.status = SessionStatus.RUNNING
+            keep_markers(meta, parts.markers)
+            files.write_meta(meta)
+            console.say(f"resuming {files.folder} after {len(runner.log)} attempts")
+            return drive(runner, files, meta, console, lsl_wait)
+
+
+def session_seed(study_seed: int, k: int) -> int:
+    """Session seed of participant ``k`` (1-based) of a simulated study."""
+    return int(np.random.SeedSequence([study_seed, k]).generate_state(1, np.uint32)[0])
+
+
+def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
+                   data: str | Path = DEFAULT_SIM_DATA, device: str = "sim", speed: float = 1.0,
+                   traces: str = "contacts", prefix: str = "sim", group: str = "",
+                   clear_fault: bool = False,
+                   progress: Callable[[str], None] | None = to_stderr) -> StudyResult:
+    """Simulated participants' sessions, headless, through the same path as a real session.
+
+    Participant k (1-based) of a study with seed S gets the id ``PREFIXkk`` and the session
+    seed ``SeedSequence([S, k])``, so a study is reproduced from S alone; in a protocol whose
+    blocks are Williams-counterbalanced, participant k takes row (k − 1) mod the number of
+    rows, so every order is used equally often.
+
+    Parameters
+    ----------
+    protocol : str or Path
+    participants : int
+    seed : int
+        Study seed.
+    data : path
+        Default ``sim-data``: simulated sessions never land beside people's.
+    device : str
+        ``sim``, ``sim:RATE``, ``serial:PORT`` or ``serial:emulator`` (paced by ``speed``).
+    speed : float
+        ``serial:emulator`` only: device seconds per wall second (≤ 20).
+    traces, prefix, group
+        As :func:`run_session` (ids are PREFIX01, PREFIX02, …).
+    clear_fault : bool
+        Clear a fault the device latched before the first session (the operator's decision).
+    progress : callable, optional
+        Called with a line after each participant.
+
+    Returns
+    -------
+    StudyResult
+        The sessions in order; it stops at the first session that does not complete.
+    """
+    if not isinstance(participants, int) or participants < 1:
+        raise UsageError(f"participants must be at least 1, got {participants!r}")
+    if not isinstance(seed, int) or seed < 0:
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
+    if not (isinstance(speed, (int, float)) and math.isfinite(speed) and 0 < speed <= 20):
+        raise UsageError(f"speed must be in (0, 20] (device seconds per wall second), got "
+                         f"{speed!r}")
+    from protocols import SessionEngine, load_protocol
+
+    proto = load_protocol(protocol)
+    williams = [p for p in proto.phases if p.block_order == "williams"]
+    rows = len(SessionEngine(proto, 0, "x", 0).williams_rows(williams[0])) if williams else 0
+    t0 = time.perf_counter()
+    out: list[SessionResult] = []
+    with emulated_spec(device, speed, Path(data) / "emulator.log") as spec:
+        for k in range(1, participants + 1):
+            # a Williams-counterbalanced protocol: participant k takes row (k − 1) mod rows
+            r = run_session(protocol, f"{prefix}{k:02d}", device=spec, data=data,
+                            responder="simulated", seed=session_seed(seed, k), group=group,
+                            traces=traces, audio=False, quiet=True, operator_keys=False,
+                            row=(k - 1) % rows if rows else None,
+                            clear_fault=clear_fault and k == 1)
+            out.append(r)
+            if r.status != SessionStatus.COMPLETE:
+                break
+            if progress is not None:
+                progress(f"  {protocol}: participant {k}/{participants} done "
+                         f"({time.perf_counter() - t0:.0f} s)")
+    return StudyResult(out, time.perf_counter() - t0)
+
+
+def preflight_line(protocol: str | Path, *, device: str, data: str | Path, responder: str,
+                   traces: str, audio: bool) -> str:
+    """The preflight's command line again, clearing the device's latched fault (quoted for
+    a shell: a folder may hold a space)."""
+    import shlex
+
+    return shlex.join(["hapticlab", "preflight", str(protocol), "--device", device,
+                       "--data", str(data), "--responder", responder, "--traces", traces,
+                       *([] if audio else ["--no-audio"]), "--clear-fault"])
+
+
+def preflight(protocol: str | Path, *, device: str, data: str | Path = "data",
+              responder: str = "person", traces: str = "full", audio: bool = True,
+              clear_fault: bool = False) -> list:
+    """Every check a session makes before it starts (``hapticlab preflight``), each a
+    :class:`app.preflight.Check` with its line and, when it fails, what to do.
+
+    Parameters
+    ----------
+    protocol : str or path
+        A built-in name or a protocol file.
+    device : str
+        The device spec the session will open.
+    data : path
+        The data folder (room for a session, writable).
+    responder : str
+        ``person`` also checks the terminal and the display.
+    traces : str
+        The traces the session will record (its size estimate).
+    audio : bool
+        Check (and play) the sound.
+    clear_fault : bool
+        Clear a fault the device latched before (the operator's decision); a failed
+        device check suggests the command again with it.
+    """
+    from app.preflight import (
+        Check,
+        check_answers,
+        check_audio,
+        check_data_folder,
+        check_device,
+        check_display,
+        check_libraries,
+        check_limit,
+        check_protocol_on,
+        check_terminal,
+        expected_session_bytes,
+    )
+    from device import DeviceError
+    from protocols import parse_protocol, protocol_text
+    from protocols.texts import english_note
+
+    source, text = protocol_text(protocol)
+    proto = parse_protocol(text, source)
+    checks = [Check("protocol", True, f"{source}: '{proto.name}' ({proto.sha256[:12]}…)"),
+              check_data_folder(data, expected_session_bytes(proto, traces)),
+              check_answers(proto)]
+    if note := english_note(proto):
+        checks.append(Check("texts", True, note))
+    if responder == "person":
+        checks += [check_terminal(), check_display()]
+    again = preflight_line(protocol, device=device, data=data, responder=responder,
+                           traces=traces, audio=audio)
+    try:
+        with session_device(device, 0, person=False, clear_fault=clear_fault, lsl=False,
+                             say=to_stderr) as dev:
+            checks += [check_device(dev, device, again), check_protocol_on(text, source, dev),
+                       check_limit(proto, dev),
+                       check_libraries(proto, dev, device, protocol)]
+    except DeviceError as exc:
+        checks.append(Check("device", False, str(exc), "check the cable, the port and the "
+                            "power"))
+    checks.append(check_audio(audio, play=audio))
+    return checks
