@@ -24,7 +24,9 @@ venv: $(STAMP)
 # firmware's host build, arm-none-eabi-gcc (with newlib) its Cortex-M build, and
 # qemu-system-arm runs that on an emulated STM32F405; clang-14 and libFuzzer fuzz the
 # firmware's receive path and command executor; strace shows where liblsl sends (the LSL
-# tests); R and its packages recompute the statistics' reference values (tests/r/).
+# tests); g++ and libusb-1.0-0-dev are what a lab's Force Dimension build needs besides its
+# SDK (check-sdk compiles the SDK's C++ headers; libdrd links libusb), which the tests build
+# as a lab does; R and its packages recompute the statistics' reference values (tests/r/).
 R_PACKAGES := afex lme4 lmerTest ordinal car effectsize coin multcompView
 R_CHECK := quit(status = !all(sapply(strsplit("$(R_PACKAGES)", " ")[[1]], requireNamespace, quietly = TRUE)))
 system-deps:
@@ -35,6 +37,7 @@ system-deps:
 	    || ! command -v arm-none-eabi-gcc >/dev/null 2>&1 \
 	    || ! command -v qemu-system-arm >/dev/null 2>&1 \
 	    || ! command -v clang-14 >/dev/null 2>&1 || ! dpkg -s libfuzzer-14-dev >/dev/null 2>&1 \
+	    || ! command -v g++ >/dev/null 2>&1 || ! dpkg -s libusb-1.0-0-dev >/dev/null 2>&1 \
 	    || [ ! -d /usr/lib/arm-none-eabi/newlib ] \
 	    || [ ! -f /usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf ] \
 	    || ! dpkg -s libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 >/dev/null 2>&1; then \
@@ -44,7 +47,8 @@ system-deps:
 	    fonts-dejavu-core libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 libxkbcommon-x11-0 \
 	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 \
 	    chromium gcc libc6-dev make gcc-arm-none-eabi libnewlib-arm-none-eabi \
-	    qemu-system-arm clang-14 libfuzzer-14-dev libclang-rt-14-dev strace >/dev/null; \
+	    qemu-system-arm clang-14 libfuzzer-14-dev libclang-rt-14-dev strace \
+	    g++ libusb-1.0-0-dev >/dev/null; \
 	fi
 	@if ! command -v Rscript >/dev/null 2>&1 || ! Rscript -e '$(R_CHECK)' >/dev/null 2>&1; then \
 	  echo "installing R and the reference packages (afex, lme4, lmerTest, ordinal, car, effectsize, coin, multcompView) from Debian's packages"; \

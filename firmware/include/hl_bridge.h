@@ -40,8 +40,31 @@ void bridge_hold(int on, double a, double a0, double b, double b0, double out[2]
  * tick's hal_io_fault() is HL_FAULT_DEVICE, so the device latches a device fault and output
  * goes off */
 void bridge_io_failed(void);
+/* the operator's answer to `question` before a start-up step that moves the device (a
+ * calibration): yes if the bridge was started with --calibrate, else asked on the
+ * controlling terminal (/dev/tty) and yes only for an answer starting with y; no where
+ * there is no terminal to ask on */
+int bridge_operator_agrees(const char *question);
+/* a start-up refusal: "<bridge>: <reason>" on stderr, then exit(1), whose handlers (each
+ * bridge's atexit) shut the device down as on every other exit */
+__attribute__((format(printf, 2, 3), noreturn)) void bridge_refuse(const char *bridge,
+                                                                   const char *fmt, ...);
 /* the device reports a fault of its own (HL_FAULT_FORCE_BUTTON ... HL_FAULT_CALIBRATION,
  * hl_device.h): latched at the next tick, the first cause reported naming it */
 void bridge_fault(uint8_t code);
+
+/* ---- the OpenHaptics bridge (src/io_hd.c, called by src/main_hd.c) */
+/* after hal_io_init: starts the HD scheduler, checks its rate and the device's calibration
+ * in its thread (asking the operator where that needs a hand). Returns the scheduler
+ * thread's real-time priority (0: it runs at normal priority) */
+int bridge_hd_start(void);
+/* inside the program's last frame: zero force and torques, force output off */
+void bridge_hd_last_frame(void);
+/* stops the HD scheduler (its thread joined) if it runs */
+void bridge_hd_stop(void);
+/* in the servo's callback after hdEndFrame: the HD API's errors, force output, calibration */
+void bridge_hd_frame_end(void);
+/* the first error the HD API reported during a tick, in words (NULL: none) */
+const char *bridge_hd_first_error(void);
 
 #endif

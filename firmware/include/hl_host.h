@@ -13,11 +13,15 @@ typedef struct {
     unsigned long long seed; /* the simulated plant's (the stand-ins' too); 0 by default */
     double speed;            /* x real time; 1 by default */
     int realtime;            /* --realtime: ask for SCHED_FIFO and locked memory */
+    int calibrate;           /* --calibrate: the operator agrees ahead to a calibration that
+                                moves the device (the bridges ask otherwise) */
 } hl_host_args;
 
-/* parse [--seed N] [--speed S] [--realtime]; `max_speed` 1 refuses any other pace. Prints
- * the usage or the reason and returns 0 on a bad command line, 1 otherwise */
+/* parse [--seed N] [--speed S] [--realtime] [--calibrate]; `max_speed` 1 refuses any other
+ * pace. Prints the usage or the reason and returns 0 on a bad command line, 1 otherwise */
 int hl_host_parse(int argc, char **argv, double max_speed, hl_host_args *out);
+/* whether the last hl_host_parse saw --calibrate */
+int hl_host_calibrate_consent(void);
 /* a raw pseudo-terminal: returns its master (non-blocking) and sets *path to the device
  * file a host opens; the other end stays open, so a host that closes is no EOF; -1 on
  * failure (reported on stderr) */

@@ -18,11 +18,16 @@
 #include "hl_hal.h"
 #include "hl_sim.h"
 
+static int calibrate_consent;
+
+int hl_host_calibrate_consent(void) { return calibrate_consent; }
+
 int hl_host_parse(int argc, char **argv, double max_speed, hl_host_args *out)
 {
     out->seed = 0;
     out->speed = 1.0;
     out->realtime = 0;
+    out->calibrate = calibrate_consent = 0;
     for (int i = 1; i < argc; i++) {
         char *end = NULL;
         if (strcmp(argv[i], "--seed") == 0 && i + 1 < argc) {
@@ -43,9 +48,13 @@ int hl_host_parse(int argc, char **argv, double max_speed, hl_host_args *out)
         } else if (strcmp(argv[i], "--realtime") == 0) {
             out->realtime = 1;
             continue;
+        } else if (strcmp(argv[i], "--calibrate") == 0) {
+            out->calibrate = calibrate_consent = 1;
+            continue;
         }
         if (end == NULL || *end != '\0' || end == argv[i]) {
-            fprintf(stderr, "usage: %s [--seed N] [--speed S] [--realtime]\n", argv[0]);
+            fprintf(stderr, "usage: %s [--seed N] [--speed S] [--realtime] [--calibrate]\n",
+                    argv[0]);
             return 0;
         }
     }

@@ -1,10 +1,17 @@
 /* The bridges' shared servo I/O (hl_bridge.h). */
 #include "hl_bridge.h"
 
+#include <fcntl.h>
 #include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
 
 #include "hl_device.h"
 #include "hl_hal.h"
+#include "hl_host.h"
 #include "hl_sim.h"
 #ifdef HL_SDK_STUB
 #include "hl_stub.h"
@@ -75,3 +82,37 @@ uint8_t hal_io_fault(void)
 float hal_accel_read(void) { return 0.0f; } /* no accelerometer: not recorded */
 int hal_estop_pressed(void) { return estop_button; }
 void sim_estop_button(int pressed) { estop_button = pressed != 0; }
+
+int bridge_operator_agrees(const char *question)
+{
+    if (hl_host_calibrate_consent()) {
+        return 1;
+    }
+    int tty = open("/dev/tty", O_RDWR | O_NOCTTY);
+    if (tty < 0) {
+        return 0; /* nobody to ask */
+    }
+    const char *suffix = " [y/N] ";
+    char answer[16] = {0};
+    ssize_t n = -1;
+    if (write(tty, question, strlen(question)) >= 0 && write(tty, suffix, strlen(suffix)) >= 0) {
+        n = read(tty, answer, sizeof answer - 1);
+    }
+    close(tty);
+    size_t i = 0;
+    while (n > 0 && i < (size_t)n && (answer[i] == ' ' || answer[i] == '\t')) {
+        i++;
+    }
+    return n > 0 && i < (size_t)n && (answer[i] == 'y' || answer[i] == 'Y');
+}
+
+void bridge_refuse(const char *bridge, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    fprintf(stderr, "%s: ", bridge);
+    vfprintf(stderr, fmt, ap);
+    fputc('\n', stderr);
+    va_end(ap);
+    exit(1); /* the device's own shutdown runs at exit */
+}
