@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .cells import column_meanings
 from .load import LoadError, load_sessions, select_sessions
 from .session_format import (
     META,
@@ -80,11 +81,12 @@ BEH_COLUMNS = {
     "tap_velocities": ("", "incoming speed of each tap [m/s], semicolon-separated (text: "
                        "BIDS gives a column a unit only where every value is one number)"),
     "peak_current": ("A", "largest amplifier current commanded in the window"),
+    # a response's columns: described by the responses the task's phases recorded
+    # (analysis.cells.column_meanings); these where none of them fills the column
     "rating": ("", "the participant's rating on the protocol's scale"),
-    "response_time": ("s", "from the rating screen to the answer"),
-    "answer": ("", "identification: the materials named for the surfaces, in order; "
-               "comparison: the sample chosen as more like real contact"),
-    "correct": ("", "identification: 1 when every surface was named right, else 0"),
+    "response_time": ("s", "from the answer screen's onset to the answer"),
+    "answer": ("", "the participant's answer"),
+    "correct": ("", "1 when the answer was right, else 0"),
     "reason": ("", "why an attempt is not valid, in words"),
 }
 EXTRA_COLUMNS = {
@@ -446,7 +448,11 @@ def _top_level(out: Path, people: dict, tasks: dict) -> list[Path]:
     written.append(p)
     for info in tasks.values():
         task, meta = info["task"], info["meta"]
-        cols = {c: {"Description": d, **({"Units": u} if u else {})}
+        # a response column's description from what the task's phases recorded; its unit
+        # as BIDS takes it (BEH_COLUMNS: none for points of a scale or 0/1)
+        answers, _labels = column_meanings((meta.protocol.design or {}).get("phases") or [])
+        cols = {c: {"Description": answers[c][1] if c in answers else d,
+                    **({"Units": u} if u else {})}
                 for c, (u, d) in {**BEH_COLUMNS, **EXTRA_COLUMNS}.items()}
         scale = _scale(meta)
         if scale:

@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .cells import column_meanings, recorded_response, response_columns
 from .load import DEVICE_COLUMNS, load_sessions, select_sessions
 from .study import analysed_phases, phase_rows
 
@@ -67,9 +68,10 @@ LONG_COLUMNS = {
                    "comparison: the two samples in the order felt, joined by +)"),
     "repetition": ("", "1-based repetition of the sample within its phase"),
     "trial_index": ("", "1-based position of the attempt in the session"),
-    "rating": ("scale points", "the participant's rating on the protocol's scale: the "
-                               "dependent variable of the one-way analyses (ANOVA, t-tests, "
-                               "Wilcoxon, Friedman, mixed and ordinal models)"),
+    # a response's columns (rating, answer, correct, response_time, …) take their unit and
+    # meaning from the responses the exported phases recorded (_response_meanings); these
+    # are for a column no exported phase's response fills
+    "rating": ("scale points", "the participant's rating on the protocol's scale"),
     "rating_z": ("SD", "the rating z-scored within the participant (factorial: within "
                        "participant and block), SD with divisor n: the dependent variable of "
                        "the factorial ANOVA; empty where the participant gave one rating "
@@ -79,10 +81,9 @@ LONG_COLUMNS = {
     "slope_per_s": ("1/s", "factorial set: the amplitude slope (peak acceleration per "
                            "incoming speed)"),
     "scale": ("", "the rating scale, min-max"),
-    "answer": ("", "identification: the names given to the surfaces, in order; "
-                   "comparison: the sample chosen as more like real contact"),
-    "correct": ("0/1", "identification: 1 when every surface was named right"),
-    "response_time": ("s", "from the rating screen's onset to the answer"),
+    "answer": ("", "the participant's answer"),
+    "correct": ("0/1", "1 when the answer was right"),
+    "response_time": ("s", "from the answer screen's onset to the answer"),
     "n_taps": ("", "contacts in the trial's window"),
     "mean_tap_velocity": ("m/s", "mean incoming speed of the trial's taps"),
     "peak_current": ("A", "largest commanded current in the window"),
@@ -98,6 +99,20 @@ LONG_COLUMNS = {
     "libraries": ("", "transient libraries played: sample=sha256 of the file (first 12 hex "
                       "digits), joined by ;"),
 }
+
+
+#: what the export adds to a response column's recorded meaning: the analyses it feeds
+_USES = {"rating": "the dependent variable of the one-way analyses (ANOVA, t-tests, Wilcoxon, "
+                   "Friedman, mixed and ordinal models)"}
+
+
+def _response_meanings(parts) -> tuple[dict[str, tuple[str, str]], dict[str, dict]]:
+    """(column → (unit, meaning), column → value labels) of the response columns the
+    exported phases fill (:func:`analysis.cells.column_meanings`), with what the export
+    adds of the analyses they feed."""
+    meanings, labels = column_meanings([phase for _design, phase, _rows in parts])
+    return {c: (u, f"{m}: {_USES[c]}" if c in _USES else m)
+            for c, (u, m) in meanings.items()}, labels
 
 
 def _safe(name: str) -> str:
@@ -164,28 +179,25 @@ def _long(parts) -> pd.DataFrame:
                            kind="stable").reset_index(drop=True)
 
 
-def _dv(phase: dict) -> str:
-    return {"rating": "rating", "choice": "won"}.get(phase.get("dv"), "correct")
-
-
-def _won(rows: pd.DataFrame) -> pd.DataFrame:
-    """A comparison's choices as one row per sample felt: ``sample`` and ``won`` (1 when it
-    was the one chosen), so a participant's mean of ``won`` per sample is the share of
-    its comparisons that sample won."""
+def _chosen(rows: pd.DataFrame, value: str) -> pd.DataFrame:
+    """Trials of several samples as one row per sample felt: ``sample`` and ``chosen`` (1
+    when ``value`` named it), so a participant's mean of ``chosen`` per sample is the share
+    of that sample's trials that chose it (a comparison: the share it won)."""
     rows = rows.copy()
     rows.attrs = {}  # the loaded data's (designs, files): not the rows', and concat compares
     felt = rows["sample"].str.split("+", expand=True)
-    parts = [rows.assign(sample=felt[i], won=(rows["answer"] == felt[i]).astype(float))
+    parts = [rows.assign(sample=felt[i], chosen=(rows[value] == felt[i]).astype(float))
              for i in range(felt.shape[1])]
     return pd.concat(parts, ignore_index=True)
 
 
 def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd.DataFrame, dict]:
-    """One row per participant, one column per cell; returns (table, column → meaning)."""
-    dv = _dv(phase)
-    cell = "repetition" if dv == "correct" else "sample"
-    if dv == "won":
-        rows = _won(rows)
+    """One row per participant, one column per cell, as the phase's recorded response says
+    (:data:`protocols.responses.WIDE_BY`); returns (table, column → meaning)."""
+    spec = recorded_response(phase)["wide"]
+    dv, cell = spec["value"], "repetition" if spec["by"] == "repetition" else "sample"
+    if spec["by"] == "chosen":
+        rows, dv = _chosen(rows, dv), "chosen"
     vals = pd.to_numeric(rows[dv], errors="coerce")
     r = rows.assign(**{dv: vals}).dropna(subset=[dv])
     w = (r.groupby(["participant", cell], observed=True)[dv].mean().unstack(cell))
@@ -194,7 +206,7 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
              + sorted(present - set(phase.get("samples", [])), key=str)
              if cell == "sample" else sorted(present))
     w = w.reindex(columns=order)
-    normalized = dv == "rating" and phase.get("normalize") in ("zscore", "zscore_block")
+    normalized = phase.get("normalize") in ("zscore", "zscore_block")
     if normalized:  # the factorial ANOVA's dependent variable, beside the raw means
         z = r.assign(_z=_z(r, phase)).groupby(["participant", cell], observed=True)["_z"]
         wz = z.mean().unstack(cell).reindex(columns=order)
@@ -213,16 +225,15 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
                "group": ("", "participant group (between-subject factor); empty when none"),
                **{c: LONG_COLUMNS[c] for c in DEVICE_COLUMNS if c in w.columns}}
     rename = {}
+    scale = design.get("scale") or {}
+    unit = spec["unit"]
+    if response_columns(phase).get(spec["value"], {}).get("range") == "scale" and scale:
+        unit = f"{unit} ({scale['min']}–{scale['max']})"
     for c in order:
-        name = f"rep{c}" if cell == "repetition" else str(c)
+        name = spec["name"].format(cell=c)
         new = _safe(name) if safe else name
         rename[c] = new
-        what = (f"proportion correct in repetition {c}" if cell == "repetition" else
-                f"share of its comparisons sample {c} won" if dv == "won" else
-                f"mean {dv} of sample {c} over its repetitions")
-        scale = design.get("scale") or {}
-        unit = ("0/1" if dv == "correct" else "proportion" if dv == "won" else
-                f"scale points ({scale['min']}–{scale['max']})" if scale else "scale points")
+        what = spec["meaning"].format(cell=c)
         meaning[new] = (unit, what + ("" if new == str(name) else f" (column {name})"))
         if normalized:
             zname = _safe(f"{name}_z") if safe else f"{name}_z"
@@ -236,9 +247,18 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
     return w, meaning
 
 
-def _write_sav(path: Path, table: pd.DataFrame, meaning: dict[str, tuple[str, str]]) -> None:
+def _long_entries(columns, answers: dict) -> dict[str, tuple[str, str]]:
+    """The long file's codebook: a response column's recorded meaning, the others' from
+    :data:`LONG_COLUMNS`, a factor's by its name."""
+    return {c: answers.get(c) or LONG_COLUMNS.get(c, ("", f"level of factor {c} (low/high)"))
+            for c in columns}
+
+
+def _write_sav(path: Path, table: pd.DataFrame, meaning: dict[str, tuple[str, str]],
+               value_labels: dict[str, dict] | None = None) -> None:
     """An SPSS file (pyreadstat) whose variable labels are the codebook's meanings (with
-    units) and whose 0/1 and low/high columns carry value labels."""
+    units) and whose low/high columns, and response columns with value labels (``correct``),
+    carry value labels."""
     import pyreadstat
 
     labels = {c: (f"{m} [{u}]" if u else m)[:255] for c, (u, m) in meaning.items()
@@ -247,8 +267,8 @@ def _write_sav(path: Path, table: pd.DataFrame, meaning: dict[str, tuple[str, st
     t = table.copy()
     for c in t.columns:
         col = t[c]
-        if c == "correct":
-            values[c] = {0: "wrong", 1: "all named right"}
+        if c in (value_labels or {}):
+            values[c] = {float(k) if _number(k) else k: v for k, v in value_labels[c].items()}
         elif (col.dtype == object or pd.api.types.is_string_dtype(col)) and \
                 set(col.dropna().astype(str)) - {""} == {"low", "high"}:
             t[c] = col.map({"low": 1, "high": 2})  # anything else (empty) is missing
@@ -256,6 +276,14 @@ def _write_sav(path: Path, table: pd.DataFrame, meaning: dict[str, tuple[str, st
         elif col.dtype == bool:
             t[c] = col.astype(int)
     pyreadstat.write_sav(t, str(path), column_labels=labels, variable_value_labels=values)
+
+
+def _number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _type(col: pd.Series) -> str:
@@ -314,6 +342,7 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
     selected, _table = select_sessions(data, **{k: v for k, v in filters.items()
                                                 if v is not None})
     parts = _analysed(selected)
+    answers, labels = _response_meanings(parts)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written, book = [], []
@@ -326,8 +355,7 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
         p = out / "long.csv"
         _write_csv(long, p)
         written.append(p)
-        entries = {c: LONG_COLUMNS.get(c, ("", f"level of factor {c} (low/high)"))
-                   for c in long.columns}
+        entries = _long_entries(long.columns, answers)
         book += _write_codebook(long, entries, p.name)
         if fmt == "r":
             p = out / "load.R"
@@ -340,7 +368,7 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
             name = f"wide_{_safe(design['protocol'])}_{_safe(phase['name'])}.{ext}"
             p = out / name
             if fmt == "spss":
-                _write_sav(p, w, meaning)
+                _write_sav(p, w, meaning, labels)
             else:
                 _write_csv(w, p)
             written.append(p)
@@ -348,10 +376,9 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
         if fmt == "spss":  # the trials too, for mixed models in SPSS
             long = _long(parts)
             long.columns = [_safe(c) for c in long.columns]
-            entries = {c: LONG_COLUMNS.get(c, ("", f"level of factor {c} (low/high)"))
-                       for c in long.columns}
+            entries = _long_entries(long.columns, answers)
             p = out / "long.sav"
-            _write_sav(p, long, entries)
+            _write_sav(p, long, entries, labels)
             written.append(p)
             book += _write_codebook(long, entries, p.name)
     p = out / "codebook.csv"

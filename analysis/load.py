@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .cells import row_problem
 from .session_format import (
     COLUMNS,
     FLOAT_COLUMNS,
@@ -59,6 +60,9 @@ def _design_key(design: dict | None) -> str:
     if not design:
         return ""
     body = {k: v for k, v in design.items() if k not in ("sha256", "title")}
+    if isinstance(body.get("phases"), list):  # a response's record follows from its kind
+        body["phases"] = [{kk: vv for kk, vv in ph.items() if kk != "response"}
+                          if isinstance(ph, dict) else ph for ph in body["phases"]]
     if isinstance(body.get("samples"), dict):  # physical values: recorded, not the design
         body["samples"] = {k: {kk: vv for kk, vv in v.items() if kk != "params"}
                            if isinstance(v, dict) else v for k, v in body["samples"].items()}
@@ -92,39 +96,9 @@ def _folder_id(folder: Path) -> str:
 
 
 def _invalid(row: dict, phase: dict | None, design: dict | None) -> str:
-    """Why a recorded valid attempt cannot be analysed ('' when it can)."""
-    if row["status"] != "valid" or phase is None:
-        return ""
-    if phase.get("dv") == "rating":
-        scale = (design or {}).get("scale") or {}
-        text = row["rating"].strip()
-        try:
-            r = float(text)
-        except ValueError:
-            return f"rating {text!r} is not a number" if text else "a valid trial without a rating"
-        if not np.isfinite(r):
-            return f"rating {text} is not a finite number"
-        if scale and not (scale["min"] <= r <= scale["max"]):
-            return f"rating {text} is outside the scale {scale['min']}–{scale['max']}"
-        if r != int(r):
-            return f"rating {text} is not a point of the scale"
-    elif phase.get("dv") == "answer":
-        names = [a for a in row["answer"].split(",") if a]
-        choices = (design or {}).get("answer_choices") or []
-        k = len(row["sample"].split("+"))
-        if len(names) != k:
-            return f"answer {row['answer']!r} names {len(names)} surfaces, the trial had {k}"
-        bad = [a for a in names if choices and a not in choices]
-        if bad:
-            return f"answer names {', '.join(bad)}, not among {', '.join(choices)}"
-        if row["correct"] not in ("0", "1"):
-            return f"correct is {row['correct']!r}, not 0 or 1"
-    elif phase.get("dv") == "choice":
-        felt = row["sample"].split("+")
-        if row["answer"] not in felt:
-            return (f"the choice {row['answer']!r} is not one of the samples felt "
-                    f"({', '.join(felt)})" if row["answer"] else "a valid trial without a choice")
-    return ""
+    """Why a recorded valid attempt cannot be analysed ('' when it can): by the rules its
+    phase's response recorded (:mod:`analysis.cells`)."""
+    return row_problem(row, phase, design)
 
 
 def session_files(root: Path) -> list[Path]:

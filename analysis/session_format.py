@@ -38,6 +38,7 @@ __all__ = ["FORMAT_VERSION", "SessionStatus", "SessionRecord", "ProtocolRecord",
            "ParticipantRecord", "TimesRecord", "upgrade_meta", "COLUMNS", "INT_COLUMNS",
            "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
            "TrialsFileError", "SessionMetaError", "TornLine", "header_line", "format_row",
+           "format_cell",
            "read_trials", "read_meta", "session_kind", "canonical_bytes", "is_canonical",
            "TRIALS", "META", "PROTOCOL_COPY", "TRACES", "LOCK", "ROW_STATUSES",
            "SessionPathError", "inside_session"]
@@ -149,7 +150,14 @@ def header_line() -> str:
     return "\t".join(COLUMNS) + "\n"
 
 
-def _cell(column: str, v: Any) -> str:
+def format_cell(column: str, v: Any) -> str:
+    """The text trials.tsv records for value ``v`` of ``column`` ('' for None).
+
+    Raises
+    ------
+    ValueError
+        For a value holding a tab or line break.
+    """
     if v is None:
         return ""
     if isinstance(v, float):
@@ -172,7 +180,7 @@ def format_row(row: dict) -> str:
     unknown = set(row) - set(COLUMNS)
     if unknown:
         raise ValueError(f"unknown trials.tsv columns: {sorted(unknown)}")
-    return "\t".join(_cell(c, row.get(c)) for c in COLUMNS) + "\n"
+    return "\t".join(format_cell(c, row.get(c)) for c in COLUMNS) + "\n"
 
 
 def _text(raw: bytes) -> str:

@@ -76,6 +76,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -384,14 +385,22 @@ class SimulatedParticipant(Responder):
             + rng.normal(0.0, self.person.rating_noise)
         return int(np.clip(round(y), lo, hi)), float(rng.lognormal(math.log(1.5), 0.3))
 
-    def choose(self, trial, results, rng) -> tuple[int, float]:
-        """The sample whose felt features lay nearer what it remembers of real contact
-        (the familiarization block, or the samples' real reference), each perceived with
-        fresh noise; a coin where nothing could be compared."""
+    def answer(self, response, question, rng) -> tuple[Any, float]:
+        """As the response declares (``response.simulated``), from this model's perception
+        and memory (its public methods)."""
+        return response.simulated(self, question, rng)
+
+    def distances(self, trial, results, rng) -> list[float]:
+        """For each window of ``results``, how far what was felt lay from what it remembers
+        of real contact (the familiarization block, or the samples' real reference), each
+        perceived with fresh noise [JND units]; NaN where nothing could be compared."""
         _key, ref = self._reference(trial)
-        d = np.array([self.distance(felt_features(r), ref, rng) for r in results])
-        k = int(rng.integers(0, len(d))) if np.isnan(d).any() else int(np.argmin(d))
-        return k, float(rng.lognormal(math.log(1.8), 0.3))
+        return [self.distance(felt_features(r), ref, rng) for r in results]
+
+    @staticmethod
+    def response_time(median: float, rng) -> float:
+        """A response time around ``median`` [s] (log-normal, 0.3 in log units)."""
+        return float(rng.lognormal(math.log(median), 0.3))
 
     def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:
         # each name's real block: the protocol's reference of the surface of that name (tapped

@@ -2,12 +2,16 @@
 
 :class:`Responder` is what the runner asks of all of them, with a default for every
 question that a kind of participant has no use for, so the runner calls every hook
-unconditionally. Every choice a non-human participant makes comes from the generator it is
-handed, which the runner derives from (session seed, trial index, attempt): a resumed
-session repeats the uninterrupted one exactly.
+unconditionally. What a participant answers after a trial is asked through one method,
+:meth:`Responder.answer`, with the response's declaration (:mod:`protocols.responses`),
+which says how each kind of participant answers it. Every choice a non-human participant
+makes comes from the generator it is handed, which the runner derives from (session seed,
+trial index, attempt): a resumed session repeats the uninterrupted one exactly.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -80,20 +84,11 @@ class Responder:
         rest = [i for i in range(len(trial.samples)) if i not in visited]
         return rest[0] if rest else None
 
-    def rate(self, trial, scale, result, rng: np.random.Generator) -> tuple[int, float]:
-        """(rating on the scale, response time [s])."""
-        raise NotImplementedError(f"{type(self).__name__} does not rate")
-
-    def identify(self, trial, choices, results, rng: np.random.Generator
-                 ) -> tuple[list[str], float]:
-        """(a name for each surface in order, response time [s])."""
-        raise NotImplementedError(f"{type(self).__name__} does not identify")
-
-    def choose(self, trial, results, rng: np.random.Generator) -> tuple[int, float]:
-        """Comparison: which of the trial's samples felt more like real contact (its index
-        in ``trial.samples``, whose windows' ``results`` are in the same order), response
-        time [s]."""
-        raise NotImplementedError(f"{type(self).__name__} does not choose")
+    def answer(self, response, question, rng: np.random.Generator) -> tuple[Any, float]:
+        """The answer to ``response`` (a :class:`protocols.responses.Response`) after the
+        windows ``question`` holds: (value, response time [s]). Default: as a person's
+        screen is asked (``response.ask``, which calls the screen's method for it)."""
+        return response.ask(self, question, rng)
 
     def pause(self, fault: bool = False) -> None:
         """The operator paused the session (``fault``: an e-stop or the watchdog)."""
@@ -115,14 +110,9 @@ class ScriptedResponder(Responder):
 
     name = "scripted"
 
-    def rate(self, trial, scale, result, rng) -> tuple[int, float]:
-        return int(rng.integers(scale.min, scale.max + 1)), float(rng.uniform(0.8, 2.5))
-
-    def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:
-        return [str(c) for c in rng.permutation(list(choices))], float(rng.uniform(3.0, 8.0))
-
-    def choose(self, trial, results, rng) -> tuple[int, float]:
-        return int(rng.integers(0, len(trial.samples))), float(rng.uniform(0.8, 2.5))
+    def answer(self, response, question, rng) -> tuple[Any, float]:
+        """At random, as the response declares (``response.scripted``)."""
+        return response.scripted(question, rng)
 
     def debrief(self) -> str:
         return "scripted responder: no criteria"

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from analysis.cells import row_problem
 from analysis.session_format import (
     FORMAT_VERSION,
     PROTOCOL_COPY,
@@ -34,6 +35,7 @@ from analysis.session_format import (
     SessionRecord,
     SessionStatus,
     TimesRecord,
+    format_cell,
 )
 from device import DeviceError, DeviceFaultError, HapticDevice
 from protocols import (
@@ -49,6 +51,7 @@ from protocols import (
     phase_kind,
     reference_item,
 )
+from protocols.responses import Question, Response
 
 from . import __version__
 from .console import PlainConsole
@@ -191,8 +194,8 @@ class SessionRunner:
             raise SessionInterrupted(f"{exc}. Everything recorded before is kept; fix this, "
                                      "then resume") from exc
 
-    # columns a replayed attempt must reproduce
-    _REPLAYED = ("item", "attempt", "status", "n_taps", "tap_velocities", "rating", "answer")
+    # columns a replayed attempt must reproduce (and its response's, but its time)
+    _REPLAYED = ("item", "attempt", "status", "n_taps", "tap_velocities")
 
     def replay(self, rows: list[dict]) -> None:
         """Run the recorded attempts again without recording them, so a participant whose
@@ -561,13 +564,12 @@ class SessionRunner:
                          played=played)
             return
         row: dict[str, Any] = {}
-        if kind.response is not None:
-            row = self._RESPONSES[kind.response](self, trial, res, judged, rng)
-            assert set(row) == set(kind.columns), (kind.name, sorted(row))
+        if kind.asks is not None:
+            row = self._respond(kind.asks, trial, judged, rng)
         self._record(trial, "valid", t_start=t_start, result=res, results=results, played=played,
                      **row)
-        self.console.result("valid", len(velocities),
-                            f"rating {row['rating']}" if "rating" in row else "")
+        self.console.result("valid", len(velocities), ", ".join(
+            f"{c} {row[c]}" for c in (kind.asks.marker if kind.asks else ())))
 
     # ------------------------------------------------------------------ a kind's windows
     # each appends every window it begins to ``played`` and each it finishes to
@@ -606,48 +608,26 @@ class SessionRunner:
 
     _WINDOWS = {"each_sample": _each_sample, "until_done": _until_done, "surfaces": _surfaces}
 
-    # ------------------------------------------------------------------ a kind's response
-    # each asks the participant and returns the row's response columns (PhaseKind.columns)
-
-    def _rating(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
-        self.console.set_state("rating")
+    # ------------------------------------------------------------------ the response
+    def _respond(self, asks: Response, trial: Trial, judged: list, rng) -> dict[str, Any]:
+        """Ask the responder for ``asks`` and return the row's response cells (its
+        declaration's columns), checked by the rules the analysis applies to them."""
+        self.console.set_state("rating")  # answering: the operator's e acts
         self.markers.send("rating_onset")
-        rating, rt = self.responder.rate(trial, self.protocol.rating, res, rng)
-        if not self.protocol.rating.min <= rating <= self.protocol.rating.max:
-            raise SessionInterrupted(f"the responder gave rating {rating!r}, outside the "
-                                     f"scale {self.protocol.rating.min}–"
-                                     f"{self.protocol.rating.max}; nothing was recorded "
-                                     "for this trial")
-        row = {"rating": int(rating), "response_time": round(float(rt), 3)}
-        self.markers.send("response", rating=row["rating"],
-                          response_time_s=row["response_time"])
-        return row
-
-    def _answer(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
-        self.console.set_state("rating")  # naming the surfaces: the operator's e acts
-        self.markers.send("rating_onset")
-        answers, rt = self.responder.identify(trial, self.protocol.answer.choices,
-                                                   judged, rng)
-        row = {"answer": ",".join(answers), "response_time": round(float(rt), 3),
-               "correct": int(list(answers) == list(trial.samples))}
-        self.markers.send("response", answer=row["answer"],
-                          response_time_s=row["response_time"])
-        return row
-
-    def _choice(self, trial: Trial, res, judged: list, rng) -> dict[str, Any]:
-        self.console.set_state("rating")  # choosing: the operator's e acts, as when rating
-        self.markers.send("rating_onset")
-        k, rt = self.responder.choose(trial, judged, rng)
-        if k not in range(len(trial.samples)):
-            raise SessionInterrupted(f"the responder chose {k!r}, not one of the "
-                                     f"{len(trial.samples)} samples felt; nothing was "
+        question = Question(trial=trial, protocol=self.protocol, results=judged)
+        value, rt = self.responder.answer(asks, question, rng)
+        try:
+            row = asks.answer_row(value, rt, question)
+        except ValueError as exc:
+            why = str(exc)
+        else:
+            why = cell_problems(row, asks, trial, self.protocol)
+        if why:
+            raise SessionInterrupted(f"the responder's {asks.name}: {why}; nothing was "
                                      "recorded for this trial")
-        row = {"answer": trial.samples[k], "response_time": round(float(rt), 3)}
-        self.markers.send("response", answer=row["answer"],
+        self.markers.send("response", **{c: row[c] for c in asks.marker},
                           response_time_s=row["response_time"])
         return row
-
-    _RESPONSES = {"rating": _rating, "answer": _answer, "choice": _choice}
 
     def _spill(self, trial: Trial, k: int, res):
         """Window ``k`` of ``trial`` with its traces written now when the session records
@@ -778,10 +758,12 @@ class SessionRunner:
     def _meet(self, trial: Trial, status: str, vel: list[float], extra: dict) -> None:
         """A replayed attempt against its recorded row."""
         row = self._expected.pop(0)
+        asks = None if trial.kind == REFERENCE else phase_kind(trial.kind).asks
+        answered = [c for c in (asks.columns if asks else ()) if c != "response_time"]
         got = {"item": trial.item, "attempt": str(trial.attempt), "status": status,
                "n_taps": str(len(vel)), "tap_velocities": ";".join(f"{v:.5f}" for v in vel),
-               "rating": str(extra.get("rating", "")), "answer": str(extra.get("answer", ""))}
-        diff = [c for c in self._REPLAYED if got[c] != row[c]]
+               **{c: format_cell(c, extra.get(c)) for c in answered}}
+        diff = [c for c in (*self._REPLAYED, *answered) if got[c] != row[c]]
         if diff:
             raise SessionFileError(
                 f"{self.files.trials}:{row['_line']}: the replayed attempt differs from the "
@@ -789,6 +771,17 @@ class SessionRunner:
                 f"{', '.join(f'{c}={row[c]!r}' for c in diff)}; replayed "
                 f"{', '.join(f'{c}={got[c]!r}' for c in diff)}): the session cannot be "
                 "resumed exactly")
+
+
+def cell_problems(row: dict, asks: Response, trial: Trial, protocol: Protocol) -> str:
+    """Why the response cells ``row`` of ``trial`` would not count when analysed ('' when
+    they would): the rules of ``asks``, applied as the analysis applies them to the file
+    (:func:`analysis.cells.row_problem`), so a session never records what its analysis
+    would set aside."""
+    design = protocol.design()
+    text = {c: format_cell(c, v) for c, v in row.items()}
+    return row_problem({**text, "status": "valid", "sample": trial.sample},
+                       {"response": asks.record()}, design)
 
 
 def _trace_payload(res, mode: str, info, sample: str) -> dict:

@@ -22,18 +22,22 @@ reading it implements once (a new kind that reuses them needs no code elsewhere)
     samples as surfaces; the participant goes between them, tapping each as often as
     they like).
 ``response``
-    What the participant gives after the windows: ``"rating"`` (a point on the
-    protocol's ``[rating]`` scale), ``"answer"`` (a name from ``[answer]`` for each
-    surface), ``"choice"`` (which of the item's samples felt more real) or None (nothing:
-    familiarization).
+    What the participant gives after the windows: the name of a declared
+    :class:`~protocols.responses.Response` (``rating``: a point on the protocol's
+    ``[rating]`` scale; ``answer``: a name from ``[answer]`` for each surface; ``choice``:
+    which of the item's samples felt more real), or None (nothing: familiarization).
 
-The trial row's response columns, the table a protocol must have, whether the phase is
-analysed and how it is scored follow from ``response``.
+The trial row's response columns, the table a protocol must have, the analysis keys a
+phase takes and how it is analysed follow from the response's declaration
+(:mod:`protocols.responses`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from ._registry import Registry
+from .responses import Response, response, responses
 
 __all__ = ["PhaseKind", "RATED", "FREE", "IDENTIFICATION", "COMPARISON", "REFERENCE",
            "phase_kind", "phase_kinds", "register"]
@@ -44,7 +48,6 @@ REFERENCE = "reference"
 
 ITEMS = ("each", "all", "pairs")
 WINDOWS = ("each_sample", "until_done", "surfaces")
-RESPONSES = ("rating", "answer", "choice", None)
 
 
 @dataclass(frozen=True)
@@ -62,7 +65,8 @@ class PhaseKind:
     windows : str
         How an item's windows run: ``each_sample``, ``until_done`` or ``surfaces``.
     response : str or None
-        What the participant gives after them: ``rating``, ``answer`` or None.
+        What the participant gives after them: a declared response's name
+        (:func:`~protocols.responses.responses`), or None.
     instructions : str
         The default instructions shown at the phase's start (``[texts.instructions]``
         replaces them per phase). ``{n}`` is the number of samples, ``{keys}`` their keys.
@@ -92,9 +96,9 @@ class PhaseKind:
         if self.windows not in WINDOWS:
             raise ValueError(f"phase kind {self.name!r}: windows must be one of {WINDOWS}, "
                              f"got {self.windows!r}")
-        if self.response not in RESPONSES:
+        if self.response is not None and self.response not in responses():
             raise ValueError(f"phase kind {self.name!r}: response must be one of "
-                             f"{RESPONSES}, got {self.response!r}")
+                             f"{responses()} or None, got {self.response!r}")
 
     @property
     def surfaces(self) -> bool:
@@ -103,23 +107,24 @@ class PhaseKind:
         return self.windows == "surfaces"
 
     @property
+    def asks(self) -> Response | None:
+        """The declaration of its response (None: nothing is asked)."""
+        return None if self.response is None else response(self.response)
+
+    @property
     def needs(self) -> str | None:
-        """The protocol table the kind needs: ``rating``, ``answer`` or None (a choice
-        between the item's samples needs none)."""
-        return self.response if self.response in ("rating", "answer") else None
+        """The protocol table the kind needs: ``rating``, ``answer`` or None."""
+        return None if self.asks is None else self.asks.needs
 
     @property
     def dv(self) -> str:
-        """What the phase measures for analysis: ``rating``, ``answer`` or ``none``."""
-        return self.response or "none"
+        """What the phase measures for analysis (its response's), or ``none``."""
+        return "none" if self.asks is None else self.asks.dv
 
     @property
     def columns(self) -> tuple[str, ...]:
         """The trial row's columns a valid trial of this kind fills beyond every row's."""
-        return {"rating": ("rating", "response_time"),
-                "answer": ("answer", "response_time", "correct"),
-                "choice": ("answer", "response_time"),  # the sample chosen
-                None: ()}[self.response]
+        return () if self.asks is None else self.asks.columns
 
     @property
     def default_references(self) -> str:
@@ -129,15 +134,12 @@ class PhaseKind:
         return "start" if self.surfaces else "block"
 
 
-_KINDS: dict[str, PhaseKind] = {}
+_KINDS: Registry[PhaseKind] = Registry("phase kind", "kinds", reserved=(REFERENCE,))
 
 
 def register(kind: PhaseKind) -> PhaseKind:
     """Make ``kind`` known by its name (a second kind of the same name is refused)."""
-    if kind.name in _KINDS or kind.name == REFERENCE:
-        raise ValueError(f"phase kind {kind.name!r} is declared already")
-    _KINDS[kind.name] = kind
-    return kind
+    return _KINDS.add(kind)
 
 
 def phase_kinds() -> tuple[str, ...]:
@@ -146,18 +148,8 @@ def phase_kinds() -> tuple[str, ...]:
 
 
 def phase_kind(name: str) -> PhaseKind:
-    """The declaration of kind ``name``.
-
-    Raises
-    ------
-    KeyError
-        Naming the declared kinds.
-    """
-    try:
-        return _KINDS[name]
-    except KeyError:
-        raise KeyError(f"no phase kind {name!r}; the kinds are "
-                       f"{', '.join(_KINDS)}") from None
+    """The declaration of kind ``name`` (KeyError naming the declared kinds)."""
+    return _KINDS.find(name)
 
 
 RATED = register(PhaseKind(

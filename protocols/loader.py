@@ -226,9 +226,12 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
     if not phases:
         raise cx.error(("phases",), "needs at least one phase")
     if rating is None and answer is None and not any(
-            phase_kind(ph.kind).response == "choice" for ph in phases):
+            phase_kind(ph.kind).asks is not None for ph in phases):
+        free = " or ".join(f"a {k.response} (kind = \"{k.name}\")"
+                           for k in map(phase_kind, phase_kinds())
+                           if k.asks is not None and k.needs is None)
         raise cx.error((), "a protocol needs a [rating] scale, an [answer] table or a "
-                       "phase that asks for a choice (kind = \"comparison\")")
+                       f"phase that asks for {free}")
     names = [p.name for p in phases]
     for i, n in enumerate(names):
         if names.index(n) != i:
@@ -604,28 +607,23 @@ def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: PhaseKind, ids: tuple[s
                   samples: Mapping[str, Sample]) -> PhaseDesign:
     """A phase's ``analysis`` table: what it measures and how it is analysed."""
     a = cx.table(path, raw, {"role", "within", "by", "normalize", "scoring"})
-    if kind.response is None:
+    asks = kind.asks
+    if asks is None:
         if a:
             raise cx.error(path, f"a{_an(kind.name)} {kind.name} phase is not rated or "
                            "answered: nothing to analyse")
         return PhaseDesign(role="none", dv=kind.dv, within=(), scoring=None)
     role = cx.string((*path, "role"), a.get("role", "analysed"), ("analysed", "practice"))
-    if kind.response == "choice":
-        for key in ("within", "by", "normalize", "scoring"):
-            if key in a:
-                raise cx.error((*path, key), f"a{_an(kind.name)} {kind.name} phase is "
-                               "analysed by its pairs (which sample was chosen); only 'role' "
-                               "applies")
-        return PhaseDesign(role=role, dv=kind.dv, within=(), scoring=None)
-    if kind.response == "answer":
-        for key in ("within", "by", "normalize"):
-            if key in a:
-                raise cx.error((*path, key), f"a{_an(kind.name)} {kind.name} phase is "
-                               "scored, not analysed by factors; use 'scoring'")
+    for key in a:
+        if key != "role" and key not in asks.options:
+            takes = ", ".join(f"'{o}'" for o in ("role", *asks.options))
+            raise cx.error((*path, key), f"a{_an(kind.name)} {kind.name} phase is analysed "
+                           f"{asks.analysed}; it takes {takes}")
+    if "scoring" in asks.options:
         scoring = cx.string((*path, "scoring"), a.get("scoring", "all_correct"), SCORINGS)
         return PhaseDesign(role=role, dv=kind.dv, within=(), scoring=scoring)
-    if "scoring" in a:
-        raise cx.error((*path, "scoring"), "only a phase of answers is scored")
+    if "within" not in asks.options:
+        return PhaseDesign(role=role, dv=kind.dv, within=(), scoring=None)
     within = a.get("within", ["sample"])
     if not isinstance(within, list) or not within or not all(isinstance(w, str) for w in within):
         raise cx.error((*path, "within"), f"must be [\"sample\"] or a list of factor names, "
@@ -670,7 +668,7 @@ def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: PhaseKind, ids: tuple[s
     elif by is not None:
         raise cx.error((*path, "by"), "'by' splits a factorial design; a one-way design over "
                        "samples compares every sample of the phase")
-    return PhaseDesign(role=role, dv="rating", within=tuple(within), by=by,
+    return PhaseDesign(role=role, dv=kind.dv, within=tuple(within), by=by,
                        normalize=normalize)
 
 

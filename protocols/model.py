@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 from device import Scene
 
-from .kinds import RATED
+from .kinds import RATED, phase_kind
 
 __all__ = ["Sample", "Window", "RatingScale", "Answer", "SaturationPolicy", "Attempts", "Limits",
            "Phase", "PhaseDesign", "Protocol", "ROLES", "ENTRIES", "NORMALIZATIONS", "SCORINGS",
@@ -273,8 +273,10 @@ class Protocol:
 
     def design(self) -> dict:
         """The study design as plain data: what the session records beside the protocol copy
-        and what the analysis reads (scale, answers, sessions policy, each phase's design
-        and samples, each sample's block, factor levels and kind)."""
+        and what the analysis reads (scale, answers, sessions policy, each phase's design,
+        samples and response — its cells, their rules and its export cells, which the
+        analysis applies from the record alone — each sample's block, factor levels and
+        kind)."""
         return {
             "protocol": self.name, "title": self.title, "sha256": self.sha256,
             "scale": None if self.rating is None else {"min": self.rating.min,
@@ -284,9 +286,15 @@ class Protocol:
             "sessions": self.sessions,
             "phases": [{"name": p.name, "kind": p.kind, "samples": list(p.samples),
                         "repetitions": p.repetitions, "blocks": p.blocks,
-                        **p.design.to_dict()} for p in self.phases],
+                        **p.design.to_dict(), "response": _recorded(p)} for p in self.phases],
             "samples": {sid: {"block": s.block, "factors": dict(s.factors),
                               "real": s.is_real, "rated": s.rated, "reference": s.reference,
                               "params": dict(s.params)}
                         for sid, s in self.samples.items()},
         }
+
+
+def _recorded(phase: Phase) -> dict | None:
+    """What a session records of the response ``phase`` asks (None: nothing is asked)."""
+    asks = phase_kind(phase.kind).asks
+    return None if asks is None else asks.record()

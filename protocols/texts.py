@@ -17,6 +17,7 @@ naming.
 from __future__ import annotations
 
 from .kinds import phase_kind
+from .responses import response, responses
 
 __all__ = ["DEFAULT_TEXTS", "resolve_texts", "left_in_english", "english_note"]
 
@@ -35,26 +36,17 @@ DEFAULT_TEXTS: dict[str, str] = {
     "surface": "Surface {i}",
     "reference": "Tap the real block",
     "reference_detail": "Compare the next samples with this one: {block}.",
-    "rating_keys": "Press a number key, then ENTER.",
-    "rating_chosen": "Your rating: {value} — ENTER confirms, another number changes it.",
-    "rating_typed": "Type a number from {min} to {max}, then press ENTER.",
-    "rating_slider": "Move the marker with the arrow keys (or click), then press ENTER.",
-    "rating_confirmed": "Your rating: {value}",
-    "rating_invalid": "{value} is not on the scale {min}–{max}.",
     "choose": "Choose a surface: {keys}",
     "tapped": "tapped: {list}",
-    "name_hint": "press N to name them",
     "switch_hint": "another surface: {keys}",
-    "name": "Surface {i} is …",
-    "names": "{names}",
     "pair": "sample {i} of 2",
-    "choice": "Which felt more like touching a real object?",
-    "choice_keys": "1 = the first        2 = the second",
     "paused": "Paused",
     "paused_detail": "The experimenter will continue shortly.",
     "debrief": "What made a sample feel real or not?",
     "debrief_hint": "Type, then press ENTER.",
     "thanks": "Thank you. The session is over.",
+    # each response's own texts (protocols.responses)
+    **{k: v for r in map(response, responses()) for k, v in r.texts.items()},
 }
 
 
@@ -67,7 +59,7 @@ def resolve_texts(overrides: dict[str, str], instructions: dict[str, str]) -> di
 
 #: which screens show a text: every protocol, or only one with a phase whose kind makes its
 #: items so ("pairs"), runs its windows so ("until_done", "surfaces") or asks for that
-#: response ("rating", "answer", "choice"),
+#: response (its name: a response's texts are its own, protocols.responses),
 #: rating entry ("keys", "typed", "slider"), saturated trials redrawn ("redraw") or real
 #: blocks ("references"; "several": a surfaces phase offering more than one, which the
 #: participant chooses between); texts of placeholders alone need no translation
@@ -79,11 +71,10 @@ _SHOWN_WHEN = {
     "reference_requested": "references",
     "reference": "references", "reference_detail": "references",
     "reference_which": "several", "reference_which_keys": "several",
-    "rating_keys": "keys", "rating_chosen": "keys", "rating_typed": "typed",
-    "rating_slider": "slider", "rating_confirmed": "rating", "rating_invalid": "typed",
     "surface": "surfaces", "choose": "surfaces", "tapped": "surfaces",
-    "name_hint": "answer", "switch_hint": "surfaces", "name": "answer",
-    "pair": "pairs", "choice": "choice", "choice_keys": "choice",
+    "switch_hint": "surfaces", "pair": "pairs",
+    # each response's own texts: shown when a phase asks for it, or as it says
+    **{k: r.shown_when.get(k, r.name) for r in map(response, responses()) for k in r.texts},
 }
 
 

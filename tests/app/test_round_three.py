@@ -160,9 +160,9 @@ class GoesBack(ScriptedResponder):
             self.plan = [0, 1, 0, 2, None]
         return self.plan.pop(0)
 
-    def identify(self, trial, choices, results, rng):
-        self.named_from = list(results)
-        return super().identify(trial, choices, results, rng)
+    def answer(self, response, question, rng):
+        self.named_from = list(question.results)
+        return super().answer(response, question, rng)
 
 
 def test_a_surface_tapped_again_keeps_both_windows(tmp_path):

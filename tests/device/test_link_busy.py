@@ -172,10 +172,10 @@ class SlowToAnswer(ScriptedResponder):
     def __init__(self, dev, seconds: float):
         self.dev, self.seconds, self.seen = dev, seconds, []
 
-    def rate(self, trial, scale, result, rng):
+    def answer(self, response, question, rng):
         time.sleep(self.seconds)  # nothing drives the device meanwhile
         self.seen.append((self.dev.fault, self.dev.output_force))
-        return super().rate(trial, scale, result, rng)
+        return super().answer(response, question, rng)
 
 
 def test_a_participant_who_takes_long_to_answer_meets_no_watchdog(own_emulator, tmp_path):
