@@ -73,8 +73,49 @@ def analysed_phases(design: dict) -> list[dict]:
 
 
 def phase_rows(data: pd.DataFrame, design_key: str, phase: str) -> pd.DataFrame:
-    """Rows of one phase of the sessions sharing a design."""
-    return data[(data["design_key"] == design_key) & (data["phase"] == phase)].copy()
+    """Rows of one phase of the sessions sharing a design; ``attrs["participants"]`` lists
+    every participant of those sessions, whether or not they reached the phase (the
+    analysis answers for each: :func:`participants_of`)."""
+    mine = data["design_key"] == design_key
+    rows = data[mine & (data["phase"] == phase)].copy()
+    rows.attrs["participants"] = sorted(map(str, data.loc[mine, SUBJECT].unique()))
+    return rows
+
+
+def participants_of(data: pd.DataFrame, subject: str = SUBJECT) -> list[str]:
+    """The participants an analysis of ``data`` answers for: ``attrs["participants"]``
+    when set (:func:`phase_rows`), else every participant with a row in ``data``."""
+    names = data.attrs.get("participants")
+    if names is None:
+        names = data[subject].unique()
+    return sorted(map(str, names))
+
+
+def _exclusion(check: str, who, detail: str, policy: str) -> dict:
+    who = sorted(map(str, who))
+    return {"check": check, "detail": detail.format(n=len(who)), "policy": policy,
+            "subjects_excluded": ",".join(who), "n_excluded": len(who)}
+
+
+def not_analysed(everyone, reached, rated, where: str) -> list[dict]:
+    """Exclusion rows (the preflight table's columns) for the participants of ``everyone``
+    who have no rated row in ``where``: those with no row there at all (``never_reached``:
+    their session stopped before it) and those whose rows there are none of them a valid
+    rating (``no_valid_rating``: every attempt excluded, skipped or invalid)."""
+    everyone, reached, rated = set(everyone), set(reached), set(rated)
+    out = []
+    never = everyone - reached
+    if never:
+        out.append(_exclusion("never_reached", never, "{n} participant(s) never reached "
+                              f"{where} (their session stopped before it)",
+                              "not in this analysis: nothing to analyse"))
+    unrated = (everyone & reached) - rated
+    if unrated:
+        out.append(_exclusion("no_valid_rating", unrated, f"{{n}} participant(s) reached "
+                              f"{where} without a valid rating in it (every attempt "
+                              "excluded, skipped or invalid)",
+                              "not in this analysis: nothing to analyse"))
+    return out
 
 
 def _rated(d: pd.DataFrame, dv: str) -> pd.DataFrame:
@@ -199,6 +240,8 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
         subject and level), ``session_length``.
     """
     d = _rated(data, dv)
+    absent = not_analysed(participants_of(data, subject), data[subject].astype(str),
+                          d[subject].astype(str), "this phase")
     d["rating_z"] = zscore_by_subject(d, dv, subject)
     subj = d.groupby([subject, within], observed=True)[[dv, "rating_z"]].mean()
     samples = []
@@ -212,6 +255,8 @@ def rating_oneway(data: pd.DataFrame, dv: str = "rating", within: str = "sample"
     d[within] = pd.Categorical(d[within], categories=order, ordered=True)
     d = d.sort_values(within)
     pre = preflight(d, dv, within, subject, scale="scale" if "scale" in d else None)
+    if absent:
+        pre = pd.concat([pd.DataFrame(absent), pre], ignore_index=True)
     holm = pairwise_ttests(d, dv, within, subject, "holm", alpha, missing)
     fdr = pairwise_ttests(d, dv, within, subject, "fdr_bh", alpha, missing)
     pw = holm.rename(columns={"p_corr": "p_holm"}).drop(columns="p_adjust")
@@ -280,14 +325,22 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
     given), on ratings z-scored within each subject when ``normalize == "zscore"``, or
     within each subject and block when ``"zscore_block"``.
 
+    Every participant the analysis answers for (:func:`participants_of`) who is not in a
+    group's ANOVA is listed in that group's ``preflight`` under the first reason that
+    applies: never reached the block, reached it without a valid rating, a set missing
+    (listwise), every set rated the same (no z-scores).
+
     Returns
     -------
     dict
         group (a block, or ``all``) → ``anova``, ``most_significant`` (the main effect with
         the smallest p), ``most_significant_p``, ``main_effects`` (DataFrame: factor, each
         level's mean, the preferred level, p_unc), ``best_set``, ``sets`` (DataFrame: each
-        set's mean and count), ``preflight``, ``n_subjects``.
+        set's mean and count), ``preflight`` (the exclusions, each participant once),
+        ``n_subjects`` (in the ANOVA), ``n_selected`` (answered for: ``n_subjects`` plus
+        those excluded).
     """
+    everyone = participants_of(data, subject)
     d = _rated(data, dv)
     y = dv
     if normalize == "zscore":
@@ -306,10 +359,18 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
     out = {}
     groups = d.groupby(by_col, observed=True) if by_col else [("all", d)]
     for name, g in groups:
+        scope = data[data[by_col].astype(str) == str(name)] if by_col else data
+        where = "this block" if by_col else "this phase"
+        absent = not_analysed(everyone, scope[subject].astype(str), g[subject].astype(str),
+                              where)
+        # a set missing first: 'rated every set the same' would be false of who rated two
+        cells = g.drop_duplicates([subject, *factors]).groupby(subject, observed=True).size()
+        n_cells = len(g.drop_duplicates(list(factors)))
+        incomplete = {str(s) for s, k in cells.items() if k < n_cells}
         constant: list[str] = []
         if y == "rating_z":  # z is 0/0 for a participant who rated every set the same
             flat = g["_flat"].to_numpy(bool)
-            constant = sorted({str(s) for s in g.loc[flat, subject]})
+            constant = sorted({str(s) for s in g.loc[flat, subject]} - incomplete)
             g = g[~g[subject].astype(str).isin(constant)]
         anova = rm_anova(g, y, list(factors), subject)
         mains = anova[anova["Source"].isin(factors)]
@@ -337,16 +398,46 @@ def rating_factorial(data: pd.DataFrame, factors: list[str], by: str | None = No
                          **{f: str(best[f]) for f in factors}},
             "cell_means": (g.groupby([subject, *factors], observed=True)[y].mean()
                            .reset_index().rename(columns={y: "value", subject: "participant"})),
-            "sets": means, "preflight": _with_constant(preflight(g, y, list(factors), subject),
-                                                       constant, dv, name),
-            "n_subjects": int(g[subject].nunique()),
+            "sets": means,
+            "preflight": _with_constant(pd.concat([pd.DataFrame(absent), preflight(
+                g, y, list(factors), subject)], ignore_index=True) if absent else preflight(
+                g, y, list(factors), subject), constant, dv, name),
+            "n_subjects": int(g[subject].nunique()) - len(incomplete),
+            "n_selected": len(everyone),
             "simple_effects": simple_effects(g, y, list(factors), subject, anova)}
     return out
+
+
+def _each_once(pre: pd.DataFrame) -> pd.DataFrame:
+    """The exclusions with each participant under the first reason that applies: a
+    participant already left out (never reached, no valid rating, a cell missing) is not
+    named again by a later check of the same table (a row left with nobody goes)."""
+    if pre.empty:
+        return pre
+    gone: set[str] = set()
+    keep, rows = [], pre.to_dict(orient="records")
+    for r in rows:
+        who = [s for s in str(r.get("subjects_excluded") or "").split(",") if s]
+        if who:
+            left = [s for s in who if s not in gone]
+            if not left:
+                continue
+            if len(left) < len(who):
+                detail = str(r["detail"])
+                if detail.startswith(f"{len(who)} "):  # its count, as the row now stands
+                    detail = f"{len(left)}{detail[len(str(len(who))):]}"
+                r = {**r, "subjects_excluded": ",".join(left), "n_excluded": len(left),
+                     "detail": detail}
+            if r["check"] in ("never_reached", "no_valid_rating", "missing_cells"):
+                gone.update(left)
+        keep.append(r)
+    return pd.DataFrame(keep, columns=pre.columns)
 
 
 def _with_constant(pre: pd.DataFrame, constant: list[str], dv: str, group) -> pd.DataFrame:
     """The preflight table with a row for participants left out because their ratings in
     the normalisation unit were all the same (their z-scores are undefined)."""
+    pre = _each_once(pre)
     if not constant:
         return pre
     where = "this block" if group != "all" else "this phase"

@@ -41,7 +41,28 @@ def _entry(r) -> dict:
                            "best_set": v["best_set"], "main_effects": v["main_effects"],
                            "sets": v["sets"], "exclusions": v["preflight"],
                            "simple_effects": v["simple_effects"],
-                           "n_subjects": v["n_subjects"]} for g, v in r.items()}}
+                           "n_subjects": v["n_subjects"], "n_selected": v["n_selected"]}
+                       for g, v in r.items()}}
+
+
+#: the exclusions that leave a participant out of a group's ANOVA, in words for the methods
+_WHY = {"never_reached": "never reached the block", "no_valid_rating": "no valid rating",
+        "missing_cells": "a set missing", "constant_ratings": "every set rated the same"}
+
+
+def _who(res: dict, by: bool) -> str:
+    """Who was analysed: everyone, or how many of those selected entered each group's
+    ANOVA and why the others did not (each is listed under the group's exclusions)."""
+    n_sel = max(v["n_selected"] for v in res.values())
+    counts = {g: v["n_subjects"] for g, v in res.items()}
+    if all(c == n_sel for c in counts.values()):
+        return f"{people(n_sel)} rated"
+    why = [w for check, w in _WHY.items() if any(
+        len(v["preflight"]) and (v["preflight"]["check"] == check).any() for v in res.values())]
+    where = ", ".join(f"{c} in {g}" for g, c in counts.items()) if by else str(counts["all"])
+    anova = "their block's ANOVA" if by else "the ANOVA"
+    return (f"Of {people(n_sel)}, {where} entered {anova} (the others are listed under "
+            f"exclusions with the reason: {', '.join(why)}); they rated")
 
 
 def _methods(res, phase: dict, design: dict) -> str:
@@ -60,8 +81,7 @@ def _methods(res, phase: dict, design: dict) -> str:
                             "out of that block's ANOVA, listed under exclusions)."}.get(
                                 phase.get("normalize") or "none", "")
     per = f" Per block ({', '.join(groups)}), a" if phase.get("by") else " A"
-    n = max(v["n_subjects"] for v in res.values())
-    return (f"{people(n)} rated {len(first['sets'])} sets per "
+    return (f"{_who(res, bool(phase.get('by')))} {len(first['sets'])} sets per "
             f"{'block' if phase.get('by') else 'design'} ({shape} levels of "
             f"{', '.join(factors)}) on a {scale_text(design)} scale.{norm}{per} "
             f"{shape} repeated-measures ANOVA ({', '.join(factors)} within subjects; "

@@ -100,10 +100,16 @@ def _methods(res, phase: dict, design: dict) -> str:
         "listed, not tested)" if const else "")
     excl = res["preflight"]
     missing = excl[excl["check"] == "missing_cells"] if len(excl) else excl
+    absent = excl[excl["check"].isin(["never_reached", "no_valid_rating"])] if len(excl) \
+        else excl
     ex_txt = ""
+    if len(absent):
+        ex_txt = (f" {int(absent['n_excluded'].sum())} participant(s) of the selected "
+                  "sessions left no valid rating in this phase (never reached it, or every "
+                  "attempt excluded) and are listed under exclusions.")
     if len(missing):
         left = int(missing["n_excluded"].sum())
-        ex_txt = (f" {left} participant(s) missing a sample were left out of the ANOVA "
+        ex_txt += (f" {left} participant(s) missing a sample were left out of the ANOVA "
                   + ("and of every t-test (listwise, as pingouin and JASP)."
                      if res.get("missing", "listwise") == "listwise" else
                      "(listwise) and of the t-tests of the pairs they miss (pairwise, "
