@@ -28,6 +28,9 @@ pytestmark = [pytest.mark.integration]
 #: a page's bound: a hung command fails its page instead of the suite's timeout
 PAGE_TIMEOUT = 900  # s
 EOF = "HAPTICLAB_DOC_BLOCK_END"
+#: README lines that are the project's own set-up: the suite is `make test`, and `make demo`
+#: builds the environment this test already runs in
+README_NOT_RUN = ("make demo", "make test")
 
 
 def _script(blocks: list[Block], shell: bool, not_run: tuple[str, ...] = ()
@@ -39,7 +42,7 @@ def _script(blocks: list[Block], shell: bool, not_run: tuple[str, ...] = ()
         "set -euo pipefail",
         # background commands a page starts (an emulator) end with the page
         "trap 'kill $(jobs -p) 2>/dev/null || true' EXIT",
-        "mkdir -p .doc-out",
+        "mkdir -p .doc-out; DOC_OUT=\"$PWD/.doc-out\"",  # absolute: a page may `cd`
     ]
     skipped = []
     checks = []
@@ -71,8 +74,9 @@ def _script(blocks: list[Block], shell: bool, not_run: tuple[str, ...] = ()
                 # in this shell (a `cd` or a variable holds for the next command), its
                 # output kept for the check and shown in the log
                 out = f".doc-out/{len(checks)}"
-                lines.append(f"{{ {cmd}\n}} > {out} 2>&1 || {{ rc=$?; cat {out}; exit $rc; }}; "
-                             f"cat {out}")
+                path = f'"$DOC_OUT/{len(checks)}"'
+                lines.append(f"{{ {cmd}\n}} > {path} 2>&1 || {{ rc=$?; cat {path}; exit $rc; }}; "
+                             f"cat {path}")
                 checks.append((out, shown, block.where, cmd))
     return "\n".join(lines) + "\n", skipped, checks
 
@@ -120,6 +124,11 @@ def _page_params(sections: tuple[str, ...]) -> list:
 @pytest.mark.parametrize("page", _page_params(("tutorials", "howto")))
 def test_commands_in_tutorials_and_guides_run(page: Path, tmp_path: Path) -> None:
     _run_page(page, tmp_path, shell=True)
+
+
+@pytest.mark.slow
+def test_readme_commands_run(tmp_path: Path) -> None:
+    _run_page(ROOT / "README.md", tmp_path, shell=True, not_run=README_NOT_RUN)
 
 
 @pytest.mark.parametrize("page", [

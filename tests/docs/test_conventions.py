@@ -60,3 +60,20 @@ def test_shown_output_must_have_been_printed() -> None:
         "3 sessions  in sim-data/ (… s)"
     # in order: a line shown after another must come after it
     assert shown_output_matches(["3 simulated …", "realism: …"], printed) == "realism: …"
+
+
+def _links(md: Path) -> list[str]:
+    tokens = MarkdownIt("commonmark").parse(md.read_text(encoding="utf-8"))
+    return [c.attrs["href"] for t in tokens if t.type == "inline"
+            for c in t.children or [] if c.type == "link_open"]
+
+
+def test_readme_links_reach_files() -> None:
+    """The README is read outside Sphinx (on a forge, in an editor): its links to the
+    repository's files must reach them (Sphinx checks the site's own links)."""
+    readme = ROOT / "README.md"
+    for href in _links(readme):
+        if "://" in href or href.startswith("#"):
+            continue
+        target = (readme.parent / href.split("#")[0]).resolve()
+        assert target.exists(), f"README.md links to {href}, which does not exist"
