@@ -12,6 +12,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # autodoc and sphinx-argparse import the packages from the tree
+sys.path.insert(0, str(Path(__file__).parent / "_ext"))  # our directives: tables from the code
 
 project = "hapticlab"
 author = "the hapticlab authors"
@@ -25,11 +26,12 @@ extensions = [
     "sphinx.ext.viewcode",
     "numpydoc",
     "sphinxarg.ext",
+    "hapticlab_docs",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}  # .rst: numpydoc loads autosummary
 root_doc = "index"
-exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "wire-vectors.txt"]
+exclude_patterns = ["_build", "_ext", "Thumbs.db", ".DS_Store", "wire-vectors.txt"]
 
 # MyST: headings get anchors so pages can link to a section ([text](page.md#anchor)), and
 # ```{directive}``` blocks plus :::{note} fences are available.

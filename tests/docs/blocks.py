@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 
 #: the captions that mark a block the test machine cannot run, and why
-SKIP_MARKS = ("needs hardware", "needs a person")
+SKIP_MARKS = ("needs hardware", "needs a person", "in the checkout")
 #: languages whose blocks are commands: `console` with `$ ` prompts, the others line by line
 SHELL_LANGUAGES = ("console", "sh", "bash", "shell")
 #: a caption that is a file name: the block is that file's content, written before later

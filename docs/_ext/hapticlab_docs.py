@@ -1,0 +1,97 @@
+"""Sphinx directives that write reference tables from the code at build time, so that they
+cannot drift from it.
+
+``{hapticlab-errors}``
+    Every error class hapticlab raises on purpose (the subclasses of ``HapticlabError`` in
+    the four packages), with its base and the first line of its docstring.
+``{hapticlab-trace-channels}``
+    The channels a tapping window records (``device.events.TRACE_CHANNELS``), with units.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import pkgutil
+
+from docutils import nodes
+from docutils.statemachine import StringList
+from sphinx.util.docutils import SphinxDirective
+from sphinx.util.nodes import nested_parse_with_titles
+
+PACKAGES = ("device", "protocols", "analysis", "app")
+
+
+def _import_all() -> None:
+    """Import every module of the packages (an error class is known once defined); a module
+    that cannot be imported here (one that needs a screen) is skipped."""
+    for pkg in PACKAGES:
+        root = importlib.import_module(pkg)
+        for info in pkgutil.walk_packages(root.__path__, pkg + "."):
+            if info.name.endswith("__main__"):
+                continue
+            try:
+                importlib.import_module(info.name)
+            except Exception:  # noqa: BLE001 - documented by what imports
+                continue
+
+
+def error_classes() -> list[type]:
+    """The subclasses of ``HapticlabError``, depth first, in definition order."""
+    from device.errors import HapticlabError
+
+    _import_all()
+    out: list[type] = []
+
+    def walk(cls: type) -> None:
+        for sub in cls.__subclasses__():
+            if sub not in out and sub.__module__.split(".")[0] in PACKAGES:
+                out.append(sub)
+                walk(sub)
+
+    walk(HapticlabError)
+    return out
+
+
+class ErrorsDirective(SphinxDirective):
+    has_content = False
+
+    def run(self):
+        lines = [".. list-table::", "   :header-rows: 1", "   :widths: 30 20 50", "",
+                 "   * - error", "     - is a", "     - raised when"]
+        for cls in error_classes():
+            bases = ", ".join(f"``{b.__name__}``" for b in cls.__bases__)
+            doc = " ".join((inspect.getdoc(cls) or "").split("\n\n")[0].split())
+            lines += [f"   * - ``{cls.__module__}.{cls.__qualname__}``", f"     - {bases}",
+                      f"     - {doc}"]
+        holder = nodes.container()
+        nested_parse_with_titles(self.state, StringList(lines, source="hapticlab-errors"),
+                                 holder)
+        return list(holder.children)
+
+
+def _table(directive: SphinxDirective, header: list[str], rows: list[list[str]]) -> list:
+    lines = [".. list-table::", "   :header-rows: 1", ""]
+    for row in [header, *rows]:
+        lines.append(f"   * - {row[0]}")
+        lines += [f"     - {cell}" for cell in row[1:]]
+    holder = nodes.container()
+    nested_parse_with_titles(directive.state, StringList(lines, source=directive.name), holder)
+    return list(holder.children)
+
+
+class TraceChannelsDirective(SphinxDirective):
+    has_content = False
+
+    def run(self):
+        from device.events import TRACE_CHANNELS
+
+        return _table(self, ["channel", "unit", "what"],
+                      [[f"``{name}``", f"``{unit}``", what]
+                       for name, (unit, what) in TRACE_CHANNELS.items()])
+
+
+def setup(app):
+    app.add_directive("hapticlab-errors", ErrorsDirective)
+    app.add_directive("hapticlab-trace-channels", TraceChannelsDirective)
+    return {"parallel_read_safe": True, "parallel_write_safe": True}
