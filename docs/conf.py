@@ -31,7 +31,7 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}  # .rst: numpydoc loads autosummary
 root_doc = "index"
-exclude_patterns = ["_build", "_ext", "Thumbs.db", ".DS_Store", "wire-vectors.txt"]
+exclude_patterns = ["_build", "_ext", "_generated", "Thumbs.db", ".DS_Store", "wire-vectors.txt"]
 
 # MyST: headings get anchors so pages can link to a section ([text](page.md#anchor)), and
 # ```{directive}``` blocks plus :::{note} fences are available.

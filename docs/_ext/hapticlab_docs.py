@@ -6,6 +6,11 @@ cannot drift from it.
     the four packages), with its base and the first line of its docstring.
 ``{hapticlab-trace-channels}``
     The channels a tapping window records (``device.events.TRACE_CHANNELS``), with units.
+
+And at the start of every build, the report of the sessions that ship with hapticlab
+(``analysis.datasets.sessions_path()``), made by ``analysis.report.analyze`` — the code that
+makes every report — into ``docs/_generated/bundled-report/``, so the figures the pages show
+are that code's output, never a copy that could go stale.
 """
 
 from __future__ import annotations
@@ -91,7 +96,24 @@ class TraceChannelsDirective(SphinxDirective):
                        for name, (unit, what) in TRACE_CHANNELS.items()])
 
 
+def make_bundled_report(app) -> None:
+    """``builder-inited``: the bundled sessions' report, figures included, into
+    ``_generated/`` of the documentation's source folder (not committed)."""
+    import shutil
+    from pathlib import Path
+
+    from analysis.datasets import sessions_path
+    from analysis.report import analyze
+
+    out = Path(app.srcdir) / "_generated" / "bundled-report"
+    if out.exists():
+        shutil.rmtree(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    analyze(sessions_path(), out, formats=("json",))
+
+
 def setup(app):
+    app.connect("builder-inited", make_bundled_report)
     app.add_directive("hapticlab-errors", ErrorsDirective)
     app.add_directive("hapticlab-trace-channels", TraceChannelsDirective)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
