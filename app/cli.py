@@ -505,7 +505,7 @@ def build_parser() -> argparse.ArgumentParser:
     em.add_argument("--speed", type=float, default=1.0, help="device seconds per wall second")
     em.add_argument("--firmware", choices=tuple(EMULATORS),
                     default="python",
-                    help="what serves the port (protocol 2): the Python emulator, or the C "
+                    help="what serves the port (wire protocol 3): the Python emulator, or the C "
                     "reference firmware built for this machine (host-board: with the "
                     "STM32F405's buffers and 1-Mbaud link; host-san: that under ASan and "
                     "UBSan) or run on an emulated STM32F405 under QEMU, or the bridges to "

@@ -202,8 +202,7 @@ class HapticDevice(ABC):
                     if from_first_contact else f"duration {duration:g} s")
             raise ValueError(f"a window of {span:g} s ({what}) is longer than this device "
                              f"records in one window: {self.max_window_s:g} s "
-                             f"({MAX_WINDOW_TICKS} ticks at {self.info.servo_rate_hz:g} Hz, "
-                             "each kept in memory); split it into shorter windows")
+                             f"({self._max_window_why()}); split it into shorter windows")
         return self._run_window(float(duration), bool(from_first_contact), float(timeout),
                                 on_progress, bool(heartbeats))
 
@@ -212,6 +211,10 @@ class HapticDevice(ABC):
         """Longest window [s] this device records, its wait for a first contact included
         (:data:`MAX_WINDOW_TICKS` servo ticks)."""
         return MAX_WINDOW_TICKS / self.info.servo_rate_hz
+
+    def _max_window_why(self) -> str:
+        """Where :attr:`max_window_s` comes from, for the error that names it."""
+        return f"{MAX_WINDOW_TICKS} ticks at {self.info.servo_rate_hz:g} Hz, each kept in memory"
 
     def end_window(self) -> None:
         """End the running window now, before its duration is up: the participant moved on

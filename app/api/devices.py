@@ -172,8 +172,8 @@ EMULATORS = {"python": None, "host": 10_000.0, "host-board": 10_000.0, "host-san
 
 def emulate(firmware: str = "python", *, rate: float | None = None, seed: int = 0,
             speed: float = 1.0) -> int:
-    """Serve protocol 2 on a new pseudo-terminal until SIGINT or SIGTERM, printing the
-    port's path first; the exit status.
+    """Serve the wire protocol (versions 2 and 3) on a new pseudo-terminal until SIGINT or
+    SIGTERM, printing the port's path first; the exit status.
 
     Parameters
     ----------

@@ -28,6 +28,7 @@ from ..errors import DeviceError, DeviceFaultError, SceneError
 from ..events import ContactEvent, FaultEvent, HostClock, SaturationEvent, WindowResult
 from ..scene import Material, Scene, TransientTable
 from . import messages as M
+from .contract import MAX_WINDOW_MS, PROTOCOL
 from .link import (
     CRCStormError,
     DeviceGoneError,
@@ -338,9 +339,9 @@ class SerialDevice(HapticDevice):
 
     @staticmethod
     def _identify(h: M.HelloAck, limits: M.Limits | None = None) -> DeviceInfo:
-        if h.protocol not in (1, 2):
+        if not 1 <= h.protocol <= PROTOCOL:  # an older one is read by its own layouts
             raise ProtocolMismatchError(f"device speaks protocol {h.protocol}, this host "
-                                        "speaks 1 and 2")
+                                        f"speaks 1 to {PROTOCOL}")
         model, serial_no, fw = h.strings
         return DeviceInfo(backend="serial", model=model, serial_number=serial_no, firmware=fw,
                           servo_rate_hz=float(h.servo_rate_hz),
@@ -365,8 +366,8 @@ class SerialDevice(HapticDevice):
         Raises
         ------
         ProtocolMismatchError
-            The device speaks version 1 (traces read after each window, retired: both the
-            emulator and the reference firmware speak 2), or sent no LIMITS.
+            The device speaks version 1 (traces read after each window, retired: the
+            emulator and the reference firmware speak 2 and 3), or sent no LIMITS.
         """
         if self.link.version < 2:
             raise ProtocolMismatchError(
@@ -609,12 +610,20 @@ class SerialDevice(HapticDevice):
             self._fault = FaultEvent(time.monotonic(), "estop", "emergency stop (latched)")
 
     def _clear_fault(self) -> None:
-        try:
-            self._command(M.ClearFault())
-        except DeviceFaultError:
-            raise DeviceFaultError(f"{self.port}: the device keeps its fault: its e-stop "
-                                   "button is still pressed (or its wire is cut); release it, "
-                                   "then clear the fault") from None
+        # a device clears only a fault it has reported (docs §4): one that latched an
+        # instant ago (an ESTOP just acknowledged) is told by the next STATUS at the latest
+        for attempt in range(2):
+            try:
+                self._command(M.ClearFault())
+                break
+            except DeviceFaultError:
+                if attempt:
+                    raise DeviceFaultError(
+                        f"{self.port}: the device keeps its fault: its e-stop button is "
+                        "still pressed (or its wire is cut); release it, then clear the "
+                        "fault") from None
+                seen = self.last_status
+                self.link.wait_for(lambda _ev, seen=seen: self.last_status is not seen, 0.5)
         self._fault = None
         self._estop_sent = False
         self._status_after_clear = False  # until a report says the device is clear (or
@@ -624,6 +633,18 @@ class SerialDevice(HapticDevice):
         self._output = 0.0
         if not self.link.gone and not self.closed:
             self._command(M.Zero())
+
+    @property
+    def max_window_s(self) -> float:
+        """Longest window [s] the device runs, its wait for a first contact included: its
+        ``LIMITS.max_window_ms``, or the protocol's own where it states none."""
+        lim = self.link.limits
+        stated = lim.max_window_ms if lim is not None else None
+        return (stated or MAX_WINDOW_MS) / 1000
+
+    def _max_window_why(self) -> str:
+        return "as its LIMITS.max_window_ms states" if self.link.limits is not None and \
+            self.link.limits.max_window_ms else "the protocol's longest"
 
     def _run_window(self, duration: float, from_first_contact: bool, timeout: float,
                     on_progress: Callable[[float, WindowResult], None] | None,

@@ -1,4 +1,5 @@
-"""The wire contract of protocol v2, written once as data (docs/wire-protocol.md).
+"""The wire contract, written once as data (docs/wire-protocol.md): protocol version
+:data:`PROTOCOL`, and what the earlier versions were.
 
 Every message's id, field layout, units and ranges, and the state × command table, live
 here; the rest is generated or derived from it:
@@ -11,7 +12,10 @@ here; the rest is generated or derived from it:
   command, and the host applies before it sends one; the firmware applies the same rows
   through ``hl_fields_fit`` (``firmware/src/wire.c``).
 
-``tests/device/test_contract.py`` fails when a generated file is stale. The way pyvisa-sim
+``tests/device/test_contract.py`` fails when a generated file is stale, and
+:func:`growth_errors` when a change would break a client of a published version (the
+layouts each version was published with are kept as data in ``published.json``; the
+growth rule is section 1b of the document). The way pyvisa-sim
 keeps instruments as data: a new message is one entry here, then ``make contract``.
 
 Ranges are inclusive; a bound that is a string names a field of
@@ -21,6 +25,9 @@ tie two fields together are stated in ``rules`` and checked by hand on every tar
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import json
 import math
 import struct
 from dataclasses import dataclass, field
@@ -32,6 +39,21 @@ __all__ = ["Field", "Spec", "SPECS", "BY_TYPE", "BY_NAME", "STATES", "STATE_TABL
 CODES = {"u8": "B", "u16": "H", "u32": "I", "u64": "Q", "i16": "h", "i32": "i", "f32": "f"}
 _INT_RANGE = {"u8": (0, 2**8 - 1), "u16": (0, 2**16 - 1), "u32": (0, 2**32 - 1),
               "u64": (0, 2**64 - 1), "i16": (-2**15, 2**15 - 1), "i32": (-2**31, 2**31 - 1)}
+
+#: the newest protocol version: the one a host offers in HELLO and a device chooses, stated
+#: here only (``HL_PROTOCOL_VERSION`` in hl_contract.h, ``framing.PROTOCOL_VERSION``)
+PROTOCOL = 3
+#: the oldest version the devices of this code speak (a host's HELLO travels in a
+#: version-1 frame, which every receiver reads; version 1 itself is retired)
+OLDEST = 2
+#: the first version laid out under the growth rule (docs §1b): a message grows only by
+#: fields appended at its end, a receiver takes a body of at least the length the version
+#: was published with and reads the fields it knows. The versions before it are frozen as
+#: published, each body exactly its length.
+EXTENSIBLE_FROM = 3
+#: messages whose type and layout are the same in every version, for ever: HELLO (every
+#: device must read it to negotiate) and ESTOP (acted on in a frame of any version)
+FOREVER = {"HELLO": (0x01, (("host_protocol", "u8"),)), "ESTOP": (0x30, ())}
 
 #: the device's resources a bound may name, and where a host finds each
 LIMIT_NAMES = ("table_items", "play_items", "channels", "max_decimation", "current_limit_ma")
@@ -70,6 +92,13 @@ class Field:
         type's own range (every f32 must in any case be finite).
     subset : str or None
         The value is a bit mask that must be a non-empty subset of this limit.
+    since : int
+        The version whose layout first carries the field (0: the message's first). A field
+        appended under the growth rule carries the version it was appended in.
+    unused : str
+        Why the reference firmware neither reads nor writes the field, when it does not
+        (``tests/device/test_contract.py`` fails by name for a field the firmware ignores
+        without a reason here).
     """
 
     name: str
@@ -78,6 +107,8 @@ class Field:
     lo: float | int | str | None = None
     hi: float | int | str | None = None
     subset: str | None = None
+    since: int = 0
+    unused: str = ""
 
     @property
     def code(self) -> str:
@@ -145,16 +176,24 @@ class Spec:
     count: str | None = None
     max_items: int | None = None
     fixed_items: int | None = None
-    versions: tuple[int, ...] = (1, 2)
+    versions: tuple[int, ...] = (1, 2, 3)
     rules: tuple[str, ...] = field(default=())
+
+    def layout(self, version: int = PROTOCOL) -> tuple[Field, ...]:
+        """The fixed fields, in wire order, as protocol ``version`` lays the message out."""
+        return tuple(f for f in self.fields if f.since <= version)
+
+    def size(self, version: int = PROTOCOL) -> int:
+        """Bytes of the fixed part in ``version``."""
+        return struct.calcsize("<" + "".join(f.code for f in self.layout(version)))
 
     @property
     def fmt(self) -> str:
-        return "".join(f.code for f in self.fields)
+        return "".join(f.code for f in self.layout())
 
     @property
     def fixed_size(self) -> int:
-        return struct.calcsize("<" + self.fmt)
+        return self.size()
 
 
 F = Field
@@ -164,9 +203,17 @@ GAP_BINS = 64
 #: the most table rows: their speeds go in one SCENE_VELOCITIES (1,024-byte payload: header
 #: 4, scene id 2, CRC 4, then 4 bytes a speed)
 MAX_ROWS = (1024 - 4 - 2 - 4) // 4
+#: the longest a window's duration and its wait for a first contact each may be [ms], and
+#: so the longest window a host may ask for, the wait included (LIMITS.max_window_ms)
+MAX_DURATION_MS = 600_000
+MAX_WINDOW_MS = 2 * MAX_DURATION_MS
 #: farthest a surface may be from the device's origin [µm] (0.5 m: beyond any desktop
 #: device's reach), and so the encoder arithmetic's bound (firmware/src/device.c)
 MAX_SURFACE_UM = 500_000
+
+#: the firmware's reason for the ring fields of a real sample
+RINGING = ("the firmware renders nothing for a real sample, and its plant rests a block "
+           "on SCENE_SUPPORT's support (docs §5); the Python emulator reads them")
 
 SPECS: tuple[Spec, ...] = (
     # ------------------------------------------------------------ host → device
@@ -180,9 +227,9 @@ SPECS: tuple[Spec, ...] = (
         F("spring", "f32", "N/m", 0.0, 1e6),
         F("stiffness", "f32", "N/m (real sample)", 0.0, 1e9),
         F("damping", "f32", "N·s/m (real sample)", 0.0, 1e6),
-        F("ring_slope", "f32", "1/s (real sample)", -1e6, 1e6),
-        F("ring_decay", "f32", "1/s (real sample)", 0.0, 1e6),
-        F("ring_freq", "f32", "Hz (real sample; 0: does not ring)", 0.0, 1e5),
+        F("ring_slope", "f32", "1/s (real sample)", -1e6, 1e6, unused=RINGING),
+        F("ring_decay", "f32", "1/s (real sample)", 0.0, 1e6, unused=RINGING),
+        F("ring_freq", "f32", "Hz (real sample; 0: does not ring)", 0.0, 1e5, unused=RINGING),
         F("block_mass", "f32", "kg (real sample; 0: does not move)", 0.0, 5.0),
         F("rows", "u8", "transient table rows", 0, MAX_ROWS),
         F("row_len", "u16", "samples per row"),
@@ -206,8 +253,9 @@ SPECS: tuple[Spec, ...] = (
                                         F("crc32", "u32", "CRC-32 of the table's i16 LE bytes"))),
     Spec(0x20, "HOME", "host", (F("clearance_um", "u32", "µm", 1, 500_000),)),
     Spec(0x21, "START_WINDOW", "host", (
-        F("window_id", "u16"), F("duration_ms", "u32", "ms", 1, 600_000),
-        F("timeout_ms", "u32", "ms", 1, 600_000), F("from_contact", "u8", "flag", 0, 1))),
+        F("window_id", "u16"), F("duration_ms", "u32", "ms", 1, MAX_DURATION_MS),
+        F("timeout_ms", "u32", "ms", 1, MAX_DURATION_MS), F("from_contact", "u8", "flag", 0, 1)),
+        rules=("duration_ms, + timeout_ms when from_contact = 1, ≤ LIMITS.max_window_ms",)),
     Spec(0x22, "STOP_WINDOW", "host"),
     Spec(0x23, "PLAY_CHUNK", "host", (
         F("offset", "u32", "samples", 0, "play_items"), F("n", "u16", "items", 0, CHUNK_ITEMS)),
@@ -225,8 +273,8 @@ SPECS: tuple[Spec, ...] = (
     Spec(0x41, "TRACE_CONFIG", "host", (
         F("channels", "u16", "bit i = channel i", subset="channels"),
         F("decimation", "u16", "servo ticks per record", 1, "max_decimation")),
-        versions=(2,)),
-    Spec(0x42, "LINK_QUERY", "host", (F("reset", "u8", "flag", 0, 1),), versions=(2,)),
+        versions=(2, 3)),
+    Spec(0x42, "LINK_QUERY", "host", (F("reset", "u8", "flag", 0, 1),), versions=(2, 3)),
     # ------------------------------------------------------------ device → host
     Spec(0x80, "ACK", "device", (F("ack_seq", "u16"), F("status", "u8", "status code", 0, 6))),
     Spec(0x81, "HELLO_ACK", "device", (
@@ -247,10 +295,13 @@ SPECS: tuple[Spec, ...] = (
         F("channels", "u16", "bit mask", 1, 0x3FF),
         F("max_decimation", "u16", "servo ticks", 1, 65_535),
         F("link_bytes_s", "u32", "B/s; 0: no limit"),
-        F("tick_p99_us", "u32", "µs of wall time; 0: not measured"),
-        F("tick_max_us", "u32", "µs of wall time; 0: not measured"),
-        F("capabilities", "u32", "bit mask: 0 simulated contact, 1 seeded")),
-         versions=(2,)),
+        F("tick_p99_us", "u32", "µs of wall time; 0: not measured; 19,999: that or more",
+          since=3),
+        F("tick_max_us", "u32", "µs of wall time, as measured; 0: not measured", since=3),
+        F("capabilities", "u32", "bit mask: 0 simulated contact, 1 seeded", since=3),
+        F("max_window_ms", "u32", "ms: the longest window, its wait for a first contact "
+          "included", 1, MAX_WINDOW_MS, since=3)),
+         versions=(2, 3)),
     Spec(0x83, "PONG", "device", (F("stamp", "u32", "host µs, echoed"),)),
     Spec(0x90, "CONTACT", "device", (
         F("window_id", "u16"), F("tick", "u32", "window tick"),
@@ -269,7 +320,8 @@ SPECS: tuple[Spec, ...] = (
     Spec(0x94, "WINDOW_DONE", "device", (
         F("window_id", "u16"), F("t0_us", "u64", "µs, device clock of tick 0"),
         F("n_ticks", "u32", "ticks"), F("first_contact", "i32", "tick; −1 none", -1, 2**31 - 1),
-        F("n_contacts", "u16"), F("n_saturations", "u16"), F("timed_out", "u8", "flag", 0, 1),
+        F("n_contacts", "u16", "saturated at 65,535"),
+        F("n_saturations", "u16", "saturated at 65,535"), F("timed_out", "u8", "flag", 0, 1),
         F("fault", "u8", "fault code that ended it; 0 none", 0, max(FAULTS)))),
     Spec(0x95, "TRACE_BLOCK", "device", (
         F("window_id", "u16"), F("channel", "u8", "channel", 0, 9), F("start", "u32", "sample"),
@@ -283,16 +335,17 @@ SPECS: tuple[Spec, ...] = (
         F("window_id", "u16"), F("channels", "u16", "bit mask", 1, 0x3FF),
         F("start", "u32", "record"), F("n", "u16", "records", 0, TRACE_ITEMS)),
         items=F("sample", "f32", "SI units, record-major"), count="n", max_items=TRACE_ITEMS,
-        versions=(2,), rules=("n × (channels in the mask) ≤ 250 items",)),
+        versions=(2, 3), rules=("n × (channels in the mask) ≤ 250 items",)),
     Spec(0x98, "TRACE_LOST", "device", (
         F("window_id", "u16"), F("start", "u32", "record"), F("n", "u32", "records", 1,
-                                                                2**32 - 1)), versions=(2,)),
+                                                                2**32 - 1)), versions=(2, 3)),
     Spec(0x99, "LINK_REPORT", "device", (
         F("since_us", "u64", "µs, device clock"), F("frames", "u32", "intact host frames"),
         F("bad_frames", "u32", "frames that failed a check"),
         F("max_gap_us", "u32", "µs of device time"),
-        F("estop_max_us", "u32", "µs of device time; 0xFFFFFFFF: no ESTOP")),
-        items=F("gaps", "u16", "count per 2-ms bin"), fixed_items=GAP_BINS, versions=(2,)),
+        F("estop_max_us", "u32", "µs of device time, saturated at 0xFFFFFFFE; 0xFFFFFFFF: no "
+          "ESTOP", since=3)),
+        items=F("gaps", "u16", "count per 2-ms bin"), fixed_items=GAP_BINS, versions=(2, 3)),
 )
 
 BY_TYPE: dict[int, Spec] = {s.type: s for s in SPECS}
@@ -428,6 +481,103 @@ def _check_field(name: str, f: Field, x, limits, index: int | None = None) -> No
         raise RangeError(f"{where} = {shown} outside {f.range_text()} {f.unit}".rstrip())
 
 
+# ------------------------------------------------------------------ the growth rule
+PUBLISHED = Path(__file__).with_name("published.json")
+
+
+def snapshot(version: int, specs: tuple[Spec, ...] | None = None) -> dict:
+    """Every message of ``version`` as the contract lays it out: {name: {type, fields:
+    [[name, type], ...], items: item type or None}} (what ``published.json`` keeps)."""
+    return {s.name: {"type": s.type, "fields": [[f.name, f.type] for f in s.layout(version)],
+                     "items": s.items.type if s.items else None}
+            for s in (SPECS if specs is None else specs) if version in s.versions}
+
+
+@functools.cache
+def published() -> dict[int, dict]:
+    """The layouts each version was published with (``published.json``): {version:
+    {"source": where it was published, "messages": :func:`snapshot`'s form}}."""
+    return {int(v): e for v, e in json.loads(PUBLISHED.read_text()).items()}
+
+
+def min_size(spec: Spec, version: int) -> int:
+    """The shortest fixed part a receiver takes for ``spec`` in ``version``: its length as
+    that version was published (the version's exact length before the growth rule)."""
+    pub = published().get(version, {}).get("messages", {}).get(spec.name)
+    if pub is None:
+        return spec.size(version)
+    return struct.calcsize("<" + "".join(Field(n, t).code for n, t in pub["fields"]))
+
+
+def growth_errors(specs: tuple[Spec, ...] | None = None,
+                  pub: dict[int, dict] | None = None) -> list[str]:
+    """What in ``specs`` (the contract) would break a client of a published version
+    (``pub``, :func:`published`), one sentence each; empty when nothing would.
+
+    A version before :data:`EXTENSIBLE_FROM` is frozen: every message as published, no
+    message added. From it on a message keeps its type, its published fields in their
+    order and types, and its array; a field is only appended after them, never before an
+    array; a new message gets a new type. HELLO and ESTOP never change (:data:`FOREVER`).
+    """
+    specs = SPECS if specs is None else specs
+    pub = published() if pub is None else pub
+    errors = []
+    by_name = {s.name: s for s in specs}
+    for name, (mtype, layout) in FOREVER.items():
+        s = by_name.get(name)
+        if s is None or s.type != mtype or tuple((f.name, f.type) for f in s.fields) != layout:
+            errors.append(f"{name} is read in every version: its type 0x{mtype:02x} and "
+                          f"layout {list(layout)} never change")
+    if PROTOCOL not in pub:
+        errors.append(f"version {PROTOCOL} is not published: `make contract` records it")
+    for version, entry in sorted(pub.items()):
+        now = snapshot(version, specs)
+        for name, old in entry["messages"].items():
+            new = now.get(name)
+            where = f"{name} in version {version}"
+            if new is None:
+                errors.append(f"{where}: published, now gone (a message is never removed "
+                              "from a version)")
+                continue
+            if new["type"] != old["type"]:
+                errors.append(f"{where}: type 0x{old['type']:02x} became 0x{new['type']:02x}")
+            if new["items"] != old["items"]:
+                errors.append(f"{where}: its array of {old['items']} became {new['items']}")
+            fields, was = [tuple(f) for f in new["fields"]], [tuple(f) for f in old["fields"]]
+            frozen = version < EXTENSIBLE_FROM or old["items"] is not None
+            if frozen and fields != was:
+                why = ("frozen as published" if version < EXTENSIBLE_FROM else
+                       "a message with an array never grows (a new message does)")
+                errors.append(f"{where}: {why}: {was}, now {fields}")
+            elif fields[:len(was)] != was:
+                errors.append(f"{where}: its published fields {was} must stay first, in "
+                              f"order and type (a field is only appended), now {fields}")
+        if version < EXTENSIBLE_FROM:
+            for name in sorted(set(now) - set(entry["messages"])):
+                errors.append(f"{name} in version {version}: version {version} is frozen "
+                              f"as published; a new message goes into version {PROTOCOL}")
+    return errors
+
+
+def publish(version: int = PROTOCOL) -> bool:
+    """Record ``version``'s layouts in ``published.json`` if it has none yet (its first
+    publication: from then on they only grow by the rule); whether it wrote."""
+    entries = json.loads(PUBLISHED.read_text()) if PUBLISHED.exists() else {}
+    if str(version) in entries:
+        return False
+    entries[str(version)] = {"source": f"device/serial/contract.py, version {version} "
+                                       "as first published",
+                             "messages": snapshot(version)}
+    lines = []  # one message a line, so that a diff shows which changed
+    for v, e in entries.items():
+        msgs = ",\n".join(f"   {json.dumps(n)}: {json.dumps(m)}" for n, m in e["messages"].items())
+        lines.append(f' "{v}": {{"source": {json.dumps(e["source"], ensure_ascii=False)},\n'
+                     f'  "messages": {{\n{msgs}\n  }}}}')
+    PUBLISHED.write_text("{\n" + ",\n".join(lines) + "\n}\n")
+    published.cache_clear()
+    return True
+
+
 # ------------------------------------------------------------------ generation
 HEADER = Path("firmware/include/hl_contract.h")
 DOC = Path("docs/wire-protocol.md")
@@ -444,13 +594,154 @@ def _c_num(v) -> str:
     return repr(float(v))
 
 
+_C_TYPE = {"u8": "uint8_t", "u16": "uint16_t", "u32": "uint32_t", "u64": "uint64_t",
+           "i16": "int16_t", "i32": "int32_t", "f32": "float"}
+#: little-endian readers and writers the accessors use (a byte at a time: any alignment)
+_C_PRIMITIVES = """static inline uint64_t hl_rd_le(const uint8_t *p, unsigned n)
+{
+    uint64_t v = 0;
+    for (unsigned k = n; k-- > 0;) {
+        v = (v << 8) | p[k];
+    }
+    return v;
+}
+static inline void hl_wr_le(uint8_t *p, uint64_t v, unsigned n)
+{
+    for (unsigned k = 0; k < n; k++) {
+        p[k] = (uint8_t)(v >> (8u * k));
+    }
+}
+static inline float hl_rd_f32(const uint8_t *p)
+{
+    uint32_t u = (uint32_t)hl_rd_le(p, 4);
+    float f;
+    memcpy(&f, &u, 4);
+    return f;
+}
+static inline void hl_wr_f32(uint8_t *p, float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    hl_wr_le(p, u, 4);
+}
+static inline void hl_wr_text(uint8_t *p, const char *s, unsigned n)
+{
+    unsigned k = 0;
+    for (; k < n && s[k]; k++) {
+        p[k] = (uint8_t)s[k];
+    }
+    for (; k < n; k++) {
+        p[k] = 0;
+    }
+}"""
+
+
+def _c_get(t: str, at: str) -> str:
+    if t == "f32":
+        return f"hl_rd_f32(b + {at})"
+    size = struct.calcsize("<" + CODES[t])
+    return f"({_C_TYPE[t]})hl_rd_le(b + {at}, {size})"
+
+
+def _c_put(t: str, at: str) -> str:
+    if t == "f32":
+        return f"hl_wr_f32(b + {at}, v)"
+    size = struct.calcsize("<" + CODES[t])
+    cast = "(uint64_t)(uint32_t)v" if t == "i32" else "(uint64_t)(uint16_t)v" if t == "i16" \
+        else "v"
+    return f"hl_wr_le(b + {at}, {cast}, {size})"
+
+
+def _accessors(s: Spec) -> list[str]:
+    """Offsets, size and accessors of message ``s`` in the newest version it has."""
+    m = s.name.lower()
+    up = s.name
+    out = [f"/* {s.name} (0x{s.type:02X}) */",
+           f"#define HL_{up}_SIZE {s.fixed_size}u",
+           f"#define HL_{up}_LEAST {min_size(s, s.versions[-1])}u /* the least its newest "
+           "version takes */"]
+    for f, off in _offsets(s, s.versions[-1]):
+        fu, fl = f.name.upper(), f.name.lower()
+        out.append(f"#define HL_{up}_{fu} {off}u")
+        if f.type.startswith("bytes"):
+            n = f.type[5:]
+            out.append(f"static inline const uint8_t *hl_{m}_{fl}(const uint8_t *b) "
+                       f"{{ return b + {off}; }}")
+            out.append(f"static inline void hl_{m}_set_{fl}(uint8_t *b, const char *v) "
+                       f"{{ hl_wr_text(b + {off}, v, {n}); }}")
+            continue
+        ct = _C_TYPE[f.type]
+        out.append(f"static inline {ct} hl_{m}_{fl}(const uint8_t *b) "
+                   f"{{ return {_c_get(f.type, str(off))}; }}")
+        out.append(f"static inline void hl_{m}_set_{fl}(uint8_t *b, {ct} v) "
+                   f"{{ {_c_put(f.type, str(off))}; }}")
+    if s.items is not None:
+        t, isz = s.items.type, s.items.size
+        ct = _C_TYPE[t]
+        most = s.fixed_items or s.max_items
+        how = "exactly" if s.fixed_items else "at most"
+        out.append(f"#define HL_{up}_ITEMS {most}u /* {how} */")
+        at = f"HL_{up}_SIZE + {isz}u * i"
+        out.append(f"static inline {ct} hl_{m}_item(const uint8_t *b, size_t i) "
+                   f"{{ return {_c_get(t, f'({at})')}; }}")
+        out.append(f"static inline void hl_{m}_set_item(uint8_t *b, size_t i, {ct} v) "
+                   f"{{ {_c_put(t, f'({at})')}; }}")
+        out.append(f"#define HL_{up}_BYTES(n) (HL_{up}_SIZE + {isz}u * (size_t)(n))")
+    return out
+
+
+def _downgrades() -> list[str]:
+    """hl_body_as: a body laid out in the newest version, as an older one lays it out."""
+    out = ["/* the body `in` (len bytes, laid out in HL_PROTOCOL_VERSION) as `version` lays out",
+           " * message `type`, into out; its length. Fields a version does not have are left",
+           " * out; every other version's layout is the newest one's. */",
+           "static inline size_t hl_body_as(uint8_t version, uint8_t type, const uint8_t *in,",
+           "                                size_t len, uint8_t *out)",
+           "{"]
+    for s in SPECS:
+        for v in range(OLDEST, PROTOCOL):
+            if v not in s.versions or s.layout(v) == s.layout():
+                continue
+            runs = []  # (from, bytes) of the fields the older layout keeps, joined
+            for f, off in _offsets(s):
+                if f.since > v:
+                    continue
+                if runs and runs[-1][0] + runs[-1][1] == off:
+                    runs[-1] = (runs[-1][0], runs[-1][1] + f.size)
+                else:
+                    runs.append((off, f.size))
+            body = [f"    if (version == {v}u && type == HL_MSG_{s.name}) {{",
+                    "        size_t o = 0;"]
+            for at, n in runs:
+                body.append(f"        memcpy(out + o, in + {at}, {n});")
+                body.append(f"        o += {n};")
+            if s.items is not None:
+                body.append(f"        memcpy(out + o, in + {s.fixed_size}, len - {s.fixed_size});")
+                body.append(f"        return o + len - {s.fixed_size};")
+            else:
+                body.append("        (void)len;")
+                body.append("        return o;")
+            body.append("    }")
+            out += body
+    out += ["    memcpy(out, in, len);", "    return len;", "}"]
+    return out
+
+
 def render_header() -> str:
     """firmware/include/hl_contract.h: the C side of the contract."""
+    versions = range(1, PROTOCOL + 1)
     out = ["/* GENERATED by `python -m device.serial.contract` from device/serial/contract.py:",
            " * do not edit (tests/device/test_contract.py fails when this file is stale).",
-           " * The wire contract of protocol v2: message ids, body layouts, field ranges and",
-           " * the state x command gate (docs/wire-protocol.md sections 4-6). */",
+           " * The wire contract: protocol versions, message ids, body layouts and accessors,",
+           " * field ranges and the state x command gate (docs/wire-protocol.md sections 1b,",
+           " * 4-6). */",
            "#ifndef HL_CONTRACT_H", "#define HL_CONTRACT_H", "",
+           "#include <stddef.h>", "#include <stdint.h>", "#include <string.h>", "",
+           "/* the newest version (HELLO_ACK.protocol), the oldest a device speaks, and the",
+           " * first under the growth rule (section 1b) */",
+           f"#define HL_PROTOCOL_VERSION {PROTOCOL}u",
+           f"#define HL_PROTOCOL_OLDEST {OLDEST}u",
+           f"#define HL_PROTOCOL_EXTENSIBLE {EXTENSIBLE_FROM}u", "",
            "/* message types */"]
     for s in SPECS:
         out.append(f"#define HL_MSG_{s.name} 0x{s.type:02X}u")
@@ -461,33 +752,39 @@ def render_header() -> str:
     for bit, cname in CAPABILITIES.items():
         out.append(f"#define HL_CAP_{cname.upper()} (1u << {bit})")
     out += ["", f"#define HL_MAX_SURFACE_UM {MAX_SURFACE_UM}",
+            f"#define HL_MAX_WINDOW_MS {MAX_WINDOW_MS}u",
             f"#define HL_CHUNK_ITEMS {CHUNK_ITEMS}u", "",
-            "/* body layouts: {type, fixed bytes, item bytes, offset of the u16 count (or -1),",
-            " * most items, 1: exactly that many} */",
+            "/* body layouts: {type, fixed bytes (newest), item bytes, offset of the u16 count",
+            " * (or -1), most items, 1: exactly that many, 1: a host command, and per version",
+            f" * 1 ... {PROTOCOL} the fixed",
+            " * bytes it takes: exactly (before the growth rule), at least (from it on), or",
+            " * 0xFFFF where the message does not exist} */",
+            f"#define HL_N_VERSIONS {PROTOCOL}u",
             "#define HL_LAYOUT_ROWS \\"]
     rows = []
     for s in SPECS:
         count_off = -1
         if s.count is not None:
-            off = 0
-            for f in s.fields:
+            for f, off in _offsets(s):
                 if f.name == s.count:
                     assert f.type == "u16", (s.name, f.name)  # hl_body_fits reads a u16
                     count_off = off
-                off += f.size
         items = s.fixed_items or s.max_items or 0
-        rows.append(f"    {{0x{s.type:02X}u, {s.fixed_size}u, {s.items.size if s.items else 0}u, "
-                    f"{count_off}, {items}u, {int(bool(s.fixed_items))}}}")
+        lens = ", ".join(f"{min_size(s, v)}u" if v in s.versions else "0xFFFFu"
+                         for v in versions)
+        isz = s.items.size if s.items else 0
+        rows.append(f"    {{0x{s.type:02X}u, {s.fixed_size}u, {isz}u, {count_off}, {items}u, "
+                    f"{int(bool(s.fixed_items))}, {int(s.sender == 'host')}, {{{lens}}}}}")
     out.append(", \\\n".join(rows))
-    out += ["", "/* field ranges of host -> device messages: {type, offset (-1: every array item),",
+    out += ["", " /* field ranges of host -> device messages: {type, offset (-1: every array "
+            "item),".replace(" /*", "/*"),
             " * kind, lo, hi, subset}; limits name the device's HL_ constants */",
             "#define HL_RANGE_ROWS \\"]
     rows = []
     for s in SPECS:
         if s.sender != "host":
             continue
-        off = 0
-        fs = [(f, o) for f, o in _offsets(s)]
+        fs = list(_offsets(s))
         if s.items is not None:
             fs.append((s.items, -1))
         for f, off in fs:
@@ -516,13 +813,19 @@ def render_header() -> str:
         st = ", ".join(f"{gate(s.name, k)}u" for k in range(len(STATES)))
         rows.append(f"    {{0x{s.type:02X}u, {{{st}}}}}")
     out.append(", \\\n".join(rows))
+    out += ["", "/* ---- each message's fixed size, field offsets and accessors (newest version;",
+            " * arrays: HL_<MSG>_ITEMS, hl_<msg>_item, HL_<MSG>_BYTES(n)) ---- */",
+            _C_PRIMITIVES, ""]
+    for s in SPECS:
+        out += _accessors(s) + [""]
+    out += _downgrades()
     out += ["", "#endif", ""]
     return "\n".join(out)
 
 
-def _offsets(s: Spec):
+def _offsets(s: Spec, version: int = PROTOCOL):
     off = 0
-    for f in s.fields:
+    for f in s.layout(version):
         yield f, off
         off += f.size
 
@@ -531,9 +834,12 @@ def _ranges_table() -> str:
     lines = ["| type | message | offset | field | type | unit | range |",
              "|---|---|---|---|---|---|---|"]
     for s in SPECS:
-        versions = "" if s.versions == (1, 2) else f" (v{s.versions[0]} only)"
+        versions = ("" if s.versions[0] == 1 and s.versions[-1] == PROTOCOL else
+                    f" (v{s.versions[0]} only)" if len(s.versions) == 1 else
+                    f" (v{s.versions[0]}–v{s.versions[-1]})")
         first = f"0x{s.type:02x} | {s.name}{versions}"
-        rows = [(str(o), f) for f, o in _offsets(s)]
+        rows = [(str(o), f if not f.since else dataclasses.replace(
+            f, name=f"{f.name} (v{f.since}+)")) for f, o in _offsets(s)]
         if s.items is not None:
             n = (f"{s.fixed_items}" if s.fixed_items else
                  f"{s.count} ≤ {s.max_items}" if s.count else f"≤ {s.max_items}")
@@ -578,6 +884,13 @@ def main(argv: list[str] | None = None) -> int:
     import sys
 
     root = Path(__file__).resolve().parents[2]
+    if publish(PROTOCOL):
+        print(f"recorded version {PROTOCOL}'s layouts as published ({PUBLISHED.name})")
+    errors = growth_errors()
+    if errors:  # nothing is written: the change would break a published version's client
+        print("the contract breaks the growth rule (docs/wire-protocol.md §1b):\n  "
+              + "\n  ".join(errors), file=sys.stderr)
+        return 1
     (root / HEADER).write_text(render_header())
     doc = root / DOC
     doc.write_text(render_doc(doc.read_text()))

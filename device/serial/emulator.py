@@ -21,9 +21,11 @@ import time
 import tty
 import zlib
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 
+from ..base import MAX_WINDOW_TICKS
 from ..codes import Blend, SceneKind
 from ..scene import Material, Ringing, Scene, Support, TableTransient, TransientTable
 from ..sim.backend import SimDevice
@@ -96,7 +98,12 @@ class Emulator:
 
     def __init__(self, sim: SimDevice, fd: int, status_hz: float = 40.0,
                  limits: M.Limits = LIMITS):
-        self.limits = limits
+        #: the longest window it records, its wait for a first contact included: what the
+        #: simulator keeps in memory (MAX_WINDOW_TICKS) at its rate, or the protocol's own
+        self.limits = limits = replace(limits, max_window_ms=min(
+            contract.MAX_WINDOW_MS, int(MAX_WINDOW_TICKS / sim.info.servo_rate_hz * 1000)))
+        #: the host session's protocol version, chosen at its HELLO (the newest before one)
+        self.proto = contract.PROTOCOL
         #: HELLO_ACK's firmware text (16 bytes at most): the emulator's version, and its
         #: speed when not ×1, as "emulator-2x3" (a host scales the emulator's e-stop bound
         #: by it: SerialDevice.estop_bound_s)
@@ -127,6 +134,8 @@ class Emulator:
         self._rehome = False               # started homed returns to HOMED)
         self._stop = threading.Event()
         self._fault_sent = False
+        self._fault_due = False  # a FAULT to tell once this turn's frames are handled
+        self._estop_pending = False  # an ESTOP whose FAULT is not told yet
         self._clock0 = time.monotonic()  # power-up: the device clock counts from here
         self._ran = False  # a window or playback ran at the last clock sync
         self._synced = self._clock0  # when the device clock was last brought up [wall s]
@@ -182,7 +191,7 @@ class Emulator:
         ``flush=False`` leaves the write to the caller, to batch frames in one)."""
         with self._wlock:
             self._seq = (self._seq + 1) & 0xFFFF
-            self._tx += M.encode(msg, self._seq, 2)
+            self._tx += M.encode(msg, self._seq, self.proto)
             if len(self._tx) > TX_MAX:
                 cut = len(self._tx) - TX_MAX
                 self.tx_dropped += cut
@@ -229,6 +238,10 @@ class Emulator:
                     for frame in self.decoder.feed(data):
                         self.frames_in += 1
                         self._handle(frame)
+                    if self._fault_due:  # an ESTOP outside a run: told after the frames
+                        self._fault_due = False  # read with it (a CLEAR_FAULT among them
+                        self._report_fault()  # finds it not yet told: docs §3)
+                        self._estop_pending = False
             # the device time before a look that finds the port empty: whatever comes
             # later arrived after it (the servo worker may move the clock meanwhile;
             # between runs the clock is brought up to now first)
@@ -306,6 +319,7 @@ class Emulator:
         f = self.sim.fault
         if f is not None and not self._fault_sent:
             self._fault_sent = True
+            self._estop_pending = False
             if f.code == "estop" and self._estop_rx is not None:
                 lat = max(0.0, f.t - self._estop_rx)
                 self._estop_max = lat if self._estop_max is None else max(self._estop_max, lat)
@@ -362,10 +376,10 @@ class Emulator:
                 return
         if isinstance(msg, M.Hello):
             self._link_reset(self.sim.time)  # a new host session
-            self._hello()
+            self._hello(msg.host_protocol)
             return
-        if frame.version != 2 and not isinstance(msg, M.EStop):
-            # this device speaks version 2 only, from HELLO_ACK on
+        if frame.version != self.proto and not isinstance(msg, M.EStop):
+            # the session's version, from HELLO_ACK on
             self.send(M.Ack(frame.seq, M.Status.BAD_MESSAGE))
             return
         if isinstance(msg, M.Heartbeat):
@@ -389,10 +403,13 @@ class Emulator:
             if msg.reset:
                 self._link_reset(self.sim.time)
 
-    def _hello(self) -> None:
+    def _hello(self, host_protocol: int) -> None:
         """HELLO, from a frame of any version: a new host session. A window or playback left
         running ends; output goes off (IDLE) unless a fault is latched; the rating and the
-        default trace configuration come back. Answered in version 2, then LIMITS."""
+        default trace configuration come back. Answered in the newest version it speaks
+        that the host's is not below (its oldest, 2, for an older host), then LIMITS, each
+        laid out as that version lays it out (docs §1a, §1b)."""
+        self.proto = max(contract.OLDEST, min(contract.PROTOCOL, host_protocol))
         self._last = None  # a new host session starts its sequence numbers again
         if self._busy() and self._running != "commit":
             self._rehome = False
@@ -407,7 +424,7 @@ class Emulator:
         sim.set_current_limit(i.current_limit)
         self._trace_config(self.limits.channels, 1)
         self.send(M.HelloAck(
-            2, int(i.servo_rate_hz), int(round(i.current_limit * 1000)),
+            self.proto, int(i.servo_rate_hz), int(round(i.current_limit * 1000)),
             int(round(i.force_constant * 1000)), int(round(i.effective_mass * 1e6)),
             int(round(i.watchdog_s * 1000)), int(round(i.encoder_resolution * 1e9)),
             int(round(i.accel_range * 1000)), b"hapticlab emulator (sim plant)",
@@ -501,6 +518,9 @@ class Emulator:
             return bool((np.diff(np.asarray(msg.items, np.float32)) > 0).all())
         if isinstance(msg, M.PlayChunk):
             return msg.offset + msg.n <= self.limits.play_items
+        if isinstance(msg, M.StartWindow):  # refused by name, before anything acts
+            span = msg.duration_ms + (msg.timeout_ms if msg.from_contact else 0)
+            return span <= self.limits.max_window_ms
         return True
 
     def _execute(self, msg: M.Message) -> int:
@@ -515,11 +535,14 @@ class Emulator:
                 self._estop_rx = self._rx_empty_at  # it arrived after: to the zeroing tick
             sim.estop()  # the servo loop zeroes output at its next tick
             self._rehome = False
+            self._estop_pending = True
             if not running:  # in a window the loop reports it, timed at the zeroing tick
-                self._report_fault()
+                self._fault_due = True
             _log("host: ESTOP")
             return S.OK
         if isinstance(msg, M.ClearFault):
+            if self._estop_pending or (sim.fault is not None and not self._fault_sent):
+                return S.FAULT_LATCHED  # not told yet: sent with the ESTOP (docs §3)
             if sim.fault is not None:
                 sim.clear_fault()
                 self._homed_um = None
@@ -583,9 +606,12 @@ class Emulator:
         S = M.Status
         if isinstance(msg, M.SceneBegin):
             self._scene_upload()
-            self._scenes[msg.scene_id] = {"begin": msg, "v": None,
-                                          "table": np.zeros(msg.rows * msg.row_len, np.int16),
-                                          "scene": None}
+            # one upload at a time: a scene begun before this one is withdrawn, and a
+            # command naming it is UNKNOWN_SCENE (docs §4), as on a device that has room
+            # for one table
+            self._scenes = {msg.scene_id: {"begin": msg, "v": None,
+                                           "table": np.zeros(msg.rows * msg.row_len, np.int16),
+                                           "scene": None}}
             return S.OK
         sc = self._scenes.get(msg.scene_id)
         if sc is None:
@@ -702,7 +728,8 @@ class Emulator:
         with self._olock:  # after the window's last chunk
             fault = _FAULT[res.faults[0].code] if res.faults else 0
             self._outbox.append(M.WindowDone(window_id, t0_us, len(res.traces["t"]), first,
-                                             len(res.contacts), len(res.saturations),
+                                             min(len(res.contacts), 0xFFFF),  # saturated
+                                             min(len(res.saturations), 0xFFFF),
                                              int(res.timed_out), fault))
 
     def _run_window(self, msg: M.StartWindow) -> None:
@@ -783,8 +810,8 @@ def main(rate_hz: float = 10_000.0, seed: int = 0, speed: float = 1.0) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     print(path, flush=True)
-    print(f"emulating a {rate_hz:g}-Hz device (protocol 2, sim plant, seed {seed}, speed "
-          f"×{speed:g}); stop with Ctrl-C", file=sys.stderr, flush=True)
+    print(f"emulating a {rate_hz:g}-Hz device (protocol {contract.PROTOCOL}, sim plant, seed "
+          f"{seed}, speed ×{speed:g}); stop with Ctrl-C", file=sys.stderr, flush=True)
     try:
         emu.serve_forever()
     finally:

@@ -13,13 +13,17 @@ import struct
 import zlib
 from dataclasses import dataclass
 
+from .contract import PROTOCOL
+
 __all__ = ["cobs_encode", "cobs_decode", "encode_frame", "decode_payload", "FrameDecoder",
            "FramingError", "PROTOCOL_VERSION", "MAX_PAYLOAD", "Frame"]
 
-#: the newest version this host speaks; frames of every version from PROTOCOL_MIN up are
-#: decoded (a HELLO always travels in version 1 so that any device reads it)
-PROTOCOL_VERSION = 2
+#: the newest version this host speaks (the contract states it); frames of every version
+#: from PROTOCOL_MIN up are decoded (a HELLO always travels in version 1 so that any
+#: device reads it), and an ESTOP in a frame of any version (docs §3)
+PROTOCOL_VERSION = PROTOCOL
 PROTOCOL_MIN = 1
+_ESTOP = 0x30
 MAX_PAYLOAD = 1024  # bytes before COBS, CRC included
 _HEAD = struct.Struct("<BBH")
 _CRC = struct.Struct("<I")
@@ -104,7 +108,7 @@ def decode_payload(encoded: bytes) -> Frame:
     if zlib.crc32(body) & 0xFFFFFFFF != crc:
         raise FramingError("CRC mismatch", "crc")
     version, mtype, seq = _HEAD.unpack(body[:4])
-    if not PROTOCOL_MIN <= version <= PROTOCOL_VERSION:
+    if not PROTOCOL_MIN <= version <= PROTOCOL_VERSION and mtype != _ESTOP:
         raise FramingError(f"protocol version {version}, expected {PROTOCOL_MIN}–"
                            f"{PROTOCOL_VERSION}", "version")
     return Frame(mtype, seq, body[4:], version)

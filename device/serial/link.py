@@ -506,7 +506,8 @@ class Link:
                               "out_of_order"):
                         self.stats[k] = 0
                 return acks[-1]
-        raise ProtocolMismatchError(f"{self.port}: no HELLO answer in protocol version 1 or 2 "
+        raise ProtocolMismatchError(f"{self.port}: no HELLO answer in protocol version 1 to "
+                                    f"{PROTOCOL_VERSION} "
                                     f"(frames ok {self._decoder.frames_ok}, corrupt "
                                     f"{sum(self._decoder.errors.values())})")
 
@@ -667,7 +668,8 @@ class Link:
         r = self.remove(lambda e: isinstance(e, M.LinkReport))[-1]
         out = {"since_s": r.since_us * 1e-6, "frames": r.frames, "bad_frames": r.bad_frames,
                "gap_max_ms": r.max_gap_us * 1e-3, "gap_hist_2ms": list(r.items),
-               "estop_max_ms": None if r.estop_max_us == 0xFFFFFFFF else r.estop_max_us * 1e-3}
+               "estop_max_ms": None if r.estop_max_us in (None, 0xFFFFFFFF)
+               else r.estop_max_us * 1e-3}
         out.update(gap_percentiles(r.items, M.LINK_GAP_BIN_US * 1e-3, r.max_gap_us * 1e-3))
         return out
 

@@ -1,8 +1,11 @@
-"""Messages of the hapticlab wire protocol, versions 1 and 2 (docs/wire-protocol.md).
+"""Messages of the hapticlab wire protocol, versions 1 to 3 (docs/wire-protocol.md).
 
 Each message is a frozen dataclass named after its entry in the wire contract
-(:mod:`device.serial.contract`), which gives its type byte, little-endian layout, item
-counts and field ranges. Units and fixed-point encodings are stated per field.
+(:mod:`device.serial.contract`), which gives its type byte, little-endian layout in each
+version, item counts and field ranges. Units and fixed-point encodings are stated per
+field. A message decoded from a version whose layout lacks a field (a version-2 device's
+LIMITS has no ``capabilities``), or from a body that ends before it (docs §1b), has None
+there: not stated, never a made-up zero.
 """
 
 from __future__ import annotations
@@ -81,26 +84,64 @@ class Message:
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
         spec = C.BY_NAME[cls.NAME]
+        # a field appended to the contract and not declared here joins the class at its end
+        # (before @dataclass reads the class): the growth rule appends fields only
+        ann = cls.__dict__.get("__annotations__", {})
+        for f in spec.fields:
+            if f.name not in ann:
+                kind = {"f32": float}.get(f.type, bytes if f.type.startswith("bytes") else int)
+                ann[f.name] = kind.__name__
+                setattr(cls, f.name, kind())
+        cls.__annotations__ = ann
         cls.TYPE, cls.FMT = spec.type, spec.fmt
         cls.ARRAY = spec.items.code if spec.items is not None else None
         cls.ITEMS = spec.fixed_items
         cls.MAX_ITEMS = spec.fixed_items or spec.max_items
 
-    def body(self) -> bytes:
-        vals = tuple(getattr(self, f.name) for f in fields(self))  # astuple deep-copies
+    def body(self, version: int = C.PROTOCOL) -> bytes:
+        """The body as protocol ``version`` lays it out (its fields only)."""
+        layout = C.BY_NAME[self.NAME].layout(version)
+        fmt = "".join(f.code for f in layout)
+        head = struct.pack("<" + fmt, *(getattr(self, f.name) for f in layout))
         if self.ARRAY is None:
-            return struct.pack("<" + self.FMT, *vals)
-        head, items = vals[:-1], vals[-1]
-        return struct.pack("<" + self.FMT, *head) + struct.pack(f"<{len(items)}{self.ARRAY}",
-                                                                 *items)
+            return head
+        items = self.items  # type: ignore[attr-defined]
+        return head + struct.pack(f"<{len(items)}{self.ARRAY}", *items)
 
     @classmethod
-    def from_body(cls, body: bytes) -> Message:
-        size = struct.calcsize("<" + cls.FMT)
+    def from_body(cls, body: bytes, version: int = C.PROTOCOL) -> Message:
+        """The message in ``body``, laid out as protocol ``version`` lays it out (docs §1b).
+
+        Before the growth rule the body is exactly its length; from it on, at least the
+        length the version was published with: fields past the body's end are None (or 0
+        in a command, whose appended fields mean by 0 what it meant before), and bytes
+        past the fields this code knows are ignored in a report, and must be zero in a
+        command (a device cannot do what it does not know)."""
+        spec = C.BY_NAME[cls.NAME]
+        if version not in spec.versions:
+            raise MessageError(f"{cls.__name__}: not in protocol version {version}")
+        layout = spec.layout(version)
+        size = spec.size(version)
+        # a field the version does not have: absent (0 in a command: what it meant before)
+        values = dict.fromkeys((f.name for f in spec.fields),
+                               0 if spec.sender == "host" else None)
         if cls.ARRAY is None:
-            if len(body) != size:
-                raise MessageError(f"{cls.__name__}: body of {len(body)} bytes, expected {size}")
-            return cls(*struct.unpack("<" + cls.FMT, body))
+            grows = version >= C.EXTENSIBLE_FROM and cls.NAME not in C.FOREVER
+            least = C.min_size(spec, version) if grows else size
+            if len(body) < least or (not grows and len(body) != size):
+                raise MessageError(f"{cls.__name__}: body of {len(body)} bytes, expected "
+                                   + (f"at least {least}" if grows else f"{size}"))
+            if spec.sender == "host" and any(body[size:]):
+                raise MessageError(f"{cls.__name__}: bytes {size}–{len(body) - 1} ask for "
+                                   "fields this device does not know")
+            at = 0
+            for f in layout:
+                if at + f.size > len(body):
+                    values[f.name] = 0 if spec.sender == "host" else None
+                else:
+                    values[f.name] = struct.unpack_from("<" + f.code, body, at)[0]
+                at += f.size
+            return cls(**values)
         item = struct.calcsize("<" + cls.ARRAY)
         if len(body) < size or (len(body) - size) % item:
             raise MessageError(f"{cls.__name__}: body of {len(body)} bytes does not fit "
@@ -108,9 +149,10 @@ class Message:
         n = (len(body) - size) // item
         if cls.MAX_ITEMS is not None and n > cls.MAX_ITEMS:
             raise MessageError(f"{cls.__name__}: {n} items, at most {cls.MAX_ITEMS}")
-        head = struct.unpack("<" + cls.FMT, body[:size])
-        items = struct.unpack(f"<{n}{cls.ARRAY}", body[size:])
-        obj = cls(*head, tuple(items))
+        fmt = "".join(f.code for f in layout)
+        values.update(zip((f.name for f in layout), struct.unpack("<" + fmt, body[:size]),
+                          strict=True))
+        obj = cls(**values, items=struct.unpack(f"<{n}{cls.ARRAY}", body[size:]))
         obj.check_count()
         return obj
 
@@ -374,8 +416,8 @@ class HelloAck(Message):
         return _str(self.model), _str(self.serial), _str(self.firmware)
 
     @classmethod
-    def from_body(cls, body: bytes) -> Message:
-        m = super().from_body(body)
+    def from_body(cls, body: bytes, version: int = C.PROTOCOL) -> Message:
+        m = super().from_body(body, version)
         return cls(*astuple(m)[:8], *(b.rstrip(b"\x00") for b in astuple(m)[8:]))
 
 
@@ -402,11 +444,12 @@ class Limits(Message):
     tick_max_us: int = 0
     capabilities: int = 0
 
-    def can(self, name: str) -> bool:
+    def can(self, name: str) -> bool | None:
         """Whether the device states capability ``name`` (a value of
-        :data:`~device.serial.contract.CAPABILITIES`, e.g. ``"simulated_contact"``)."""
+        :data:`~device.serial.contract.CAPABILITIES`, e.g. ``"simulated_contact"``); None
+        where it states none (a version-2 device, whose LIMITS has no capabilities)."""
         bit = {v: k for k, v in C.CAPABILITIES.items()}[name]
-        return bool(self.capabilities >> bit & 1)
+        return None if self.capabilities is None else bool(self.capabilities >> bit & 1)
 
 
 @dataclass(frozen=True)
@@ -581,8 +624,10 @@ TRACE_ITEMS = C.TRACE_ITEMS  # f32 items per TraceBlock, and at most per TraceCh
 
 
 def encode(msg: Message, seq: int, version: int = 1) -> bytes:
-    """The delimited frame carrying ``msg`` in protocol ``version``."""
-    return encode_frame(msg.TYPE, seq, msg.body(), version)
+    """The delimited frame carrying ``msg`` in protocol ``version`` (laid out as that version
+    lays it out; HELLO travels in version 1, whose layout it keeps in every version)."""
+    layout = version if version in C.BY_NAME[msg.NAME].versions else C.PROTOCOL
+    return encode_frame(msg.TYPE, seq, msg.body(layout), version)
 
 
 def decode(frame: Frame) -> Message:
@@ -594,7 +639,7 @@ def decode(frame: Frame) -> Message:
     if cls is None:
         raise MessageError(f"unknown message type 0x{frame.type:02x}")
     try:
-        return cls.from_body(frame.body)
+        return cls.from_body(frame.body, frame.version)
     except struct.error as exc:
         raise MessageError(f"{cls.__name__}: {exc}") from None
 

@@ -12,11 +12,14 @@ Line format (fields separated by one space; ``#`` starts a comment line)::
     NAME HEX error crc|version|length|cobs
 
 ``frame``: the frame decodes (COBS, length, CRC, version) to protocol VERSION, message
-TYPE (decimal) with sequence number SEQ and the body bytes; ``fit`` when the body has the
-layout of its type (docs/wire-protocol.md §5–6), ``misfit`` when it does not (the device answers
-``ACK(BAD_MESSAGE)``). ``error``: the frame is discarded, for the reason given, checked in
-this order: an encoded frame longer than any valid one (length), COBS, payload length, CRC,
-version.
+TYPE (decimal) with sequence number SEQ and the body bytes; ``fit`` when the body has a
+layout its type has in that version (docs/wire-protocol.md §1b: before the growth rule
+exactly; from it on at least the published length, a command's unknown tail zero; counted
+arrays whose count matches; ranges are not judged), ``misfit`` when it does not (a device
+answers ``ACK(BAD_MESSAGE)``; an ESTOP stops all the same). ``error``: the frame is
+discarded, for the reason given, checked in this order: an encoded frame longer than any
+valid one (length), COBS, payload length, CRC, version (an ESTOP is never discarded for its
+version: §3).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import struct
 import sys
 import zlib
 
+from . import contract as C
 from . import messages as M
 from .framing import MAX_PAYLOAD, FramingError, cobs_encode, decode_payload, encode_frame
 
@@ -67,7 +71,8 @@ def _examples() -> list[tuple[str, M.Message]]:
         ("position", M.Position(9, 777, -5000)),
         # version 2
         ("trace_config", M.TraceConfig(0x7F, 4)),
-        ("limits", M.Limits(16384, 16384, 1024, 0x7F, 100, 100_000, 0, 0, 3)),
+        ("limits", M.Limits(16384, 16384, 1024, 0x7F, 100, 100_000, 0, 0, 3,
+                                      1_200_000)),
         ("trace_chunk", M.TraceChunk(9, 0x05, 40, 2, (0.25, -1.0, 0.5, 2.0))),
         ("trace_lost", M.TraceLost(9, 1024, 35)),
         ("link_query", M.LinkQuery(1)),
@@ -76,9 +81,9 @@ def _examples() -> list[tuple[str, M.Message]]:
     ]
 
 
-#: the examples sent in version-2 frames (the rest travel in version 1, as HELLO must)
-_V2 = {"trace_config", "limits", "trace_chunk", "trace_lost", "estop", "link_query",
-       "link_report"}
+#: the examples sent in version-1 frames (HELLO, as it must, and version 1's own); the
+#: rest travel in the newest version
+_V1 = {"hello", "trace_request", "trace_block"}
 
 
 def _frame_hex(frame: bytes) -> str:
@@ -93,8 +98,27 @@ def _raw(version: int, mtype: int, seq: int, body: bytes, crc_xor: int = 0) -> b
 
 def vectors() -> list[tuple[str, bytes]]:
     """(name, encoded frame without its delimiter) of every vector, in file order."""
-    out = [(name, encode_frame(m.TYPE, 100 + i, m.body(), 2 if name in _V2 else 1)[:-1])
+    out = [(name, M.encode(m, 100 + i, 1 if name in _V1 else C.PROTOCOL)[:-1])
            for i, (name, m) in enumerate(_examples())]
+    # the growth rule (docs §1b): version 2 as published; a longer report and a command
+    # whose unknown tail is zero fit, one that asks for more does not, nor a short body
+    lim = dict(_examples())["limits"]
+    out.append(("limits_v2", M.encode(lim, 200, 2)[:-1]))
+    out.append(("limits_v2_as_v3", encode_frame(lim.TYPE, 201, lim.body(), 2)[:-1]))
+    out.append(("link_report_v2", M.encode(dict(_examples())["link_report"], 202, 2)[:-1]))
+    out.append(("limits_longer", encode_frame(lim.TYPE, 203, lim.body() + b"\x07\0\0\0",
+                                              C.PROTOCOL)[:-1]))
+    first = C.min_size(C.BY_NAME["LIMITS"], C.PROTOCOL)  # as version 3 was first published
+    out.append(("limits_as_published", encode_frame(lim.TYPE, 209, lim.body()[:first],
+                                                    C.PROTOCOL)[:-1]))
+    out.append(("limits_short", encode_frame(lim.TYPE, 204, lim.body()[:first - 1],
+                                             C.PROTOCOL)[:-1]))
+    home = M.Home(20_000).body()
+    out.append(("home_tail_zero", encode_frame(0x20, 205, home + b"\0\0", C.PROTOCOL)[:-1]))
+    out.append(("home_tail_set", encode_frame(0x20, 206, home + b"\0\x01", C.PROTOCOL)[:-1]))
+    out.append(("home_v2_longer", encode_frame(0x20, 207, home + b"\0\0", 2)[:-1]))
+    # an ESTOP in a frame of a version nobody speaks: decoded (never discarded), acted on
+    out.append(("estop_version_9", _raw(9, 0x30, 208, b"")))
     # COBS past 254 bytes: a long run of non-zero bytes, zeros at the edges, and the most
     # items a frame holds (payload 1,024 bytes)
     ramp = tuple(((i % 200) + 1) * 37 for i in range(300))
@@ -110,7 +134,7 @@ def vectors() -> list[tuple[str, bytes]]:
     out.append(("zeros_everywhere", _raw(1, 0x03, 0, b"\0\0\0\0")))
     # what a receiver must discard
     out.append(("error_crc", _raw(1, 0x03, 5, struct.pack("<I", 1), crc_xor=0x00010000)))
-    out.append(("error_version", _raw(3, 0x03, 5, struct.pack("<I", 1))))
+    out.append(("error_version", _raw(C.PROTOCOL + 1, 0x03, 5, struct.pack("<I", 1))))
     out.append(("error_version_0", _raw(0, 0x03, 5, struct.pack("<I", 1))))
     out.append(("error_short", cobs_encode(b"\x01\x03\x05")))
     out.append(("error_long_payload", _raw(1, 0x12, 3, bytes(MAX_PAYLOAD - 7))))
@@ -121,7 +145,7 @@ def vectors() -> list[tuple[str, bytes]]:
     out.append(("misfit_chunk_odd", encode_frame(0x12, 8, b"\x01\0\0\0\0\0\x01\0\xff")[:-1]))
     out.append(("misfit_unknown_type", encode_frame(0x7E, 9, b"")[:-1]))
     out.append(("misfit_chunk_count", encode_frame(0x97, 10, M.TraceChunk(
-        1, 0x07, 0, 2, (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)).body()[:-4], 2)[:-1]))
+        1, 0x07, 0, 2, (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)).body()[:-4], C.PROTOCOL)[:-1]))
     return out
 
 
@@ -140,7 +164,8 @@ def expectation(encoded: bytes) -> str:
 
 
 def render() -> str:
-    lines = ["# hapticlab wire protocol v2 test vectors (device/serial/vectors.py; format in",
+    lines = [f"# hapticlab wire protocol test vectors, versions 1 to {C.PROTOCOL} "
+             "(device/serial/vectors.py; format in",
              "# its docstring). NAME HEX frame VERSION TYPE SEQ BODY_HEX fit|misfit, or",
              "# NAME HEX error KIND. HEX is the frame on the wire without its 0x00 delimiter;",
              "# BODY_HEX '-' is an empty body."]

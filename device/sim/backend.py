@@ -456,8 +456,11 @@ class SimDevice(HapticDevice):
         self._ist[K.IST_SINCE_ENABLE] = max(int(self._ist[K.IST_SINCE_ENABLE]),
                                             self._tick - self._tick_enabled)
         tick0 = self._tick
+        # room for the whole window at once: zeros the window does not reach cost nothing,
+        # and growing it midway copied every array so far (a stall the emulator's serve
+        # loop shares)
         res = self._run(cs, plan, n_max, stop_after, _EMPTY, on_progress, heartbeats,
-                        timeout if from_first_contact else None, duration + 2.0)
+                        timeout if from_first_contact else None, total_s)
         # no contact within the timeout; a window ended sooner (end_window, a fault) is not
         res.timed_out = (from_first_contact and res.t_first_contact is None
                          and (self._tick - tick0) * dev.dt >= timeout - dev.dt / 2)
@@ -724,6 +727,10 @@ def _contact_warnings(name: str, switches: int, unresolved: int, ticks: int,
     return out
 
 
+#: ticks of the hand's pull computed ahead of the servo at a time (1 s at 10 kHz)
+PULL_AHEAD = 10_000
+
+
 class _Buffers:
     """Growable per-tick arrays of a window, with the hand input computed alongside."""
 
@@ -732,8 +739,9 @@ class _Buffers:
         self.n = 0
         self.out = np.zeros((K.N_OUT, 0))
         self.flags = np.zeros(0, dtype=np.int64)
-        self.u_hand = np.zeros(0)
-        self.ensure(capacity)
+        self.u_hand = np.zeros(1)
+        self.pulled = 0  # ticks whose hand pull is computed
+        self._grow(capacity)
 
     pos = property(lambda self: self.out[K.OUT_POS])
     fcmd = property(lambda self: self.out[K.OUT_FCMD])
@@ -745,18 +753,29 @@ class _Buffers:
     a2 = property(lambda self: self.out[K.OUT_A2])
 
     def ensure(self, n: int) -> None:
-        if n <= self.n:
-            return
-        new = max(n, 2 * self.n)
-        out = np.zeros((K.N_OUT, new))
-        out[:, : self.n] = self.out[:, : self.n]
-        self.out = out
-        f = np.zeros(new, dtype=np.int64)
-        f[: self.n] = self.flags[: self.n]
-        self.flags = f
-        # the hand's pull at every tick, plus one beyond for its slope over the last tick
-        start = max(0, self.n)
-        zr, vr, ar = self.plan.reference(np.arange(start, new + 1) * self.dt)
-        kz, kv, ka = self.gains
-        self.u_hand = np.concatenate([self.u_hand[:start], kz * zr + kv * vr + ka * ar])
-        self.n = new
+        """Room for ticks [0, n) and the hand's pull computed up to tick n (and one beyond,
+        for its slope over the last tick). The pull is computed as the ticks come, never
+        ahead: for a window of 20 minutes all at once it held the interpreter for seconds,
+        and the emulator's serve loop fell silent meanwhile (issue 53 item 2)."""
+        if n > self.n:
+            self._grow(max(n, 2 * self.n))
+        if n + 1 > self.pulled:
+            start, end = self.pulled, min(self.n + 1, max(n + 1, self.pulled + PULL_AHEAD))
+            zr, vr, ar = self.plan.reference(np.arange(start, end) * self.dt)
+            kz, kv, ka = self.gains
+            self.u_hand[start:end] = kz * zr + kv * vr + ka * ar
+            self.pulled = end
+
+    def _grow(self, new: int) -> None:
+        """Room for ``new`` ticks (zeros: memory the window does not reach is never touched)."""
+        if new > self.n:
+            out = np.zeros((K.N_OUT, new))
+            out[:, : self.n] = self.out[:, : self.n]
+            self.out = out
+            f = np.zeros(new, dtype=np.int64)
+            f[: self.n] = self.flags[: self.n]
+            self.flags = f
+            u = np.zeros(new + 1)
+            u[: self.pulled] = self.u_hand[: self.pulled]
+            self.u_hand = u
+            self.n = new

@@ -23,7 +23,8 @@ void sim_encoder_force(int on, int32_t counts);
 
 /* the servo's tick periods: note each tick's wall time [ns] as it runs (from the thread
  * that runs the ticks), then read the period [us] below which a fraction q of them fall
- * (q = 1: the longest; SIM_PERIOD_BINS - 1: that or longer) and how many were timed */
+ * (q < 1: SIM_PERIOD_BINS - 1 means that or longer; q = 1: the longest as measured, up to
+ * UINT32_MAX) and how many were timed */
 #define SIM_PERIOD_BINS 20000u
 void sim_tick_seen(uint64_t now_ns);
 uint32_t sim_tick_period_us(double q);

@@ -1,4 +1,4 @@
-/* hapticlab wire protocol v2: framing (COBS, CRC-32) and message layouts.
+/* hapticlab wire protocol: framing (COBS, CRC-32) and message layouts.
  *
  * The contract is docs/wire-protocol.md; docs/wire-vectors.txt holds test vectors that
  * this code and the Python host both decode. C11, no dynamic allocation: every function
@@ -11,9 +11,10 @@
 #include <stdint.h>
 #include <string.h>
 
-/* the version this firmware speaks; frames of every version from HL_PROTOCOL_MIN up are
- * decoded (a HELLO comes in version 1, so that any device reads it) */
-#define HL_PROTOCOL_VERSION 2u
+#include "hl_contract.h" /* HL_PROTOCOL_VERSION and the layouts, from the contract */
+
+/* frames of every version from this one up to HL_PROTOCOL_VERSION are decoded (a HELLO
+ * comes in version 1, so that any device reads it), and an ESTOP in a frame of any */
 #define HL_PROTOCOL_MIN 1u
 /* payload = version, type, seq (u16), body, CRC-32: at most this many bytes */
 #define HL_MAX_PAYLOAD 1024u
@@ -51,7 +52,9 @@ size_t hl_cobs_encode(const uint8_t *in, size_t len, uint8_t *out, size_t cap);
 long hl_cobs_decode(const uint8_t *in, size_t len, uint8_t *out, size_t cap);
 
 /* Decode one encoded frame (without its delimiter) into payload (capacity at least
- * HL_MAX_PAYLOAD); on HL_FRAME_OK, *frame points into payload. */
+ * HL_MAX_PAYLOAD); on HL_FRAME_OK, *frame points into payload. A frame of a version
+ * outside HL_PROTOCOL_MIN ... HL_PROTOCOL_VERSION is HL_ERR_VERSION, unless it is an ESTOP
+ * (docs section 3: acted on in a frame of any version). */
 hl_frame_status hl_decode_frame(const uint8_t *encoded, size_t len, uint8_t *payload,
                                 hl_frame *frame);
 
@@ -64,10 +67,13 @@ size_t hl_encode_frame_v(uint8_t version, uint8_t type, uint16_t seq, const uint
 size_t hl_encode_frame(uint8_t type, uint16_t seq, const uint8_t *body, size_t body_len,
                        uint8_t *out, size_t cap);
 
-/* Does a body of body_len bytes have the layout of message type (docs §5-6)? Fixed part,
- * whole array items, and for chunked messages the count field equal to the items that
- * follow. An unknown type does not fit. */
-int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len);
+/* Does a body of body_len bytes have the layout of message type in protocol `version`
+ * (docs sections 1b, 5-6)? Before the growth rule, exactly its length; from it on, at
+ * least the length the version was published with, and a command's bytes past the newest
+ * layout zero (a device cannot do what it does not know); whole array items, and for
+ * chunked messages the count field equal to the items that follow. An unknown type, or
+ * one the version does not have, does not fit. */
+int hl_body_fits(uint8_t version, uint8_t type, const uint8_t *body, size_t body_len);
 
 /* Are the fields of a command that fits its layout within their ranges (docs section 5a:
  * every f32 finite, every bounded field within its bounds, the device's limits as this

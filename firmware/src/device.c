@@ -24,7 +24,7 @@
 #define WATCHDOG_TICKS (HL_WATCHDOG_MS * (HL_SERVO_HZ / 1000u))
 #define N_EVENTS 64u
 #define TX_RESERVE 2200u /* UART room kept for control frames while traces stream */
-#define GAP_BINS 64u      /* LINK_REPORT: gaps between host frames in 2-ms bins */
+#define GAP_BINS HL_LINK_REPORT_ITEMS /* LINK_REPORT: gaps between host frames, 2-ms bins */
 #define GAP_BIN_US 2000u
 /* the longest frame the e-stop's own path looks into [encoded bytes]: an ESTOP with stray
  * bytes in its body; a longer one is acted on by the main loop, as every other command */
@@ -33,6 +33,7 @@
 #ifndef HL_MODEL
 #define HL_MODEL "hapticlab reference firmware"
 #endif
+#define HL_FIRMWARE "hlfw-2.0 " HL_BUILD /* HELLO_ACK.firmware */
 
 static const float ENC_M = (float)HL_ENCODER_NM * 1e-9f;
 static const float KF = (float)HL_FORCE_CONSTANT_MN_A * 1e-3f;
@@ -126,6 +127,7 @@ static struct {
     volatile uint8_t estop_timed;    /* ... when set (cleared by the tick that zeroes) */
     volatile uint32_t estop_max_ticks; /* the longest from such a tick to the zeroing one */
     volatile uint8_t estop_seen;
+    uint8_t fault_told; /* the latched fault was sent in a FAULT or a STATUS (main loop) */
     /* the e-stop's own path (hl_device_rx_byte, in the UART's receive interrupt on a
      * board; it and the main loop share rx_mark and the estop_ fields under hal_lock):
      * the frame arriving */
@@ -153,46 +155,9 @@ float hl_test_extra_force; /* [N], added to every tick's command (tests only) */
 static int16_t TABLE[HL_TABLE_ITEMS];
 static int16_t PLAY[HL_PLAY_ITEMS];
 
-/* ------------------------------------------------------------------ little-endian helpers */
-static uint16_t get_u16(const uint8_t *p) { return (uint16_t)(p[0] | (p[1] << 8)); }
-static uint32_t get_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) |
-           ((uint32_t)p[3] << 24);
-}
-static float get_f32(const uint8_t *p)
-{
-    uint32_t u = get_u32(p);
-    float f;
-    memcpy(&f, &u, 4);
-    return f;
-}
-static uint8_t *put_u16(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    return p + 2;
-}
-static uint8_t *put_u32(uint8_t *p, uint32_t v)
-{
-    for (int k = 0; k < 4; k++) {
-        p[k] = (uint8_t)(v >> (8 * k));
-    }
-    return p + 4;
-}
-static uint8_t *put_u64(uint8_t *p, uint64_t v)
-{
-    for (int k = 0; k < 8; k++) {
-        p[k] = (uint8_t)(v >> (8 * k));
-    }
-    return p + 8;
-}
-static uint8_t *put_f32(uint8_t *p, float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, 4);
-    return put_u32(p, u);
-}
+/* Message bodies are read and written through the accessors hl_contract.h generates from
+ * the wire contract (hl_<message>_<field>, hl_<message>_set_<field>, HL_<MESSAGE>_SIZE):
+ * no offset or size is written here by hand. */
 
 /* the clamp [A] for a limit in mA: the binary32 at or just below it, never above */
 static float clamp_of(uint32_t ma)
@@ -403,7 +368,9 @@ void hl_servo_tick(void)
             flags |= HL_FLAG_CONTACT;
             if (D.armed) {
                 D.armed = 0;
-                D.n_contacts++;
+                if (D.n_contacts < UINT16_MAX) {
+                    D.n_contacts++; /* WINDOW_DONE's u16 stops there, never wraps */
+                }
                 if (D.first_contact < 0) {
                     D.first_contact = (int32_t)D.wtick;
                 }
@@ -476,7 +443,9 @@ void hl_servo_tick(void)
                 D.sat_on = 1;
                 D.sat_start = D.wtick;
                 D.sat_peak = 0.0f;
-                D.n_sats++;
+                if (D.n_sats < UINT16_MAX) {
+                    D.n_sats++;
+                }
             }
             if (fabsf(want) > D.sat_peak) {
                 D.sat_peak = fabsf(want);
@@ -525,8 +494,11 @@ void hl_servo_tick(void)
  * stops reading */
 static int send(uint8_t type, const uint8_t *body, size_t len, int control)
 {
-    uint8_t out[HL_MAX_ENCODED + 1];
-    size_t n = hl_encode_frame(type, (uint16_t)(D.tx_seq + 1u), body, len, out, sizeof out);
+    uint8_t out[HL_MAX_ENCODED + 1], as[HL_MAX_PAYLOAD];
+    /* in the host session's version: the layout it was published with (docs 1b) */
+    size_t blen = hl_body_as(D.proto, type, body, len, as);
+    size_t n = hl_encode_frame_v(D.proto, type, (uint16_t)(D.tx_seq + 1u), as, blen, out,
+                                 sizeof out);
     if (n == 0) {
         return 0;
     }
@@ -544,48 +516,41 @@ static int send(uint8_t type, const uint8_t *body, size_t len, int control)
 
 static void send_ack(uint16_t seq, uint8_t status)
 {
-    uint8_t b[3];
-    put_u16(b, seq);
-    b[2] = status;
-    send(0x80, b, 3, 1);
-}
-
-static void copy_str(uint8_t *dst, const char *s, size_t n)
-{
-    memset(dst, 0, n);
-    for (size_t i = 0; i < n && s[i]; i++) {
-        dst[i] = (uint8_t)s[i];
-    }
+    uint8_t b[HL_ACK_SIZE];
+    hl_ack_set_ack_seq(b, seq);
+    hl_ack_set_status(b, status);
+    send(HL_MSG_ACK, b, sizeof b, 1);
 }
 
 static void send_hello_ack(void)
 {
-    uint8_t b[87], *p = b;
-    *p++ = D.proto;
-    p = put_u32(p, HL_SERVO_HZ);
-    p = put_u16(p, HL_CURRENT_RATING_MA);
-    p = put_u16(p, HL_FORCE_CONSTANT_MN_A);
-    p = put_u32(p, HL_EFFECTIVE_MASS_MG);
-    p = put_u16(p, HL_WATCHDOG_MS);
-    p = put_u32(p, HL_ENCODER_NM);
-    p = put_u32(p, HL_ACCEL_RANGE_MMS2);
-    copy_str(p, HL_MODEL, 32);
-    copy_str(p + 32, D.serial, 16);
-    copy_str(p + 48, "hlfw-2.0 " HL_BUILD, 16);
-    send(0x81, b, sizeof b, 1);
-    uint8_t l[32];
+    uint8_t b[HL_HELLO_ACK_SIZE];
+    hl_hello_ack_set_protocol(b, D.proto);
+    hl_hello_ack_set_servo_rate_hz(b, HL_SERVO_HZ);
+    hl_hello_ack_set_current_limit_ma(b, HL_CURRENT_RATING_MA);
+    hl_hello_ack_set_force_constant(b, HL_FORCE_CONSTANT_MN_A);
+    hl_hello_ack_set_effective_mass(b, HL_EFFECTIVE_MASS_MG);
+    hl_hello_ack_set_watchdog_ms(b, HL_WATCHDOG_MS);
+    hl_hello_ack_set_encoder_nm(b, HL_ENCODER_NM);
+    hl_hello_ack_set_accel_range(b, HL_ACCEL_RANGE_MMS2);
+    hl_hello_ack_set_model(b, HL_MODEL);
+    hl_hello_ack_set_serial(b, D.serial);
+    hl_hello_ack_set_firmware(b, HL_FIRMWARE);
+    send(HL_MSG_HELLO_ACK, b, sizeof b, 1);
+    uint8_t l[HL_LIMITS_SIZE];
     uint32_t p99 = 0, longest = 0;
     hal_tick_periods_us(&p99, &longest); /* measured where a computer's clock drives it */
-    p = put_u32(l, HL_TABLE_ITEMS);
-    p = put_u32(p, HL_PLAY_ITEMS);
-    p = put_u32(p, HL_RING_RECORDS);
-    p = put_u16(p, HL_CHANNEL_MASK);
-    p = put_u16(p, HL_MAX_DECIMATION);
-    p = put_u32(p, hal_link_bytes_s()); /* measured where it can be (the QEMU build) */
-    p = put_u32(p, p99);
-    p = put_u32(p, longest);
-    put_u32(p, hal_capabilities());
-    send(0x82, l, sizeof l, 1);
+    hl_limits_set_table_items(l, HL_TABLE_ITEMS);
+    hl_limits_set_play_items(l, HL_PLAY_ITEMS);
+    hl_limits_set_ring_records(l, HL_RING_RECORDS);
+    hl_limits_set_channels(l, HL_CHANNEL_MASK);
+    hl_limits_set_max_decimation(l, HL_MAX_DECIMATION);
+    hl_limits_set_link_bytes_s(l, hal_link_bytes_s()); /* measured where it can be (QEMU) */
+    hl_limits_set_tick_p99_us(l, p99);
+    hl_limits_set_tick_max_us(l, longest);
+    hl_limits_set_capabilities(l, hal_capabilities());
+    hl_limits_set_max_window_ms(l, HL_MAX_WINDOW_MS); /* it streams: any window at all */
+    send(HL_MSG_LIMITS, l, sizeof l, 1); /* in a version-2 session, its first 20 bytes */
 }
 
 static uint8_t popcount16(uint16_t m)
@@ -642,21 +607,26 @@ static void begin_run(uint8_t state, uint16_t window_id)
 static int rules_fit(uint8_t type, const uint8_t *b, size_t len)
 {
     if (type == HL_MSG_SCENE_BEGIN) {
-        uint8_t kind = b[2], rows = b[35];
-        uint16_t row_len = get_u16(b + 36);
+        uint8_t kind = hl_scene_begin_kind(b), rows = hl_scene_begin_rows(b);
+        uint16_t row_len = hl_scene_begin_row_len(b);
         return kind == 2 ? rows > 0 && row_len > 0 && (uint32_t)rows * row_len <= HL_TABLE_ITEMS
                          : rows == 0 && row_len == 0;
     }
     if (type == HL_MSG_SCENE_VELOCITIES) {
-        for (size_t i = 1; i < (len - 2) / 4; i++) {
-            if (!(get_f32(b + 2 + 4 * i) > get_f32(b + 4 * i - 2))) {
+        for (size_t i = 1; i < (len - HL_SCENE_VELOCITIES_SIZE) / 4u; i++) {
+            if (!(hl_scene_velocities_item(b, i) > hl_scene_velocities_item(b, i - 1u))) {
                 return 0; /* ascending */
             }
         }
         return 1;
     }
-    if (type == HL_MSG_PLAY_CHUNK) {
-        return get_u16(b + 4) <= HL_PLAY_ITEMS - get_u32(b); /* offset <= play_items: ranges */
+    if (type == HL_MSG_START_WINDOW) { /* never beyond it with each in its range */
+        uint64_t span = (uint64_t)hl_start_window_duration_ms(b) +
+                        (hl_start_window_from_contact(b) ? hl_start_window_timeout_ms(b) : 0u);
+        return span <= HL_MAX_WINDOW_MS;
+    }
+    if (type == HL_MSG_PLAY_CHUNK) { /* offset <= play_items: the ranges */
+        return hl_play_chunk_n(b) <= HL_PLAY_ITEMS - hl_play_chunk_offset(b);
     }
     return 1;
 }
@@ -676,18 +646,18 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
     case HL_MSG_SCENE_BEGIN: {
         scene_upload();
         memset(&S, 0, sizeof S);
-        S.scene_id = get_u16(b);
-        S.kind = b[2];
+        S.scene_id = hl_scene_begin_scene_id(b);
+        S.kind = hl_scene_begin_kind(b);
         S.begun = 1;
-        S.surface_um = (int32_t)get_u32(b + 3);
-        S.spring = get_f32(b + 7);
-        S.sample.stiffness = get_f32(b + 11);
-        S.sample.damping = get_f32(b + 15);
-        S.sample.block_mass = get_f32(b + 31);
-        S.rows = b[35];
-        S.row_len = get_u16(b + 36);
-        S.blend = b[38];
-        S.attenuation = get_f32(b + 39);
+        S.surface_um = hl_scene_begin_surface_um(b);
+        S.spring = hl_scene_begin_spring(b);
+        S.sample.stiffness = hl_scene_begin_stiffness(b);
+        S.sample.damping = hl_scene_begin_damping(b);
+        S.sample.block_mass = hl_scene_begin_block_mass(b);
+        S.rows = hl_scene_begin_rows(b);
+        S.row_len = hl_scene_begin_row_len(b);
+        S.blend = hl_scene_begin_blend(b);
+        S.attenuation = hl_scene_begin_attenuation(b);
         if (S.kind == 2) {
             memset(TABLE, 0, (size_t)S.rows * S.row_len * sizeof TABLE[0]);
         }
@@ -695,29 +665,33 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
     }
     case HL_MSG_SCENE_VELOCITIES: case HL_MSG_SCENE_CHUNK: case HL_MSG_SCENE_SUPPORT:
     case HL_MSG_SCENE_COMMIT: {
-        if (!S.begun || get_u16(b) != S.scene_id) {
+        uint16_t id = type == HL_MSG_SCENE_VELOCITIES ? hl_scene_velocities_scene_id(b)
+                      : type == HL_MSG_SCENE_CHUNK   ? hl_scene_chunk_scene_id(b)
+                      : type == HL_MSG_SCENE_SUPPORT ? hl_scene_support_scene_id(b)
+                                                     : hl_scene_commit_scene_id(b);
+        if (!S.begun || id != S.scene_id) {
             return HL_UNKNOWN_SCENE;
         }
         if (type == HL_MSG_SCENE_VELOCITIES) {
-            size_t n = (len - 2) / 4;
+            size_t n = (len - HL_SCENE_VELOCITIES_SIZE) / 4u;
             if (n != S.rows) {
                 return HL_BAD_MESSAGE;
             }
             scene_upload();
             for (size_t i = 0; i < n; i++) {
-                S.v[i] = get_f32(b + 2 + 4 * i);
+                S.v[i] = hl_scene_velocities_item(b, i);
             }
             S.have_v = 1;
             return HL_OK;
         }
         if (type == HL_MSG_SCENE_CHUNK) {
-            uint32_t off = get_u32(b + 2), n = get_u16(b + 6);
+            uint32_t off = hl_scene_chunk_offset(b), n = hl_scene_chunk_n(b);
             if (off > (uint32_t)S.rows * S.row_len || n > (uint32_t)S.rows * S.row_len - off) {
                 return HL_BAD_MESSAGE;
             }
             scene_upload();
             for (uint32_t i = 0; i < n; i++) {
-                TABLE[off + i] = (int16_t)get_u16(b + 8 + 2 * i);
+                TABLE[off + i] = hl_scene_chunk_item(b, i);
             }
             return HL_OK;
         }
@@ -726,8 +700,8 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
                 return HL_BAD_MESSAGE;
             }
             scene_upload();
-            S.sample.support_k = get_f32(b + 2);
-            S.sample.support_b = get_f32(b + 6);
+            S.sample.support_k = hl_scene_support_stiffness(b);
+            S.sample.support_b = hl_scene_support_damping(b);
             return HL_OK;
         }
         /* SCENE_COMMIT */
@@ -736,7 +710,7 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         if (S.kind == 2 && !S.have_v) {
             return HL_BAD_MESSAGE;
         }
-        if (crc != get_u32(b + 2)) {
+        if (crc != hl_scene_commit_crc32(b)) {
             return HL_TABLE_CRC;
         }
         scene_upload();
@@ -751,7 +725,7 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
             return HL_BAD_STATE;
         }
         hal_lock();
-        hal_plant_home((float)S.surface_um * 1e-6f + (float)get_u32(b) * 1e-6f);
+        hal_plant_home((float)S.surface_um * 1e-6f + (float)hl_home_clearance_um(b) * 1e-6f);
         D.enabled = 1;
         D.ramp = 0;
         D.state = HL_HOMED;
@@ -760,10 +734,10 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
     }
     case HL_MSG_START_WINDOW:
         hal_lock();
-        D.duration = get_u32(b + 2) * (HL_SERVO_HZ / 1000u);
-        D.timeout = get_u32(b + 6) * (HL_SERVO_HZ / 1000u);
-        D.from_contact = b[10];
-        begin_run(HL_WINDOW, get_u16(b));
+        D.duration = hl_start_window_duration_ms(b) * (HL_SERVO_HZ / 1000u);
+        D.timeout = hl_start_window_timeout_ms(b) * (HL_SERVO_HZ / 1000u);
+        D.from_contact = hl_start_window_from_contact(b);
+        begin_run(HL_WINDOW, hl_start_window_window_id(b));
         hal_plant_task(HAL_TASK_TAP);
         hal_unlock();
         return HL_OK;
@@ -773,9 +747,9 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         }
         return HL_OK;
     case HL_MSG_PLAY_CHUNK: {
-        uint32_t off = get_u32(b), n = get_u16(b + 4);
+        uint32_t off = hl_play_chunk_offset(b), n = hl_play_chunk_n(b);
         for (uint32_t i = 0; i < n; i++) {
-            PLAY[off + i] = (int16_t)get_u16(b + 6 + 2 * i);
+            PLAY[off + i] = hl_play_chunk_item(b, i);
         }
         return HL_OK;
     }
@@ -787,12 +761,12 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
             D.enabled = 1;
             D.ramp = 0;
         }
-        D.play_n = get_u32(b + 2);
-        begin_run(HL_PLAYING, get_u16(b));
+        D.play_n = hl_play_start_n_samples(b);
+        begin_run(HL_PLAYING, hl_play_start_window_id(b));
         hal_unlock();
         return HL_OK;
     case HL_MSG_SET_LIMIT:
-        D.limit = clamp_of(get_u16(b));
+        D.limit = clamp_of(hl_set_limit_current_ma(b));
         return HL_OK;
     case HL_MSG_ESTOP:
         /* in order with the frames before it, whether or not the e-stop's own path asked
@@ -810,9 +784,13 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         if (hal_estop_pressed()) {
             return HL_FAULT_LATCHED; /* the button is still held */
         }
+        if (D.req_estop || (D.fault != HL_FAULT_NONE && !D.fault_told)) {
+            return HL_FAULT_LATCHED; /* not told yet: an ESTOP sent with it stays (docs 3) */
+        }
         if (D.state == HL_FAULT) {
             hal_lock();
             D.fault = HL_FAULT_NONE;
+            D.fault_told = 0;
             D.enabled = 0;
             D.state = HL_IDLE;
             hal_unlock();
@@ -833,8 +811,8 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
     case HL_MSG_LINK_QUERY: /* answered in every state (handle() sends the report) */
         return HL_OK;
     case HL_MSG_TRACE_CONFIG:
-        D.mask = get_u16(b);
-        D.decim = get_u16(b + 2);
+        D.mask = hl_trace_config_channels(b);
+        D.decim = hl_trace_config_decimation(b);
         D.nch = popcount16(D.mask);
         return HL_OK;
     default:
@@ -886,19 +864,24 @@ static void link_note(uint64_t now)
 
 static void send_link_report(void)
 {
-    uint8_t b[24 + 2 * GAP_BINS], *p = put_u64(b, ticks_to_us(D.gap_since));
-    p = put_u32(p, D.gap_frames);
-    p = put_u32(p, rx_errors() - D.gap_bad0);
+    uint8_t b[HL_LINK_REPORT_BYTES(HL_LINK_REPORT_ITEMS)];
+    hl_link_report_set_since_us(b, ticks_to_us(D.gap_since));
+    hl_link_report_set_frames(b, D.gap_frames);
+    hl_link_report_set_bad_frames(b, rx_errors() - D.gap_bad0);
     uint64_t max_us = ticks_to_us(D.gap_max_ticks);
-    p = put_u32(p, max_us > UINT32_MAX ? UINT32_MAX : (uint32_t)max_us);
+    hl_link_report_set_max_gap_us(b, max_us > UINT32_MAX ? UINT32_MAX : (uint32_t)max_us);
     hal_lock();
     uint64_t estop_us = D.estop_seen ? ticks_to_us(D.estop_max_ticks) : UINT32_MAX;
+    uint8_t seen = D.estop_seen;
     hal_unlock();
-    p = put_u32(p, estop_us > UINT32_MAX ? UINT32_MAX : (uint32_t)estop_us);
-    for (uint32_t k = 0; k < GAP_BINS; k++) {
-        p = put_u16(p, D.gap_hist[k]);
+    /* 0xFFFFFFFF says "no ESTOP": a measured one stops one below it (docs 6) */
+    hl_link_report_set_estop_max_us(b, !seen ? UINT32_MAX
+                                             : estop_us >= UINT32_MAX ? UINT32_MAX - 1u
+                                                                      : (uint32_t)estop_us);
+    for (uint32_t k = 0; k < HL_LINK_REPORT_ITEMS; k++) {
+        hl_link_report_set_item(b, k, D.gap_hist[k]);
     }
-    send(0x99, b, sizeof b, 1);
+    send(HL_MSG_LINK_REPORT, b, sizeof b, 1);
 }
 
 static void handle(const hl_frame *f, uint8_t version)
@@ -909,13 +892,17 @@ static void handle(const hl_frame *f, uint8_t version)
     hal_lock();
     D.last_rx_tick = now; /* every intact frame feeds the watchdog */
     hal_unlock();
-    if (f->type == 0x01) { /* HELLO: any header version */
-        if (f->body_len != 1) {
+    if (f->type == HL_MSG_HELLO) { /* in a frame of any version it decodes */
+        if (!hl_body_fits(f->version, f->type, f->body, f->body_len)) {
             send_ack(f->seq, HL_BAD_MESSAGE); /* as any command that does not fit */
             return;
         }
         link_reset(); /* a new host session */
-        D.proto = 2; /* the only version this firmware speaks; a v1 host closes the link */
+        /* the newest version it speaks that the host's is not below; its oldest when the
+         * host's is older still (a version-1 host then closes the link) */
+        uint8_t host = hl_hello_host_protocol(f->body);
+        D.proto = host > HL_PROTOCOL_VERSION ? (uint8_t)HL_PROTOCOL_VERSION
+                  : host < HL_PROTOCOL_OLDEST ? (uint8_t)HL_PROTOCOL_OLDEST : host;
         D.have_last = 0;
         hal_lock();
         if (running()) {
@@ -940,19 +927,27 @@ static void handle(const hl_frame *f, uint8_t version)
         send_ack(f->seq, execute(f->type, f->body, 0));
         return;
     }
-    if (version != 2) {
+    if (version != D.proto) { /* the session's version, from HELLO_ACK on */
         send_ack(f->seq, HL_BAD_MESSAGE);
         return;
     }
-    if (!hl_body_fits(f->type, f->body, f->body_len)) {
+    if (!hl_body_fits(version, f->type, f->body, f->body_len)) {
         send_ack(f->seq, HL_BAD_MESSAGE);
         return;
     }
     if (f->type == HL_MSG_HEARTBEAT) {
         return;
     }
+    /* a body shorter than this device's layout (a host of an earlier publication of the
+     * version) reads zero in the fields it did not send: each appended field's zero means
+     * what the message meant before it (docs 1b) */
+    static uint8_t body[HL_MAX_PAYLOAD];
+    memset(body, 0, sizeof body);
+    memcpy(body, f->body, f->body_len);
     if (f->type == HL_MSG_PING) {
-        send(0x83, f->body, 4, 1);
+        uint8_t pong[HL_PONG_SIZE];
+        hl_pong_set_stamp(pong, hl_ping_stamp(body));
+        send(HL_MSG_PONG, pong, sizeof pong, 1);
         return;
     }
     uint32_t crc = hl_crc32(f->body, f->body_len);
@@ -961,7 +956,7 @@ static void handle(const hl_frame *f, uint8_t version)
         send_ack(f->seq, D.last_status); /* a re-sent command: answered, not redone */
         return;
     }
-    uint8_t st = execute(f->type, f->body, f->body_len);
+    uint8_t st = execute(f->type, body, f->body_len);
     D.have_last = 1;
     D.last_seq = f->seq;
     D.last_type = f->type;
@@ -969,9 +964,9 @@ static void handle(const hl_frame *f, uint8_t version)
     D.last_len = f->body_len;
     D.last_status = st;
     send_ack(f->seq, st);
-    if (f->type == 0x42 && st == HL_OK) { /* LINK_QUERY: the report follows its ACK */
+    if (f->type == HL_MSG_LINK_QUERY && st == HL_OK) { /* the report follows its ACK */
         send_link_report();
-        if (f->body[0]) {
+        if (hl_link_query_reset(body)) {
             link_reset();
         }
     }
@@ -981,7 +976,7 @@ static void send_events(void)
 {
     while (D.ev_r != D.ev_w) {
         event e = D.ev[D.ev_r % N_EVENTS];
-        uint8_t b[24], *p;
+        uint8_t b[HL_MAX_PAYLOAD];
         if (e.type != EV_FAULT && e.session != D.session) {
             D.ev_r = D.ev_r + 1; /* a run a HELLO ended: dropped, with its records */
             continue;
@@ -995,22 +990,22 @@ static void send_events(void)
         }
         switch (e.type) {
         case EV_CONTACT:
-            p = put_u16(b, e.window_id);
-            p = put_u32(p, e.tick);
-            put_u32(p, (uint32_t)e.a);
-            send(0x90, b, 10, 1);
+            hl_contact_set_window_id(b, e.window_id);
+            hl_contact_set_tick(b, e.tick);
+            hl_contact_set_velocity_nm_s(b, e.a);
+            send(HL_MSG_CONTACT, b, HL_CONTACT_SIZE, 1);
             break;
         case EV_SATURATION:
-            p = put_u16(b, e.window_id);
-            p = put_u32(p, e.tick);
-            p = put_u32(p, (uint32_t)e.a);
-            put_u32(p, (uint32_t)e.b);
-            send(0x91, b, 14, 1);
+            hl_saturation_set_window_id(b, e.window_id);
+            hl_saturation_set_tick(b, e.tick);
+            hl_saturation_set_duration(b, (uint32_t)e.a);
+            hl_saturation_set_peak_ma(b, e.b);
+            send(HL_MSG_SATURATION, b, HL_SATURATION_SIZE, 1);
             break;
         case EV_FAULT:
-            b[0] = e.code;
-            put_u64(b + 1, e.time_us);
-            send(0x92, b, 9, 1);
+            hl_fault_set_code(b, e.code);
+            hl_fault_set_time_us(b, e.time_us);
+            D.fault_told |= (uint8_t)send(HL_MSG_FAULT, b, HL_FAULT_SIZE, 1);
             break;
         default:
             break;
@@ -1021,10 +1016,11 @@ static void send_events(void)
 
 static void send_lost(uint32_t start, uint32_t n)
 {
-    uint8_t b[10], *p = put_u16(b, D.trace_window);
-    p = put_u32(p, start);
-    put_u32(p, n);
-    send(0x98, b, 10, 1);
+    uint8_t b[HL_TRACE_LOST_SIZE];
+    hl_trace_lost_set_window_id(b, D.trace_window);
+    hl_trace_lost_set_start(b, start);
+    hl_trace_lost_set_n(b, n);
+    send(HL_MSG_TRACE_LOST, b, sizeof b, 1);
 }
 
 /* stream the ring: TRACE_CHUNKs of consecutive records, TRACE_LOST for a gap */
@@ -1052,17 +1048,19 @@ static void send_traces(void)
         if (n < per && !D.done_pending && running()) {
             break; /* wait for a full chunk while the window runs */
         }
-        uint8_t b[10 + 4 * HL_CHUNK_FLOATS], *p = put_u16(b, D.trace_window);
-        p = put_u16(p, D.run_mask);
-        p = put_u32(p, first);
-        p = put_u16(p, n);
+        uint8_t b[HL_TRACE_CHUNK_BYTES(HL_TRACE_CHUNK_ITEMS)];
+        hl_trace_chunk_set_window_id(b, D.trace_window);
+        hl_trace_chunk_set_channels(b, D.run_mask);
+        hl_trace_chunk_set_start(b, first);
+        hl_trace_chunk_set_n(b, (uint16_t)n);
+        size_t items = 0;
         for (uint32_t i = 0; i < n; i++) {
             const float *rec = D.ring[(r + i) % HL_RING_RECORDS];
             for (uint8_t k = 0; k < D.run_nch; k++) {
-                p = put_f32(p, rec[k]);
+                hl_trace_chunk_set_item(b, items++, rec[k]);
             }
         }
-        if (!send(0x97, b, (size_t)(p - b), 0)) {
+        if (!send(HL_MSG_TRACE_CHUNK, b, HL_TRACE_CHUNK_BYTES(items), 0)) {
             break; /* the UART is full: the ring holds the records meanwhile */
         }
         D.ring_r = r + n;
@@ -1073,15 +1071,16 @@ static void send_traces(void)
             send_lost(D.next_record, D.done_records - D.next_record);
             D.next_record = D.done_records;
         }
-        uint8_t b[24], *p = put_u16(b, D.done.window_id);
-        p = put_u64(p, D.done.time_us);
-        p = put_u32(p, D.done.tick);
-        p = put_u32(p, (uint32_t)D.done.a);
-        p = put_u16(p, (uint32_t)D.done.b & 0xFFFFu);
-        p = put_u16(p, (uint32_t)D.done.b >> 16);
-        *p++ = D.done.code & 1u;
-        *p = (uint8_t)(D.done.code >> 1); /* the fault code that ended it, 0: none */
-        if (send(0x94, b, 24, 1)) {
+        uint8_t b[HL_WINDOW_DONE_SIZE];
+        hl_window_done_set_window_id(b, D.done.window_id);
+        hl_window_done_set_t0_us(b, D.done.time_us);
+        hl_window_done_set_n_ticks(b, D.done.tick);
+        hl_window_done_set_first_contact(b, D.done.a);
+        hl_window_done_set_n_contacts(b, (uint16_t)((uint32_t)D.done.b & 0xFFFFu));
+        hl_window_done_set_n_saturations(b, (uint16_t)((uint32_t)D.done.b >> 16));
+        hl_window_done_set_timed_out(b, D.done.code & 1u);
+        hl_window_done_set_fault(b, (uint8_t)(D.done.code >> 1)); /* what ended it; 0: none */
+        if (send(HL_MSG_WINDOW_DONE, b, sizeof b, 1)) {
             D.done_pending = 0; /* a frame the UART had no room for is tried again */
         }
     }
@@ -1099,7 +1098,7 @@ void hl_device_init(const char *serial_number)
     D.nch = D.run_nch = popcount16(HL_CHANNEL_MASK);
     D.proto = 2;
     D.wd_ticks = WATCHDOG_TICKS;
-    copy_str((uint8_t *)D.serial, serial_number, sizeof D.serial - 1);
+    hl_wr_text((uint8_t *)D.serial, serial_number, sizeof D.serial - 1);
 }
 
 void hl_device_pace(float speed)
@@ -1142,12 +1141,11 @@ void hl_device_rx_byte(uint8_t b)
     uint8_t p[SNIFF_MAX];
     long n = over || len == 0 ? -1 : hl_cobs_decode(D.sn_buf, len, p, sizeof p);
     /* the type first: only an ESTOP's check is computed here */
-    if (n < (long)(HL_HEADER_SIZE + HL_CRC_SIZE) || p[1] != HL_MSG_ESTOP ||
-        p[0] < HL_PROTOCOL_MIN || p[0] > HL_PROTOCOL_VERSION) {
-        return;
+    if (n < (long)(HL_HEADER_SIZE + HL_CRC_SIZE) || p[1] != HL_MSG_ESTOP) {
+        return; /* an ESTOP in a frame of any version stops (docs 3) */
     }
     size_t end = (size_t)n - HL_CRC_SIZE;
-    if (hl_crc32(p, end) != get_u32(p + end)) {
+    if (hl_crc32(p, end) != (uint32_t)hl_rd_le(p + end, 4)) {
         return;
     }
     hal_lock();
@@ -1193,18 +1191,22 @@ void hl_device_poll(void)
     uint32_t wt = D.wtick ? D.wtick - 1u : 0u; /* the tick that read this height */
     hal_unlock();
     if (pos_due && D.state == HL_WINDOW) {
-        uint8_t b[10], *p = put_u16(b, D.window_id);
-        p = put_u32(p, wt);
-        put_u32(p, (uint32_t)height);
-        send(0x96, b, 10, 0);
+        uint8_t b[HL_POSITION_SIZE];
+        hl_position_set_window_id(b, D.window_id);
+        hl_position_set_tick(b, wt);
+        hl_position_set_height_um(b, height);
+        send(HL_MSG_POSITION, b, sizeof b, 0);
     }
     if (now >= D.next_status) {
         D.next_status = now + REPORT_TICKS;
-        uint8_t b[14], *p = put_u64(b, ticks_to_us(now));
-        *p++ = D.state;
-        p = put_u32(p, (uint32_t)(int32_t)lroundf(D.current * KF * 1000.0f));
-        *p = D.fault;
-        send(0x93, b, 14, 0);
+        uint8_t b[HL_STATUS_SIZE];
+        hl_status_set_time_us(b, ticks_to_us(now));
+        hl_status_set_state(b, D.state);
+        hl_status_set_output_mn(b, (int32_t)lroundf(D.current * KF * 1000.0f));
+        hl_status_set_fault(b, D.fault);
+        if (send(HL_MSG_STATUS, b, sizeof b, 0) && D.fault != HL_FAULT_NONE) {
+            D.fault_told = 1; /* a FAULT frame the UART had no room for: STATUS says it */
+        }
     }
 }
 

@@ -19,6 +19,9 @@ typedef struct {
 
 static uint8_t tx_buf[SIM_TX_BYTES], rx_buf[SIM_RX_BYTES];
 static queue TX = {tx_buf, SIM_TX_BYTES, 0, 0}, RX = {rx_buf, SIM_RX_BYTES, 0, 0};
+#if HL_LINK_BYTES_S > 0u
+static uint64_t on_line; /* bytes a board's line has carried since power-up (below) */
+#endif
 
 static size_t q_put(queue *q, const uint8_t *b, size_t n)
 {
@@ -42,6 +45,9 @@ static size_t q_get(queue *q, uint8_t *b, size_t cap)
 void sim_hal_init(uint64_t seed)
 {
     TX.head = TX.len = RX.head = RX.len = 0;
+#if HL_LINK_BYTES_S > 0u
+    on_line = 0;
+#endif
     hal_io_init(seed);
 }
 
@@ -52,11 +58,33 @@ size_t sim_uart_to_device(const uint8_t *buf, size_t n)
     }
     return q_put(&RX, buf, n);
 }
+#if HL_LINK_BYTES_S > 0u
+/* a board's UART (the host-board builds: LIMITS.link_bytes_s > 0): the device's transmit
+ * buffer, as the STM32's, drains onto the line at its rate in device time, so a device
+ * that makes more than its line carries fills its ring and says so with TRACE_LOST, as a
+ * board does (docs 6a); the line banks no idle time beyond a millisecond's worth */
+#define SIM_LINE_BUFFER 8192u
+#define SIM_LINE_SLACK (HL_LINK_BYTES_S / 1000u + 1u)
+
+size_t sim_uart_from_device(uint8_t *buf, size_t cap)
+{
+    uint64_t due = hl_device_ticks() * (uint64_t)HL_LINK_BYTES_S / HL_SERVO_HZ;
+    if (due > on_line + SIM_LINE_SLACK) {
+        on_line = due - SIM_LINE_SLACK;
+    }
+    size_t allow = due > on_line ? (size_t)(due - on_line) : 0u;
+    size_t n = q_get(&TX, buf, cap < allow ? cap : allow);
+    on_line += n;
+    return n;
+}
+size_t hal_uart_space(void) { return TX.len < SIM_LINE_BUFFER ? SIM_LINE_BUFFER - TX.len : 0u; }
+#else
 size_t sim_uart_from_device(uint8_t *buf, size_t cap) { return q_get(&TX, buf, cap); }
+size_t hal_uart_space(void) { return TX.cap - TX.len; }
+#endif
 
 void hal_watchdog_kick(void) {}
 size_t hal_uart_read(uint8_t *buf, size_t cap) { return q_get(&RX, buf, cap); }
-size_t hal_uart_space(void) { return TX.cap - TX.len; }
 
 uint32_t hal_link_bytes_s(void) { return HL_LINK_BYTES_S; } /* the nominal: sending is free */
 void hal_uart_write(const uint8_t *buf, size_t len) { (void)q_put(&TX, buf, len); }
@@ -65,9 +93,10 @@ void hal_unlock(void) {}
 uint32_t hal_cycles(void) { return 0; }
 
 /* the servo's tick periods [us of wall time] in 1-us bins (the last holds the longer
- * ones), noted by the program that paces the ticks (sim_tick_seen) */
+ * ones), and the longest itself, noted by the program that paces the ticks
+ * (sim_tick_seen) */
 static struct {
-    uint64_t last_ns, n;
+    uint64_t last_ns, n, longest_us;
     uint32_t bins[SIM_PERIOD_BINS];
 } T;
 
@@ -76,6 +105,7 @@ void sim_tick_seen(uint64_t now_ns)
     if (T.last_ns != 0 && now_ns >= T.last_ns) {
         uint64_t us = (now_ns - T.last_ns) / 1000u;
         T.bins[us < SIM_PERIOD_BINS ? us : SIM_PERIOD_BINS - 1u]++;
+        T.longest_us = us > T.longest_us ? us : T.longest_us;
         T.n++;
     }
     T.last_ns = now_ns;
@@ -88,7 +118,10 @@ uint32_t sim_tick_period_us(double q)
     if (T.n == 0) {
         return 0u;
     }
-    uint64_t want = q >= 1.0 ? T.n - 1u : (uint64_t)(q * (double)T.n), seen = 0;
+    if (q >= 1.0) { /* the longest as measured, saturated only at the u32 field's top */
+        return T.longest_us > UINT32_MAX ? UINT32_MAX : (uint32_t)T.longest_us;
+    }
+    uint64_t want = (uint64_t)(q * (double)T.n), seen = 0;
     for (uint32_t i = 0; i < SIM_PERIOD_BINS; i++) {
         seen += T.bins[i];
         if (seen > want) {

@@ -1,4 +1,4 @@
-/* Framing and message layouts of the hapticlab wire protocol v2 (see hl_wire.h). */
+/* Framing and message layouts of the hapticlab wire protocol (see hl_wire.h). */
 #include "hl_wire.h"
 
 #include <math.h>
@@ -106,7 +106,7 @@ hl_frame_status hl_decode_frame(const uint8_t *encoded, size_t len, uint8_t *pay
     if (hl_crc32(tmp, body_end) != get_u32(tmp + body_end)) {
         return HL_ERR_CRC;
     }
-    if (tmp[0] < HL_PROTOCOL_MIN || tmp[0] > HL_PROTOCOL_VERSION) {
+    if ((tmp[0] < HL_PROTOCOL_MIN || tmp[0] > HL_PROTOCOL_VERSION) && tmp[1] != HL_MSG_ESTOP) {
         return HL_ERR_VERSION;
     }
     memcpy(payload, tmp, (size_t)n);
@@ -154,14 +154,17 @@ size_t hl_encode_frame_v(uint8_t version, uint8_t type, uint16_t seq, const uint
     return e + 1;
 }
 
-/* the body layouts of docs section 5a, generated into hl_contract.h */
+/* the body layouts of docs sections 1b and 5a, generated into hl_contract.h */
 typedef struct {
     uint8_t type;
-    uint16_t fixed;   /* bytes before the array */
+    uint16_t fixed;   /* bytes before the array, in the newest version */
     uint8_t item;     /* bytes per array item (0: no array) */
     int8_t count_off; /* offset of the u16 that counts the items (-1: none) */
     uint16_t items;   /* the most items a frame carries */
     uint8_t exact;    /* 1: exactly `items` items */
+    uint8_t command;  /* 1: host -> device */
+    uint16_t need[HL_N_VERSIONS]; /* fixed bytes per version: exact before the growth rule,
+                                   * the least from it on; 0xFFFF: not in that version */
 } layout;
 
 static const layout LAYOUTS[] = {HL_LAYOUT_ROWS};
@@ -175,20 +178,38 @@ static unsigned channels_in(uint16_t mask)
     return n;
 }
 
-int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len)
+int hl_body_fits(uint8_t version, uint8_t type, const uint8_t *body, size_t body_len)
 {
+    if (version < 1u || version > HL_N_VERSIONS) {
+        return 0;
+    }
     for (size_t i = 0; i < sizeof LAYOUTS / sizeof LAYOUTS[0]; i++) {
         const layout *l = &LAYOUTS[i];
         if (l->type != type) {
             continue;
         }
-        if (l->item == 0) {
-            return body_len == l->fixed;
-        }
-        if (body_len < l->fixed || (body_len - l->fixed) % l->item) {
+        size_t fixed = l->need[version - 1u];
+        if (fixed == 0xFFFFu) {
             return 0;
         }
-        size_t items = (body_len - l->fixed) / l->item;
+        if (l->item == 0) {
+            if (version < HL_PROTOCOL_EXTENSIBLE || type == HL_MSG_HELLO) {
+                return body_len == fixed;
+            }
+            if (body_len < fixed) {
+                return 0;
+            }
+            for (size_t k = l->fixed; l->command && k < body_len; k++) {
+                if (body[k]) {
+                    return 0; /* a field this device does not know, asked for */
+                }
+            }
+            return 1;
+        }
+        if (body_len < fixed || (body_len - fixed) % l->item) {
+            return 0;
+        }
+        size_t items = (body_len - fixed) / l->item;
         if (items > l->items || (l->exact && items != l->items)) {
             return 0;
         }
@@ -197,7 +218,7 @@ int hl_body_fits(uint8_t type, const uint8_t *body, size_t body_len)
         }
         size_t n = (size_t)body[l->count_off] | ((size_t)body[l->count_off + 1] << 8);
         if (type == HL_MSG_TRACE_CHUNK) { /* n records of one f32 per channel in the mask */
-            unsigned k = channels_in((uint16_t)(body[2] | (body[3] << 8)));
+            unsigned k = channels_in(hl_trace_chunk_channels(body));
             return k > 0 && n * k == items;
         }
         return n == items;

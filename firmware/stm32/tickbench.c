@@ -159,7 +159,7 @@ static void ticks(uint32_t n)
     uint8_t none[1] = {0};
     for (uint32_t i = 0; i < n; i++) {
         if (i % 250u == 0) {
-            put(2, 0x02, none, 0); /* the host's heartbeat, every 25 ms */
+            put(HL_PROTOCOL_VERSION, 0x02, none, 0); /* the host's heartbeat, every 25 ms */
         }
         tick();
     }
@@ -208,7 +208,7 @@ int main(void)
                (float)HL_FORCE_CONSTANT_MN_A * 1e-3f);
     hl_device_init("TICKBENCH");
     hl_receiver_init(&host);
-    uint8_t hello[1] = {2};
+    uint8_t hello[1] = {HL_PROTOCOL_VERSION};
     put(1, 0x01, hello, 1);
     ticks(200); /* idle */
 
@@ -223,13 +223,13 @@ int main(void)
     b0[37] = 0;
     b0[38] = 2;
     hl_lef(b0 + 39, 1.0f);
-    put(2, 0x10, b0, sizeof b0);
+    put(HL_PROTOCOL_VERSION, 0x10, b0, sizeof b0);
     uint8_t v[2 + 4 * ROWS] = {1, 0};
     const float speeds[ROWS] = {0.05f, 0.10f, 0.20f, 0.40f};
     for (int r = 0; r < ROWS; r++) {
         hl_lef(v + 2 + 4 * r, speeds[r]);
     }
-    put(2, 0x11, v, sizeof v);
+    put(HL_PROTOCOL_VERSION, 0x11, v, sizeof v);
     static int16_t table[ROWS * LEN];
     for (int r = 0; r < ROWS; r++) {
         for (int i = 0; i < LEN; i++) { /* a decaying 300-Hz ring, up to 9 N (3x the limit) */
@@ -248,24 +248,24 @@ int main(void)
         c[6] = (uint8_t)n;
         c[7] = (uint8_t)(n >> 8);
         memcpy(c + 8, table + off, 2u * (uint32_t)n);
-        put(2, 0x12, c, 8u + 2u * (uint32_t)n);
+        put(HL_PROTOCOL_VERSION, 0x12, c, 8u + 2u * (uint32_t)n);
     }
     uint8_t cm[6] = {1, 0};
     hl_le32(cm + 2, hl_crc32((const uint8_t *)table, sizeof table));
-    put(2, 0x13, cm, 6);
+    put(HL_PROTOCOL_VERSION, 0x13, cm, 6);
 
     uint8_t h[4];
     hl_le32(h, 20000u); /* HOME 20 mm above the surface */
-    put(2, 0x20, h, 4);
+    put(HL_PROTOCOL_VERSION, 0x20, h, 4);
     ticks(1000); /* the ramp, then homed */
     uint8_t w[11] = {7, 0};
     hl_le32(w + 2, 1500u);  /* 1.5 s from the first contact */
     hl_le32(w + 6, 10000u); /* waiting up to 10 s for it */
     w[10] = 1;
-    put(2, 0x21, w, 11);
+    put(HL_PROTOCOL_VERSION, 0x21, w, 11);
     ticks(40000u); /* taps: contacts, transients, saturation; then the window ends */
     uint8_t none[1] = {0};
-    put(2, 0x30, none, 0); /* ESTOP */
+    put(HL_PROTOCOL_VERSION, 0x30, none, 0); /* ESTOP */
     ticks(200);
 
     static const char *const names[N_STATES] = {"idle", "homed", "window", "playing",

@@ -29,6 +29,7 @@ static uint8_t payload[HL_MAX_PAYLOAD];
 /* what the device said since the last drain, by type */
 static int seen[256];
 static uint8_t last_body[256][HL_MAX_PAYLOAD];
+static size_t last_len[256];
 static uint32_t chunk_records, chunk_next, lost_records;
 /* channel 0 of chunks that carry it first, by record: the encoder's position [m] */
 static float positions[20000];
@@ -44,28 +45,27 @@ static void drain(void)
             if (!hl_receiver_push(&host_rx, buf[i], payload, &f)) {
                 continue;
             }
-            EXPECT(hl_body_fits(f.type, f.body, f.body_len));
+            EXPECT(hl_body_fits(f.version, f.type, f.body, f.body_len));
             seen[f.type]++;
             memcpy(last_body[f.type], f.body, f.body_len);
-            if (f.type == 0x97) {
-                uint32_t start = (uint32_t)f.body[4] | ((uint32_t)f.body[5] << 8) |
-                                 ((uint32_t)f.body[6] << 16) | ((uint32_t)f.body[7] << 24);
-                uint32_t k = (uint32_t)f.body[8] | ((uint32_t)f.body[9] << 8);
+            last_len[f.type] = f.body_len;
+            if (f.type == HL_MSG_TRACE_CHUNK) {
+                uint32_t start = hl_trace_chunk_start(f.body);
+                uint32_t k = hl_trace_chunk_n(f.body);
+                uint16_t mask = hl_trace_chunk_channels(f.body);
                 chunk_gap |= start != chunk_next;
                 chunk_next = start + k;
                 chunk_records += k;
                 unsigned width = 0;
-                for (unsigned m = (unsigned)(f.body[2] | (f.body[3] << 8)); m; m &= m - 1u) {
+                for (unsigned m = mask; m; m &= m - 1u) {
                     width++;
                 }
-                for (uint32_t r = 0; (f.body[2] & 1u) && r < k && start + r < 20000u; r++) {
-                    memcpy(&positions[start + r], f.body + 10 + 4u * width * r, 4);
+                for (uint32_t r = 0; (mask & 1u) && r < k && start + r < 20000u; r++) {
+                    positions[start + r] = hl_trace_chunk_item(f.body, width * r);
                 }
-            } else if (f.type == 0x98) {
-                uint32_t start = (uint32_t)f.body[2] | ((uint32_t)f.body[3] << 8) |
-                                 ((uint32_t)f.body[4] << 16) | ((uint32_t)f.body[5] << 24);
-                uint32_t k = (uint32_t)f.body[6] | ((uint32_t)f.body[7] << 8) |
-                             ((uint32_t)f.body[8] << 16) | ((uint32_t)f.body[9] << 24);
+            } else if (f.type == HL_MSG_TRACE_LOST) {
+                uint32_t start = hl_trace_lost_start(f.body);
+                uint32_t k = hl_trace_lost_n(f.body);
                 chunk_gap |= start != chunk_next;
                 chunk_next = start + k;
                 lost_records += k;
@@ -94,7 +94,7 @@ static void ticks_fed(uint32_t n)
 {
     uint8_t none[1] = {0};
     for (uint32_t i = 0; i < n; i += 250) {
-        put(2, 0x02, none, 0);
+        put(HL_PROTOCOL_VERSION, HL_MSG_HEARTBEAT, none, 0);
         ticks(n - i < 250 ? n - i : 250, 1, 1);
     }
 }
@@ -111,73 +111,130 @@ static void put(uint8_t version, uint8_t type, const uint8_t *body, size_t len)
 /* send a command, return the ACK's status (-1: no ACK) */
 static int cmd_v(uint8_t version, uint8_t type, const uint8_t *body, size_t len)
 {
-    seen[0x80] = 0;
+    seen[HL_MSG_ACK] = 0;
     put(version, type, body, len);
-    if (!seen[0x80]) {
+    if (!seen[HL_MSG_ACK]) {
         return -1;
     }
-    uint16_t acked = (uint16_t)(last_body[0x80][0] | (last_body[0x80][1] << 8));
-    EXPECT(acked == seq);
-    return last_body[0x80][2];
+    EXPECT(hl_ack_ack_seq(last_body[HL_MSG_ACK]) == seq);
+    return hl_ack_status(last_body[HL_MSG_ACK]);
 }
-static int cmd(uint8_t type, const uint8_t *body, size_t len) { return cmd_v(2, type, body, len); }
+static int cmd(uint8_t type, const uint8_t *body, size_t len)
+{
+    return cmd_v(HL_PROTOCOL_VERSION, type, body, len);
+}
+static int cmd0(uint8_t type) /* a command without a body */
+{
+    uint8_t none[1] = {0};
+    return cmd(type, none, 0);
+}
+
+/* a spring scene's SCENE_BEGIN (kind 1, attenuation 1), for a test to change */
+static void spring_begin(uint8_t *b, uint16_t id, float k)
+{
+    memset(b, 0, HL_SCENE_BEGIN_SIZE);
+    hl_scene_begin_set_scene_id(b, id);
+    hl_scene_begin_set_kind(b, 1);
+    hl_scene_begin_set_spring(b, k);
+    hl_scene_begin_set_attenuation(b, 1.0f);
+}
+
+/* a transient-table scene's SCENE_BEGIN (kind 2, linear blend 0), sent; its status */
+static int table_begin(uint16_t id, uint8_t rows, uint16_t row_len)
+{
+    uint8_t b[HL_SCENE_BEGIN_SIZE];
+    spring_begin(b, id, 680.0f);
+    hl_scene_begin_set_kind(b, 2);
+    hl_scene_begin_set_rows(b, rows);
+    hl_scene_begin_set_row_len(b, row_len);
+    return cmd(HL_MSG_SCENE_BEGIN, b, sizeof b);
+}
+
+static int commit(uint16_t id, uint32_t crc)
+{
+    uint8_t c[HL_SCENE_COMMIT_SIZE];
+    hl_scene_commit_set_scene_id(c, id);
+    hl_scene_commit_set_crc32(c, crc);
+    return cmd(HL_MSG_SCENE_COMMIT, c, sizeof c);
+}
 
 static int scene_spring(uint16_t id, float k, float atten)
 {
-    uint8_t b[43] = {0};
-    b[0] = (uint8_t)id;
-    b[2] = 1;
-    hl_lef(b + 7, k);
-    hl_lef(b + 39, atten);
-    int st = cmd(0x10, b, sizeof b);
-    if (st != 0) {
-        return st;
-    }
-    uint8_t c[6] = {(uint8_t)id, 0, 0, 0, 0, 0};
-    return cmd(0x13, c, 6);
+    uint8_t b[HL_SCENE_BEGIN_SIZE];
+    spring_begin(b, id, k);
+    hl_scene_begin_set_attenuation(b, atten);
+    int st = cmd(HL_MSG_SCENE_BEGIN, b, sizeof b);
+    return st != 0 ? st : commit(id, 0);
 }
 
 static int home(uint32_t um)
 {
-    uint8_t b[4];
-    hl_le32(b, um);
-    return cmd(0x20, b, 4);
+    uint8_t b[HL_HOME_SIZE];
+    hl_home_set_clearance_um(b, um);
+    return cmd(HL_MSG_HOME, b, sizeof b);
 }
 
+static int window_for(uint16_t id, uint32_t ms, uint32_t timeout_ms, uint8_t from_contact)
+{
+    uint8_t b[HL_START_WINDOW_SIZE];
+    hl_start_window_set_window_id(b, id);
+    hl_start_window_set_duration_ms(b, ms);
+    hl_start_window_set_timeout_ms(b, timeout_ms);
+    hl_start_window_set_from_contact(b, from_contact);
+    return cmd(HL_MSG_START_WINDOW, b, sizeof b);
+}
 static int window(uint16_t id, uint32_t ms, uint8_t from_contact)
 {
-    uint8_t b[11];
-    b[0] = (uint8_t)id;
-    b[1] = 0;
-    hl_le32(b + 2, ms);
-    hl_le32(b + 6, ms);
-    b[10] = from_contact;
-    return cmd(0x21, b, 11);
+    return window_for(id, ms, ms, from_contact);
+}
+
+static int set_limit(uint16_t ma)
+{
+    uint8_t b[HL_SET_LIMIT_SIZE];
+    hl_set_limit_set_current_ma(b, ma);
+    return cmd(HL_MSG_SET_LIMIT, b, sizeof b);
+}
+
+static int trace_config(uint16_t channels, uint16_t decimation)
+{
+    uint8_t b[HL_TRACE_CONFIG_SIZE];
+    hl_trace_config_set_channels(b, channels);
+    hl_trace_config_set_decimation(b, decimation);
+    return cmd(HL_MSG_TRACE_CONFIG, b, sizeof b);
 }
 
 static int play(const int16_t *f, uint16_t n)
 {
-    uint8_t b[6 + 2 * 480];
-    hl_le32(b, 0);
-    b[4] = (uint8_t)n;
-    b[5] = (uint8_t)(n >> 8);
-    memcpy(b + 6, f, 2u * n); /* little-endian host */
-    int st = cmd(0x23, b, 6 + 2u * n);
+    uint8_t b[HL_PLAY_CHUNK_BYTES(HL_PLAY_CHUNK_ITEMS)];
+    hl_play_chunk_set_offset(b, 0);
+    hl_play_chunk_set_n(b, n);
+    for (uint16_t i = 0; i < n; i++) {
+        hl_play_chunk_set_item(b, i, f[i]);
+    }
+    int st = cmd(HL_MSG_PLAY_CHUNK, b, HL_PLAY_CHUNK_BYTES(n));
     if (st != 0) {
         return st;
     }
-    uint8_t s[6] = {9, 0};
-    hl_le32(s + 2, n);
-    return cmd(0x24, s, 6);
+    uint8_t s[HL_PLAY_START_SIZE];
+    hl_play_start_set_window_id(s, 9);
+    hl_play_start_set_n_samples(s, n);
+    return cmd(HL_MSG_PLAY_START, s, sizeof s);
 }
 
-static void hello(void)
+/* a HELLO offering `version`: the device's HELLO_ACK, then LIMITS */
+static void hello_v(uint8_t version)
 {
     memset(seen, 0, sizeof seen);
-    uint8_t b[1] = {2};
-    put(1, 0x01, b, 1);
-    EXPECT(seen[0x81] == 1 && last_body[0x81][0] == 2); /* HELLO_ACK in protocol 2 */
-    EXPECT(seen[0x82] == 1);                            /* then LIMITS */
+    uint8_t b[HL_HELLO_SIZE];
+    hl_hello_set_host_protocol(b, version);
+    put(1, HL_MSG_HELLO, b, sizeof b);
+    EXPECT(seen[HL_MSG_HELLO_ACK] == 1);
+    EXPECT(seen[HL_MSG_LIMITS] == 1);
+}
+static void hello(void)
+{
+    hello_v(HL_PROTOCOL_VERSION);
+    EXPECT(hl_hello_ack_protocol(last_body[HL_MSG_HELLO_ACK]) == HL_PROTOCOL_VERSION);
 }
 
 static void fresh(uint64_t seed)
@@ -198,17 +255,19 @@ static void test_state_table(void)
     /* IDLE, no scene */
     EXPECT(home(20000) == HL_BAD_STATE);
     EXPECT(window(1, 100, 0) == HL_BAD_STATE);
-    EXPECT(cmd(0x22, none, 0) == HL_OK);  /* STOP_WINDOW: nothing runs */
-    EXPECT(cmd(0x31, none, 0) == HL_OK);  /* CLEAR_FAULT: none latched */
-    uint8_t sup[10] = {7, 0};
-    EXPECT(cmd(0x14, sup, 10) == HL_UNKNOWN_SCENE);
-    /* a version-1 frame after a version-2 HELLO_ACK */
-    EXPECT(cmd_v(1, 0x32, none, 0) == HL_BAD_MESSAGE);
+    EXPECT(cmd0(HL_MSG_STOP_WINDOW) == HL_OK);  /* nothing runs */
+    EXPECT(cmd0(HL_MSG_CLEAR_FAULT) == HL_OK);  /* none latched */
+    uint8_t sup[HL_SCENE_SUPPORT_SIZE] = {0};
+    hl_scene_support_set_scene_id(sup, 7);
+    EXPECT(cmd(HL_MSG_SCENE_SUPPORT, sup, sizeof sup) == HL_UNKNOWN_SCENE);
+    /* a frame of another version than the session's */
+    EXPECT(cmd_v(1, HL_MSG_ZERO, none, 0) == HL_BAD_MESSAGE);
+    EXPECT(cmd_v(HL_PROTOCOL_OLDEST, HL_MSG_ZERO, none, 0) == HL_BAD_MESSAGE);
     /* v1's TRACE_REQUEST and a device -> host type */
-    uint8_t tr[11] = {0};
-    EXPECT(cmd(0x40, tr, 11) == HL_BAD_MESSAGE);
-    uint8_t ack[3] = {0};
-    EXPECT(cmd(0x80, ack, 3) == HL_BAD_MESSAGE);
+    uint8_t tr[HL_TRACE_REQUEST_SIZE] = {0};
+    EXPECT(cmd(HL_MSG_TRACE_REQUEST, tr, sizeof tr) == HL_BAD_MESSAGE);
+    uint8_t ack[HL_ACK_SIZE] = {0};
+    EXPECT(cmd(HL_MSG_ACK, ack, sizeof ack) == HL_BAD_MESSAGE);
     /* HOMED */
     EXPECT(scene_spring(3, 680.0f, 1.0f) == HL_OK);
     EXPECT(home(20000) == HL_OK);
@@ -220,29 +279,27 @@ static void test_state_table(void)
     EXPECT(scene_spring(4, 100.0f, 1.0f) == HL_BUSY);
     EXPECT(home(20000) == HL_BUSY);
     EXPECT(window(3, 100, 0) == HL_BUSY);
-    uint8_t lim[2] = {0xF4, 0x01};
-    EXPECT(cmd(0x25, lim, 2) == HL_BUSY);
-    uint8_t tc[4] = {1, 0, 1, 0};
-    EXPECT(cmd(0x41, tc, 4) == HL_BUSY);
-    EXPECT(cmd(0x22, none, 0) == HL_OK);
+    EXPECT(set_limit(500) == HL_BUSY);
+    EXPECT(trace_config(1, 1) == HL_BUSY);
+    EXPECT(cmd0(HL_MSG_STOP_WINDOW) == HL_OK);
     ticks(2, 1, 1);
     EXPECT(hl_device_peek().state == HL_HOMED);
-    EXPECT(seen[0x94] == 1); /* WINDOW_DONE after the stop */
+    EXPECT(seen[HL_MSG_WINDOW_DONE] == 1); /* WINDOW_DONE after the stop */
     /* a scene upload turns output off: IDLE */
     EXPECT(scene_spring(5, 680.0f, 1.0f) == HL_OK);
     ticks(1, 1, 1);
     EXPECT(hl_device_peek().state == HL_IDLE);
     /* a re-sent command is answered with the first status, not executed again */
-    uint8_t h[4];
-    hl_le32(h, 20000);
+    uint8_t h[HL_HOME_SIZE];
+    hl_home_set_clearance_um(h, 20000);
     uint8_t out[64];
-    size_t n = hl_encode_frame(0x20, 77, h, 4, out, sizeof out);
-    seen[0x80] = 0;
+    size_t n = hl_encode_frame(HL_MSG_HOME, 77, h, sizeof h, out, sizeof out);
+    seen[HL_MSG_ACK] = 0;
     sim_uart_to_device(out, n);
     sim_uart_to_device(out, n);
     hl_device_poll();
     drain();
-    EXPECT(seen[0x80] == 2);
+    EXPECT(seen[HL_MSG_ACK] == 2);
 }
 
 static void test_ranges_and_nan(void)
@@ -258,51 +315,42 @@ static void test_ranges_and_nan(void)
     EXPECT(window(1, 0, 0) == HL_BAD_MESSAGE);
     EXPECT(window(1, 600001, 0) == HL_BAD_MESSAGE);
     EXPECT(window(1, 0xFFFFFFFFu, 1) == HL_BAD_MESSAGE);
-    uint8_t lim[2] = {0, 0};
-    EXPECT(cmd(0x25, lim, 2) == HL_BAD_MESSAGE);
-    lim[0] = 0x79; /* 1401 mA: above the rating */
-    lim[1] = 0x05;
-    EXPECT(cmd(0x25, lim, 2) == HL_BAD_MESSAGE);
-    uint8_t tc[4] = {0x80, 0, 1, 0}; /* a channel this device lacks */
-    EXPECT(cmd(0x41, tc, 4) == HL_BAD_MESSAGE);
-    tc[0] = 1;
-    tc[2] = 101; /* decimation above the limit */
-    EXPECT(cmd(0x41, tc, 4) == HL_BAD_MESSAGE);
+    EXPECT(set_limit(0) == HL_BAD_MESSAGE);
+    EXPECT(set_limit(HL_CURRENT_RATING_MA + 1u) == HL_BAD_MESSAGE); /* above the rating */
+    EXPECT(trace_config(0x80, 1) == HL_BAD_MESSAGE); /* a channel this device lacks */
+    EXPECT(trace_config(1, HL_MAX_DECIMATION + 1u) == HL_BAD_MESSAGE);
     /* a table scene: velocities must be > 0 and ascending; the commit's CRC checked */
-    uint8_t b[43] = {0};
-    b[0] = 9;
-    b[2] = 2;
-    b[35] = 2;
-    b[36] = 3;
-    hl_lef(b + 39, 1.0f);
-    EXPECT(cmd(0x10, b, 43) == HL_OK);
-    uint8_t v[10] = {9, 0};
-    hl_lef(v + 2, 0.2f);
-    hl_lef(v + 6, 0.1f);
-    EXPECT(cmd(0x11, v, 10) == HL_BAD_MESSAGE);
-    hl_lef(v + 2, 0.1f);
-    hl_lef(v + 6, 0.2f);
-    EXPECT(cmd(0x11, v, 10) == HL_OK);
-    uint8_t ch[8 + 12] = {9, 0, 0, 0, 0, 0, 6, 0};
+    EXPECT(table_begin(9, 2, 3) == HL_OK);
+    uint8_t v[HL_SCENE_VELOCITIES_BYTES(2)];
+    hl_scene_velocities_set_scene_id(v, 9);
+    hl_scene_velocities_set_item(v, 0, 0.2f);
+    hl_scene_velocities_set_item(v, 1, 0.1f);
+    EXPECT(cmd(HL_MSG_SCENE_VELOCITIES, v, sizeof v) == HL_BAD_MESSAGE);
+    hl_scene_velocities_set_item(v, 0, 0.1f);
+    hl_scene_velocities_set_item(v, 1, 0.2f);
+    EXPECT(cmd(HL_MSG_SCENE_VELOCITIES, v, sizeof v) == HL_OK);
+    uint8_t ch[HL_SCENE_CHUNK_BYTES(6)];
+    hl_scene_chunk_set_scene_id(ch, 9);
+    hl_scene_chunk_set_offset(ch, 0);
+    hl_scene_chunk_set_n(ch, 6);
     for (int i = 0; i < 6; i++) {
-        ch[8 + 2 * i] = (uint8_t)(100 * (i + 1));
+        hl_scene_chunk_set_item(ch, (size_t)i, (int16_t)(100 * (i + 1)));
     }
-    EXPECT(cmd(0x12, ch, 20) == HL_OK);
-    uint8_t over[8 + 2] = {9, 0, 6, 0, 0, 0, 1, 0, 1, 0}; /* offset 6 of 6 items */
-    EXPECT(cmd(0x12, over, 10) == HL_BAD_MESSAGE);
-    uint8_t c[6] = {9, 0};
-    hl_le32(c + 2, 0x12345678u);
-    EXPECT(cmd(0x13, c, 6) == HL_TABLE_CRC);
-    hl_le32(c + 2, hl_crc32(ch + 8, 12));
-    EXPECT(cmd(0x13, c, 6) == HL_OK);
+    EXPECT(cmd(HL_MSG_SCENE_CHUNK, ch, sizeof ch) == HL_OK);
+    uint8_t over[HL_SCENE_CHUNK_BYTES(1)] = {0}; /* offset 6 of 6 items */
+    hl_scene_chunk_set_scene_id(over, 9);
+    hl_scene_chunk_set_offset(over, 6);
+    hl_scene_chunk_set_n(over, 1);
+    EXPECT(cmd(HL_MSG_SCENE_CHUNK, over, sizeof over) == HL_BAD_MESSAGE);
+    EXPECT(commit(9, 0x12345678u) == HL_TABLE_CRC);
+    EXPECT(commit(9, hl_crc32(ch + HL_SCENE_CHUNK_SIZE, 6u * 2u)) == HL_OK);
 }
 
 static void test_ramp_clamp_estop(void)
 {
     fresh(3);
     /* playback in free air: ramp over 50 ms, then the clamp at SET_LIMIT */
-    uint8_t lim[2] = {0xF4, 0x01}; /* 500 mA */
-    EXPECT(cmd(0x25, lim, 2) == HL_OK);
+    EXPECT(set_limit(500) == HL_OK);
     static int16_t f[480];
     for (int i = 0; i < 480; i++) {
         f[i] = 430; /* 0.43 N = 0.2 A */
@@ -320,14 +368,14 @@ static void test_ramp_clamp_estop(void)
     EXPECT(fabsf(i250 - 0.2f * 0.5f) < 1e-5f);      /* halfway at 25 ms */
     EXPECT(hl_device_peek().state == HL_IDLE);      /* a playback enables output for itself */
     EXPECT(fabsf(i_end) < 1e-12f && !sim_amp_enabled());
-    EXPECT(seen[0x94] == 1);
+    EXPECT(seen[HL_MSG_WINDOW_DONE] == 1);
     for (int i = 0; i < 480; i++) {
         f[i] = 10000; /* 10 N: 4.65 A, clamped at 0.5 */
     }
     EXPECT(play(f, 480) == HL_OK);
     ticks(600, 1, 1);
-    EXPECT(seen[0x91] >= 1);                        /* a SATURATION run was reported */
-    uint32_t peak = (uint32_t)last_body[0x91][10] | ((uint32_t)last_body[0x91][11] << 8);
+    EXPECT(seen[HL_MSG_SATURATION] >= 1);                        /* a SATURATION run was reported */
+    int32_t peak = hl_saturation_peak_ma(last_body[HL_MSG_SATURATION]);
     /* 10 N / 2.15 N/A before the clamp, at the ramp's 480/500: the playback is 48 ms */
     EXPECT(peak == 4465);
     /* e-stop in a window: zero at the next tick, latched, FAULT_LATCHED until cleared */
@@ -335,42 +383,28 @@ static void test_ramp_clamp_estop(void)
     EXPECT(home(20000) == HL_OK);
     EXPECT(window(4, 2000, 0) == HL_OK);
     ticks(700, 1, 1);
-    uint8_t none[1] = {0};
     memset(seen, 0, sizeof seen);
-    EXPECT(cmd(0x30, none, 0) == HL_OK);
+    EXPECT(cmd0(HL_MSG_ESTOP) == HL_OK);
     ticks(1, 0, 0);
     EXPECT(hl_device_peek().fault == HL_FAULT_ESTOP);
     EXPECT(sim_current() == 0.0f && !sim_amp_enabled());
     ticks(5, 1, 1);
-    EXPECT(seen[0x92] == 1 && seen[0x94] == 1);
-    EXPECT(last_body[0x94][23] == HL_FAULT_ESTOP); /* WINDOW_DONE: the fault that ended it */
+    EXPECT(seen[HL_MSG_FAULT] == 1 && seen[HL_MSG_WINDOW_DONE] == 1);
+    EXPECT(hl_window_done_fault(last_body[HL_MSG_WINDOW_DONE]) == HL_FAULT_ESTOP); /* what ended it */
     EXPECT(home(20000) == HL_FAULT_LATCHED);
     EXPECT(window(5, 100, 0) == HL_FAULT_LATCHED);
-    EXPECT(cmd(0x31, none, 0) == HL_OK);
+    EXPECT(cmd0(HL_MSG_CLEAR_FAULT) == HL_OK);
     EXPECT(hl_device_peek().state == HL_IDLE);
     EXPECT(home(20000) == HL_OK);
 }
 
 static int scene_at(uint16_t id, int32_t surface_um, float k)
 {
-    uint8_t b[43] = {0};
-    b[0] = (uint8_t)id;
-    b[2] = 1;
-    hl_le32(b + 3, (uint32_t)surface_um);
-    hl_lef(b + 7, k);
-    hl_lef(b + 39, 1.0f);
-    int st = cmd(0x10, b, sizeof b);
-    if (st != 0) {
-        return st;
-    }
-    uint8_t c[6] = {(uint8_t)id, 0, 0, 0, 0, 0};
-    return cmd(0x13, c, 6);
-}
-
-static int32_t le_i32(const uint8_t *p)
-{
-    return (int32_t)((uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) |
-                     ((uint32_t)p[3] << 24));
+    uint8_t b[HL_SCENE_BEGIN_SIZE];
+    spring_begin(b, id, k);
+    hl_scene_begin_set_surface_um(b, surface_um);
+    int st = cmd(HL_MSG_SCENE_BEGIN, b, sizeof b);
+    return st != 0 ? st : commit(id, 0);
 }
 
 /* Issue 28, safety 1 and 2: a surface of -2^31 um once made the servo's int32 arithmetic
@@ -400,20 +434,21 @@ static void test_safety_at_range_ends(void)
             sim_encoder_force(1, encoders[e]);
             ticks_fed(600); /* past the 50-ms enable ramp */
             float a = sim_current();
-            int32_t height = le_i32(last_body[0x96] + 6);
+            int32_t height = hl_position_height_um(last_body[HL_MSG_POSITION]);
             if (encoders[e] == INT32_MIN) { /* 21 km into the surface: full, clamped, said */
                 EXPECT(a > 1.399f && a <= 1.4f);
-                EXPECT(seen[0x90] == 1); /* the contact */
+                EXPECT(seen[HL_MSG_CONTACT] == 1); /* the contact */
                 EXPECT(height == -INT32_MAX);
             } else { /* 21 km above it: free air */
                 EXPECT(a == 0.0f);
-                EXPECT(seen[0x90] == 0);
+                EXPECT(seen[HL_MSG_CONTACT] == 0);
                 EXPECT(height == INT32_MAX);
             }
             ticks_fed(600);
-            EXPECT(seen[0x94] == 1);
+            EXPECT(seen[HL_MSG_WINDOW_DONE] == 1);
             if (encoders[e] == INT32_MIN) { /* the run's peak, saturated in the i32 field */
-                EXPECT(seen[0x91] == 1 && le_i32(last_body[0x91] + 10) == INT32_MAX);
+                EXPECT(seen[HL_MSG_SATURATION] == 1 &&
+                       hl_saturation_peak_ma(last_body[HL_MSG_SATURATION]) == INT32_MAX);
             }
             EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
             sim_encoder_force(0, 0);
@@ -421,7 +456,6 @@ static void test_safety_at_range_ends(void)
     }
     /* a large finite command clamps and saturates; a non-finite one latches a named fault */
     fresh(9);
-    uint8_t none[1] = {0};
     EXPECT(scene_at(1, 0, 680.0f) == HL_OK);
     EXPECT(home(20000) == HL_OK);
     EXPECT(window(1, 1000, 0) == HL_OK);
@@ -437,12 +471,13 @@ static void test_safety_at_range_ends(void)
         EXPECT(hl_device_peek().fault == HL_FAULT_NONFINITE);
         EXPECT(sim_current() == 0.0f && !sim_amp_enabled());
         ticks(3, 1, 1);
-        EXPECT(seen[0x92] == 1 && last_body[0x92][0] == HL_FAULT_NONFINITE);
+        EXPECT(seen[HL_MSG_FAULT] == 1 && hl_fault_code(last_body[HL_MSG_FAULT]) == HL_FAULT_NONFINITE);
         if (k == 0) {
-            EXPECT(seen[0x94] == 1 && last_body[0x94][23] == HL_FAULT_NONFINITE);
+            EXPECT(seen[HL_MSG_WINDOW_DONE] == 1 &&
+                   hl_window_done_fault(last_body[HL_MSG_WINDOW_DONE]) == HL_FAULT_NONFINITE);
         }
         hl_test_extra_force = 0.0f;
-        EXPECT(cmd(0x31, none, 0) == HL_OK);
+        EXPECT(cmd0(HL_MSG_CLEAR_FAULT) == HL_OK);
         EXPECT(home(20000) == HL_OK);
     }
 }
@@ -455,69 +490,61 @@ static void test_refusal_changes_nothing(void)
     EXPECT(scene_at(1, 0, 680.0f) == HL_OK);
     EXPECT(home(20000) == HL_OK);
     ticks_fed(600);
-    uint8_t b[43] = {0};
-    b[0] = 2;
-    b[2] = 1;
-    hl_lef(b + 7, 680.0f);
-    hl_lef(b + 39, 2.0f); /* attenuation out of range */
-    EXPECT(cmd(0x10, b, 43) == HL_BAD_MESSAGE);
-    hl_lef(b + 39, NAN);
-    EXPECT(cmd(0x10, b, 43) == HL_BAD_MESSAGE);
-    hl_lef(b + 39, 1.0f);
-    b[2] = 2;
-    b[35] = 255;
-    b[36] = 0xFF;
-    b[37] = 0xFF; /* 255 x 65,535 table items */
-    EXPECT(cmd(0x10, b, 43) == HL_BAD_MESSAGE);
+    uint8_t b[HL_SCENE_BEGIN_SIZE];
+    spring_begin(b, 2, 680.0f);
+    hl_scene_begin_set_attenuation(b, 2.0f); /* out of range */
+    EXPECT(cmd(HL_MSG_SCENE_BEGIN, b, sizeof b) == HL_BAD_MESSAGE);
+    hl_scene_begin_set_attenuation(b, NAN);
+    EXPECT(cmd(HL_MSG_SCENE_BEGIN, b, sizeof b) == HL_BAD_MESSAGE);
+    hl_scene_begin_set_attenuation(b, 1.0f);
+    hl_scene_begin_set_kind(b, 2);
+    hl_scene_begin_set_rows(b, 255);
+    hl_scene_begin_set_row_len(b, 0xFFFF); /* 255 x 65,535 table items */
+    EXPECT(cmd(HL_MSG_SCENE_BEGIN, b, sizeof b) == HL_BAD_MESSAGE);
     ticks_fed(10);
     EXPECT(hl_device_peek().state == HL_HOMED && sim_amp_enabled());
     EXPECT(window(1, 1000, 0) == HL_OK);
     ticks_fed(10);
-    EXPECT(cmd(0x10, b, 43) == HL_BAD_MESSAGE); /* not BUSY: the fields come first */
-    b[2] = 1;
-    b[35] = b[36] = b[37] = 0;
-    EXPECT(cmd(0x10, b, 43) == HL_BUSY);
+    EXPECT(cmd(HL_MSG_SCENE_BEGIN, b, sizeof b) == HL_BAD_MESSAGE); /* fields come first */
+    spring_begin(b, 2, 680.0f);
+    EXPECT(cmd(HL_MSG_SCENE_BEGIN, b, sizeof b) == HL_BUSY);
     ticks_fed(10);
     EXPECT(hl_device_peek().state == HL_WINDOW);
     /* chunks of 481 items fit no layout (the document: n <= 480) */
-    static uint8_t big[8 + 2 * 481];
+    static uint8_t big[HL_SCENE_CHUNK_BYTES(HL_SCENE_CHUNK_ITEMS + 1u)];
     memset(big, 0, sizeof big);
-    big[6] = (uint8_t)(481 & 0xFF);
-    big[7] = (uint8_t)(481 >> 8);
-    EXPECT(cmd(0x12, big, sizeof big) == HL_BAD_MESSAGE);
-    uint8_t none[1] = {0};
-    EXPECT(cmd(0x22, none, 0) == HL_OK);
+    hl_scene_chunk_set_n(big, HL_SCENE_CHUNK_ITEMS + 1u);
+    EXPECT(cmd(HL_MSG_SCENE_CHUNK, big, sizeof big) == HL_BAD_MESSAGE);
+    EXPECT(cmd0(HL_MSG_STOP_WINDOW) == HL_OK);
     ticks_fed(10);
-    memmove(big, big + 2, 6 + 2 * 481); /* PLAY_CHUNK: offset, n, items */
-    EXPECT(cmd(0x23, big, 6 + 2 * 481) == HL_BAD_MESSAGE);
+    static uint8_t bigplay[HL_PLAY_CHUNK_BYTES(HL_PLAY_CHUNK_ITEMS + 1u)];
+    memset(bigplay, 0, sizeof bigplay);
+    hl_play_chunk_set_n(bigplay, HL_PLAY_CHUNK_ITEMS + 1u);
+    EXPECT(cmd(HL_MSG_PLAY_CHUNK, bigplay, sizeof bigplay) == HL_BAD_MESSAGE);
     EXPECT(hl_device_peek().state == HL_HOMED);
     /* a chunk into the committed table withdraws the scene until the next commit */
-    uint8_t t[43] = {0};
-    t[0] = 5;
-    t[2] = 2;
-    t[35] = 1;
-    t[36] = 4;
-    hl_lef(t + 7, 680.0f);
-    hl_lef(t + 39, 1.0f);
-    EXPECT(cmd(0x10, t, 43) == HL_OK);
-    uint8_t v[6] = {5, 0};
-    hl_lef(v + 2, 0.1f);
-    EXPECT(cmd(0x11, v, 6) == HL_OK);
-    uint8_t c[6] = {5, 0, 0, 0, 0, 0};
-    EXPECT(cmd(0x13, c, 6) == HL_TABLE_CRC); /* an all-zero table's CRC is not 0 */
-    static const uint8_t zeros[8] = {0};
-    hl_le32(c + 2, hl_crc32(zeros, 8));
-    EXPECT(cmd(0x13, c, 6) == HL_OK);
+    EXPECT(table_begin(5, 1, 4) == HL_OK);
+    uint8_t v[HL_SCENE_VELOCITIES_BYTES(1)];
+    hl_scene_velocities_set_scene_id(v, 5);
+    hl_scene_velocities_set_item(v, 0, 0.1f);
+    EXPECT(cmd(HL_MSG_SCENE_VELOCITIES, v, sizeof v) == HL_OK);
+    EXPECT(commit(5, 0) == HL_TABLE_CRC); /* an all-zero table's CRC is not 0 */
+    static const uint8_t zeros[4 * sizeof(int16_t)] = {0};
+    const uint32_t crc = hl_crc32(zeros, sizeof zeros);
+    EXPECT(commit(5, crc) == HL_OK);
     EXPECT(home(20000) == HL_OK);
-    uint8_t ch[10] = {5, 0, 0, 0, 0, 0, 1, 0, 0x10, 0x27}; /* item 0 = 10 N */
-    EXPECT(cmd(0x12, ch, 10) == HL_OK);
+    uint8_t ch[HL_SCENE_CHUNK_BYTES(1)];
+    hl_scene_chunk_set_scene_id(ch, 5);
+    hl_scene_chunk_set_offset(ch, 0);
+    hl_scene_chunk_set_n(ch, 1);
+    hl_scene_chunk_set_item(ch, 0, 10000); /* 10 N */
+    EXPECT(cmd(HL_MSG_SCENE_CHUNK, ch, sizeof ch) == HL_OK);
     ticks_fed(2);
     EXPECT(hl_device_peek().state == HL_IDLE);
     EXPECT(home(20000) == HL_BAD_STATE);
-    EXPECT(cmd(0x13, c, 6) == HL_TABLE_CRC);
+    EXPECT(commit(5, crc) == HL_TABLE_CRC);
 }
 
-static uint32_t le_u32(const uint8_t *p) { return (uint32_t)le_i32(p); }
 
 /* Issue 28, conformance: ESTOP whatever its body; PING and HEARTBEAT that do not fit are
  * BAD_MESSAGE; a from-contact window lasts exactly its duration after the contact; a HELLO
@@ -527,44 +554,40 @@ static void test_conformance(void)
 {
     fresh(11);
     uint8_t stray[1] = {0x55};
-    uint8_t none[1] = {0};
     EXPECT(scene_at(1, 0, 680.0f) == HL_OK);
     EXPECT(home(20000) == HL_OK);
-    EXPECT(cmd(0x30, stray, 1) == HL_OK); /* ESTOP with a stray byte still stops */
+    EXPECT(cmd(HL_MSG_ESTOP, stray, 1) == HL_OK); /* ESTOP with a stray byte still stops */
     ticks(1, 1, 1);
     EXPECT(hl_device_peek().fault == HL_FAULT_ESTOP && !sim_amp_enabled());
-    EXPECT(cmd(0x31, none, 0) == HL_OK);
-    uint8_t three[3] = {1, 2, 3};
-    EXPECT(cmd(0x03, three, 3) == HL_BAD_MESSAGE); /* PING: 4 bytes */
-    EXPECT(cmd(0x02, three, 1) == HL_BAD_MESSAGE); /* HEARTBEAT: none */
+    EXPECT(cmd0(HL_MSG_CLEAR_FAULT) == HL_OK);
+    uint8_t three[HL_PING_SIZE] = {1, 2, 3};
+    EXPECT(cmd(HL_MSG_PING, three, HL_PING_SIZE - 1u) == HL_BAD_MESSAGE);
+    EXPECT(cmd(HL_MSG_HEARTBEAT, three, 1) == HL_BAD_MESSAGE); /* HEARTBEAT: none */
     /* from contact: n_ticks = first contact + duration; POSITION at its own tick */
-    uint8_t tc[4] = {0x01, 0, 1, 0}; /* position alone, every tick */
-    EXPECT(cmd(0x41, tc, 4) == HL_OK);
+    EXPECT(trace_config(1, 1) == HL_OK); /* position alone, every tick */
     EXPECT(home(20000) == HL_OK);
     ticks_fed(10);
     memset(seen, 0, sizeof seen);
     chunk_records = chunk_next = 0;
     int checked = 0, wrong = 0;
-    uint8_t sw[11] = {1, 0};
-    hl_le32(sw + 2, 100);   /* 100 ms from the first contact */
-    hl_le32(sw + 6, 30000); /* which may take up to 30 s */
-    sw[10] = 1;
-    EXPECT(cmd(0x21, sw, 11) == HL_OK);
-    for (int k = 0; k < 400 && !seen[0x94]; k++) {
-        int before = seen[0x96];
+    /* 100 ms from the first contact, which may take up to 30 s */
+    EXPECT(window_for(1, 100, 30000, 1) == HL_OK);
+    for (int k = 0; k < 400 && !seen[HL_MSG_WINDOW_DONE]; k++) {
+        int before = seen[HL_MSG_POSITION];
         ticks_fed(250);
-        if (seen[0x96] != before) { /* the last POSITION's height vs the record at its tick */
-            uint32_t tick = le_u32(last_body[0x96] + 2);
-            int32_t h = le_i32(last_body[0x96] + 6);
+        if (seen[HL_MSG_POSITION] != before) { /* the last POSITION's height vs the record at its tick */
+            uint32_t tick = hl_position_tick(last_body[HL_MSG_POSITION]);
+            int32_t h = hl_position_height_um(last_body[HL_MSG_POSITION]);
             if (tick < chunk_next) {
                 checked++;
                 wrong += lroundf(positions[tick] * 1e6f) != h;
             }
         }
     }
-    EXPECT(seen[0x94] == 1);
-    int32_t first = le_i32(last_body[0x94] + 14);
-    EXPECT(first > 0 && le_u32(last_body[0x94] + 10) == (uint32_t)first + 1000u);
+    EXPECT(seen[HL_MSG_WINDOW_DONE] == 1);
+    int32_t first = hl_window_done_first_contact(last_body[HL_MSG_WINDOW_DONE]);
+    EXPECT(first > 0 && hl_window_done_n_ticks(last_body[HL_MSG_WINDOW_DONE]) ==
+                            (uint32_t)first + 1000u);
     EXPECT(checked > 3 && wrong == 0);
     /* a HELLO during a window: it ends, and nothing of it follows HELLO_ACK */
     EXPECT(home(20000) == HL_OK);
@@ -572,7 +595,7 @@ static void test_conformance(void)
     ticks_fed(3000);
     hello();
     ticks_fed(2000);
-    EXPECT(seen[0x94] == 0 && seen[0x97] == 0 && seen[0x98] == 0 && seen[0x90] == 0);
+    EXPECT(seen[HL_MSG_WINDOW_DONE] == 0 && seen[HL_MSG_TRACE_CHUNK] == 0 && seen[HL_MSG_TRACE_LOST] == 0 && seen[HL_MSG_CONTACT] == 0);
     EXPECT(hl_device_peek().state == HL_IDLE);
     /* a window that ended at the tick before the HELLO: its WINDOW_DONE, still queued, and
      * its unsent records are not the new host's either */
@@ -583,14 +606,50 @@ static void test_conformance(void)
     ticks(1, 0, 0);
     hello();
     ticks_fed(500);
-    EXPECT(seen[0x94] == 0 && seen[0x97] == 0 && seen[0x98] == 0);
+    EXPECT(seen[HL_MSG_WINDOW_DONE] == 0 && seen[HL_MSG_TRACE_CHUNK] == 0 && seen[HL_MSG_TRACE_LOST] == 0);
     EXPECT(scene_at(1, 0, 680.0f) == HL_OK); /* and a new window streams from record 0 */
     EXPECT(home(20000) == HL_OK);
     chunk_records = chunk_next = 0;
     chunk_gap = 0;
     EXPECT(window(3, 100, 0) == HL_OK);
     ticks_fed(1500);
-    EXPECT(seen[0x94] == 1 && chunk_records == 1000 && !chunk_gap);
+    EXPECT(seen[HL_MSG_WINDOW_DONE] == 1 && chunk_records == 1000 && !chunk_gap);
+}
+
+/* Issue 53, the growth rule (docs 1a, 1b): a host offering version 2 gets version 2's
+ * layouts as published (LIMITS 20 bytes, LINK_REPORT 148); one offering a newer version
+ * than the device's gets the device's newest, one offering 1 its oldest; an ESTOP in a
+ * frame of a version nobody speaks still stops. */
+static void test_versions(void)
+{
+    fresh(12);
+    EXPECT(last_len[HL_MSG_LIMITS] == HL_LIMITS_SIZE);
+    hello_v(2);
+    EXPECT(hl_hello_ack_protocol(last_body[HL_MSG_HELLO_ACK]) == 2);
+    EXPECT(last_len[HL_MSG_HELLO_ACK] == HL_HELLO_ACK_SIZE && last_len[HL_MSG_LIMITS] == 20u);
+    uint8_t q[HL_LINK_QUERY_SIZE] = {0};
+    EXPECT(cmd_v(2, HL_MSG_LINK_QUERY, q, sizeof q) == HL_OK);
+    EXPECT(last_len[HL_MSG_LINK_REPORT] == 148u);
+    EXPECT(cmd(HL_MSG_LINK_QUERY, q, sizeof q) == HL_BAD_MESSAGE); /* a version-3 frame */
+    hello_v(9);
+    EXPECT(hl_hello_ack_protocol(last_body[HL_MSG_HELLO_ACK]) == HL_PROTOCOL_VERSION);
+    EXPECT(cmd(HL_MSG_LINK_QUERY, q, sizeof q) == HL_OK);
+    EXPECT(last_len[HL_MSG_LINK_REPORT] == HL_LINK_REPORT_BYTES(HL_LINK_REPORT_ITEMS));
+    hello_v(1);
+    EXPECT(hl_hello_ack_protocol(last_body[HL_MSG_HELLO_ACK]) == HL_PROTOCOL_OLDEST);
+    hello();
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    EXPECT(cmd_v(9, HL_MSG_ESTOP, q, 0) == HL_OK);
+    ticks(1, 1, 1);
+    EXPECT(hl_device_peek().fault == HL_FAULT_ESTOP && !sim_amp_enabled());
+    /* a command longer than this device knows: zero tail taken, anything else refused */
+    EXPECT(cmd0(HL_MSG_CLEAR_FAULT) == HL_OK);
+    uint8_t h[HL_HOME_SIZE + 2] = {0};
+    hl_home_set_clearance_um(h, 20000);
+    EXPECT(cmd(HL_MSG_HOME, h, sizeof h) == HL_OK);
+    h[HL_HOME_SIZE + 1] = 1;
+    EXPECT(cmd(HL_MSG_HOME, h, sizeof h) == HL_BAD_MESSAGE);
 }
 
 static void test_watchdog(void)
@@ -602,13 +661,13 @@ static void test_watchdog(void)
     EXPECT(home(20000) == HL_OK);
     ticks(990, 1, 1);
     uint8_t none[1] = {0};
-    put(2, 0x02, none, 0); /* a heartbeat feeds it */
+    put(HL_PROTOCOL_VERSION, HL_MSG_HEARTBEAT, none, 0); /* a heartbeat feeds it */
     ticks(990, 1, 1);
     EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
     ticks(20, 1, 1);
     EXPECT(hl_device_peek().fault == HL_FAULT_WATCHDOG);
     EXPECT(sim_current() == 0.0f);
-    EXPECT(seen[0x92] == 1);
+    EXPECT(seen[HL_MSG_FAULT] == 1);
 }
 
 static void test_watchdog_waits_for_its_reader(void)
@@ -622,7 +681,8 @@ static void test_watchdog_waits_for_its_reader(void)
     EXPECT(home(20000) == HL_OK);
     ticks(10, 1, 1); /* the reader looks and finds the input empty */
     uint8_t hb[HL_MAX_ENCODED + 1];
-    size_t n = hl_encode_frame_v(2, 0x02, ++seq, none, 0, hb, sizeof hb);
+    size_t n = hl_encode_frame_v(HL_PROTOCOL_VERSION, HL_MSG_HEARTBEAT, ++seq, none, 0, hb,
+                                 sizeof hb);
     sim_uart_to_device(hb, n); /* a heartbeat arrives, and waits unread */
     ticks(1500, 0, 0); /* 1.5 periods without a look */
     EXPECT(hl_device_peek().fault == HL_FAULT_NONE);
@@ -640,7 +700,6 @@ static void test_estop_button(void)
     /* the operator's button: output off at the tick that reads it, latched as ESTOP, the
      * window ended; CLEAR_FAULT is refused until the button is released */
     fresh(6);
-    uint8_t none[1] = {0};
     EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
     EXPECT(home(20000) == HL_OK);
     EXPECT(window(2, 2000, 0) == HL_OK);
@@ -652,12 +711,12 @@ static void test_estop_button(void)
     EXPECT(hl_device_peek().fault == HL_FAULT_ESTOP);
     EXPECT(sim_current() == 0.0f && !sim_amp_enabled());
     ticks(5, 1, 1);
-    EXPECT(seen[0x92] == 1 && seen[0x94] == 1); /* FAULT, then WINDOW_DONE */
-    EXPECT(cmd(0x31, none, 0) == HL_FAULT_LATCHED);
+    EXPECT(seen[HL_MSG_FAULT] == 1 && seen[HL_MSG_WINDOW_DONE] == 1); /* FAULT, then WINDOW_DONE */
+    EXPECT(cmd0(HL_MSG_CLEAR_FAULT) == HL_FAULT_LATCHED);
     EXPECT(hl_device_peek().state == HL_FAULT);
     EXPECT(home(20000) == HL_FAULT_LATCHED);
     sim_estop_button(0);
-    EXPECT(cmd(0x31, none, 0) == HL_OK);
+    EXPECT(cmd0(HL_MSG_CLEAR_FAULT) == HL_OK);
     EXPECT(hl_device_peek().state == HL_IDLE);
     EXPECT(home(20000) == HL_OK);
     ticks(100, 1, 1);
@@ -672,11 +731,10 @@ static void test_stream(void)
     EXPECT(home(20000) == HL_OK);
     EXPECT(window(1, 500, 0) == HL_OK);
     ticks_fed(5200);
-    EXPECT(seen[0x94] == 1);
+    EXPECT(seen[HL_MSG_WINDOW_DONE] == 1);
     EXPECT(chunk_records == 5000 && lost_records == 0 && !chunk_gap);
     /* decimation 10 and two channels */
-    uint8_t tc[4] = {0x05, 0, 10, 0};
-    EXPECT(cmd(0x41, tc, 4) == HL_OK);
+    EXPECT(trace_config(0x05, 10) == HL_OK);
     chunk_records = chunk_next = 0;
     EXPECT(home(20000) == HL_OK);
     EXPECT(window(2, 500, 0) == HL_OK);
@@ -692,11 +750,11 @@ static void test_stream(void)
     for (int k = 0; k < 120; k++) {
         ticks(250, 1, 0);
         uint8_t out[32];
-        size_t n = hl_encode_frame(0x02, 0, none, 0, out, sizeof out);
+        size_t n = hl_encode_frame(HL_MSG_HEARTBEAT, 0, none, 0, out, sizeof out);
         sim_uart_to_device(out, n); /* heartbeats keep coming */
     }
     ticks_fed(20000);
-    EXPECT(seen[0x94] == 1);
+    EXPECT(seen[HL_MSG_WINDOW_DONE] == 1);
     EXPECT(lost_records > 0 && !chunk_gap);
     EXPECT(chunk_records + lost_records == 30000);
     EXPECT(hl_device_peek().records_lost == lost_records);
@@ -765,11 +823,10 @@ static void test_plant_at_extremes(void)
 static void test_zero_then_play_before_a_tick(void)
 {
     fresh(5);
-    uint8_t none[1] = {0};
     EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
     EXPECT(home(20000) == HL_OK);
     ticks(600, 1, 1); /* output on, its ramp over */
-    EXPECT(cmd(0x32, none, 0) == HL_OK); /* ZERO */
+    EXPECT(cmd0(HL_MSG_ZERO) == HL_OK); /* ZERO */
     static int16_t f[480];
     for (int i = 0; i < 480; i++) {
         f[i] = 430; /* 0.43 N = 0.2 A */
@@ -782,8 +839,33 @@ static void test_zero_then_play_before_a_tick(void)
     EXPECT(fabsf(hl_device_peek().current - 0.2f * 301.0f / 500.0f) < 1e-5f);
 }
 
+/* Issue 53 item 3: the longest tick period reads what was measured (a 300-ms hold-up once
+ * read 19,999 us, the histogram's last bin); the 99th percentile still comes from the
+ * histogram, whose last bin says "that or longer" (docs section 6) */
+static void test_tick_periods(void)
+{
+    uint64_t t = 1000000000u;
+    for (int k = 0; k < 1000; k++) {
+        sim_tick_seen(t);
+        t += 100000u; /* 100 us */
+    }
+    sim_tick_seen(t + 300000000u); /* held up 300 ms */
+    EXPECT(sim_tick_period_us(1.0) == 300100u);
+    EXPECT(sim_tick_period_us(0.99) == 100u);
+    for (int k = 0; k < 20; k++) {
+        t += 5000000000u; /* 5-s periods: more than 1 % of them, beyond the histogram */
+        sim_tick_seen(t + 300000000u);
+    }
+    EXPECT(sim_tick_period_us(0.99) == SIM_PERIOD_BINS - 1u);
+    EXPECT(sim_tick_period_us(1.0) == 5000000u);
+    t += 7200000000000u; /* two hours: beyond the u32 field's 71 minutes, saturated there */
+    sim_tick_seen(t);
+    EXPECT(sim_tick_period_us(1.0) == UINT32_MAX);
+}
+
 int device_tests(void)
 {
+    test_tick_periods();
     test_plant_at_extremes();
     test_plant_is_passive();
     test_state_table();
@@ -791,6 +873,7 @@ int device_tests(void)
     test_safety_at_range_ends();
     test_refusal_changes_nothing();
     test_conformance();
+    test_versions();
     test_ramp_clamp_estop();
     test_zero_then_play_before_a_tick();
     test_watchdog();

@@ -7,7 +7,8 @@
  *     and its enable line is off;
  *   - every frame the device sends decodes and fits its layout.
  *
- * An input is read as a script. Its first byte picks the mode:
+ * An input is read as a script. Its first byte picks the mode (bit 0) and the version the
+ * session is opened in (bit 1: 2, else the newest):
  *   even  raw bytes: the rest goes to the receiver as it is, in slices of 1 to 64 bytes,
  *         a few ticks after each (the receive path: COBS, CRC, lengths, resynchronisation);
  *   odd   commands: the rest is a sequence of [type, length, body...] that this harness
@@ -45,7 +46,7 @@ static void drain(void)
         for (size_t i = 0; i < n; i++) {
             hl_frame f;
             if (hl_receiver_push(&host_rx, buf[i], payload, &f)) {
-                fail_if(!hl_body_fits(f.type, f.body, f.body_len));
+                fail_if(!hl_body_fits(f.version, f.type, f.body, f.body_len));
             }
         }
     }
@@ -97,8 +98,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     hl_device_init("FUZZ");
     hl_receiver_init(&host_rx);
     seq = 0;
-    uint8_t hello[1] = {2};
-    send_frame(1, 0x01, hello, 1); /* a session, as every host opens one */
+    /* a session, as every host opens one: version 2 (frozen, its layouts as published)
+     * when the input's first byte has bit 1 set, else the newest */
+    uint8_t version = (data[0] & 2u) ? 2u : (uint8_t)HL_PROTOCOL_VERSION;
+    uint8_t hello[HL_HELLO_SIZE];
+    hl_hello_set_host_protocol(hello, version);
+    send_frame(1, HL_MSG_HELLO, hello, sizeof hello);
     ticks(2);
     size_t at = 1;
     if ((data[0] & 1u) == 0) {
@@ -127,7 +132,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 }
             }
             at += n;
-            send_frame(2, type, body, body_len);
+            send_frame(version, type, body, body_len);
             unsigned wait = at < size ? 1u + data[at++] : 16u;
             ticks(wait);
         }

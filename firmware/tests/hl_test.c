@@ -87,7 +87,7 @@ static void expectation(const uint8_t *enc, size_t len, char *out, size_t cap)
     tohex(f.body, f.body_len, body);
     snprintf(out, cap, "frame %u %u %u %s %s", (unsigned)f.version, (unsigned)f.type,
              (unsigned)f.seq, body,
-             hl_body_fits(f.type, f.body, f.body_len) ? "fit" : "misfit");
+             hl_body_fits(f.version, f.type, f.body, f.body_len) ? "fit" : "misfit");
 }
 
 typedef struct {
@@ -224,12 +224,35 @@ static void test_frames_and_layouts(void)
         }
     }
     /* counted arrays: SCENE_CHUNK with n = 2 and two items fits; with three it does not */
-    uint8_t chunk[14] = {1, 0, 0, 0, 0, 0, 2, 0, 1, 0, 2, 0, 3, 0};
-    CHECK(hl_body_fits(0x12, chunk, 12));
-    CHECK(!hl_body_fits(0x12, chunk, 14));
-    CHECK(!hl_body_fits(0x12, chunk, 13));
-    CHECK(!hl_body_fits(0x7E, chunk, 0));
-    CHECK(hl_body_fits(0x02, chunk, 0) && !hl_body_fits(0x02, chunk, 1));
+    const uint8_t v = HL_PROTOCOL_VERSION;
+    uint8_t chunk[HL_SCENE_CHUNK_BYTES(3)] = {0};
+    hl_scene_chunk_set_scene_id(chunk, 1);
+    hl_scene_chunk_set_n(chunk, 2);
+    for (size_t i = 0; i < 3; i++) {
+        hl_scene_chunk_set_item(chunk, i, (int16_t)(i + 1));
+    }
+    CHECK(hl_body_fits(v, HL_MSG_SCENE_CHUNK, chunk, HL_SCENE_CHUNK_BYTES(2)));
+    CHECK(!hl_body_fits(v, HL_MSG_SCENE_CHUNK, chunk, HL_SCENE_CHUNK_BYTES(3)));
+    CHECK(!hl_body_fits(v, HL_MSG_SCENE_CHUNK, chunk, HL_SCENE_CHUNK_BYTES(3) - 1u));
+    CHECK(!hl_body_fits(v, 0x7E, chunk, 0));
+    CHECK(hl_body_fits(v, HL_MSG_HEARTBEAT, chunk, 0) && !hl_body_fits(v, HL_MSG_HEARTBEAT, chunk, 1));
+    /* the growth rule (docs 1b): version 2 exactly as published (LIMITS 20 bytes); from
+     * version 3 a report longer than this code knows fits (its tail is ignored), a command
+     * does only while the tail is zero, and nothing shorter than its publication fits */
+    uint8_t big[HL_LIMITS_SIZE + 8] = {0};
+    CHECK(hl_body_fits(2, HL_MSG_LIMITS, big, 20) && !hl_body_fits(2, HL_MSG_LIMITS, big, HL_LIMITS_SIZE));
+    CHECK(hl_body_fits(v, HL_MSG_LIMITS, big, HL_LIMITS_SIZE));
+    big[HL_LIMITS_SIZE + 3] = 7;
+    CHECK(hl_body_fits(v, HL_MSG_LIMITS, big, sizeof big));
+    CHECK(!hl_body_fits(v, HL_MSG_LIMITS, big, HL_LIMITS_LEAST - 1u));
+    CHECK(hl_body_fits(v, HL_MSG_LIMITS, big, HL_LIMITS_LEAST)); /* as published */
+    uint8_t home[HL_HOME_SIZE + 4] = {0};
+    hl_home_set_clearance_um(home, 20000);
+    CHECK(hl_body_fits(v, HL_MSG_HOME, home, sizeof home));
+    home[HL_HOME_SIZE + 1] = 1;
+    CHECK(!hl_body_fits(v, HL_MSG_HOME, home, sizeof home));
+    CHECK(!hl_body_fits(2, HL_MSG_HOME, home, sizeof home));
+    CHECK(!hl_body_fits(2, HL_MSG_TRACE_REQUEST, home, 11) && hl_body_fits(1, HL_MSG_TRACE_REQUEST, big, 11));
 }
 
 static void test_receiver(void)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import struct
 import time
 from pathlib import Path
 
@@ -31,6 +30,77 @@ def test_generated_files_are_current():
     assert (ROOT / C.HEADER).read_text() == C.render_header(), "run `make contract`"
     doc = (ROOT / C.DOC).read_text()
     assert C.render_doc(doc) == doc, "run `make contract`"
+
+
+#: the shared core that reads every command and writes every report
+FIRMWARE_CORE = ("firmware/src/device.c", "firmware/src/wire.c")
+
+
+def test_the_firmware_handles_every_field_of_the_newest_version():
+    """Issue 54 item 2: a field added to the contract and not handled by the firmware fails
+    here, by name. The firmware reads a command's fields and writes a report's through the
+    accessors hl_contract.h generates (hl_<message>_<field>, hl_<message>_set_<field>), so
+    a field it handles is one whose accessor it calls; a field it may leave alone says why
+    in the contract (``Field.unused``)."""
+    code = "".join((ROOT / f).read_text() for f in FIRMWARE_CORE)
+    missing = []
+    for spec in C.SPECS:
+        if C.PROTOCOL not in spec.versions:
+            continue
+        fields = [f for f in spec.fields if not f.unused] + \
+            ([spec.items] if spec.items else [])
+        for f in fields:
+            name = "item" if f is spec.items else f.name
+            call = (f"hl_{spec.name.lower()}_{name}(" if spec.sender == "host" else
+                    f"hl_{spec.name.lower()}_set_{name}(")
+            if call not in code:
+                missing.append(f"{spec.name}.{f.name} ({call}…) ")
+    assert not missing, "the firmware never handles " + ", ".join(missing)
+
+
+def test_the_documents_hand_written_tables_say_what_the_contract_says():
+    """Issue 54 item 2: the tables of sections 5 and 6 that stay written by hand (their
+    prose is the document's) list each message's fields with the contract's types in the
+    contract's order, the SCENE_BEGIN table its offsets and size, and the title the one
+    protocol version (contract.PROTOCOL)."""
+    import re
+
+    doc = (ROOT / C.DOC).read_text()
+    assert doc.splitlines()[0] == f"# hapticlab wire protocol, version {C.PROTOCOL}"
+    wrong, seen = [], set()
+    for line in doc.splitlines():
+        m = re.match(r"\| 0x([0-9a-f]{2}) \| ([A-Z_]+) \| (.*?) \|", line)
+        if not m or m[2] not in C.BY_NAME or m[2] in seen or m[3].strip().isdigit():
+            continue  # not a body row, or the generated table of §5a (offsets)
+        spec = C.BY_NAME[m[2]]
+        seen.add(m[2])
+        if m[3].startswith("see below"):
+            continue
+        said = [t for t in re.findall(r"`([uif]\d+)(?:\[[^\]]*\])? ?[^`]*`", m[3])]
+        want = [f.type if not f.type.startswith("bytes") else "u8" for f in spec.fields]
+        want += [spec.items.type] if spec.items else []
+        if said != want:
+            wrong.append(f"{m[2]}: the table says {said}, the contract {want}")
+    assert seen == set(C.BY_NAME), set(C.BY_NAME) - seen
+    begin = C.BY_NAME["SCENE_BEGIN"]
+    rows = re.findall(r"^\| (\d+) \| ([uif]\d+) \| (\w+) \|", doc, re.M)
+    assert [(int(o), t) for o, t, _ in rows] == [(o, f.type) for f, o in C._offsets(begin)]
+    assert f"**SCENE_BEGIN** body ({begin.fixed_size} bytes)" in doc
+    assert not wrong, "\n".join(wrong)
+
+
+def test_no_literal_offset_or_size_in_the_firmware_core():
+    """The executor and the C tests take offsets and sizes from hl_contract.h: no `b + 36`,
+    no SCENE_BEGIN size 43 written out."""
+    import re
+
+    for f in (*FIRMWARE_CORE, "firmware/tests/device_test.c", "firmware/tests/hl_test.c"):
+        text = (ROOT / f).read_text()
+        literal = re.findall(r"\b(?:b|c|h|l|p|t|v|ch|sw|tc|body)\s*\+\s*\d+\b"  # b + 36
+                             r"|\b(?:b|c|t|sw|tc|lim|body|f\.body)\[\d+\]"  # b[35]
+                             r"|last_body\[[^\]]+\]\s*(?:\+\s*\d+|\[\d+\])"
+                             r"|(?<![.\d])43\b", text)  # SCENE_BEGIN's size
+        assert not literal, (f, literal)
 
 
 def test_every_message_class_is_its_contract_entry():
@@ -123,7 +193,7 @@ def test_check_is_the_range_for_any_value(surface, spring):
 #: one valid instance of each host → device command (a real sample, kind 0: a
 #: SCENE_SUPPORT for it is valid; a chunk of no items fits any table)
 BASE = {
-    "HELLO": M.Hello(2),
+    "HELLO": M.Hello(C.PROTOCOL),
     "SCENE_BEGIN": M.SceneBegin(1, 0, 0, 0.0, 1000.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0, 1.0),
     "SCENE_VELOCITIES": M.SceneVelocities(1, ()),
     "SCENE_CHUNK": M.SceneChunk(1, 0, 0, ()),
@@ -201,7 +271,7 @@ def test_every_target_refuses_every_field_beyond_its_range(firmware):
     host = Host(emu.port)
     wrong = []
     try:
-        assert host.ask(M.Hello(2)) == "hello"
+        assert host.ask(M.Hello(C.PROTOCOL)) == "hello"
         lim = host.limits
         limits = {"table_items": lim.table_items, "play_items": lim.play_items,
                   "channels": lim.channels, "max_decimation": lim.max_decimation,
@@ -239,7 +309,7 @@ def _ready(host: Host, scene: M.Message | None) -> None:
     ``scene`` begun (id 1), when given."""
     host.ask(M.ClearFault())
     host.ask(M.Zero())
-    host.ask(M.Hello(2))
+    host.ask(M.Hello(C.PROTOCOL))
     end = time.monotonic() + 5  # a playback the ZERO ended may take a moment to wind down
     while host.settled_state() != "IDLE" and time.monotonic() < end:
         pass
@@ -258,4 +328,3 @@ def test_range_errors_name_the_field_before_anything_is_sent():
     with pytest.raises(C.RangeError, match=r"SET_LIMIT\.current_ma = 1401 outside 1 … "
                                            r"HELLO_ACK\.current_limit mA"):
         M.SetLimit(1401).check(LIMITS)
-    assert struct.calcsize("<" + M.SceneBegin.FMT) == 43

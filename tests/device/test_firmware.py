@@ -18,6 +18,7 @@ import pytest
 
 from device import Scene
 from device.errors import DeviceError
+from device.serial import contract as C
 from device.serial import messages as M
 from device.serial.backend import SerialDevice, stream_decimation
 
@@ -63,9 +64,9 @@ def test_selftest_passes_against_the_host_build_with_the_boards_resources(firmwa
     assert_selftest_passes(firmware_board.port)
 
 
-def test_the_firmware_negotiates_version_2_and_advertises_its_limits(firmware_host):
+def test_the_firmware_negotiates_the_newest_version_and_advertises_its_limits(firmware_host):
     with SerialDevice(firmware_host.port) as dev:
-        assert dev.link.version == 2
+        assert dev.link.version == C.PROTOCOL
         lim = dev.link.limits
         assert lim.channels == 0x7F and lim.ring_records == 8192 and lim.max_decimation == 100
         assert lim.can("simulated_contact") and lim.can("seeded")  # its plant, from --seed
@@ -246,7 +247,7 @@ def test_selftest_passes_against_the_cortex_m_build_under_qemu():
     try:
         assert_selftest_passes(emu.port)
         with SerialDevice(emu.port) as dev:
-            assert dev.link.version == 2
+            assert dev.link.version == C.PROTOCOL
             assert dev.info.firmware == "hlfw-2.0 stm32"
             lim = dev.link.limits
             # the link's capacity as the build measured it: under QEMU's instruction

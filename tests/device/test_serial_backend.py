@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from device import DeviceFaultError, Scene, open_device
+from device.serial import contract as C
 from device.serial.backend import DeviceGoneError, PortBusyError, ProtocolMismatchError
 from device.serial.emulator import open_pty
 
@@ -277,7 +278,7 @@ def test_a_crc_storm_declares_the_link_unusable():
 class _RawHost:
     """A host written against the document: raw frames over pyserial to an in-process
     emulator on a pty (no driver in between). HELLO travels in a version-1 frame, every
-    other command in version 2 unless ``version`` says otherwise."""
+    other command in the newest version unless ``version`` says otherwise."""
 
     def __init__(self, emulator=None, sim=None, **options):
         import os
@@ -304,7 +305,7 @@ class _RawHost:
         from device.serial import messages as M
 
         self.seq += 1
-        v = version or (1 if isinstance(msg, M.Hello) else 2)
+        v = version or (1 if isinstance(msg, M.Hello) else C.PROTOCOL)
         self.port.write(M.encode(msg, self.seq, v))
         return self.seq
 
@@ -375,9 +376,9 @@ def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
     S = M.Status
     host = _RawHost()
     try:
-        assert host.ask(M.Hello(2)) == "hello"
+        assert host.ask(M.Hello(C.PROTOCOL)) == "hello"
         ack = next(m for m in host.seen if isinstance(m, M.HelloAck))
-        assert ack.protocol == 2
+        assert ack.protocol == C.PROTOCOL
         good = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
         assert host.ask(good, version=1) == S.BAD_MESSAGE
         assert host.ask(M.TraceRequest(1, 0, 0, 10)) == S.BAD_MESSAGE
@@ -403,7 +404,7 @@ def test_an_estop_is_served_while_the_trace_streams():
     S = M.Status
     host = _RawHost()
     try:
-        assert host.ask(M.Hello(2)) == "hello"
+        assert host.ask(M.Hello(C.PROTOCOL)) == "hello"
         assert host.ask(M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)) == S.OK
         assert host.ask(M.SceneCommit(1, 0)) == S.OK
         assert host.ask(M.Home(20_000)) == S.OK
@@ -481,7 +482,7 @@ def test_status_reports_a_playback_its_force_and_one_clock():
     S = M.Status
     host = _RawHost()
     try:
-        assert host.ask(M.Hello(2)) == "hello"
+        assert host.ask(M.Hello(C.PROTOCOL)) == "hello"
         for a in range(0, 20_000, 480):
             assert host.ask(M.PlayChunk(a, 480, (500,) * 480)) == S.OK
         assert host.ask(M.PlayStart(1, 20_000)) == S.OK
@@ -520,7 +521,7 @@ def test_status_keeps_coming_while_a_scene_is_prepared():
     S = M.Status
     host = _RawHost(sim=SlowToPrepare(seed=1))
     try:
-        assert host.ask(M.Hello(2)) == "hello"
+        assert host.ask(M.Hello(C.PROTOCOL)) == "hello"
         assert host.ask(M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)) == S.OK
         n0 = len(host.seen)
         assert host.ask(M.SceneCommit(1, 0)) == S.OK

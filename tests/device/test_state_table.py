@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 import serial
 
+from device.serial import contract as C
 from device.serial import messages as M
 from device.serial.contract import FAULTS
 from device.serial.firmware import CONFORMANCE_TARGETS
@@ -42,7 +43,7 @@ ANSWER_S = 10.0
 #: one valid instance of the command each row names (the first name of a row that names
 #: several: the others share its column of statuses)
 COMMANDS = {
-    "HELLO": M.Hello(2),
+    "HELLO": M.Hello(C.PROTOCOL),
     "HEARTBEAT, PING": M.Ping(7),
     "SCENE_BEGIN, _VELOCITIES, _CHUNK, _SUPPORT, _COMMIT": SPRING,
     "HOME": M.Home(20_000),
@@ -102,6 +103,8 @@ class Host:
         self.servo_hz: int | None = None
         self.link_report: M.LinkReport | None = None  # the last LINK_REPORT
         self.watchdog = False  # a watchdog fault was reported since it was last reset
+        self.version = C.PROTOCOL  # the session's protocol version, from HELLO_ACK
+        self.rx_bytes = 0  # bytes read from the device so far
 
     def _pump(self, pred, limit: float, keep: list | None = None):
         """The first message ``pred`` accepts; those passed over on the way go to ``keep``
@@ -109,9 +112,11 @@ class Host:
         end = time.monotonic() + limit
         while time.monotonic() < end:
             if time.monotonic() - self.sent > 0.025:  # a host heartbeats while it waits
-                self.write(M.encode(M.Heartbeat(), 0, 2))
+                self.write(M.encode(M.Heartbeat(), 0, self.version))
             if not self.pending:
-                self.pending = [M.decode(f) for f in self.dec.feed(self.port.read(4096))]
+                data = self.port.read(4096)
+                self.rx_bytes += len(data)
+                self.pending = [M.decode(f) for f in self.dec.feed(data)]
             while self.pending:  # frames read with the one awaited wait for the next ask
                 m = self.pending.pop(0)
                 if isinstance(m, M.StatusReport):
@@ -148,10 +153,11 @@ class Host:
             else:
                 raise AssertionError("no HELLO_ACK in 5 s")
             self.rating_ma, self.watchdog_ms = ack.current_limit_ma, ack.watchdog_ms
+            self.version = ack.protocol
             self.servo_hz = ack.servo_rate_hz
             self.limits = self._pump(lambda m: isinstance(m, M.Limits), ANSWER_S)
             return "hello"
-        self.write(M.encode(msg, self.seq, 2))
+        self.write(M.encode(msg, self.seq, self.version))
         if isinstance(msg, M.Ping):
             self._pump(lambda m: isinstance(m, M.Pong), ANSWER_S)
             return "pong"
@@ -265,7 +271,7 @@ def test_every_state_answers_every_command_as_the_document_says(firmware):
     host = Host(emu.port)
     wrong = []
     try:
-        assert host.ask(M.Hello(2)) == "hello"
+        assert host.ask(M.Hello(C.PROTOCOL)) == "hello"
         for row, cells in table().items():
             for state, (answer, after) in cells.items():
                 cmd = COMMANDS[row]
