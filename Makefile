@@ -86,7 +86,8 @@ contract: $(STAMP)
 	$(PY) -m device.serial.contract
 	$(PY) -m device.serial.vectors > docs/wire-vectors.txt
 
-# The README's screenshots, from the last `make test` (look at them before committing).
+# The documentation's screenshots (docs/screens/: the first-session tutorial and the sessions
+# reference show them), from the last `make test` (look at them before committing).
 SCREENS := realism-instructions realism-tap realism-rating factorial-rating factorial-tap \
            factorial-tap-1920x1080 identification-choose identification-answer debrief pause \
            between-trials-session reference-requested reference-block estop-pause \

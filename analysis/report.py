@@ -41,9 +41,9 @@ SIMULATED_NOTE = (
     "simulated device's signals. Each simulated person taps with their own speed, grasp "
     "and rhythm, compares four felt features (stop time, jolt, onset pitch, ring-down) "
     "with the reference it felt, and places that distance on the range of what it has "
-    "felt so far; the parameters are listed in app/participant_model.py and the README. The "
-    "report rehearses the study's analysis; its findings are not claims about human "
-    "perception.")
+    "felt so far; the parameters are listed in app/participant_model.py and "
+    "docs/explanation/simulated-participants.md. The report rehearses the study's "
+    "analysis; its findings are not claims about human perception.")
 DRY_RUN_NOTE = ("These data come from a dry run: a scripted responder answered at random to "
                 "test the machinery. Nothing in this report is a finding.")
 

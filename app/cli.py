@@ -255,7 +255,8 @@ def _resume(args: argparse.Namespace) -> int:
 
 def _add_lsl(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lsl", action="store_true", help="send the session's events as markers "
-                   "on Lab Streaming Layer (needs the hapticlab[lsl] extra; README: LSL)")
+                   "on Lab Streaming Layer (needs the hapticlab[lsl] extra; "
+                   "docs/howto/send-lsl-markers.md)")
     p.add_argument("--lsl-wait", type=float, default=300.0, metavar="SECONDS",
                    help="with --lsl, wait this long for a recorder to receive the markers "
                    "before the first trial (default 300)")
