@@ -76,9 +76,10 @@ test: $(STAMP) system-deps
 
 # The documentation site (docs/, Sphinx + MyST) into docs/_build/html: warnings are errors and
 # every cross-reference must resolve (-n), so a broken link or a stale name fails the build.
-# No linkcheck: the machines that build it reach no network beyond the package registries.
+# -E reads every page afresh: an incremental build would not repeat an unchanged page's
+# warnings. No linkcheck: the machines that build it reach no network beyond the registries.
 docs: $(STAMP)
-	$(PY) -m sphinx -W --keep-going -n -q -b html docs docs/_build/html
+	$(PY) -m sphinx -E -W --keep-going -n -q -b html docs docs/_build/html
 
 # The wire contract (device/serial/contract.py) into the files made from it: the firmware's
 # include/hl_contract.h and the tables of docs/wire-protocol.md, then the test vectors

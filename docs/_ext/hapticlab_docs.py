@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import pkgutil
+import re
 
 from docutils import nodes
 from docutils.statemachine import StringList
@@ -62,24 +63,26 @@ class ErrorsDirective(SphinxDirective):
     has_content = False
 
     def run(self):
-        lines = [".. list-table::", "   :header-rows: 1", "   :widths: 30 20 50", "",
-                 "   * - error", "     - is a", "     - raised when"]
+        rows = []
         for cls in error_classes():
-            bases = ", ".join(f"``{b.__name__}``" for b in cls.__bases__)
+            bases = ", ".join(f"`{b.__name__}`" for b in cls.__bases__)
             doc = " ".join((inspect.getdoc(cls) or "").split("\n\n")[0].split())
-            lines += [f"   * - ``{cls.__module__}.{cls.__qualname__}``", f"     - {bases}",
-                      f"     - {doc}"]
-        holder = nodes.container()
-        nested_parse_with_titles(self.state, StringList(lines, source="hapticlab-errors"),
-                                 holder)
-        return list(holder.children)
+            rows.append([f"`{cls.__module__}.{cls.__qualname__}`", bases, _md(doc)])
+        return _table(self, ["error", "is a", "raised when"], rows)
+
+
+def _md(rst: str) -> str:
+    """A docstring's first paragraph as Markdown in a table cell: roles in MyST's syntax,
+    literals in single backticks, no bar that would end the cell."""
+    text = re.sub(r":(\w+):`~?([^`]+)`", r"{\1}`\2`", rst)
+    text = text.replace("``", "`")
+    return text.replace("|", "\\|")
 
 
 def _table(directive: SphinxDirective, header: list[str], rows: list[list[str]]) -> list:
-    lines = [".. list-table::", "   :header-rows: 1", ""]
-    for row in [header, *rows]:
-        lines.append(f"   * - {row[0]}")
-        lines += [f"     - {cell}" for cell in row[1:]]
+    """A Markdown table parsed in place (the pages are MyST Markdown)."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
     holder = nodes.container()
     nested_parse_with_titles(directive.state, StringList(lines, source=directive.name), holder)
     return list(holder.children)
@@ -92,7 +95,7 @@ class TraceChannelsDirective(SphinxDirective):
         from device.events import TRACE_CHANNELS
 
         return _table(self, ["channel", "unit", "what"],
-                      [[f"``{name}``", f"``{unit}``", what]
+                      [[f"`{name}`", f"`{unit}`", _md(what)]
                        for name, (unit, what) in TRACE_CHANNELS.items()])
 
 
