@@ -23,6 +23,7 @@ that could not complete).
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -181,12 +182,35 @@ def _one_point(k: int, torn: bool, protocol: str, run_args: list[str], work: Pat
     return out
 
 
+def sample_points(log: list[tuple[str, str]]) -> list[int]:
+    """The write points (1-based) of a sample that meets every way the session writes:
+    the first point of each kind at each file (a temporary file's random name and a trial's
+    number aside: ``.session.json.x8k2….tmp`` and ``trial-0002-0`` are one file each); the
+    first row's append to trials.tsv (the same kinds at the same file as its header, but
+    the write a resume must find whole or set aside as torn); and the last update of
+    session.json, its write and its rename (every row is in, the status not yet complete).
+    ``log`` is the reference run's ``(kind, path)`` per point, in order."""
+    seen, chosen, trials_opened = set(), [], 0
+    for k, (kind, path) in enumerate(log, start=1):
+        name = re.sub(r"\d{4}", "N", re.sub(r"\.[^./]+\.tmp$", ".tmp", path))
+        trials_opened += path.endswith("trials.tsv") and kind == "open"
+        first_row = path.endswith("trials.tsv") and trials_opened == 2
+        if (kind, name) not in seen or first_row:
+            seen.add((kind, name))
+            chosen.append(k)
+    for kind, file in (("write", "session.json"), ("rename", "session.json")):
+        last = max(k for k, (kd, path) in enumerate(log, start=1)
+                   if kd == kind and file in path.rsplit("/", 1)[-1])
+        chosen.append(last)
+    return sorted(set(chosen))
+
+
 def kill_at_points(protocol: str = "realism", seed: int = 1, points: str = "all",
                    workdir: Path | None = None, traces: str = "contacts", workers: int = 2,
                    torn: bool = True) -> dict:
-    """Kill a session after each of its write points (``points``: ``all`` or a comma list
-    of point numbers), resume it, and check what :mod:`this module <benchmarks.crash>`'s
-    docstring lists."""
+    """Kill a session after each of its write points (``points``: ``all``, ``sample`` for
+    :func:`sample_points`, or a comma list of point numbers), resume it, and check what
+    :mod:`this module <benchmarks.crash>`'s docstring lists."""
     from concurrent.futures import ThreadPoolExecutor
 
     work = Path(workdir or tempfile.mkdtemp(prefix="hapticlab-points-"))
@@ -199,9 +223,11 @@ def kill_at_points(protocol: str = "realism", seed: int = 1, points: str = "all"
     r = _launch(["run", protocol, "--data", str(ref), *run_args], env)
     if r.returncode != 0:
         raise RuntimeError(f"the reference session failed: {r.stderr}")
-    kinds = [line.split("\t")[0] for line in log.read_text().splitlines()]
+    logged = [tuple(line.split("\t", 1)) for line in log.read_text().splitlines()]
+    kinds = [kind for kind, _ in logged]
     reference = _rows(_sessions(ref)[-1])
-    chosen = parse_points(points, len(kinds)) or range(1, len(kinds) + 1)
+    chosen = (sample_points(logged) if points == "sample"
+              else parse_points(points, len(kinds)) or range(1, len(kinds) + 1))
     jobs = [(k, False) for k in chosen] + [(k, True) for k in chosen
                                            if torn and kinds[k - 1] == "write"]
     with ThreadPoolExecutor(max_workers=workers) as pool:
@@ -211,6 +237,7 @@ def kill_at_points(protocol: str = "realism", seed: int = 1, points: str = "all"
            or not x["killed"]]
     return {"points": len(kinds), "runs": len(results),
             "by_kind": {k: kinds.count(k) for k in sorted(set(kinds))},
+            "killed_at": {k: kinds[k - 1] for k in chosen},
             "lost_rows": sum(x["lost"] for x in results),
             "headerless": sum(x["headerless"] for x in results),
             "divergent": sum(x["divergent"] for x in results),
