@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint venv clean system-deps screens contract docs
+.PHONY: demo test check lint venv clean system-deps screens contract docs
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -63,6 +63,11 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
+# The unit tier (tests/tiers.py): in-process tests, no child process, no window, none over a few
+# seconds: the inner loop's check, in a few minutes. `make test` is the whole gate CI runs.
+check: $(STAMP)
+	$(PY) -m pytest -q -m unit
+
 # The native link (device/serial/_hostlink*.so) is built in the source tree: a `git clean -x`
 # removes it while the environment's stamp stays, and the suite would then test the Python
 # threads' fallback, which a busy computer starves. Rebuild it rather than test without it.
@@ -72,7 +77,7 @@ test: $(STAMP) system-deps
 	$(MAKE) -C firmware test
 	@$(PY) -c 'import sys; from device.serial.native import load; sys.exit(load()[0] is None)' \
 	  || $(PY) -m pip install --quiet --no-deps -e .
-	$(PY) -m pytest -q --durations=15
+	$(PY) -m pytest -q --durations=15 -n 2 --dist loadgroup
 
 # The documentation site (docs/, Sphinx + MyST) into docs/_build/html: warnings are errors and
 # every cross-reference must resolve (-n), so a broken link or a stale name fails the build.

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from .hostwatch import HostWatch, busiest, cpu_by_process
+from .tiers import TierGuard
 
 settings.register_profile("ci", deadline=None, max_examples=60,
                           suppress_health_check=[HealthCheck.too_slow])
@@ -37,11 +38,31 @@ def wait_for(pred, limit: float = 30.0, what: str = "condition") -> None:
 def pytest_configure(config):
     """Build transient libraries into a fresh library store per run (subprocesses inherit
     it); refuse to load liblsl anywhere but in a private network (app.markers.PRIVATE_ENV:
-    every process the tests start inherits it)."""
-    if "HAPTICLAB_LIBRARIES" not in os.environ:
+    every process the tests start inherits it); mark the unit tier and guard it
+    (tests/tiers.py)."""
+    if "HAPTICLAB_LIBRARIES" not in os.environ or os.environ.get("PYTEST_XDIST_WORKER"):
+        # each pytest-xdist worker its own store, as a run has: a test that finds a library
+        # missing is not handed one the other worker built meanwhile
         os.environ["HAPTICLAB_LIBRARIES"] = tempfile.mkdtemp(prefix="hapticlab-libraries-")
     os.environ["HAPTICLAB_LSL_PRIVATE"] = "1"
+    _adopt_orphans()
     _HOST_WATCH.start()
+    config.pluginmanager.register(TierGuard(config), "tier-guard")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """How pytest-xdist shares the suite between its workers (``make test``: two, ``--dist
+    loadgroup``). Every ``realtime`` test goes to one group, run by one worker one test after
+    another as in a serial run: no realtime test runs beside another (each was made to pass
+    beside two CPU-bound processes; the other worker is one). Every other test goes with its
+    module, so that a module's shared fixture (a study, an identified plant) is made once."""
+    if not config.pluginmanager.hasplugin("xdist"):
+        return
+    for item in items:
+        group = ("realtime" if item.get_closest_marker("realtime")
+                 else item.nodeid.split("::", 1)[0])
+        item.add_marker(pytest.mark.xdist_group(group))
 
 
 #: what the machine did while each test ran (tests/hostwatch.py), told when one fails
@@ -77,24 +98,49 @@ def pytest_runtest_makereport(item, call):
 _LONG_LIVED: set[int] = set()
 
 
+def _adopt_orphans() -> None:
+    """Make this process a child subreaper (prctl PR_SET_CHILD_SUBREAPER): a process whose
+    parent exits (a daemon that forks away, a child of a killed emulator) becomes this
+    process's child rather than init's, so it stays in this process's tree and
+    :func:`_processes` finds it, whichever pytest worker started it."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
+    except (OSError, AttributeError):  # not Linux: orphans go to init, unseen
+        pass
+
+
 def _processes() -> dict[int, tuple[int, str, str]]:
-    """Every process of this session (this run's, not the machine's other work): pid →
-    (parent pid, state, command line)."""
-    session = os.getsid(0)
-    out = {}
+    """Every process descended from this one (this run's, or with pytest-xdist this
+    worker's: not the machine's other work, nor the other worker's): pid → (parent pid,
+    state, command line)."""
+    table = {}
     for d in os.listdir("/proc"):
         if not d.isdigit():
             continue
         try:
             with open(f"/proc/{d}/stat", "rb") as f:
                 stat = f.read().decode(errors="replace")
-            with open(f"/proc/{d}/cmdline", "rb") as f:
-                cmd = f.read().replace(b"\0", b" ").decode(errors="replace").strip()
         except OSError:  # gone meanwhile
             continue
-        fields = stat[stat.rindex(")") + 2:].split()  # state, ppid, pgrp, session, …
-        if int(fields[3]) == session:
-            out[int(d)] = (int(fields[1]), fields[0], cmd)
+        fields = stat[stat.rindex(")") + 2:].split()  # state, ppid, …
+        table[int(d)] = (int(fields[1]), fields[0])
+    me, out = os.getpid(), {}
+    for pid, (ppid, state) in table.items():
+        up = ppid
+        for _ in range(64):
+            if up == me or up not in table:
+                break
+            up = table[up][0]
+        if up != me:
+            continue
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                cmd = f.read().replace(b"\0", b" ").decode(errors="replace").strip()
+        except OSError:
+            continue
+        out[pid] = (ppid, state, cmd)
     return out
 
 
@@ -245,20 +291,22 @@ def emulator_factory():
 def xdisplay():
     """A virtual X server (Xvfb) for PsychoPy windows; sets DISPLAY for the session."""
     import shutil
-    import time
 
     if shutil.which("Xvfb") is None:
         pytest.fail("Xvfb is missing: `make test` installs it from Debian's packages")
-    for n in range(90, 130):
-        if not os.path.exists(f"/tmp/.X{n}-lock"):
-            break
-    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "1920x1200x24", "-nolisten",
-                             "tcp"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # -displayfd: the server takes the first free display and writes its number here (two
+    # pytest workers, or another run on this machine, never race for one)
+    rfd, wfd = os.pipe()
+    proc = subprocess.Popen(["Xvfb", "-displayfd", str(wfd), "-screen", "0", "1920x1200x24",
+                             "-nolisten", "tcp"], pass_fds=(wfd,),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(wfd)
     _LONG_LIVED.add(proc.pid)
-    for _ in range(100):
-        if os.path.exists(f"/tmp/.X11-unix/X{n}"):
-            break
-        time.sleep(0.05)
+    with os.fdopen(rfd) as said:
+        line = said.readline().strip()  # once it listens; empty if it died
+    if not line.isdigit():
+        pytest.fail(f"Xvfb did not start (exit status {proc.poll()})")
+    n = int(line)
     old = os.environ.get("DISPLAY")
     os.environ["DISPLAY"] = f":{n}"
     yield f":{n}"
@@ -455,3 +503,52 @@ def participant(xdisplay, tmp_path):
     if shutil.which("xdotool") is None:
         pytest.fail("xdotool is missing: `make test` installs it from Debian's packages")
     return Participant(xdisplay, tmp_path / "screens.log")
+
+
+def built_once(tmp_path_factory, name: str, build) -> Path:
+    """A folder ``build(folder)`` fills once per test run, shared by every test that asks for
+    ``name``: with pytest-xdist the first worker to ask builds it while the others wait on
+    a lock, then all read the same folder. (Tests must not change what they are handed.)"""
+    import fcntl
+
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # the run's folder, above each worker's own
+    folder, done = base / f"shared-{name}", base / f"shared-{name}.done"
+    with open(base / f"shared-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            if folder.exists():  # a build that failed before: start again
+                import shutil
+
+                shutil.rmtree(folder)
+            folder.mkdir()
+            build(folder)
+            done.touch()
+    return folder
+
+
+_FIRMWARE_READY: list[bool] = []
+
+
+def _firmware_builds() -> None:
+    """Every firmware build (``make -C firmware all``) once per run, before the first test
+    that needs one: the tests' own ``make`` calls then find them current, and two pytest
+    workers never compile the same binary at once (the lock). What cannot be built here (a
+    compiler missing) is left to the test that needs it, which says why (firmware.binary)."""
+    import fcntl
+
+    from device.serial.firmware import FIRMWARE_DIR
+
+    (FIRMWARE_DIR / "build").mkdir(exist_ok=True)
+    with open(FIRMWARE_DIR / "build" / ".tests.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        subprocess.run(["make", "-s", "-k", "-j2", "-C", str(FIRMWARE_DIR), "all"],
+                       capture_output=True)
+    _FIRMWARE_READY.append(True)
+
+
+def pytest_runtest_setup(item):
+    if not _FIRMWARE_READY and (item.get_closest_marker("firmware")
+                                or item.get_closest_marker("qemu")):
+        _firmware_builds()

@@ -228,6 +228,7 @@ print(json.dumps({"psychopy": sorted(m for m in sys.modules if m.split(".")[0] =
 """
 
 
+@pytest.mark.integration
 def test_core_imports_without_psychopy_or_writes(tmp_path):
     env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}  # Python's own caches are not ours
     out = subprocess.run([sys.executable, "-c", IMPORT_PROBE], capture_output=True, text=True,

@@ -161,6 +161,8 @@ def test_the_studies_reach_the_cases_they_were_built_for():
     assert pw.attrs["excluded_subjects"] == ["P03"]
 
 
+@pytest.mark.r
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("Rscript") is None,
                     reason="R missing: `make test` installs r-base-core and r-cran-*")
 def test_r_still_computes_the_committed_references(tmp_path):

@@ -24,6 +24,8 @@ from analysis.bids import export_bids
 from ..app.test_session import MINI
 from ..conftest import PRIVATE_NET, private_net_problem
 
+pytestmark = [pytest.mark.integration]
+
 CLI = [sys.executable, "-m", "app"]
 VALIDATOR = Path(sys.executable).parent / "bids-validator-deno"
 
@@ -116,6 +118,7 @@ def messy(tmp_path_factory):
     return data
 
 
+@pytest.mark.slow
 def test_a_messy_study_is_a_valid_bids_dataset_with_its_mapping_written(messy, tmp_path):
     out = tmp_path / "bids"
     res = export_bids(messy, out, kind="dry-run")
@@ -159,6 +162,7 @@ def test_an_export_refuses_a_folder_in_use_and_an_empty_choice(messy, tmp_path):
         export_bids(messy, tmp_path / "none", kind="dry-run", participants=["nobody"])
 
 
+@pytest.mark.slow
 def test_a_window_kept_in_full_is_a_physio_recording_in_si_units(messy, tmp_path):
     """Each full window: its samples at the device's rate, position = counts × the
     encoder's resolution and acceleration = counts × its LSB, the other streams as
@@ -188,6 +192,7 @@ def test_a_window_kept_in_full_is_a_physio_recording_in_si_units(messy, tmp_path
         assert side["position"] == {"Units": "m"} and side["accel"] == {"Units": "m/s^2"}
 
 
+@pytest.mark.slow
 def test_the_cli_writes_it_with_every_session(messy, tmp_path):
     """`hapticlab export --format bids`: interrupted sessions in by default (a raw dataset),
     out with --status complete."""

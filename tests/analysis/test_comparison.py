@@ -38,6 +38,8 @@ def test_a_pair_counts_both_orders_and_is_tested_by_hand():
     assert r["p_corr"] == pytest.approx(10 / 16, rel=1e-12)  # one pair: nothing to correct
 
 
+@pytest.mark.integration
+@pytest.mark.r
 @pytest.mark.skipif(shutil.which("Rscript") is None,
                     reason="R missing: `make test` installs r-base-core")
 def test_every_pair_and_the_order_bias_match_r():

@@ -46,6 +46,7 @@ def test_more_people_and_repetitions_buy_power_and_precision():
     assert np.all(np.diff(h, axis=0) < 0) and np.all(np.diff(h, axis=1) < 0)
 
 
+@pytest.mark.integration
 def test_power_cli():
     out = subprocess.run([sys.executable, "-m", "app", "power", "realism", "--subjects", "5..30",
                           "--reps", "1..5", "--json"], capture_output=True, text=True,

@@ -9,6 +9,8 @@ import pytest
 from analysis import load_sessions
 from analysis.report import analyze
 
+pytestmark = [pytest.mark.integration]
+
 CLI = [sys.executable, "-m", "app"]
 
 
@@ -32,6 +34,7 @@ def _no_nan(obj):
     json.loads(json.dumps(obj), parse_constant=lambda c: pytest.fail(f"{c} in the report"))
 
 
+@pytest.mark.slow
 def test_load_sessions(study):
     d = load_sessions(study)
     assert d.attrs["sessions"] == 9 and d["participant"].nunique() == 9
@@ -53,6 +56,7 @@ def _analysis(rep, id_):
     return next(a for a in rep["analyses"] if a["id"] == id_)
 
 
+@pytest.mark.slow
 def test_report_structure_and_numbers(study, tmp_path):
     rep = analyze(study, tmp_path / "r")
     _no_nan(rep)
@@ -97,6 +101,7 @@ def test_report_structure_and_numbers(study, tmp_path):
     assert "<table>" in (out / "report.html").read_text()
 
 
+@pytest.mark.slow
 def test_rerun_gives_identical_numbers(study, tmp_path):
     a = analyze(study, tmp_path / "a", ("json",))
     b = analyze(study, tmp_path / "b", ("json",))
@@ -105,6 +110,7 @@ def test_rerun_gives_identical_numbers(study, tmp_path):
     assert a == b
 
 
+@pytest.mark.slow
 def test_cli_analyze_and_its_errors(study, tmp_path):
     out = subprocess.run([*CLI, "analyze", str(study), "--out", str(tmp_path / "o"), "--format",
                           "json"], capture_output=True, text=True, timeout=300)
@@ -118,6 +124,7 @@ def test_cli_analyze_and_its_errors(study, tmp_path):
     assert fmt.returncode == 2 and "--format" in fmt.stderr
 
 
+@pytest.mark.slow
 def test_export_files_agree_with_the_report_cell_by_cell(study, tmp_path):
     """`hapticlab export` in every format, opened with pandas: the wide realism file is the
     report's per-participant means cell by cell (report.json keeps 12 significant digits);
@@ -204,6 +211,8 @@ def test_export_files_agree_with_the_report_cell_by_cell(study, tmp_path):
     assert "human" in set(book.loc[book["column"] == "kind", "meaning"].iloc[0].split())
 
 
+@pytest.mark.r
+@pytest.mark.slow
 @pytest.mark.skipif(__import__("shutil").which("Rscript") is None,
                     reason="R missing: `make test` installs r-base-core and r-cran-*")
 def test_r_reproduces_the_report_from_its_own_export(study, tmp_path):
@@ -263,6 +272,8 @@ def _chromium_shot(page, png, height=1200):
     assert out.returncode == 0 and png.exists(), out.stderr[-2000:]
 
 
+@pytest.mark.screen
+@pytest.mark.slow
 def test_report_html_is_valid_and_reads_in_a_browser(study, tmp_path, artifacts):
     """report.html parsed strictly (every tag closed, no Markdown syntax leaking into the
     text, every figure shown and found), the same sections as report.md, and rendered

@@ -83,6 +83,7 @@ def test_first_session_means_the_first_complete_one(mixed, tmp_path):
     assert kept == {"ses-2"}
 
 
+@pytest.mark.integration
 def test_a_folder_renamed_to_another_participant_is_named_not_merged(mixed, tmp_path):
     """P03's session moved into sub-P09 (a wrong --participant, then a renamed folder): it
     was once merged silently with whichever participant the files named. Now it is left
@@ -123,6 +124,8 @@ def test_filters(mixed):
     assert not t["included"].any() and set(t["reason"]) == {"protocol six_on_nine not selected"}
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_cli_report_opens_with_the_selection(mixed, tmp_path):
     out = subprocess.run([*CLI, "analyze", str(mixed), "--out", str(tmp_path / "r"),
                           "--format", "json,md,html"], capture_output=True, text=True,
@@ -155,6 +158,8 @@ def test_cli_report_opens_with_the_selection(mixed, tmp_path):
     assert bad.returncode == 2 and "--since" in bad.stderr and "Traceback" not in bad.stderr
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_simulate_writes_to_its_own_folder(tmp_path):
     out = subprocess.run([*CLI, "simulate", PROTO, "--participants", "1", "--traces", "none"],
                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
@@ -163,6 +168,7 @@ def test_simulate_writes_to_its_own_folder(tmp_path):
     assert not (tmp_path / "data").exists()
 
 
+@pytest.mark.integration
 def test_a_person_needs_a_device_and_a_dry_run_says_so(tmp_path):
     out = subprocess.run([*CLI, "run", PROTO, "--participant", "P09", "--data", str(tmp_path)],
                          capture_output=True, text=True, timeout=60)

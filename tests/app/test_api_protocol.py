@@ -11,6 +11,7 @@ from app.api import protocol_plan, validate_protocol
 from protocols import ProtocolError
 
 
+@pytest.mark.integration
 def test_the_plan_is_what_protocol_show_prints_as_json():
     plan = protocol_plan("realism", seed=3, participant="P01")
     shown = subprocess.run([sys.executable, "-m", "app", "protocol", "show", "realism",

@@ -14,6 +14,7 @@ def run(*args, **kw):
     return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=600, **kw)
 
 
+@pytest.mark.integration
 def test_selftest_sim_json():
     out = run("device", "selftest", "sim", "--json")
     assert out.returncode == 0, out.stderr
@@ -22,6 +23,7 @@ def test_selftest_sim_json():
     assert all({"name", "ok", "detail"} <= set(c) for c in report["checks"])
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("spec, fragment", [
     ("bogus", "unknown device backend 'bogus'"),
     ("/dev/ttyACM0", "did you mean serial:/dev/ttyACM0?"),
@@ -35,11 +37,13 @@ def test_selftest_bad_spec_is_a_clear_error(spec, fragment):
     assert fragment in out.stderr and "Traceback" not in out.stderr
 
 
+@pytest.mark.integration
 def test_unknown_benchmark():
     out = run("bench", "nothing")
     assert out.returncode == 2 and "no benchmark named 'nothing'" in out.stderr
 
 
+@pytest.mark.integration
 @pytest.mark.slow
 def test_bench_sim_json_shape():
     out = run("bench", "sim", "--json", "--repeats", "1")
@@ -54,6 +58,8 @@ def test_bench_sim_json_shape():
     assert wall[1_000] > 1.0 > wall[10_000]
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_fit_grasp_json():
     out = run("device", "fit-grasp", "--simulated", "--rig", "published", "--impacts", "100",
               "--seed", "3", "--json")
@@ -76,6 +82,8 @@ def test_fit_grasp_json():
         assert abs(err["intercept"]) < 0.03 and abs(err["slope"]) < 0.15, (p, err)
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_fit_grasp_defaults_to_the_rig_with_a_mode_the_model_lacks():
     """The default rig is not a round trip: its fit % is the paper's range, not ~89 %, and
     the command says what its differences mean; too few impacts are refused by name."""
@@ -90,6 +98,8 @@ def test_fit_grasp_defaults_to_the_rig_with_a_mode_the_model_lacks():
     assert bad.returncode == 2 and "--seed must be >= 0, got -1" in bad.stderr
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_sysid_json_and_plot(artifacts):
     png = artifacts / "sysid_sim.png"
     out = run("device", "sysid", "--device", "sim", "--json", "--png", str(png))
@@ -100,6 +110,8 @@ def test_sysid_json_and_plot(artifacts):
     assert png.stat().st_size > 10_000
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_library_build_show_and_refusals(tmp_path, artifacts):
     lib = tmp_path / "lib.npz"
     out = run("library", "build", "--device", "sim", "--out", str(lib), "--entries", "6",
@@ -116,6 +128,7 @@ def test_library_build_show_and_refusals(tmp_path, artifacts):
     assert "Traceback" not in bad.stderr + other.stderr
 
 
+@pytest.mark.integration
 def test_version_and_every_option_explained():
     """`hapticlab --version` is pyproject's version; every command's every argument has help
     text (about 45 had none)."""
@@ -143,6 +156,7 @@ def test_version_and_every_option_explained():
     assert not missing, missing
 
 
+@pytest.mark.integration
 def test_device_list_opens_nothing_and_names_the_simulator(tmp_path):
     out = run("device", "list", "--json")
     assert out.returncode == 0, out.stderr
@@ -179,6 +193,7 @@ def test_device_list_names_each_serial_port_as_a_spec(monkeypatch, capsys):
     assert lines[-1] == "check one with: hapticlab device selftest SPEC (it opens the port)"
 
 
+@pytest.mark.integration
 def test_protocol_show_says_what_to_place_and_how_long():
     out = run("protocol", "show", "realism", "--seed", "3")
     assert out.returncode == 0, out.stderr
@@ -195,6 +210,7 @@ def test_protocol_show_says_what_to_place_and_how_long():
     assert out.stdout.count("never the same sample twice in a row") == 2
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("old, new, fragment", [
     ("duration = 5.0 ", "duration = 1e9 ", "window.duration: must be <= 600"),
     ("scene.spring = 680.0", "scene.spring = 1e7", "above the stiffest spring the device"),
@@ -212,6 +228,8 @@ def test_protocol_validate_refuses_what_no_session_can_run(tmp_path, old, new, f
     assert out.returncode != 0 and fragment in (out.stdout + out.stderr), out
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_protocol_validate_warns_of_a_transient_the_device_renders_poorly(tmp_path):
     """Issue 34: a transient near the Nyquist frequency was accepted silently. A third of
     the servo rate is played at 72 % of its peak (warned); 0.499 of it at 42 % (refused)."""
@@ -231,6 +249,7 @@ def test_protocol_validate_warns_of_a_transient_the_device_renders_poorly(tmp_pa
     assert out.returncode != 0 and "renders only" in out.stdout + out.stderr, out
 
 
+@pytest.mark.integration
 def test_a_translated_protocol_is_told_which_texts_are_still_english(tmp_path):
     """Issue 30: texts added to hapticlab after a lab translated its protocol appeared in
     English beside the translation without a word. ``protocol validate`` and ``preflight``

@@ -12,6 +12,8 @@ from statsmodels.stats.multitest import multipletests
 
 from app.api import analyze, simulate_study
 
+pytestmark = [pytest.mark.slow]
+
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):

@@ -42,6 +42,8 @@ def dev():
     return d
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_keys_act_only_in_their_state_and_estop_acts_at_once(tty_stdin, dev):
     """A key pressed where it means nothing is discarded with a line saying so; nothing
     pressed in one state acts in the next (an s during a trial never skips the next one)."""
@@ -81,6 +83,8 @@ def test_keys_act_only_in_their_state_and_estop_acts_at_once(tty_stdin, dev):
         con.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_non_ascii_keys_never_end_the_reader_and_estop_acts_in_every_state(tty_stdin, dev):
     """A German operator's keys: ü beside p, a note about Müller, a byte no encoding knows.
     The reader reads whole characters, says what it cannot use, and e (Ctrl-E inside a note)
@@ -122,6 +126,8 @@ def test_non_ascii_keys_never_end_the_reader_and_estop_acts_in_every_state(tty_s
         con.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_an_estop_after_c_is_never_cleared_by_it(tty_stdin, dev):
     """c queued, then e before the session acts on the c, or while the clear is on its way
     to the device: the device stays latched (the later key wins), and the operator is told
@@ -190,6 +196,8 @@ def test_an_estop_after_c_is_never_cleared_by_it(tty_stdin, dev):
         con.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_an_estop_the_device_does_not_confirm_is_said_loudly(tty_stdin):
     """A link that fails as e is pressed: the console says the e-stop is not confirmed and
     names the device's own button, and the reader goes on."""
@@ -213,6 +221,7 @@ def test_an_estop_the_device_does_not_confirm_is_said_loudly(tty_stdin):
         con.close()
 
 
+@pytest.mark.integration
 def test_device_check_reports_saturation_by_sample():
     out = subprocess.run([sys.executable, "-m", "app", "device", "check", "realism", "--json",
                           "--windows", "6"], capture_output=True, text=True, timeout=300)
@@ -254,6 +263,8 @@ def test_familiarization_runs_until_the_participant_is_done(tmp_path):
     assert int(rows[0]["n_taps"]) > 15  # three 5-s windows of taps
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_the_counter_counts_items_never_past_their_number(tty_stdin, dev):
     """Issue 30 (7): after redraws the panel read '50 of 45' (attempts against items). It
     counts finished items, the attempt's number in brackets; at the last item, and after
@@ -273,6 +284,8 @@ def test_the_counter_counts_items_never_past_their_number(tty_stdin, dev):
         con.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_bytes_that_are_no_character_are_said_and_the_keys_still_act(tty_stdin, dev):
     """A terminal whose encoding is not the one it sends (Latin-1 'ü' into a UTF-8 reader)
     was replaced silently; it is said, dropped from a note, and e still stops at once."""
@@ -289,6 +302,8 @@ def test_bytes_that_are_no_character_are_said_and_the_keys_still_act(tty_stdin, 
         con.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_a_terminal_that_goes_away_is_said_and_the_session_goes_on(dev):
     """The operator's terminal closed (an ssh session dropped, the window closed): the key
     reader says so and ends (the device's own button still acts); the console keeps
@@ -314,6 +329,8 @@ def test_a_terminal_that_goes_away_is_said_and_the_session_goes_on(dev):
         f.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_close_survives_a_live_view_that_cannot_draw_any_more(tty_stdin, dev):
     """With the live view on (a real session), close() draws a last frame: on a terminal
     that went away that raised EIO in the session's finally, replacing its result."""

@@ -120,6 +120,7 @@ def test_any_line_ending_or_bom_resumes_and_is_written_back_canonical(session, e
 
 
 # ------------------------------------------------------------------ 3: one writer
+@pytest.mark.realtime
 @pytest.mark.integration
 @pytest.mark.slow
 def test_a_second_resume_of_the_same_session_is_refused(tmp_path, emulator):
@@ -300,6 +301,7 @@ def test_the_protocols_current_limit_is_applied_on_the_device(mini, tmp_path):
     assert any(r["status"] == "saturated" for r in rows)
 
 
+@pytest.mark.realtime
 @pytest.mark.integration
 @pytest.mark.slow
 def test_the_current_limit_goes_over_the_serial_link(emulator, mini, tmp_path):

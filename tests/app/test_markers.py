@@ -46,6 +46,7 @@ class Recorded(MarkerSink):
         self.markers.append((stamp, json.loads(text)))
 
 
+@pytest.mark.integration
 def test_the_private_network_has_loopback_alone_before_liblsl_is_loaded():
     """The wrapper's command sees loopback alone, up, and liblsl's configuration of the
     project's; the wrapper refuses to run a command in a namespace that has more."""
@@ -97,6 +98,7 @@ def _destinations(log: Path) -> set[str]:
         re.findall(r'inet_pton\(AF_INET6, "([0-9a-f:]+)"', text))
 
 
+@pytest.mark.integration
 @pytest.mark.skipif(shutil.which("strace") is None, reason="needs strace (make test installs "
                     "it)")
 def test_liblsl_with_the_projects_configuration_sends_to_loopback_alone(tmp_path):
@@ -194,6 +196,9 @@ def _utc(text: str) -> float:
     return dt.datetime.fromisoformat(text).timestamp()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_markers_a_pylsl_inlet_receives_line_up_with_the_recorded_session(tmp_path):
     """The mini protocol with the simulated participant over the serial link to the device
     emulator, first without a recorder (the session stops before its first trial, to be
@@ -292,6 +297,7 @@ def test_markers_a_pylsl_inlet_receives_line_up_with_the_recorded_session(tmp_pa
         assert stamps[-1] >= end - 1e-3 - pad  # trial_end: after the row was written
 
 
+@pytest.mark.integration
 def test_a_session_that_cannot_send_markers_stops_before_its_folder(tmp_path):
     """Outside a private network (where the tests require one) --lsl is refused in one
     line before the device opens, and no session folder is left behind to trip the
@@ -310,6 +316,7 @@ def test_a_session_that_cannot_send_markers_stops_before_its_folder(tmp_path):
     assert not (tmp_path / "data" / "sub-P33").exists()
 
 
+@pytest.mark.integration
 def test_ctrl_c_while_waiting_for_a_recorder_stops_cleanly(tmp_path):
     """SIGTERM during the wait for a recorder acts at once (the wait polls), and the
     session is recorded as stopped with its LSL run, resumable."""

@@ -69,6 +69,7 @@ def test_data_folder_checks_name_the_problem(tmp_path):
     assert c.ok and "writable" in c.detail
 
 
+@pytest.mark.integration
 def test_terminal_and_display_checks_fail_without_them():
     code = ("from app.preflight import check_terminal, check_display as d; "
             "t = check_terminal(); print(t.ok, t.fix); print(d().ok)")
@@ -115,6 +116,8 @@ def test_a_limit_above_the_rating_fails_and_one_below_is_applied():
         assert c.ok and abs(dev.current_limit - rating / 2) <= 1e-9 * rating
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_the_command_prints_one_line_per_check_and_exits_one_on_a_failure(tmp_path):
     out = subprocess.run([*PY, "preflight", "factorial", "--device", "sim", "--no-audio",
                           "--data", str(tmp_path / "d"), "--responder", "scripted"],

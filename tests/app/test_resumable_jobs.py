@@ -65,6 +65,10 @@ def _stopped(firmware, cmd: list[str], step: str, env=None) -> str:
     return "".join(err)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
 def test_a_library_build_stopped_by_a_fault_keeps_its_work_and_resumes(firmware, tmp_path):
     out = tmp_path / "wood.npz"
     text = _stopped(firmware, [sys.executable, "-m", "app", "library", "build", "--device",
@@ -90,6 +94,10 @@ def test_a_library_build_stopped_by_a_fault_keeps_its_work_and_resumes(firmware,
                      r"baseline, [\d.]+ dB \(\d+ and \d+ taps\)", again.stdout), again.stdout
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
 def test_an_identification_stopped_by_a_fault_keeps_its_sweeps_and_resumes(firmware, tmp_path):
     """`device sysid` kept nothing across a fault without a terminal (an audit of issue
     29); its finished sweeps now wait in the library store until the model is fitted."""
@@ -113,6 +121,10 @@ def test_an_identification_stopped_by_a_fault_keeps_its_sweeps_and_resumes(firmw
     assert not Path(m.group(2)).exists()  # fitted: the record is gone
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
 def test_a_person_clears_a_fault_and_the_build_measures_again(firmware, terminal, tmp_path,
                                                              artifacts):
     out = tmp_path / "wood.npz"
@@ -209,6 +221,7 @@ def test_every_command_that_opens_a_device_can_clear_its_fault():
         assert args.clear_fault is True, line
 
 
+@pytest.mark.integration
 def test_commands_built_from_values_parse_with_spaces_in_them():
     """The scan above sees string constants only; these commands are built from the user's
     own values (a data folder or a plot path may hold a space, which an unquoted

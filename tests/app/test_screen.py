@@ -13,6 +13,8 @@ import pytest
 from device import ContactEvent, WindowResult
 from protocols import load_protocol, parse_protocol, protocol_text
 
+pytestmark = [pytest.mark.screen, pytest.mark.realtime]
+
 psychopy = pytest.importorskip("psychopy", reason="the `ui` extra is installed by make test")
 
 

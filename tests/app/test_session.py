@@ -30,6 +30,8 @@ def realism_session(tmp_path_factory):
     return data / "sub-P01" / "ses-1"
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_realism_session_files_and_counts(realism_session):
     files = SessionFiles(realism_session)
     assert (realism_session / "traces").is_dir()
@@ -54,6 +56,7 @@ def test_realism_session_files_and_counts(realism_session):
     assert meta["times"]["created_utc"] and meta["times"]["finished_utc"]
 
 
+@pytest.mark.integration
 def test_placements_never_reveal_and_always_swap(realism_session):
     rows, _ = read_trials(realism_session / "trials.tsv")
     for r in rows:
@@ -63,6 +66,8 @@ def test_placements_never_reveal_and_always_swap(realism_session):
             assert r["placement"] in ("placeholder A", "placeholder B")
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_an_existing_session_is_never_overwritten(tmp_path):
     for n in (1, 2):
         out = run("run", "identification", "--participant", "P02", "--seed", "3", "--data",
@@ -71,6 +76,7 @@ def test_an_existing_session_is_never_overwritten(tmp_path):
         assert (tmp_path / "sub-P02" / f"ses-{n}" / "trials.tsv").exists()
 
 
+@pytest.mark.integration
 def test_seed_is_drawn_and_recorded_when_not_given(tmp_path):
     out = run("run", "identification", "--participant", "P03", "--data", str(tmp_path),
               *HEADLESS)
@@ -79,6 +85,7 @@ def test_seed_is_drawn_and_recorded_when_not_given(tmp_path):
     assert isinstance(meta["seed"], int) and meta["seed"] >= 0
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("pid, fragment", [
     ("../x", "path separator"), ("a/b", "path separator"), ("P..1", "'..'"),
     ("CON", "reserved device name"), ("nul", "reserved device name"),
@@ -100,6 +107,8 @@ def _copy_session(src: Path, dst: Path) -> Path:
     return dst / src.parent.name / src.name
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_torn_last_line_is_set_aside_and_the_attempt_rerun(realism_session, tmp_path):
     folder = _copy_session(realism_session, tmp_path / "d")
     lines = (folder / "trials.tsv").read_text().splitlines(keepends=True)
@@ -118,6 +127,7 @@ def test_torn_last_line_is_set_aside_and_the_attempt_rerun(realism_session, tmp_
     assert strip((folder / "trials.tsv").read_text()) == strip(full)
 
 
+@pytest.mark.integration
 def test_a_corrupt_earlier_line_is_a_named_error(realism_session, tmp_path):
     folder = _copy_session(realism_session, tmp_path / "d")
     lines = (folder / "trials.tsv").read_text().splitlines(keepends=True)
@@ -132,6 +142,8 @@ def test_a_corrupt_earlier_line_is_a_named_error(realism_session, tmp_path):
     assert out.returncode == 2 and "trials.tsv:6: corrupt line" in out.stderr
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_resume_uses_the_sessions_protocol_copy_and_refuses_an_edited_one(tmp_path):
     proto = tmp_path / "mini.toml"
     proto.write_text(MINI)
@@ -161,6 +173,7 @@ def test_resume_uses_the_sessions_protocol_copy_and_refuses_an_edited_one(tmp_pa
     assert "protocol.toml" in out.stderr
 
 
+@pytest.mark.integration
 @pytest.mark.slow
 def test_kill_harness_loses_nothing_and_resumes_exactly(tmp_path):
     """≥ 30 kill -9 at random moments (1000 in `hapticlab bench crash`), some of them, on a
@@ -172,6 +185,9 @@ def test_kill_harness_loses_nothing_and_resumes_exactly(tmp_path):
     assert r["sequence_matches"], r["mismatched"]
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_headless_session_over_the_emulator(emulator, tmp_path):
     proto = tmp_path / "mini.toml"
     proto.write_text(MINI)
@@ -187,6 +203,9 @@ def test_headless_session_over_the_emulator(emulator, tmp_path):
     assert meta["link"]["frames_sent"] > 0 and meta["link"]["crc_errors"] == 0
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_emulator_dies_mid_session_then_resume_on_a_new_one(tmp_path, emulator_factory):
     proto = tmp_path / "mini.toml"
     proto.write_text(MINI.replace("duration = 1.0", "duration = 2.0"))
@@ -220,6 +239,8 @@ def test_emulator_dies_mid_session_then_resume_on_a_new_one(tmp_path, emulator_f
     assert retried and int(retried[0]["attempt"]) == int(aborted[0]["attempt"]) + 1
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_real_device_sessions_refuse_to_run_without_audio(emulator, tmp_path):
     proto = tmp_path / "mini.toml"
     proto.write_text(MINI)
@@ -231,6 +252,8 @@ def test_real_device_sessions_refuse_to_run_without_audio(emulator, tmp_path):
     assert not (tmp_path / "d").exists() or not any((tmp_path / "d").rglob("trials.tsv"))
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_a_real_device_without_its_library_is_refused_with_the_command(emulator, tmp_path):
     """Realism over the serial link: the matched samples need a library built on this very
     device; the run stops before recording anything and names the command that builds it."""

@@ -78,6 +78,7 @@ def test_a_changed_rendering_changes_the_rating():
     assert person.position("reference", near[1]) > 0.8
 
 
+@pytest.mark.slow
 def test_experts_identify_more_reliably_than_novices():
     """Same surfaces felt, same remembered blocks: only the perceptual noise differs by group
     (app.participant_model.FEATURE_NOISE), so experts name the materials right more often (the
@@ -105,6 +106,7 @@ def test_experts_identify_more_reliably_than_novices():
     assert score["novice"] > 0.5, score  # chance is 1/6
 
 
+@pytest.mark.slow
 def test_identification_improves_with_practice():
     """Same surfaces felt, only the repetition differs: perception noise shrinks by
     ID_LEARNING per repetition done, so the third attempt is named right more often than the
@@ -176,6 +178,8 @@ def realism(study):
     return analyse_recorded(study, "realism", "testing")["result"]
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_face_validity_realism(study):
     r = realism(study)
     means = {s["sample"]: s["mean"] for s in r["samples"]}
@@ -198,6 +202,7 @@ def test_face_validity_realism(study):
         assert p_holm(a, b) >= 0.05, (a, b)
 
 
+@pytest.mark.integration
 def test_face_validity_taps_and_saturations(study):
     dev = analyse_recorded(study, "realism", "testing")["device"]
     assert 0.09 < dev["velocity_mean"] < 0.13 and 0.02 < dev["velocity_sd"] < 0.05
@@ -206,12 +211,14 @@ def test_face_validity_taps_and_saturations(study):
     assert heavy >= 0.8 * sum(sat.values()) and heavy > 0
 
 
+@pytest.mark.integration
 def test_face_validity_identification(study):
     i = analyse_recorded(study, "identification", "identification")["result"]
     t = {row["scope"]: row for row in i["table"].to_dict(orient="records")}
     assert t["all"]["percent"] > 60 and t["all"]["p_binom"] < 1e-6
 
 
+@pytest.mark.integration
 def test_face_validity_factorial(study):
     """What emerges in every seed tried (1, 2, 3; p values below are the range over them):
     for wood, frequency (p ≤ .006) and slope (p ≤ .048) matter and their high levels,
@@ -231,6 +238,7 @@ def test_face_validity_factorial(study):
         assert res[mat]["preflight"].empty, mat
 
 
+@pytest.mark.integration
 def test_power_from_a_factorial_pilot_says_what_it_cannot_estimate(study_dir):
     """A factorial pilot rates each set once: the trial SD cannot be told from the
     participant × set SD. It used to print NaN (invalid JSON); now it says so, and with
@@ -249,6 +257,7 @@ def test_power_from_a_factorial_pilot_says_what_it_cannot_estimate(study_dir):
     assert got["sd_trial"] == 0.8 and got["sd_interaction"] >= 0
 
 
+@pytest.mark.integration
 def test_familiarization_windows_are_tapped_afresh(study_dir):
     """The two familiarization windows each get their own seed: no run of four tap speeds
     repeats within a participant's familiarization (it did, exactly, when both windows were
@@ -268,6 +277,8 @@ def test_familiarization_windows_are_tapped_afresh(study_dir):
     assert len(seen) == 9 and len(set(seen)) == 9
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_session_length_from_a_simulated_study(study_dir, study):
     """`power --pilot` takes the SDs from the analysed (testing) phase of simulated
     sessions, and the precision it predicts for the study's own size (9 participants, 3
@@ -324,6 +335,8 @@ def test_aluminum_300_hz_is_beyond_the_simulated_device():
     assert force > 3 * limit, (force, limit)  # measured 12 N (the best set, A = −300: 17 N)
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_simulate_is_reproducible(tmp_path):
     def run(d):
         out = subprocess.run([*CLI, "simulate", "identification", "--participants", "2",
@@ -340,6 +353,9 @@ def test_simulate_is_reproducible(tmp_path):
     assert bad.returncode == 2 and "--participants" in bad.stderr
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_simulate_over_the_serial_link_to_the_emulator(tmp_path):
     """The whole path of a real session: pyserial over a pty to the device emulator (×10
     real time), the participant feeling the traces the link uploads. This is the run that
@@ -362,6 +378,8 @@ def test_simulate_over_the_serial_link_to_the_emulator(tmp_path):
     assert bad.returncode == 2 and "--speed" in bad.stderr
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_demo_writes_the_whole_study_and_its_report(tmp_path):
     out = subprocess.run([*CLI, "demo", "--out", str(tmp_path / "demo")], capture_output=True,
                          text=True, timeout=900)

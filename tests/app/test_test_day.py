@@ -14,6 +14,8 @@ import pytest
 
 from analysis.session_format import read_trials
 
+pytestmark = [pytest.mark.integration]
+
 ROOT = Path(__file__).resolve().parents[2]
 TEST_DAY = ROOT / "tests" / "data" / "test_day.toml"
 PY = [sys.executable, "-m", "app"]
@@ -91,6 +93,9 @@ def name_three_and_finish(participant, t) -> None:
     assert t.exit_code(90) == 0
 
 
+@pytest.mark.realtime
+@pytest.mark.screen
+@pytest.mark.slow
 def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp_path):
     """The participant's details in a dialog; familiarization ended with ENTER; the real
     block at the start of the block and again when the participant asks (R); 'please wait'
@@ -190,6 +195,10 @@ def test_a_person_session_end_to_end(xdisplay, terminal, participant, shots, tmp
     assert meta["summary"].startswith("5 valid, 0 saturated, 0 excluded, 0 skipped")
 
 
+@pytest.mark.realtime
+@pytest.mark.screen
+@pytest.mark.firmware
+@pytest.mark.slow
 def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory, xdisplay,
                                                                 terminal, participant, shots,
                                                                 tmp_path):
@@ -233,6 +242,9 @@ def test_a_person_switches_surfaces_mid_window_on_the_firmware(emulator_factory,
         assert seconds < 10.0, (k, seconds)
 
 
+@pytest.mark.realtime
+@pytest.mark.screen
+@pytest.mark.slow
 def test_a_person_chooses_which_real_block_to_tap_again(xdisplay, terminal, participant,
                                                         shots, tmp_path):
     """Issue 30 (4), as a person does it: in identification R asks which real block (the
@@ -278,6 +290,8 @@ def test_a_person_chooses_which_real_block_to_tap_again(xdisplay, terminal, part
             and r["status"] != "reference"] == ["valid"]
 
 
+@pytest.mark.realtime
+@pytest.mark.slow
 def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp_path):
     """Over the serial emulator (windows in real time): an s during a trial is discarded (it
     used to skip the next trial), a double r starts one trial, un-pausing needs r, and s, u,
@@ -345,6 +359,9 @@ def test_operator_keys_act_on_the_trial_in_front_of_them(emulator, terminal, tmp
     assert [r["status"] for r in retried] == ["estop", "valid"]
 
 
+@pytest.mark.realtime
+@pytest.mark.firmware
+@pytest.mark.slow
 def test_the_devices_estop_button_pauses_and_holds_until_released(emulator_factory, terminal,
                                                                     tmp_path, shots):
     """The e-stop button on the device itself (the host-built firmware presses it on SIGUSR1
@@ -388,6 +405,9 @@ def test_the_devices_estop_button_pauses_and_holds_until_released(emulator_facto
     assert "own e-stop button" in rows[1]["reason"]
 
 
+@pytest.mark.realtime
+@pytest.mark.screen
+@pytest.mark.slow
 def test_a_person_without_a_terminal_is_refused_before_anything_opens(xdisplay, tmp_path):
     out = subprocess.run([*PY, "run", str(TEST_DAY), "--participant", "P03", "--device", "sim",
                           "--no-audio", "--data", str(tmp_path / "d")], capture_output=True,
@@ -404,6 +424,9 @@ def test_a_person_without_a_terminal_is_refused_before_anything_opens(xdisplay, 
     assert nodisplay.returncode == 2 and "no display" in nodisplay.stderr
 
 
+@pytest.mark.realtime
+@pytest.mark.firmware
+@pytest.mark.slow
 @pytest.mark.parametrize("firmware", ["python", "host", "host-board"])
 def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulator_factory,
                                                                            tmp_path, firmware):
@@ -461,6 +484,8 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
     assert lib.rate_hz == 10_000.0 and lib.forces.shape[1] == 1000
 
 
+@pytest.mark.realtime
+@pytest.mark.slow
 def test_clear_fault_over_serial_clears_a_fault_latched_before(emulator, tmp_path):
     from device import Scene, open_device
 
@@ -480,6 +505,7 @@ def test_clear_fault_over_serial_clears_a_fault_latched_before(emulator, tmp_pat
     assert out.returncode == 0, out.stderr
 
 
+@pytest.mark.realtime
 def test_the_cursor_follows_the_stylus_over_the_serial_link(emulator):
     from device import Scene, open_device
 
@@ -492,6 +518,7 @@ def test_the_cursor_follows_the_stylus_over_the_serial_link(emulator):
     assert len(seen) >= 5 and max(seen) > 0.005 and min(seen) < 0.002  # up and down
 
 
+@pytest.mark.slow
 def test_williams_rows_beyond_the_square_and_simulated_counterbalancing(tmp_path):
     text = (ROOT / "protocols" / "factorial.toml").read_text().replace(
         'block_order = "random"', 'block_order = "williams"')

@@ -15,6 +15,8 @@ from statsmodels.stats.multitest import multipletests
 
 from app.api import analyze, simulate_study
 
+pytestmark = [pytest.mark.slow]
+
 VARIANTS = Path(__file__).resolve().parents[1] / "data" / "protocols"
 ROOT = Path(__file__).resolve().parents[2]
 

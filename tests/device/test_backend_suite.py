@@ -26,6 +26,8 @@ def opener(request):
     return REACH[request.param](request)
 
 
+@pytest.mark.integration
+@pytest.mark.realtime
 @pytest.mark.parametrize("check", sorted(CHECKS))
 def test_backend_contract(opener, check):
     detail = CHECKS[check](opener)

@@ -60,12 +60,15 @@ def test_every_fault_a_device_can_latch_is_told_in_words():
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
+@pytest.mark.slow
 def test_the_self_test_passes_on_each_bridge(bridge):
     assert_selftest_passes(bridge.port)
 
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_the_hd_bridges_two_threads_share_nothing_unguarded():
     """The OpenHaptics bridge runs its tick in the scheduler's thread and its link in the
@@ -92,6 +95,7 @@ def test_the_hd_bridges_two_threads_share_nothing_unguarded():
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 def test_a_bridge_says_its_rate_and_that_it_records_no_acceleration(bridge):
     """HELLO_ACK carries the bridge's servo rate and its model; LIMITS leaves the accel
     channel out (bit 5), so the host streams every other channel and a window's traces
@@ -117,6 +121,7 @@ def test_a_bridge_says_its_rate_and_that_it_records_no_acceleration(bridge):
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_a_session_runs_over_each_bridge(bridge, tmp_path):
     """A whole session (three samples twice: a real block, a spring, a pulse) with the
@@ -154,6 +159,7 @@ def test_a_session_runs_over_each_bridge(bridge, tmp_path):
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_a_library_build_on_a_bridge_is_refused_for_want_of_an_accelerometer(tmp_path):
     """Acceleration matching identifies the device from its accelerometer: on a device
@@ -172,6 +178,7 @@ def test_a_library_build_on_a_bridge_is_refused_for_want_of_an_accelerometer(tmp
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 def test_the_hd_bridge_runs_in_real_time_only():
     run = subprocess.run([*CLI, "device", "emulate", "--firmware", "hd-stub", "--speed", "2"],
                          capture_output=True, text=True, timeout=60)
@@ -180,6 +187,7 @@ def test_the_hd_bridge_runs_in_real_time_only():
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 @pytest.mark.parametrize(("target", "variable"), [("dhd", "DHD_SDK"), ("hd", "OPENHAPTICS")])
 def test_a_build_against_an_sdk_that_is_not_there_says_what_it_needs(target, variable,
                                                                       tmp_path):
@@ -194,6 +202,7 @@ def test_a_build_against_an_sdk_that_is_not_there_says_what_it_needs(target, var
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 @pytest.mark.slow
 def test_validate_says_up_front_what_each_bridge_cannot_render(bridge):
     """`protocol validate --device`: the factorial's 300-Hz aluminum sets are 0.3 × a 1-kHz
@@ -222,6 +231,7 @@ def test_validate_says_up_front_what_each_bridge_cannot_render(bridge):
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 def test_realtime_is_asked_for_and_its_answer_said():
     """`--realtime` asks for SCHED_FIFO and locked memory: granted (as root, or with an
     rtprio limit) it says so, refused it says what it runs at and how to grant it; either
@@ -242,6 +252,7 @@ def test_realtime_is_asked_for_and_its_answer_said():
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 @pytest.mark.parametrize(("scheduler", "link"), [(40, 20), (12, 11), (0, 0)])
 def test_the_openhaptics_bridges_link_thread_runs_below_the_scheduler(scheduler, link,
                                                                       monkeypatch):
@@ -278,6 +289,7 @@ def test_the_openhaptics_bridges_link_thread_runs_below_the_scheduler(scheduler,
 
 @pytest.mark.integration
 @pytest.mark.firmware
+@pytest.mark.realtime
 @pytest.mark.parametrize("kind", sorted(RATES))
 def test_a_device_that_stops_answering_latches_a_fault_and_output_goes_off(kind, monkeypatch):
     """A real device's cable pulled mid-window: the stand-in's position readings fail after

@@ -25,6 +25,8 @@ from device.serial.framing import encode_frame
 from ..conftest import start_emulator, stop_emulator
 from .test_state_table import ANSWER_S, Host
 
+pytestmark = [pytest.mark.integration, pytest.mark.firmware, pytest.mark.realtime]
+
 TARGETS = CONFORMANCE_TARGETS  # every target, as device/serial/firmware.py lists them
 SPRING = M.SceneBegin(1, 1, 0, 680.0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1.0)
 S = M.Status
@@ -379,6 +381,7 @@ def _fault_ends_playback(host: Host, stall: float = 0.0) -> None:
     assert host.ask(M.ClearFault()) == S.OK
 
 
+@pytest.mark.slow
 @deadline_kept
 def test_a_fault_ends_a_playback_at_once(host):
     """Finding 4: an e-stop during a playback was reported when the whole buffer had run."""
@@ -457,6 +460,7 @@ def test_an_estop_zeroes_output_within_its_bound_while_traces_stream(host):
     assert worst <= estop_bound_us(host), (worst, estop_bound_us(host))
 
 
+@pytest.mark.slow
 @deadline_kept
 def test_a_from_contact_window_lasts_its_duration_and_position_is_its_tick(host):
     """Findings 5 and 6: a from-contact window lasted one tick too long on the firmware;

@@ -259,7 +259,12 @@ QEMU_FIELDS = {("SCENE_BEGIN", "surface_um"), ("SCENE_BEGIN", "spring"),
                ("SET_LIMIT", "current_ma"), ("TRACE_CONFIG", "channels")}
 
 
-@pytest.mark.parametrize("firmware", [*CONFORMANCE_TARGETS, "qemu"])
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
+@pytest.mark.parametrize("firmware", [*CONFORMANCE_TARGETS,
+                                      pytest.param("qemu", marks=pytest.mark.qemu)])
 def test_every_target_refuses_every_field_beyond_its_range(firmware):
     """Each bounded field of each command, in IDLE with a real sample committed: just
     beyond its range (NaN and ±inf for every f32) BAD_MESSAGE and nothing changes; at its

@@ -55,15 +55,26 @@ def assert_selftest_passes(port: str) -> None:
     assert run.returncode == 0
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
 def test_selftest_passes_against_the_host_built_firmware(firmware_host):
     assert_selftest_passes(firmware_host.port)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
 def test_selftest_passes_against_the_host_build_with_the_boards_resources(firmware_board):
     """The board's buffers and 1-Mbaud link (traces every 4th tick): the same suite."""
     assert_selftest_passes(firmware_board.port)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
 def test_the_firmware_negotiates_the_newest_version_and_advertises_its_limits(firmware_host):
     with SerialDevice(firmware_host.port) as dev:
         assert dev.link.version == C.PROTOCOL
@@ -76,6 +87,9 @@ def test_the_firmware_negotiates_the_newest_version_and_advertises_its_limits(fi
             dev.play_force(np.zeros(lim.play_items + 1))
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
 def test_window_end_to_traces_is_immediate_over_the_stream(firmware_host):
     """Version 2 streams the trace during the window: when WINDOW_DONE arrives the trace
     is complete, and every record is covered once (the driver checks)."""
@@ -90,6 +104,9 @@ def test_window_end_to_traces_is_immediate_over_the_stream(firmware_host):
         assert dev.link_stats()["lost"] == 0
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
 def test_the_estop_button_stops_a_window_and_holds_its_fault_until_released(firmware_host):
     """The operator's e-stop button on the device (the host build presses it on SIGUSR1 and
     releases it on SIGUSR2): output is zero from the tick that read it, the fault is an
@@ -164,6 +181,9 @@ def test_the_link_carries_one_channel_at_every_tick_where_seven_need_every_fourt
     assert stream_decimation(lim, 2, 10_000.0) == 2
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
 def test_a_narrow_link_streams_what_a_measurement_asks_at_every_tick(firmware_board):
     """On the board's link the traces a session keeps come every 4th tick; a measurement
     that needs the accelerometer alone (identification, matching) gets it at every tick,
@@ -188,6 +208,9 @@ def test_a_narrow_link_streams_what_a_measurement_asks_at_every_tick(firmware_bo
         assert set(NAMES) <= set(res.traces) and len(res.traces["t"]) == 250
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
 def test_a_library_the_board_cannot_hold_is_refused_before_tapping_and_at_preflight(
         firmware_board, tmp_path):
     """The board's transient table holds 16,384 items: 16 entries of 100 ms at 10 kHz.
@@ -232,6 +255,11 @@ def test_a_library_the_board_cannot_hold_is_refused_before_tapping_and_at_prefli
         "device's table holds 16384" in line and "fewer --entries" in line
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.qemu
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("qemu-system-arm") is None,
                     reason="qemu-system-arm missing: `make test` installs it")
 def test_selftest_passes_against_the_cortex_m_build_under_qemu():
@@ -331,6 +359,10 @@ def _xp(path: str, addr: int) -> int:
     return int(re.search(rf"{addr:016x}: (0x[0-9a-f]+)", answer).group(1), 16)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.qemu
 @pytest.mark.skipif(shutil.which("qemu-system-arm") is None,
                     reason="qemu-system-arm missing: `make test` installs it")
 def test_the_board_build_drives_the_papers_device_peripherals_under_qemu(tmp_path):
@@ -399,6 +431,11 @@ def test_the_board_build_drives_the_papers_device_peripherals_under_qemu(tmp_pat
         set(steps)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.qemu
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("qemu-system-arm") is None,
                     reason="qemu-system-arm missing: `make test` installs it")
 def test_the_servo_tick_fits_its_budget_on_the_cortex_m4():
@@ -421,6 +458,8 @@ def test_the_servo_tick_fits_its_budget_on_the_cortex_m4():
     assert 3 * max(s["max"] for s in res["states"].values()) < 16_800
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_emulate_refuses_a_pace_the_firmware_cannot_keep():
     """--speed paces the host build only; QEMU keeps its instructions' pace, --rate is the
     Python emulator's; a speed outside (0, 20] is refused before anything starts."""
@@ -434,6 +473,9 @@ def test_emulate_refuses_a_pace_the_firmware_cannot_keep():
         assert run.returncode == 2 and message in run.stderr, (args, run.stderr)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
 def test_the_host_build_keeps_device_time_at_its_pace():
     """At --speed 10 the device clock (STATUS.time) advances ten device seconds per wall
     second, and a window of 2 device seconds streams all its 20,000 records."""
@@ -516,6 +558,10 @@ def _gain_against(wire: list, sim: list) -> tuple[float, int]:
     return float(np.median(ratios)) if ratios else float("nan"), len(ratios)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
 @pytest.mark.parametrize("firmware", ["host", "python"])
 def test_a_real_sample_has_the_simulators_physics_on_every_target(firmware):
     """The same protocol gives the same physics over the wire as on `sim`: each real sample

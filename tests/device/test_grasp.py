@@ -65,6 +65,7 @@ def test_paper_formula_differs_by_the_threshold():
     assert paper.zeta / exact.zeta == pytest.approx(2 / np.log(1 / 0.15), rel=0.02)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("estimate, tol_i, tol_s", [("ls", 0.03, 0.15), ("rls", 0.05, 0.25),
                                                     ("manual", 0.15, 0.30)])
 def test_recovers_the_published_relations_from_100_noisy_impacts(noisy, estimate, tol_i, tol_s):
@@ -113,6 +114,7 @@ def test_the_modal_response_is_scipys_state_space_simulation():
     assert np.max(np.abs(ours - ref[:, 0])) <= 1e-9 * np.max(np.abs(ref))
 
 
+@pytest.mark.slow
 def test_impacts_with_a_mode_the_model_lacks_fit_as_the_papers_and_bias_the_relations():
     """The tissue rig (the published handle with TISSUE, 60 impacts, seed 1) is not a round
     trip: the manual fit scores in the paper's manual range (69.8–79.6 %; measured 78.0,

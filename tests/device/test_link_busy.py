@@ -39,6 +39,9 @@ def _hold_the_interpreter(seconds: float) -> None:
     ctypes.PyDLL(None).usleep(int(seconds * 1e6))  # PyDLL: the call keeps the lock
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_a_host_whose_interpreter_is_held_keeps_the_device_fed(own_emulator):
     """0.5 s with the interpreter lock held (five watchdog periods): the Python-thread
     heartbeat could not run, the native thread does, and the device's watchdog stays
@@ -59,6 +62,8 @@ def test_a_host_whose_interpreter_is_held_keeps_the_device_fed(own_emulator):
     assert "FAULT watchdog" not in own_emulator.stderr()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_the_python_thread_link_is_starved_by_the_same_hold(own_emulator):
     """The control: with reading and heartbeats in Python threads, the same hold stops the
     heartbeats and the device zeroes its output — the failure the native thread removes."""
@@ -84,6 +89,9 @@ with open_device("serial:" + sys.argv[1]) as dev:
 """
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_a_hung_interpreter_still_trips_the_watchdog(own_emulator):
     """A host whose interpreter hangs stops renewing the native thread's lease (1 s); the
     heartbeats stop and the device zeroes its output T_wd after the last of them."""
@@ -101,6 +109,9 @@ def test_a_hung_interpreter_still_trips_the_watchdog(own_emulator):
     assert float(line.group(1)) <= 100.0 + 0.1  # T_wd of device time after the last frame
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_the_lease_ends_the_heartbeats_after_its_stated_second(own_emulator):
     """The bound the test above cannot give (it waits for the fault, however late): the
     interpreter held for 3 s, three times the lease. The device must fault during the hold,
@@ -137,6 +148,9 @@ def test_the_lease_ends_the_heartbeats_after_its_stated_second(own_emulator):
         dev.clear_fault()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 @pytest.mark.parametrize("native", [True, False], ids=["native", "python-threads"])
 def test_a_main_loop_that_hangs_without_the_interpreter_lock_trips_the_watchdog(
         own_emulator, native):
@@ -178,6 +192,9 @@ class SlowToAnswer(ScriptedResponder):
         return super().answer(response, question, rng)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_a_participant_who_takes_long_to_answer_meets_no_watchdog(own_emulator, tmp_path):
     """The other half of the lease: a session's main loop legitimately leaves the device
     alone while the participant answers. The runner zeroes the output as each window ends,
@@ -207,6 +224,8 @@ def test_a_participant_who_takes_long_to_answer_meets_no_watchdog(own_emulator, 
     assert "FAULT" not in own_emulator.stderr()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_the_device_reports_what_it_saw_of_the_host(own_emulator):
     """LINK_REPORT: frames and the gaps between them in device time; a reset starts afresh
     and HELLO does too."""
@@ -244,6 +263,8 @@ with open_device("serial:" + sys.argv[1]) as dev:
 """
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 @pytest.mark.skipif(shutil.which("setpriv") is None, reason="setpriv (util-linux) missing")
 def test_without_real_time_scheduling_the_link_says_so_and_works(own_emulator):
     """The fallback where the system grants no real-time priority (a process without

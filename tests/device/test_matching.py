@@ -115,6 +115,7 @@ def test_fit_is_exact_on_noise_free_plant_response():
         fit_transfer_function(est, 3, 5)
 
 
+@pytest.mark.slow
 def test_identified_model_matches_the_true_plant_not_just_the_estimate(ident):
     """Judged against the simulator's known plant (coherence alone does not certify it):
     within 1.5 dB and 3° over 10–500 Hz (measured: 1.0 dB, 0.4°)."""

@@ -148,6 +148,7 @@ def test_thirty_seconds_on_each_real_block_of_the_factorial_study():
         assert res.energy["out"] < res.energy["in"], sid
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rate", [1_000, 10_000, 20_000])
 def test_energy_audit_every_real_sample_is_passive(rate):
     for name, scene in real_samples():

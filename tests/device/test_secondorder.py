@@ -9,6 +9,7 @@ from device.sim.secondorder import free_response, impulse_response, step_respons
 ZETAS = [0.0, 0.169, 1 - 1e-12, 1.0, 1 + 1e-12, 1.5, 10.0, 1e6]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("zeta", ZETAS)
 def test_matches_an_independent_ode_solution(zeta):
     wn = 2 * np.pi * 287.0  # the grasp model's nominal natural frequency

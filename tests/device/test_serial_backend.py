@@ -56,6 +56,8 @@ def serving(emulator_cls, **options):
         os.close(slave)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_exclusive_open(emulator):
     with open_device(f"serial:{emulator.port}") as dev:
         assert dev.info.backend == "serial" and dev.info.servo_rate_hz == 10_000
@@ -64,6 +66,8 @@ def test_exclusive_open(emulator):
     open_device(f"serial:{emulator.port}").close()  # free again once closed
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_window_over_the_link_and_link_statistics(emulator):
     with open_device(f"serial:{emulator.port}") as dev:
         dev.load_scene(FIRM)
@@ -80,6 +84,9 @@ def test_window_over_the_link_and_link_statistics(emulator):
         assert np.isfinite(st["rtt_p50_ms"]) and st["rtt_p99_ms"] >= st["rtt_p50_ms"]
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_a_long_trace_upload_does_not_trip_the_watchdog(emulator_factory):
     """A 20-s window (the identification protocol's) has 200,000 samples per channel: the
     emulator is busy writing them for longer than the watchdog period while the host's
@@ -99,6 +106,9 @@ def test_a_long_trace_upload_does_not_trip_the_watchdog(emulator_factory):
     assert not any("FAULT" in line for line in emu.stderr_lines), emu.stderr_lines
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_selftest_cli_passes_against_the_emulator(emulator):
     import json
 
@@ -111,6 +121,9 @@ def test_selftest_cli_passes_against_the_emulator(emulator):
     assert report["passed"] == len(report["checks"]) == 13
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM, signal.SIGSTOP])
 def test_device_gone_mid_window_is_typed_and_keeps_what_arrived(how, emulator_factory):
     """The emulator dies, closes its pty, or freezes (SIGSTOP: the port stays open and
@@ -136,6 +149,9 @@ def test_device_gone_mid_window_is_typed_and_keeps_what_arrived(how, emulator_fa
     dev.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_watchdog_zeroes_output_when_the_host_is_killed(own_emulator):
     host = subprocess.Popen([sys.executable, "-c", HOST, own_emulator.port],
                             stdout=subprocess.PIPE, text=True)
@@ -158,6 +174,8 @@ def test_watchdog_zeroes_output_when_the_host_is_killed(own_emulator):
         dev.home()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_host_signals_zero_the_output(own_emulator, sig):
     # The host starts as a foreground process at a terminal does, with SIGINT's default
@@ -181,6 +199,8 @@ def test_host_signals_zero_the_output(own_emulator, sig):
     assert "FAULT watchdog" not in own_emulator.stderr()  # zeroed by the host, not the watchdog
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_a_port_that_does_not_speak_the_protocol():
     master, slave, path = open_pty()
     try:
@@ -193,11 +213,15 @@ def test_a_port_that_does_not_speak_the_protocol():
         os.close(slave)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_missing_port_is_a_clear_error():
     with pytest.raises(DeviceGoneError, match="cannot open"):
         open_device("serial:/dev/does-not-exist")
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_an_emulator_that_fails_mid_window_goes_away_instead_of_hanging():
     """A bug inside the emulator's window thread (it once could not encode a contact) used
     to leave the host waiting for the whole window limit; now the emulator stops, like a
@@ -361,6 +385,8 @@ class _RawHost:
         self._os.close(self.slave)
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
     """Commands that once killed the emulator or slipped past it, sent as raw frames over
     the pty: HOME with clearance 0 and START_WINDOW with duration 0 (killed it), a duration
@@ -393,6 +419,8 @@ def test_the_emulator_refuses_fields_out_of_range_and_keeps_serving():
         host.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_an_estop_is_served_while_the_trace_streams():
     """ESTOP once waited ~550 ms behind a trace upload. Now traces stream during the window
     and the emulator feeds the link from its ring a few frames per turn of its loop,
@@ -429,6 +457,8 @@ def test_an_estop_is_served_while_the_trace_streams():
         host.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 @pytest.mark.parametrize("fault", ["duplicate", "outside", "overflow"])
 def test_streamed_records_are_checked_for_coverage_not_counted(fault):
     """An emulator that sends one chunk twice instead of the next, a chunk past the
@@ -470,6 +500,9 @@ def test_streamed_records_are_checked_for_coverage_not_counted(fault):
             assert emu.records_lost == 1500
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_status_reports_a_playback_its_force_and_one_clock():
     """STATUS once read output 0 while 0.4–1.7 N were delivered, never said PLAYING, and
     FAULT and STATUS used different clocks. A 0.5-N playback (2 s) now reports PLAYING with
@@ -505,6 +538,8 @@ def test_status_reports_a_playback_its_force_and_one_clock():
         host.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_status_keeps_coming_while_a_scene_is_prepared():
     """A stiff real block takes the simulator up to ~1.5 s to prepare; the emulator's clock
     used to stand still meanwhile, so it sent no STATUS and a host declared it gone after
@@ -532,6 +567,8 @@ def test_status_keeps_coming_while_a_scene_is_prepared():
         host.close()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_a_stalled_host_does_not_call_the_device_gone(emulator):
     """The host process stopped for 0.3 s (as a long garbage collection or a loaded machine
     stops it) was not listening; the STATUS frames the device sent meanwhile wait in the
@@ -582,6 +619,9 @@ def test_a_table_goes_on_the_wire_in_range_and_plays_the_same():
         _wire_table(TransientTable([0.1, 0.2], forces, "linear"), "port: scene 's'")
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 @pytest.mark.parametrize("native", [True, False], ids=["native", "python-threads"])
 def test_full_collections_do_not_starve_the_watchdog(own_emulator, native):
     """A full garbage collection stops every Python thread; on a loaded 2-core machine it
@@ -632,6 +672,9 @@ def test_full_collections_do_not_starve_the_watchdog(own_emulator, native):
     assert gc.get_threshold()[2] < 1000  # the interpreter's own setting is given back
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_a_failed_check_does_not_fail_the_checks_after_it(own_emulator, monkeypatch):
     """A device keeps a latched fault across connections, so one failed check used to fail
     every later one with "clear it first". The self-test names the fault the failed check
@@ -661,6 +704,8 @@ def test_a_failed_check_does_not_fail_the_checks_after_it(own_emulator, monkeypa
     assert second["ok"] and second["detail"] == "2000 records", second
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_a_window_whose_end_is_lost_on_the_wire_says_so():
     """A loaded computer once lost a QEMU build's single WINDOW_DONE frame (1 run in 3 of
     the suite beside two CPU-bound processes): the host waited out the window's limit in
@@ -697,6 +742,8 @@ def test_a_window_whose_end_is_lost_on_the_wire_says_so():
     assert re.search(r"link: [1-9]\d* frames missing, 0 failed their CRC", text), text
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_an_acknowledgement_is_awaited_in_the_devices_time():
     """A device held up as a whole (QEMU descheduled on a busy computer) answers late and
     reports nothing meanwhile. Beside two CPU-bound processes the QEMU build once
@@ -745,6 +792,9 @@ def test_an_acknowledgement_is_awaited_in_the_devices_time():
         release.set()
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.slow
 def test_an_unanswered_command_says_what_this_host_heard_meanwhile(emulator_factory):
     """A loaded run of issue 29 failed on 'no acknowledgement of EStop after 4 tries of
     200 ms' from the OpenHaptics stand-in, whose own account showed its tick on time and no

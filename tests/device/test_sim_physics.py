@@ -210,6 +210,8 @@ def test_live_mode_reports_rate_and_jitter():
     assert len(res.traces["t"]) == 500
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
 def test_a_stopped_live_device_slips_its_clock_instead_of_racing():
     """The live servo loop's process stopped for 0.4 s (as by a long garbage collection)
     while a thread heartbeats every 10 ms, as an emulator's link does. Racing to catch up

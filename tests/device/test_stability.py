@@ -17,6 +17,7 @@ STIFFNESS = [220.0, 1e4, 1e7]
 RATES = [1_000.0, 10_000.0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("zeta, k, rate", list(itertools.product(ZETAS, STIFFNESS, RATES)))
 def test_discretized_second_order_matches_closed_form(zeta, k, rate):
     """ZOH propagator + the kernel's stepping vs the analytic step response: rel. error ≤ 1e-9.

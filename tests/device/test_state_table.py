@@ -265,6 +265,10 @@ def test_the_document_table_is_read_whole():
     assert rows["ZERO"]["PLAYING"] == (M.Status.OK, "IDLE")
 
 
+@pytest.mark.realtime
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
 @pytest.mark.parametrize("firmware", CONFORMANCE_TARGETS)
 def test_every_state_answers_every_command_as_the_document_says(firmware):
     emu = start_emulator("--firmware", firmware, "--seed", "2")

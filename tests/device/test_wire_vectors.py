@@ -51,6 +51,9 @@ def c_decoder(tmp_path_factory):
     return ROOT / "firmware" / "build" / "hl_test"
 
 
+@pytest.mark.integration
+@pytest.mark.firmware
+@pytest.mark.slow
 def test_c_decodes_every_vector_as_python_does(c_decoder):
     out = subprocess.run([str(c_decoder), "vectors", str(FILE)], capture_output=True,
                          text=True, timeout=60)
@@ -60,6 +63,8 @@ def test_c_decodes_every_vector_as_python_does(c_decoder):
     assert c_lines == py
 
 
+@pytest.mark.integration
+@pytest.mark.firmware
 def test_c_fuzz_accepts_no_corrupt_frame(c_decoder):
     """10⁵ seeded mutations here (make -C firmware test runs 10⁶)."""
     out = subprocess.run([str(c_decoder), "fuzz", str(FILE), "100000", "7"],

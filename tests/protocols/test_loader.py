@@ -157,6 +157,8 @@ def test_williams_needs_a_row(tmp_path):
 CLI = [sys.executable, "-m", "app"]
 
 
+@pytest.mark.integration
+@pytest.mark.slow
 def test_cli_validate_and_errors(tmp_path):
     ok = subprocess.run([*CLI, "protocol", "validate", "factorial", "--device", "sim"],
                         capture_output=True, text=True)
