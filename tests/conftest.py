@@ -50,18 +50,31 @@ def pytest_configure(config):
     config.pluginmanager.register(TierGuard(config), "tier-guard")
 
 
+#: what makes a test real-time besides its own ``realtime`` marker: the tiers that run a
+#: device or a window, and the fixtures here that start a device, a terminal or a display
+_REALTIME_TIERS = ("firmware", "qemu", "screen")
+_REALTIME_FIXTURES = {"emulator", "own_emulator", "emulator_factory", "xdisplay", "participant",
+                      "terminal"}
+
+
+def is_realtime(item) -> bool:
+    """Whether ``item`` meets deadlines in real time (see ``realtime`` in pyproject.toml)."""
+    return (any(item.get_closest_marker(m) for m in ("realtime", *_REALTIME_TIERS))
+            or bool(_REALTIME_FIXTURES & set(getattr(item, "fixturenames", ()))))
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """How pytest-xdist shares the suite between its workers (``make test``: two, ``--dist
-    loadgroup``). Every ``realtime`` test goes to one group, run by one worker one test after
-    another as in a serial run: no realtime test runs beside another (each was made to pass
-    beside two CPU-bound processes; the other worker is one). Every other test goes with its
-    module, so that a module's shared fixture (a study, an identified plant) is made once."""
+    loadgroup``). Every real-time test (:func:`is_realtime`) goes to one group, run by one
+    worker one test after another as in a serial run: none runs beside another (each was
+    made to pass beside two CPU-bound processes; the other worker is one). Every other test
+    goes with its module, so that a module's shared fixture (a study, an identified plant)
+    is made once."""
     if not config.pluginmanager.hasplugin("xdist"):
         return
     for item in items:
-        group = ("realtime" if item.get_closest_marker("realtime")
-                 else item.nodeid.split("::", 1)[0])
+        group = "realtime" if is_realtime(item) else item.nodeid.split("::", 1)[0]
         item.add_marker(pytest.mark.xdist_group(group))
 
 

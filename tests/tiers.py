@@ -11,8 +11,8 @@ The guard fails a unit test that
   the interpreter's audit events) or opens a pseudo-terminal (``os.openpty``), in its
   setup (fixtures of any scope included) or its call; or
 - costs more than :data:`UNIT_BUDGET_S` over its setup and call, counted as wall-clock time
-  less the time the machine made the test's thread wait for a CPU
-  (``/proc/thread-self/schedstat``): a busy machine does not make a unit test look
+  less the time the machine made the test's threads wait for a CPU
+  (``/proc/self/task/*/schedstat``): a busy machine does not make a unit test look
   expensive, and a test that waits (a sleep, a device at real time) is not cheap because it
   waits.
 
@@ -68,14 +68,28 @@ def _install() -> None:
         _installed.append(True)
 
 
-def _waited_for_cpu() -> float:
-    """How long this thread has waited for a CPU so far [s] (0 where the kernel does not
-    say)."""
+def _waits() -> dict[str, float]:
+    """How long each thread of this process has waited for a CPU so far [s], by thread id
+    (empty where the kernel does not say)."""
+    out = {}
     try:
-        with open("/proc/thread-self/schedstat") as f:
-            return int(f.read().split()[1]) / 1e9
-    except (OSError, IndexError, ValueError):
-        return 0.0
+        tids = os.listdir("/proc/self/task")
+    except OSError:
+        return out
+    for tid in tids:
+        try:
+            with open(f"/proc/self/task/{tid}/schedstat") as f:
+                out[tid] = int(f.read().split()[1]) / 1e9
+        except (OSError, IndexError, ValueError):  # gone meanwhile
+            continue
+    return out
+
+
+def _waited_for_cpu(before: dict[str, float], after: dict[str, float]) -> float:
+    """The time the test waited for a CPU between two :func:`_waits` [s]: the longest any
+    of its threads waited (the test's own thread, or a numerical library's worker thread
+    it was blocked on; they wait side by side, so the longest is a lower bound)."""
+    return max((t - before.get(tid, 0.0) for tid, t in after.items()), default=0.0)
 
 
 #: markers pyproject.toml declares that are not tiers: the one this module gives, and the
@@ -124,11 +138,11 @@ class TierGuard:
             return
         spent = self._spent.setdefault(item.nodeid, _Spent())
         _WATCHING.append(spent.spawned)
-        t0, w0 = time.monotonic(), _waited_for_cpu()
+        t0, w0 = time.monotonic(), _waits()
         try:
             yield
         finally:
-            spent.cost += (time.monotonic() - t0) - (_waited_for_cpu() - w0)
+            spent.cost += (time.monotonic() - t0) - _waited_for_cpu(w0, _waits())
             _WATCHING.pop()
 
     @pytest.hookimpl(hookwrapper=True)

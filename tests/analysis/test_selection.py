@@ -48,6 +48,7 @@ def _table(data):
     return load_sessions(data).attrs["session_table"]
 
 
+@pytest.mark.integration  # the sessions record their provenance: git, uname
 def test_default_is_people_only_with_every_exclusion_named(mixed):
     d = load_sessions(mixed)
     assert d.attrs["sessions"] == 8
@@ -67,6 +68,7 @@ def test_default_is_people_only_with_every_exclusion_named(mixed):
     assert set(sel["participant"]) == {"P01", "P02"}
 
 
+@pytest.mark.integration  # the sessions record their provenance: git, uname
 def test_first_session_means_the_first_complete_one(mixed, tmp_path):
     """With --status all, a participant whose first session was interrupted and who then
     completed a second is analysed on the complete one (it once kept the interrupted)."""
@@ -108,6 +110,7 @@ def test_a_folder_renamed_to_another_participant_is_named_not_merged(mixed, tmp_
     assert out.returncode == 0, out.stderr
 
 
+@pytest.mark.integration  # the sessions record their provenance: git, uname
 def test_filters(mixed):
     d = load_sessions(mixed)
     sim, _ = select_sessions(d, kind="simulated")

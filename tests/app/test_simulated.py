@@ -303,6 +303,7 @@ def test_session_length_from_a_simulated_study(study_dir, study):
     assert predicted == pytest.approx(observed, rel=0.25), (predicted, observed)
 
 
+@pytest.mark.slow  # identifies the simulated device's plant
 def test_aluminum_300_hz_is_beyond_the_simulated_device():
     """Why aluminum's 300-Hz sets lose to its 200-Hz ones (README): above the device's
     ~130-Hz resonance the same commanded model is felt with well under half the jolt, and

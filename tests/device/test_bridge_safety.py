@@ -29,7 +29,7 @@ from device.scene import Scene
 from device.serial.backend import SerialDevice
 from device.serial.firmware import binary
 
-pytestmark = [pytest.mark.integration, pytest.mark.firmware]
+pytestmark = [pytest.mark.integration, pytest.mark.firmware, pytest.mark.realtime]
 
 
 class Bridge:

@@ -22,7 +22,7 @@ import pytest
 from device.serial.backend import SerialDevice
 from device.serial.firmware import FIRMWARE_DIR, binary
 
-pytestmark = [pytest.mark.integration, pytest.mark.firmware]
+pytestmark = [pytest.mark.integration, pytest.mark.firmware, pytest.mark.realtime]
 
 STUBS = FIRMWARE_DIR / "stubs"
 RATINGS = "-DHL_EFFECTIVE_MASS_MG=55000u -DHL_CURRENT_RATING_MA=400u -DHL_ENCODER_NM=2000u"

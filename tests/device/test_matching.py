@@ -129,6 +129,7 @@ def test_identified_model_matches_the_true_plant_not_just_the_estimate(ident):
     assert e.freq[np.argmax(np.abs(e.H))] == pytest.approx(128, abs=4)  # the 130-Hz resonance
 
 
+@pytest.mark.slow  # the plant identified from the simulated device (module fixture)
 def test_discretization_matches_the_continuous_model_with_its_delay(ident):
     m = ident.model
     from dataclasses import replace
@@ -142,6 +143,7 @@ def test_discretization_matches_the_continuous_model_with_its_delay(ident):
         np.testing.assert_allclose(dm.response(f), expected, rtol=0.01)
 
 
+@pytest.mark.slow  # the plant identified from the simulated device (module fixture)
 def test_sampled_rel_degree_4_has_unstable_zeros_and_the_direct_inverse_diverges(ident):
     from dataclasses import replace
 
@@ -167,6 +169,7 @@ def test_stable_inverse_is_exact_on_a_nonminimum_phase_system():
     np.testing.assert_allclose(signal.lfilter(b, a, u)[400:800], y, atol=1e-12)
 
 
+@pytest.mark.slow  # the plant identified from the simulated device (module fixture)
 @pytest.mark.parametrize("method", ["regularized", "stable"])
 def test_inversion_through_the_forward_model(ident, method):
     """A 66-Hz decaying target: in-window error ≤ 0.35 (measured 0.30–0.31; half of it in
@@ -269,6 +272,7 @@ def test_even_spread_and_segmentation(realism):
     assert len(gapped) == len(taps) - 1 and first.t not in {t.t for t in gapped}
 
 
+@pytest.mark.slow
 def test_a_library_is_built_explicitly_into_the_store_and_found_there(realism):
     scene = realism.samples["matched_firm"].scene
     source = realism.samples["wood_on_foam"].scene
@@ -452,6 +456,7 @@ def test_the_store_refuses_a_library_matched_over_another_band(tmp_path, monkeyp
     assert build_key(dev.info, src, band=(10.0, 1000.0)) != build_key(dev.info, src)
 
 
+@pytest.mark.slow  # the plant identified from the simulated device (module fixture)
 def test_a_library_played_over_a_spring_can_leave_the_springs_share_out(ident, realism):
     """``build_library(under=spring)``: each target is the tap less the spring's
     least-squares response per unit speed times the tap's speed, recomputed here from the
