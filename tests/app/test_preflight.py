@@ -19,13 +19,13 @@ from app.preflight import (
     expected_session_bytes,
 )
 from device import Scene, open_device
-from protocols import load_protocol, protocol_text
+from protocols import BUILTIN, load_protocol, protocol_text
 from protocols.model import Answer, RatingScale
 
 PY = [sys.executable, "-m", "app"]
 
 
-@pytest.mark.parametrize("name", ["realism", "factorial", "identification"])
+@pytest.mark.parametrize("name", BUILTIN)
 def test_the_built_in_protocols_can_be_answered(name):
     c = check_answers(load_protocol(name))
     assert c.ok, c.line()

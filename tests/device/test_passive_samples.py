@@ -14,16 +14,16 @@ from device.sim.audit import energy_audit
 from device.sim.backend import SimDevice
 from device.sim.plant import block_model, contact_modes
 from device.sim.tapper import Tapper
-from protocols import load_protocol
+from protocols import BUILTIN, load_protocol
 
 TABLE1 = {"wood": (-1500.0, 600.0, 592.0, 0.026, 70_000.0),  # A, B, f; block mass, K
           "aluminum": (-100_000.0, 1500.0, 1153.0, 0.116, 500_000.0)}
 
 
 def real_samples():
-    """(protocol/sample, scene) of every real sample of the three protocols, each once."""
+    """(protocol/sample, scene) of every real sample of the built-in protocols, each once."""
     out, seen = [], set()
-    for name in ("realism", "factorial", "identification"):
+    for name in BUILTIN:
         for sid, s in load_protocol(name).samples.items():
             if s.scene.is_real and s.scene.material not in seen:
                 seen.add(s.scene.material)
