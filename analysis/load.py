@@ -9,12 +9,13 @@ import datetime as dt
 import hashlib
 import os
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from .cells import row_problem
+from .cells import response_columns, row_problem
 from .session_format import (
     COLUMNS,
     FLOAT_COLUMNS,
@@ -30,7 +31,7 @@ from .session_format import (
     TrialsFileError,
     inside_session,
     read_meta,
-    read_trials,
+    read_trial_fields,
 )
 
 __all__ = ["load_sessions", "select_sessions", "LoadError", "tap_velocities", "SESSION_COLUMNS",
@@ -45,7 +46,7 @@ _SIMULATED_FIRMWARE = re.compile(r"^(emulator|hlfw-[0-9.]+ (host|stm32))")
 #: columns of ``load_sessions(...).attrs["session_table"]``, one row per session folder
 SESSION_COLUMNS = ("session_dir", "participant", "session", "protocol", "protocol_sha256",
                    "kind", "responder", "status", "created_utc", "seed", "rows", "valid_rows",
-                   "design_key", "folder_participant", *DEVICE_COLUMNS)
+                   "design_key", "folder_participant", *DEVICE_COLUMNS, "identity")
 #: how a participant id that the folder name and the recorded session disagree on is taken
 IDS = ("check", "record", "folder")
 
@@ -54,11 +55,27 @@ class LoadError(ValueError):
     """A session folder cannot be read (named by path and line), or no session was found."""
 
 
-def _design_key(design: dict | None) -> str:
-    import json
+#: designs already keyed, by protocol SHA-256: [(design, key)] (sessions of one protocol
+#: record equal designs; comparing dicts is cheaper than hashing their JSON again)
+_KEYED: dict[str, list[tuple[dict, str]]] = {}
 
+
+def _design_key(design: dict | None) -> str:
     if not design:
         return ""
+    known = _KEYED.setdefault(str(design.get("sha256")), [])
+    for d, k in known:
+        if d == design:
+            return k
+    key = _hash_design(design)
+    if len(known) < 8:
+        known.append((design, key))
+    return key
+
+
+def _hash_design(design: dict) -> str:
+    import json
+
     body = {k: v for k, v in design.items() if k not in ("sha256", "title")}
     if isinstance(body.get("phases"), list):  # a response's record follows from its kind
         body["phases"] = [{kk: vv for kk, vv in ph.items() if kk != "response"}
@@ -95,10 +112,12 @@ def _folder_id(folder: Path) -> str:
     return ""
 
 
-def _invalid(row: dict, phase: dict | None, design: dict | None) -> str:
+def _invalid(row: list[str], phase: dict | None, design: dict | None) -> str:
     """Why a recorded valid attempt cannot be analysed ('' when it can): by the rules its
-    phase's response recorded (:mod:`analysis.cells`)."""
-    return row_problem(row, phase, design)
+    phase's response recorded (:mod:`analysis.cells`); ``row`` is its fields."""
+    if row[_STATUS] != "valid":
+        return ""
+    return row_problem(dict(zip(COLUMNS, row, strict=True)), phase, design)
 
 
 def session_files(root: Path) -> list[Path]:
@@ -128,8 +147,11 @@ def session_files(root: Path) -> list[Path]:
         for e in entries:
             if not e.is_dir() or (e.name == TRACES and META in names):
                 continue
+            if not e.is_symlink():
+                walk(folder / e.name, real / e.name)
+                continue
             target = Path(os.path.realpath(e.path))
-            if e.is_symlink() and (target == top or top in target.parents):
+            if target == top or top in target.parents:
                 continue  # an alias of a folder inside root: read there
             walk(folder / e.name, target)
 
@@ -137,7 +159,8 @@ def session_files(root: Path) -> list[Path]:
     return sorted(found)
 
 
-def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
+def load_sessions(path: str | Path, drop_invalid: bool = False,
+                  progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
     """All attempts of all sessions under ``path``, one row per attempt.
 
     Parameters
@@ -149,6 +172,8 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
         number or not finite; an answer that names the wrong surfaces) is an error naming its
         file and line (default); True marks such rows not valid instead, with their reason
         in ``invalid_reason`` and in ``attrs["invalid_rows"]``.
+    progress : callable (done, total), optional
+        Called after each session folder is read.
 
     Returns
     -------
@@ -163,10 +188,12 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
         ``session_status``, ``session_dir``.
 
         ``result.attrs``: ``session_table`` (DataFrame, one row per session folder, columns
-        :data:`SESSION_COLUMNS`), ``designs`` (design key → the design recorded with the
-        sessions), ``torn`` (torn last lines, by file), ``files`` (SHA-256 of every file
-        read), ``sessions`` (count), ``invalid_rows`` (list of dicts: ``file``, ``line``,
-        ``participant``, ``phase``, ``sample``, ``reason``).
+        :data:`SESSION_COLUMNS`; ``identity`` names the first row whose participant,
+        session or protocol disagrees with session.json, '' when none does), ``designs``
+        (design key → the design recorded with the sessions), ``torn`` (torn last lines,
+        by file), ``files`` (SHA-256 of every file read), ``sessions`` (count),
+        ``invalid_rows`` (list of dicts: ``file``, ``line``, ``participant``, ``phase``,
+        ``sample``, ``reason``).
 
     Raises
     ------
@@ -190,8 +217,17 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
         raise LoadError(f"{root}: no such folder")
     if not root.is_dir():
         raise LoadError(f"{root}: not a folder")
-    frames, torn, files, sessions, designs, invalid = [], {}, {}, [], {}, []
-    for mpath in session_files(root):
+    found = session_files(root)
+    if not found:
+        raise LoadError(f"{root}: no sessions (sub-*/ses-*/session.json) found")
+    torn, files, sessions, designs, invalid = {}, {}, [], {}, []
+    chunks: list[pd.DataFrame] = []  # rows as frames of ~50,000: no dict per row is kept
+    pending: list[list[str]] = []
+    reasons: list[str] = []
+    counts: list[int] = []  # rows per session, in order
+    checked: dict[str, dict[tuple, str]] = {}  # design key → cells → why not analysable
+    spots: dict[tuple[str, str], tuple[int, ...]] = {}  # (design key, phase) → columns
+    for n, mpath in enumerate(found, start=1):
         folder = mpath.parent
         try:
             meta = read_meta(mpath)
@@ -199,7 +235,7 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
             raise LoadError(str(exc)) from None
         tpath = folder / TRIALS
         try:
-            rows, t = read_trials(tpath)
+            rows, t = read_trial_fields(tpath)
             inside_session(folder, TRACES)  # the recordings too are the session's own
         except (TrialsFileError, SessionPathError) as exc:
             raise LoadError(str(exc)) from None
@@ -213,70 +249,76 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
         key = _design_key(design)
         if key:
             designs.setdefault(key, design)
-        kind = meta.kind
         status = str(meta.status)
-        device = _device(meta)
         sessions.append({
             "session_dir": str(folder), "participant": meta.participant.id,
             "session": meta.session, "protocol": proto.name,
-            "protocol_sha256": proto.sha256, "kind": kind,
+            "protocol_sha256": proto.sha256, "kind": meta.kind,
             "responder": meta.responder or "", "status": status,
             "created_utc": meta.times.created_utc or "",
             "seed": meta.seed, "rows": len(rows),
-            "valid_rows": sum(r["status"] == "valid" for r in rows), "design_key": key,
-            "folder_participant": _folder_id(folder), **device})
-        if not rows:
-            continue
+            "valid_rows": sum(r[_STATUS] == "valid" for r in rows), "design_key": key,
+            "folder_participant": _folder_id(folder), **_device(meta),
+            "identity": _identity(meta, rows, tpath), "group": meta.participant.group,
+            "scale": (f"{proto.scale['min']}-{proto.scale['max']}" if proto.scale else "")})
+        counts.append(len(rows))
         phases = {p["name"]: p for p in (design or {}).get("phases", [])}
-        reasons = [_invalid(r, phases.get(r["phase"]), design) for r in rows]
-        for line, (r, why) in enumerate(zip(rows, reasons, strict=True), start=2):
+        seen = checked.setdefault(key, {})  # the same cells in the same design: one verdict
+        for line, r in enumerate(rows, start=2):
+            if r[_STATUS] != "valid":
+                reasons.append("")
+                continue
+            spot = spots.get((key, r[_PHASE]))
+            if spot is None:  # where this phase's response is written
+                spot = spots[key, r[_PHASE]] = tuple(
+                    COLUMNS.index(c) for c in response_columns(phases.get(r[_PHASE]))
+                    if c in COLUMNS)
+            cells = (r[_PHASE], r[_SAMPLE], *(r[i] for i in spot))
+            why = seen.get(cells)
+            if why is None:
+                why = seen[cells] = _invalid(r, phases.get(r[_PHASE]), design)
+            reasons.append(why)
             if why:
-                invalid.append({"file": str(tpath), "line": line, "participant": r["participant"],
-                                "phase": r["phase"], "sample": r["sample"], "reason": why})
-        df = pd.DataFrame(rows)
-        df["invalid_reason"] = reasons
-        rating = proto.scale
-        df["protocol"] = proto.name
-        df["protocol_sha256"] = proto.sha256
-        df["design_key"] = key
-        df["seed"] = meta.seed
-        df["group"] = meta.participant.group
-        df["scale"] = f"{rating['min']}-{rating['max']}" if rating else ""
-        for c, v in device.items():
-            df[c] = v
-        df["kind"] = kind
-        df["responder"] = (meta.responder or "") if kind != "human" else "person"
-        df["session_status"] = status
-        df["session_dir"] = str(folder)
-        frames.append(df)
-    if not sessions:
-        raise LoadError(f"{root}: no sessions (sub-*/ses-*/session.json) found")
+                invalid.append({"file": str(tpath), "line": line, "participant": r[_PID],
+                                "phase": r[_PHASE], "sample": r[_SAMPLE], "reason": why})
+        pending += rows
+        if len(pending) >= 50_000:
+            chunks.append(pd.DataFrame(pending, columns=list(COLUMNS)))
+            pending = []
+        if progress is not None:
+            progress(n, len(found))
     if invalid and not drop_invalid:
         first = invalid[0]
         more = f" (and {len(invalid) - 1} more row(s))" if len(invalid) > 1 else ""
         raise LoadError(f"{first['file']}:{first['line']}: {first['reason']}{more}; correct "
                         "the file, or analyse with --drop-invalid to leave such rows out "
                         "(each is then listed in the report)")
-    table = pd.DataFrame(sessions, columns=list(SESSION_COLUMNS))
-    data = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
-        columns=[*COLUMNS, "protocol", "protocol_sha256", "design_key", "seed", "group", "scale",
-                 *DEVICE_COLUMNS, "kind", "responder", "session_status", "session_dir",
-                 "invalid_reason"])
+    chunks.append(pd.DataFrame(pending, columns=list(COLUMNS)))
+    full = pd.DataFrame(sessions)
+    table = full[list(SESSION_COLUMNS)].copy()
+    data = pd.concat(chunks, ignore_index=True) if len(chunks) > 1 else chunks[0]
+    data["invalid_reason"] = pd.array(reasons, dtype="str")
+    # what each session recorded once, on every one of its rows
+    at = np.repeat(np.arange(len(full)), counts)
+    full["responder"] = np.where(full["kind"] == "human", "person", full["responder"])
+    for c, src in (("protocol", "protocol"), ("protocol_sha256", "protocol_sha256"),
+                   ("design_key", "design_key"), ("seed", "seed"), ("group", "group"),
+                   ("scale", "scale"), *((c, c) for c in DEVICE_COLUMNS), ("kind", "kind"),
+                   ("responder", "responder"), ("session_status", "status"),
+                   ("session_dir", "session_dir")):
+        data[c] = full[src].to_numpy()[at]
     for c in INT_COLUMNS:
-        if c in data:
-            data[c] = pd.to_numeric(data[c], errors="coerce").fillna(0).astype(int)
+        data[c] = pd.to_numeric(data[c], errors="coerce").fillna(0).astype(int)
     for c in FLOAT_COLUMNS:
-        if c in data:
-            data[c] = pd.to_numeric(data[c].replace("", np.nan), errors="coerce")
-    data["valid"] = (data["status"] == "valid") & (data["invalid_reason"].fillna("") == "") \
-        if "invalid_reason" in data else data["status"] == "valid"
+        data[c] = pd.to_numeric(data[c].replace("", np.nan), errors="coerce")
+    data["valid"] = (data["status"] == "valid") & (data["invalid_reason"] == "")
     rep = data["item"].astype(str).str.extract(r"#(\d+)$")[0]
     data["repetition"] = pd.to_numeric(rep, errors="coerce").fillna(0).astype(int)
-    if "factors" in data:
-        parsed = data["factors"].fillna("").map(
-            lambda s: dict(kv.split("=", 1) for kv in s.split(";") if "=" in kv))
-        for name in sorted({k for d in parsed for k in d}):
-            data[name] = parsed.map(lambda d, n=name: d.get(n, ""))
+    codes, texts = pd.factorize(data["factors"].fillna(""))  # a few distinct strings
+    parsed = [dict(kv.split("=", 1) for kv in str(s).split(";") if "=" in kv) for s in texts]
+    for name in sorted({k for d in parsed for k in d}):
+        levels = np.array([d.get(name, "") for d in parsed] + [""], dtype=object)
+        data[name] = pd.array(levels[codes], dtype="str")  # code -1 (none): ''
     data.attrs["session_table"] = table
     data.attrs["designs"] = designs
     data.attrs["torn"] = torn
@@ -284,6 +326,34 @@ def load_sessions(path: str | Path, drop_invalid: bool = False) -> pd.DataFrame:
     data.attrs["sessions"] = len(table)
     data.attrs["invalid_rows"] = invalid
     return data
+
+
+_PID, _SES, _PHASE, _SAMPLE, _STATUS = (COLUMNS.index(c) for c in (
+    "participant", "session", "phase", "sample", "status"))
+
+
+def _identity(meta: SessionRecord, rows: list[list[str]], path: Path) -> str:
+    """The first row of ``path`` whose participant, session or protocol disagrees with the
+    session's record (session.json), in words naming the line; '' when every row agrees.
+    A row's protocol is told by its phase and samples: each must be in the recorded design.
+    """
+    pid, ses = meta.participant.id, str(meta.session)
+    design = meta.protocol.design or {}
+    phases = {p["name"] for p in design.get("phases", [])}
+    samples = set(design.get("samples") or {})
+    for line, r in enumerate(rows, start=2):
+        if r[_PID] != pid:
+            return (f"{path}:{line}: the row names participant {r[_PID]!r}, session.json "
+                    f"{pid!r}")
+        if r[_SES] != ses:
+            return f"{path}:{line}: the row names session {r[_SES]!r}, session.json {ses!r}"
+        if phases and r[_PHASE] not in phases:
+            return (f"{path}:{line}: phase {r[_PHASE]!r} is not a phase of protocol "
+                    f"{meta.protocol.name!r} as session.json records it")
+        if samples and any(x not in samples for x in r[_SAMPLE].split("+")):
+            return (f"{path}:{line}: sample {r[_SAMPLE]!r} is not a sample of protocol "
+                    f"{meta.protocol.name!r} as session.json records it")
+    return ""
 
 
 def _date(text: str | None, name: str) -> dt.datetime | None:

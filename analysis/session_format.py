@@ -28,6 +28,7 @@ everything else is text.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
 from enum import StrEnum
@@ -39,7 +40,8 @@ __all__ = ["FORMAT_VERSION", "SessionStatus", "SessionRecord", "ProtocolRecord",
            "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
            "TrialsFileError", "SessionMetaError", "TornLine", "header_line", "format_row",
            "format_cell",
-           "read_trials", "read_meta", "session_kind", "canonical_bytes", "is_canonical",
+           "read_trials", "read_trial_fields", "read_meta", "session_kind", "canonical_bytes",
+           "is_canonical",
            "TRIALS", "META", "PROTOCOL_COPY", "TRACES", "LOCK", "ROW_STATUSES",
            "SessionPathError", "inside_session"]
 
@@ -119,6 +121,9 @@ def inside_session(folder: str | Path, name: str | Path) -> Path:
     """
     folder = Path(folder)
     path = folder / name
+    if isinstance(name, str) and name and "/" not in name and name not in (".", "..") \
+            and not os.path.islink(path):
+        return path  # a plain name in the folder that is no link: in it (one lstat)
     root = folder.resolve()
     real = path.resolve()
     if real == root or root in real.parents:
@@ -232,6 +237,17 @@ def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
     TrialsFileError
         For a wrong header, or a malformed line that is not the last.
     """
+    rows, torn = read_trial_fields(path)
+    return [dict(zip(COLUMNS, f, strict=True)) for f in rows], torn
+
+
+#: where the checked columns are in a row's fields
+_AT = {c: i for i, c in enumerate(COLUMNS)}
+
+
+def read_trial_fields(path: str | Path) -> tuple[list[list[str]], TornLine | None]:
+    """As :func:`read_trials`, each row as its fields in :data:`COLUMNS` order (what a
+    reader of many sessions keeps: no dict per row)."""
     path = Path(path)
     try:
         inside_session(path.parent, path.name)
@@ -259,17 +275,17 @@ def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
                                      f"unknown {', '.join(unknown)}" if unknown else "") if x)
         raise TrialsFileError(f"{path}:1: not the trials.tsv header "
                               f"({what or 'columns in another order'})")
-    rows: list[dict] = []
+    rows: list[list[str]] = []
     torn = None
+    width, ti, at = len(COLUMNS), _AT["trial_index"], _AT["attempt"]
     for no, line in enumerate(lines[1:], start=2):
         fields = line.split("\t")
         last = no == len(lines)
-        ok = len(fields) == len(COLUMNS) and (complete or not last)
+        ok = len(fields) == width and (complete or not last)
         if ok:
-            row = dict(zip(COLUMNS, fields, strict=True))
             try:
-                int(row["trial_index"])
-                int(row["attempt"])
+                int(fields[ti])
+                int(fields[at])
             except ValueError:
                 ok = False
         if not ok:
@@ -278,26 +294,29 @@ def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
                 break
             raise TrialsFileError(f"{path}:{no}: corrupt line ({len(fields)} fields, expected "
                                   f"{len(COLUMNS)}): {line[:80]!r}")
-        _check_row(row, path, no)
-        rows.append(row)
+        _check_row(fields, path, no)
+        rows.append(fields)
     return rows, torn
 
 
-def _check_row(row: dict, path: Path, no: int) -> None:
+_STATUS_SET = frozenset(ROW_STATUSES)
+
+
+def _check_row(fields: list[str], path: Path, no: int) -> None:
     """A complete row's status is one this format writes, and its whole-number columns are
     whole numbers (or empty): anything else is an edited file, named with its line."""
-    status = row["status"]
-    if status not in ROW_STATUSES:
+    status = fields[_AT["status"]]
+    if status not in _STATUS_SET:
         canon = status.strip().lower()
         hint = (f"; the recorder writes {canon!r} (lower case, no spaces): an edit or a "
                 "spreadsheet changed it — correct the file" if canon in ROW_STATUSES else "")
         raise TrialsFileError(f"{path}:{no}: status {status!r} is not one of "
                               f"{', '.join(ROW_STATUSES)}{hint}")
     for c in ("session", "n_taps"):
-        v = row[c]
+        v = fields[_AT[c]]
         if v and not (v.isascii() and v.isdigit()):
             raise TrialsFileError(f"{path}:{no}: {c} {v!r} is not a whole number")
-    trace = row["trace_file"]
+    trace = fields[_AT["trace_file"]]
     if trace and (trace.startswith(("/", "\\")) or ".." in trace.replace("\\", "/").split("/")):
         raise TrialsFileError(f"{path}:{no}: trace_file {trace!r} names a file outside the "
                               f"session folder; the recorder writes {TRACES}/<name>")
