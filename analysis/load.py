@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ._kept import kept
 from .cells import response_columns, row_problem
 from .session_format import (
     COLUMNS,
@@ -46,9 +47,10 @@ _SIMULATED_FIRMWARE = re.compile(r"^(emulator|hlfw-[0-9.]+ (host|stm32))")
 #: columns of ``load_sessions(...).attrs["session_table"]``, one row per session folder
 SESSION_COLUMNS = ("session_dir", "participant", "session", "protocol", "protocol_sha256",
                    "kind", "responder", "status", "created_utc", "seed", "rows", "valid_rows",
-                   "design_key", "folder_participant", *DEVICE_COLUMNS, "identity")
+                   "design_key", "folder_participant", *DEVICE_COLUMNS, "identity",
+                   "identity_of", "rows_participant")
 #: how a participant id that the folder name and the recorded session disagree on is taken
-IDS = ("check", "record", "folder")
+IDS = ("check", "record", "folder", "rows")
 
 
 class LoadError(ValueError):
@@ -229,21 +231,22 @@ def load_sessions(path: str | Path, drop_invalid: bool = False,
     spots: dict[tuple[str, str], tuple[int, ...]] = {}  # (design key, phase) → columns
     for n, mpath in enumerate(found, start=1):
         folder = mpath.parent
+        digests: dict[str, str] = {}  # the SHA-256 of every file read, as it was read
         try:
-            meta = read_meta(mpath)
+            meta = read_meta(mpath, digests)
         except SessionMetaError as exc:
             raise LoadError(str(exc)) from None
         tpath = folder / TRIALS
         try:
-            rows, t = read_trial_fields(tpath)
+            rows, t = read_trial_fields(tpath, digests)
             inside_session(folder, TRACES)  # the recordings too are the session's own
         except (TrialsFileError, SessionPathError) as exc:
             raise LoadError(str(exc)) from None
         if t is not None:
             torn[str(tpath)] = t.text
         for f in (mpath, tpath):
-            if f.exists():
-                files[str(f.relative_to(root))] = hashlib.sha256(f.read_bytes()).hexdigest()
+            if str(f) in digests:
+                files[str(f.relative_to(root))] = digests[str(f)]
         proto = meta.protocol
         design = proto.design
         key = _design_key(design)
@@ -259,7 +262,7 @@ def load_sessions(path: str | Path, drop_invalid: bool = False,
             "seed": meta.seed, "rows": len(rows),
             "valid_rows": sum(r[_STATUS] == "valid" for r in rows), "design_key": key,
             "folder_participant": _folder_id(folder), **_device(meta),
-            "identity": _identity(meta, rows, tpath), "group": meta.participant.group,
+            **_identity(meta, rows, tpath), "group": meta.participant.group,
             "scale": (f"{proto.scale['min']}-{proto.scale['max']}" if proto.scale else "")})
         counts.append(len(rows))
         phases = {p["name"]: p for p in (design or {}).get("phases", [])}
@@ -319,12 +322,9 @@ def load_sessions(path: str | Path, drop_invalid: bool = False,
     for name in sorted({k for d in parsed for k in d}):
         levels = np.array([d.get(name, "") for d in parsed] + [""], dtype=object)
         data[name] = pd.array(levels[codes], dtype="str")  # code -1 (none): ''
-    data.attrs["session_table"] = table
-    data.attrs["designs"] = designs
-    data.attrs["torn"] = torn
-    data.attrs["files"] = files
-    data.attrs["sessions"] = len(table)
-    data.attrs["invalid_rows"] = invalid
+    data.attrs.update({k: kept(v) for k, v in (  # shared by every frame made from data
+        ("session_table", table), ("designs", designs), ("torn", torn), ("files", files),
+        ("sessions", len(table)), ("invalid_rows", invalid))})
     return data
 
 
@@ -332,28 +332,85 @@ _PID, _SES, _PHASE, _SAMPLE, _STATUS = (COLUMNS.index(c) for c in (
     "participant", "session", "phase", "sample", "status"))
 
 
-def _identity(meta: SessionRecord, rows: list[list[str]], path: Path) -> str:
-    """The first row of ``path`` whose participant, session or protocol disagrees with the
-    session's record (session.json), in words naming the line; '' when every row agrees.
-    A row's protocol is told by its phase and samples: each must be in the recorded design.
+def _identity(meta: SessionRecord, rows: list[list[str]], path: Path) -> dict[str, str]:
+    """Whether every row of ``path`` belongs to the session session.json records: its
+    participant, its session number, and its protocol (a row's phase and samples must be
+    in the recorded design).
+
+    Returns
+    -------
+    dict
+        ``identity``: the first disagreement in words, naming the line ('' when none);
+        ``identity_of``: what disagrees (``participant``, ``session``, ``protocol``, '');
+        ``rows_participant``: when the rows disagree only by naming one other participant
+        throughout, that id (the analyst may trust it: ``--ids rows``), else ''.
     """
     pid, ses = meta.participant.id, str(meta.session)
     design = meta.protocol.design or {}
     phases = {p["name"] for p in design.get("phases", [])}
     samples = set(design.get("samples") or {})
+    first = ""
+    named = {r[_PID] for r in rows}
     for line, r in enumerate(rows, start=2):
-        if r[_PID] != pid:
-            return (f"{path}:{line}: the row names participant {r[_PID]!r}, session.json "
-                    f"{pid!r}")
         if r[_SES] != ses:
-            return f"{path}:{line}: the row names session {r[_SES]!r}, session.json {ses!r}"
+            return {"identity": f"{path}:{line}: the row names session {r[_SES]!r}, "
+                                f"session.json {ses!r}", "identity_of": "session",
+                    "rows_participant": ""}
         if phases and r[_PHASE] not in phases:
-            return (f"{path}:{line}: phase {r[_PHASE]!r} is not a phase of protocol "
-                    f"{meta.protocol.name!r} as session.json records it")
+            return {"identity": f"{path}:{line}: phase {r[_PHASE]!r} is not a phase of "
+                                f"protocol {meta.protocol.name!r} as session.json records it",
+                    "identity_of": "protocol", "rows_participant": ""}
         if samples and any(x not in samples for x in r[_SAMPLE].split("+")):
-            return (f"{path}:{line}: sample {r[_SAMPLE]!r} is not a sample of protocol "
-                    f"{meta.protocol.name!r} as session.json records it")
-    return ""
+            return {"identity": f"{path}:{line}: sample {r[_SAMPLE]!r} is not a sample of "
+                                f"protocol {meta.protocol.name!r} as session.json records it",
+                    "identity_of": "protocol", "rows_participant": ""}
+        if not first and r[_PID] != pid:
+            first = (f"{path}:{line}: the row names participant {r[_PID]!r}, session.json "
+                     f"{pid!r}" + ("" if len(named) == 1 else
+                                   f" (the rows name {len(named)} participants)"))
+    return {"identity": first, "identity_of": "participant" if first else "",
+            "rows_participant": next(iter(named)) if first and len(named) == 1 else ""}
+
+
+def _whose(table: pd.DataFrame, ids: str) -> tuple[pd.DataFrame, list[str]]:
+    """Whom each session's rows are analysed under, as ``ids`` chooses (see
+    :func:`select_sessions`), and why a session is left out for its identity ('' when it
+    is not): a row whose session number or protocol disagrees with session.json, or, with
+    ``ids="check"``, a folder, a record and rows that do not name one participant. The
+    table gains ``recorded_participant`` (session.json's id); ``participant`` becomes the
+    id chosen."""
+    table = table.assign(recorded_participant=table["participant"])
+    chosen, whose = [], []
+    for r in table.itertuples():
+        record, folder, rows = r.participant, r.folder_participant, r.rows_participant
+        clash = bool(folder) and folder != record
+        why, who = "", record
+        if r.identity_of and r.identity_of != "participant":
+            why = (f"{r.identity}: the rows do not belong to the session its session.json "
+                   "records; correct or remove them (there is nothing to choose between)")
+        elif ids == "check" and r.identity_of == "participant":
+            options = [f"--ids record (analyse as {record})"]
+            if rows:
+                options.append(f"--ids rows (as {rows})")
+            if clash:
+                options.append(f"--ids folder (as {folder})")
+            why = f"{r.identity}: choose with {' or '.join(options)}"
+        elif ids == "check" and clash:
+            why = (f"folder sub-{folder} holds participant {record}'s session "
+                   f"(session.json, trials.tsv): choose with --ids record (analyse as "
+                   f"{record}) or --ids folder (as {folder})")
+        elif ids == "folder" and folder:
+            who = folder
+        elif ids == "rows" and r.identity_of == "participant":
+            if rows:
+                who = rows
+            else:
+                why = (f"{r.identity}: --ids rows cannot choose, the rows name several "
+                       "participants; choose with --ids record or --ids folder")
+        chosen.append(who)
+        whose.append(why)
+    table["participant"] = chosen
+    return table, whose
 
 
 def _date(text: str | None, name: str) -> dt.datetime | None:
@@ -390,11 +447,15 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
     since, until : str, optional
         Dates (``YYYY-MM-DD``, UTC) or ISO times bounding when a session was created
         (``until`` a date includes that whole day).
-    ids : {'check', 'record', 'folder'}
-        A session whose folder (``sub-<id>``) names another participant than its
-        session.json and trials.tsv (an operator typed the wrong ``--participant``, then
-        renamed the folder) is left out and named with ``check`` (default), analysed under
-        the recorded id with ``record``, or under the folder's id with ``folder``.
+    ids : {'check', 'record', 'folder', 'rows'}
+        Whom a session's rows are pooled under when its folder (``sub-<id>``), its
+        session.json and its trials.tsv rows do not name the same participant (an operator
+        typed the wrong ``--participant``, then renamed the folder; rows copied from another
+        session): with ``check`` (default) it is left out and named with the first row or
+        name that disagrees; ``record`` trusts session.json, ``folder`` the folder's name,
+        ``rows`` the one id the rows name. A row whose session number or protocol (a phase
+        or sample the recorded design does not have) disagrees with session.json leaves its
+        session out whatever ``ids`` says: there is nothing to choose between.
     sim_device : bool
         Keep people's (human) sessions on a simulated device (the ``sim`` backend, the
         emulator, a firmware build with its simulated plant: nobody touched a physical
@@ -441,11 +502,7 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         kind_note = f"kind {kind}"
     if ids not in IDS:
         raise LoadError(f"--ids must be one of {', '.join(IDS)}, got {ids!r}")
-    table = table.assign(recorded_participant=table["participant"])
-    clash = (table["folder_participant"] != "") & (table["folder_participant"]
-                                                   != table["participant"])
-    if ids == "folder":
-        table.loc[clash, "participant"] = table.loc[clash, "folder_participant"]
+    table, whose = _whose(table, ids)
     if status not in ("complete", "all"):
         raise LoadError(f"--status must be complete or all, got {status!r}")
     protos = [protocol] if isinstance(protocol, str) else protocol
@@ -453,15 +510,11 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
     if t1 is not None and len(str(until)) <= 10:
         t1 = t1 + dt.timedelta(days=1)
     reasons = []
-    for r in table.itertuples():
+    for r, who in zip(table.itertuples(), whose, strict=True):
         why = ""
         created = _date(r.created_utc, "created") if r.created_utc else None
-        if ids == "check" and r.folder_participant and r.folder_participant != \
-                r.recorded_participant:
-            why = (f"folder sub-{r.folder_participant} holds participant "
-                   f"{r.recorded_participant}'s session (session.json, trials.tsv): choose "
-                   f"with --ids record (analyse as {r.recorded_participant}) or --ids folder "
-                   f"(as {r.folder_participant})")
+        if who:
+            why = who
         elif protos is not None and r.protocol not in protos:
             why = f"protocol {r.protocol} not selected"
         elif kind != "all" and r.kind != kind:
@@ -484,15 +537,13 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
     table["included"] = table["reason"] == ""
     # backup copies: the same participant, protocol, seed and rows in two folders
     fingerprints: dict[tuple, str] = {}
+    prints = session_fingerprints(data)  # every session's at once: one pass over the rows
     # the copy nearest the top of the folder is kept (a backup usually sits deeper)
     order = sorted(table.index[table["included"]],
-                   key=lambda i: (len(Path(table.loc[i, "session_dir"]).parts),
-                                  table.loc[i, "session_dir"]))
+                   key=lambda i: (len(Path(table.at[i, "session_dir"]).parts),
+                                  table.at[i, "session_dir"]))
     for i, r in table.loc[order].iterrows():
-        rows = data[data["session_dir"] == r.session_dir]
-        key = (r.participant, r.protocol_sha256, r.seed,
-               hashlib.sha256(rows[["item", "attempt", "status", "rating", "answer",
-                                    "tap_velocities"]].to_csv(index=False).encode()).hexdigest())
+        key = (r.participant, r.protocol_sha256, r.seed, prints.get(r.session_dir))
         if key in fingerprints:
             table.loc[i, ["included", "reason"]] = (False, f"duplicate of {fingerprints[key]} "
                                                            "(same participant, seed and rows)")
@@ -525,14 +576,34 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         table.loc[i, "reason"] = kind_note
     keep = set(table.loc[table["included"], "session_dir"])
     out = data[data["session_dir"].isin(keep)].copy()
-    if ids == "folder" and clash.any():  # the rows follow the folder's id
-        rename = dict(zip(table.loc[clash, "session_dir"], table.loc[clash, "participant"],
+    chosen = table["included"] & (table["participant"] != table["recorded_participant"]) | (
+        table["included"] & (table["identity_of"] == "participant"))
+    if chosen.any():  # the rows follow the id chosen for their session (--ids)
+        rename = dict(zip(table.loc[chosen, "session_dir"], table.loc[chosen, "participant"],
                           strict=True))
         hit = out["session_dir"].isin(rename)
         out.loc[hit, "participant"] = out.loc[hit, "session_dir"].map(rename)
     out.attrs = dict(data.attrs)
-    out.attrs["selection"] = table
+    out.attrs["selection"] = kept(table)
     return out, table
+
+
+#: what a backup copy repeats: the rows' attempts and answers
+_COPIED = ["item", "attempt", "status", "rating", "answer", "tap_velocities"]
+
+
+def session_fingerprints(data: pd.DataFrame) -> dict[str, int]:
+    """A 64-bit fingerprint of each session's rows (:data:`_COPIED`, in order), by
+    ``session_dir``, computed for all sessions at once: two folders holding the same rows
+    get the same number (a backup copy), others differ but by a chance of about 2⁻⁶⁴."""
+    if data.empty:
+        return {}
+    pos = data.groupby("session_dir", sort=False).cumcount()
+    cells = data[_COPIED].astype(str).assign(_pos=pos.to_numpy())
+    h = pd.util.hash_pandas_object(cells, index=False).to_numpy(np.uint64)
+    sums = pd.Series(h, index=data.index).groupby(data["session_dir"].to_numpy(),
+                                                  sort=False).sum()
+    return {str(k): int(v) for k, v in sums.items()}
 
 
 def tap_velocities(data: pd.DataFrame) -> np.ndarray:

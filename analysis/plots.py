@@ -180,15 +180,21 @@ def _tap_near(path: Path, speed: float):
         return abs(z["contacts_v"][k] - speed), acc, float(z["contacts_v"][k]), rate
 
 
+#: recordings of a sample searched for the tap nearest the common speed (the first ones, in
+#: the order of the rows: 10⁶ rows would otherwise open 10⁶ files for one figure)
+TRACES_PER_SAMPLE = 200
+
+
 def accel_traces(a: dict, data: pd.DataFrame, out: Path, speed: float = 0.11) -> list[str]:
-    """Acceleration after contact per sample, for the tap closest to a common speed."""
+    """Acceleration after contact per sample, for the tap closest to a common speed among
+    the sample's first :data:`TRACES_PER_SAMPLE` recordings."""
     plt = _plt()
     d = data[(data["design_key"] == a["design_key"]) & (data["phase"] == a["phase"])
              & data["valid"] & (data["trace_file"].fillna("") != "")]
     picked, skipped = [], []
     for sample, g in d.groupby("sample"):
         best = None
-        for row in g.itertuples():
+        for row in g.head(TRACES_PER_SAMPLE).itertuples():
             path = Path(row.session_dir) / row.trace_file
             if not path.exists() or "*" in row.trace_file:
                 continue

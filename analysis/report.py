@@ -20,6 +20,7 @@ import json
 import math
 import platform
 import re
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 
@@ -33,7 +34,10 @@ from .report_text import table as _table
 from .stats import StatsError
 from .study import analysed_phases, phase_rows
 
-__all__ = ["analyze", "build_report"]
+__all__ = ["analyze", "build_report", "LISTED"]
+
+#: told how far the work has got: (what, done, total)
+Progress = Callable[[str, int, int], None]
 
 SIMULATED_NOTE = (
     "These data come from simulated participants, not people: the ratings and answers "
@@ -95,31 +99,42 @@ def _run(rows: pd.DataFrame, phase: dict):
         return {"type": "not computed", "result": f"not computed: {exc}", "device": None}
 
 
-def build_report(data: pd.DataFrame, selection: pd.DataFrame, filters: dict) -> tuple[dict, list]:
+#: a per-participant or per-session table of report.md and report.html is written out up
+#: to this many rows; beyond, the page summarises it and says where the whole table is
+#: (report.json, and sessions.tsv and input_files.tsv beside the report)
+LISTED = 200
+
+
+def build_report(data: pd.DataFrame, selection: pd.DataFrame, filters: dict,
+                 progress: Progress | None = None) -> tuple[dict, list]:
     """Every analysis the selected sessions' designs call for; returns the report content (not
     yet cleaned) and the analyses with their full results (for the figures)."""
     designs = data.attrs.get("designs", {})
     analyses = []
-    for key in sorted(set(data["design_key"]) - {""},
-                      key=lambda k: (designs[k]["protocol"], k)):
+    todo = [(key, phase) for key in sorted(set(data["design_key"]) - {""},
+                                           key=lambda k: (designs[k]["protocol"], k))
+            for phase in analysed_phases(designs[key])]
+    for n, (key, phase) in enumerate(todo):
         design = designs[key]
-        for phase in analysed_phases(design):
-            rows = phase_rows(data, key, phase["name"])
-            if rows.empty:
-                continue
-            a = _run(rows, phase)
-            a.update({"id": f"{design['protocol']}/{phase['name']}", "protocol":
-                      design["protocol"], "phase": phase["name"], "design_key": key,
-                      "phase_design": phase, "scale": design.get("scale")})
-            title = f"{design.get('title') or design['protocol']} ({design['protocol']}), " \
-                    f"phase '{phase['name']}'"
-            if isinstance(a["result"], str):
-                a["entry"], a["methods"] = {"result": a["result"]}, f"{title}: {a['result']}."
-            else:  # its own part of report.json, and its methods in its own words
-                a["entry"], body = report_entry(analysis_type(a["type"]), a["result"], phase,
-                                                design)
-                a["methods"] = f"{title}: {body}"
-            analyses.append(a)
+        rows = phase_rows(data, key, phase["name"])
+        if rows.empty:
+            continue
+        if progress is not None:
+            progress(f"analysing {design['protocol']}/{phase['name']} ({len(rows):,} rows)",
+                     n, len(todo))
+        a = _run(rows, phase)
+        a.update({"id": f"{design['protocol']}/{phase['name']}", "protocol":
+                  design["protocol"], "phase": phase["name"], "design_key": key,
+                  "phase_design": phase, "scale": design.get("scale")})
+        title = f"{design.get('title') or design['protocol']} ({design['protocol']}), " \
+                f"phase '{phase['name']}'"
+        if isinstance(a["result"], str):
+            a["entry"], a["methods"] = {"result": a["result"]}, f"{title}: {a['result']}."
+        else:  # its own part of report.json, and its methods in its own words
+            a["entry"], body = report_entry(analysis_type(a["type"]), a["result"], phase,
+                                            design)
+            a["methods"] = f"{title}: {body}"
+        analyses.append(a)
     ids = [a["id"] for a in analyses]
     for a in analyses:  # the same protocol name under two designs: tell them apart
         if ids.count(a["id"]) > 1:
@@ -134,7 +149,10 @@ def build_report(data: pd.DataFrame, selection: pd.DataFrame, filters: dict) -> 
     shown = [f"{k}: {v}" for k, v in sorted(filters.items())
              if v and not (k == "ids" and v == "check")]  # the default check goes unsaid
     sel_text = (f"{len(inc)} of {len(selection)} sessions included ({', '.join(shown)}); "
-                "every session found is listed below with the reason it is in or out.")
+                + ("every session found is listed below with the reason it is in or out."
+                   if len(selection) <= LISTED else
+                   "every session found is listed in sessions.tsv with the reason it is in or "
+                   "out (below: the count of each kind, and those left out)."))
     methods = " ".join([*intro, sel_text, *(a["methods"] for a in analyses)])
     report = {
         "methods": methods, "kinds": kinds,
@@ -159,7 +177,7 @@ def _report_entry(a: dict) -> dict:
 def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"),
             protocol=None, kind=None, status: str = "complete", participants=None,
             since=None, until=None, drop_invalid: bool = False, ids: str = "check",
-            sim_device: bool = False) -> dict:
+            sim_device: bool = False, progress: Progress | None = None) -> dict:
     """Select sessions, run every analysis their designs call for, write the report.
 
     Parameters
@@ -174,30 +192,40 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
     drop_invalid : bool
         Leave out (and list) recorded rows that cannot be analysed, instead of stopping
         with an error naming the first (:func:`analysis.load.load_sessions`).
+    progress : callable (step, done, total), optional
+        Told how far the work has got: each session folder read, each analysis begun, the
+        figures, the writing.
 
     Returns
     -------
     dict
-        The report's content (what report.json holds).
+        The report's content (what report.json holds). Beside report.*, ``sessions.tsv``
+        lists every session found with the reason it is in or out, and ``input_files.tsv``
+        the SHA-256 of every file read (the pages write them out up to :data:`LISTED` rows).
     """
-    data = load_sessions(data_dir, drop_invalid=drop_invalid)
+    tell = progress or (lambda step, done, total: None)
+    data = load_sessions(data_dir, drop_invalid=drop_invalid,
+                         progress=lambda n, total: tell("loading sessions", n, total))
     filters = {"protocol": protocol, "kind": kind, "status": status,
                "participants": participants, "since": since, "until": until, "ids": ids,
                "sim_device": sim_device}
+    tell("choosing the sessions", 0, 1)
     selected, table = select_sessions(data, **filters)
     filters = {**filters, "kind": kind or _default_kind(table)}
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    report, analyses = build_report(selected, table, filters)
+    report, analyses = build_report(selected, table, filters, tell)
     figures = []
     if analyses:
         from .analyses import save_figures
 
+        tell("drawing the figures", 0, 1)
         figures = save_figures(selected, analyses, out)
+    tell("writing the report", 0, 1)
     inc = table[table["included"]]
+    kept = set(inc["session_dir"])  # a file is the included session's whose folder holds it
     files = {k: v for k, v in data.attrs["files"].items()
-             if any(str(Path(data_dir) / k).startswith(str(Path(d)) + "/")
-                    for d in inc["session_dir"])}
+             if str((Path(data_dir) / k).parent) in kept}
     report["figures"] = figures
     keep = set(inc["session_dir"])
     report["selection"]["rows_left_out"] = [
@@ -210,6 +238,7 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
         "seeds": sorted({int(s) for s in inc["seed"] if s is not None}),
         "sessions": int(len(inc)), "torn_lines_set_aside": data.attrs["torn"]}
     report = _clean(report)
+    _side_files(report, out)
     if "json" in formats:
         (out / "report.json").write_text(json.dumps(_p_bounds(report), indent=1,
                                                     sort_keys=True))
@@ -219,6 +248,40 @@ def analyze(data_dir: str | Path, out: str | Path, formats=("html", "md", "json"
     if "html" in formats:
         (out / "report.html").write_text(_html(md, report))
     return report
+
+
+def _side_files(rep: dict, out: Path) -> None:
+    """sessions.tsv (every session found, in or out, and why) and input_files.tsv (every
+    file read, with its SHA-256): the whole of the tables the pages summarise beyond
+    :data:`LISTED` rows, for a spreadsheet or a program."""
+    pd.DataFrame(rep["selection"]["sessions"]).to_csv(out / "sessions.tsv", sep="\t",
+                                                      index=False)
+    pd.DataFrame(sorted(rep["provenance"]["input_files"].items()),
+                 columns=["file", "sha256"]).to_csv(out / "input_files.tsv", sep="\t",
+                                                    index=False)
+
+
+def _sessions_md(sel: dict) -> list[str]:
+    """The sessions found: the whole table up to :data:`LISTED` sessions; beyond, the count
+    per protocol, kind and status, and the sessions left out (up to LISTED of them)."""
+    cols = ["participant", "session", "protocol", "kind", "device_backend", "device_id",
+            "firmware", "status", "rows", "included", "reason", "session_dir"]
+    rows = sel["sessions"]
+    if len(rows) <= LISTED:
+        return [_table(rows, cols)]
+    counts = (pd.DataFrame(rows).groupby(["protocol", "kind", "status", "included"])
+              .size().reset_index(name="sessions"))
+    out_ = [r for r in rows if not r["included"]]
+    text = [f"{len(rows):,} sessions were found, more than the {LISTED} this page lists one "
+            f"by one: every one of them, with the reason it is in or out, is in sessions.tsv "
+            "beside this report (and in report.json).\n\n",
+            _table(counts.to_dict(orient="records"))]
+    if out_:
+        shown = out_[:LISTED]
+        text += [f"\n{len(out_):,} sessions were left out"
+                 + (f"; the first {LISTED}" if len(out_) > LISTED else "") + ":\n\n",
+                 _table(shown, cols)]
+    return text
 
 
 def _default_kind(table: pd.DataFrame) -> str:
@@ -272,15 +335,16 @@ def _markdown(rep: dict) -> str:
         "No analysed phase has data in the selected sessions."]
     out += ["", "## Methods\n", md_text(general) + "\n"]
     out.append("## Sessions included and excluded\n")
-    out.append(_table(rep["selection"]["sessions"],
-                      ["participant", "session", "protocol", "kind", "device_backend",
-                       "device_id", "firmware", "status", "rows", "included", "reason",
-                       "session_dir"]))
+    out.extend(_sessions_md(rep["selection"]))
     appendix = []
     left_out = rep["selection"].get("rows_left_out") or []
     if left_out:
         out.append("\n### Recorded rows left out (--drop-invalid)\n")
-        out.append(_table(left_out, ["participant", "phase", "sample", "reason", "file", "line"]))
+        if len(left_out) > LISTED:
+            out.append(f"{len(left_out):,} rows; the first {LISTED} (all in report.json, "
+                       "selection.rows_left_out):\n\n")
+        out.append(_table(left_out[:LISTED], ["participant", "phase", "sample", "reason",
+                                              "file", "line"]))
     for a in rep["analyses"]:
         out.append(f"## {md_text(a['id'])}\n")
         out.append(md_text(a["methods"]) + "\n")
@@ -313,7 +377,14 @@ def _markdown(rep: dict) -> str:
                                                      p["packages"].items()) + ".\n\n")
     out.append(f"Seeds: {p['seeds']}. Sessions: {p['sessions']}. Torn lines set aside: "
                f"{len(p['torn_lines_set_aside'])}.\n\n")
-    out.append(_table([{"file": k, "sha256": v} for k, v in sorted(p["input_files"].items())]))
+    files = sorted(p["input_files"].items())
+    if len(files) > LISTED:
+        digest = hashlib.sha256("".join(f"{k}\t{v}\n" for k, v in files).encode()).hexdigest()
+        out.append(f"{len(files):,} files were read; the SHA-256 of each is in "
+                   f"input_files.tsv beside this report and in report.json (SHA-256 of the "
+                   f"list, one 'file<TAB>sha256' line each: {digest}).\n")
+    else:
+        out.append(_table([{"file": k, "sha256": v} for k, v in files]))
     return "\n".join(out)
 
 

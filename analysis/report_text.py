@@ -50,6 +50,10 @@ def p_text(p: float) -> str:
     return "p = " + p_digits(p)
 
 
+#: a table cell listing participants names this many, then says how many more
+NAMES_SHOWN = 20
+
+
 def table(rows: list[dict], cols: list[str] | None = None) -> str:
     """A Markdown table of ``rows`` (every row's columns, or ``cols``); '*none*' when empty.
     p columns in APA style; every cell escaped, so no cell can add columns or raw HTML."""
@@ -60,6 +64,10 @@ def table(rows: list[dict], cols: list[str] | None = None) -> str:
     def fmt(v, col):
         if v is None:
             return "—"
+        if col == "subjects_excluded" and isinstance(v, str) and v.count(",") >= NAMES_SHOWN:
+            names = v.split(",")  # a long list of people: the first, and how many
+            return (f"{', '.join(names[:NAMES_SHOWN])} and {len(names) - NAMES_SHOWN:,} more "
+                    "(all in report.json)")
         if isinstance(v, float):
             if col.startswith("p_") or col in ("p", "p_spher"):
                 return p_digits(v) if v >= 0.001 else "< .001"  # APA: no leading zero

@@ -27,6 +27,7 @@ everything else is text.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Callable
@@ -245,9 +246,10 @@ def read_trials(path: str | Path) -> tuple[list[dict], TornLine | None]:
 _AT = {c: i for i, c in enumerate(COLUMNS)}
 
 
-def read_trial_fields(path: str | Path) -> tuple[list[list[str]], TornLine | None]:
+def read_trial_fields(path: str | Path, digests: dict | None = None
+                      ) -> tuple[list[list[str]], TornLine | None]:
     """As :func:`read_trials`, each row as its fields in :data:`COLUMNS` order (what a
-    reader of many sessions keeps: no dict per row)."""
+    reader of many sessions keeps: no dict per row); ``digests`` as :func:`read_meta`."""
     path = Path(path)
     try:
         inside_session(path.parent, path.name)
@@ -258,7 +260,10 @@ def read_trial_fields(path: str | Path) -> tuple[list[list[str]], TornLine | Non
     if not path.is_file():  # a FIFO or a device would block the read for ever
         raise TrialsFileError(f"{path}: not a regular file ({_kind(path)}); a session's "
                               "trials.tsv is a plain file — copy its contents into one")
-    raw = _text(path.read_bytes())
+    data = path.read_bytes()
+    if digests is not None:
+        digests[str(path)] = hashlib.sha256(data).hexdigest()
+    raw = _text(data)
     if not raw:
         return [], None
     complete = raw.endswith("\n")
@@ -583,8 +588,10 @@ class SessionRecord(_Record):
         self.warnings = list(dict.fromkeys([*(self.warnings or []), *warnings]))
 
 
-def read_meta(path: str | Path) -> SessionRecord:
-    """session.json's record, checked and upgraded (:meth:`SessionRecord.from_json`).
+def read_meta(path: str | Path, digests: dict | None = None) -> SessionRecord:
+    """session.json's record, checked and upgraded (:meth:`SessionRecord.from_json`);
+    with ``digests``, the SHA-256 of the bytes read is put there under ``str(path)`` (a
+    reader that records what it read need not read it twice).
 
     Raises
     ------
@@ -600,7 +607,10 @@ def read_meta(path: str | Path) -> SessionRecord:
     if path.exists() and not path.is_file():
         raise SessionMetaError(f"{path}: not a regular file ({_kind(path)})")
     try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
+        raw = path.read_bytes()
+        if digests is not None:
+            digests[str(path)] = hashlib.sha256(raw).hexdigest()
+        meta = json.loads(raw.decode("utf-8"))
     except FileNotFoundError:
         raise SessionMetaError(f"{path}: no session.json — not a session folder") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

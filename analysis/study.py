@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 from scipy import special, stats
 
+from ._kept import kept
 from .load import tap_velocities
 from .ordinal import ordinal_mixed
 from .power import power_table, variance_components
@@ -78,7 +79,7 @@ def phase_rows(data: pd.DataFrame, design_key: str, phase: str) -> pd.DataFrame:
     analysis answers for each: :func:`participants_of`)."""
     mine = data["design_key"] == design_key
     rows = data[mine & (data["phase"] == phase)].copy()
-    rows.attrs["participants"] = sorted(map(str, data.loc[mine, SUBJECT].unique()))
+    rows.attrs["participants"] = kept(sorted(map(str, data.loc[mine, SUBJECT].unique())))
     return rows
 
 

@@ -277,6 +277,7 @@ def _list(text: str | None) -> list[str] | None:
 
 def _analyze(args: argparse.Namespace) -> int:
     from app.api import analyze
+    from app.api._say import progress_to_stderr
 
     formats = tuple(f.strip() for f in args.format.split(","))
     bad = set(formats) - {"html", "md", "json"}
@@ -286,7 +287,7 @@ def _analyze(args: argparse.Namespace) -> int:
                   kind=args.kind, status=args.status or "complete",
                   participants=_list(args.participants),
                   since=args.since, until=args.until, drop_invalid=args.drop_invalid,
-                  ids=args.ids, sim_device=args.sim_device)
+                  ids=args.ids, sim_device=args.sim_device, progress=progress_to_stderr())
     sel = rep["selection"]
     ids = [a["id"] for a in rep["analyses"]]
     print(f"{len(ids)} analyses ({', '.join(ids) or 'none'}) of {sel['included']} sessions "
@@ -312,10 +313,11 @@ def _selection_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--participants", help="participant ids, comma-separated")
     p.add_argument("--since", help="sessions created on or after (YYYY-MM-DD, UTC)")
     p.add_argument("--until", help="sessions created on or before (YYYY-MM-DD, UTC)")
-    p.add_argument("--ids", choices=("check", "record", "folder"), default="check",
-                   help="a session whose folder sub-<id> names another participant than its "
-                   "files: leave it out and name it (check), or analyse it under the recorded "
-                   "id (record) or the folder's (folder)")
+    p.add_argument("--ids", choices=("check", "record", "folder", "rows"), default="check",
+                   help="a session whose folder sub-<id>, session.json and trials.tsv rows do "
+                   "not name the same participant: leave it out and name it (check), or "
+                   "analyse it under session.json's id (record), the folder's (folder) or the "
+                   "one the rows name (rows)")
     p.add_argument("--drop-invalid", action="store_true",
                    help="leave out recorded rows that cannot be analysed (a rating off the "
                    "scale, …), listing each, instead of stopping at the first")
@@ -326,12 +328,13 @@ def _selection_args(p: argparse.ArgumentParser) -> None:
 
 def _export(args: argparse.Namespace) -> int:
     from app.api import export
+    from app.api._say import progress_to_stderr
 
     files = export(args.data_dir, args.out, args.format, drop_invalid=args.drop_invalid,
                    protocol=_list(args.protocol), kind=args.kind,
                    status=args.status or ("all" if args.format == "bids" else "complete"),
                    participants=_list(args.participants), since=args.since, until=args.until,
-                   ids=args.ids, sim_device=args.sim_device)
+                   ids=args.ids, sim_device=args.sim_device, progress=progress_to_stderr())
     if args.format == "bids":  # thousands of files with traces: what to read first
         print(f"a BIDS dataset of {len(files)} files in {args.out}/: participants.tsv maps "
               "each BIDS label to the id as entered; validate it with the BIDS validator")
@@ -590,7 +593,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "orderings, causes (why realism's middle ranks differ from the paper), "
                    "factorial (why the factorial and identification findings differ, and "
                    "what would change them), "
-                   "tick (the firmware's servo tick on the Cortex-M4)")
+                   "tick (the firmware's servo tick on the Cortex-M4), scale (analyze and "
+                   "export against 10³…10⁶ rows: time and peak memory)")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=BENCH_OPTIONS["repeats"],
                    help="timing repeats (median reported)")
@@ -612,6 +616,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="link --load: session traffic per target and load [s]")
     b.add_argument("--baseline", action="store_true", help="link --load: also run each cell "
                    "with reading and heartbeats in Python threads")
+    b.add_argument("--rows", default=None, help="scale: study sizes in rows (default "
+                   "1e3,1e4,1e5,1e6)")
     b.add_argument("--no-window", action="store_true",
                    help="link --load: no PsychoPy window (drawn otherwise, under Xvfb if needed)")
     b.set_defaults(func=_bench)

@@ -16,11 +16,11 @@ from typing import Any
 __all__ = ["READ_BY", "LOAD_ONLY", "check_options", "parse_points"]
 
 #: option → the benchmarks that read it (``json`` is read by every one)
-READ_BY = {"repeats": ("accuracy", "analysis", "demo", "link", "sim"),
+READ_BY = {"repeats": ("accuracy", "analysis", "demo", "link", "scale", "sim"),
            "fuzz": ("link",), "kills": ("crash",), "points": ("crash",),
            "seeds": ("causes", "factorial", "orderings"), "firmware": ("link",),
            "load": ("link",), "targets": ("link",), "seconds": ("link",),
-           "baseline": ("link",), "no_window": ("link",)}
+           "baseline": ("link",), "no_window": ("link",), "rows": ("scale",)}
 #: options of ``link`` that only its ``--load`` run reads
 LOAD_ONLY = ("targets", "seconds", "baseline", "no_window")
 
@@ -133,6 +133,10 @@ def check_options(what: str, options: Mapping[str, Any], defaults: Mapping[str, 
     if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) or s <= 0:
         shown = f"{s:g}" if isinstance(s, float) else repr(s)
         raise _error(f"--seconds {shown}: a number of seconds > 0")
+    if opts.get("rows") is not None:
+        from .scale import parse_rows
+
+        parse_rows(opts["rows"])
     for name in ("json", "baseline", "no_window"):
         if not isinstance(opts[name], bool):
             raise _error(f"{_flag(name)} {opts[name]!r}: true or false")

@@ -15,10 +15,12 @@ def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json")
             protocol: str | list[str] | None = None, kind: str | None = None,
             status: str = "complete", participants: list[str] | None = None,
             since: str | None = None, until: str | None = None,
-            drop_invalid: bool = False, ids: str = "check", sim_device: bool = False) -> dict:
+            drop_invalid: bool = False, ids: str = "check", sim_device: bool = False,
+            progress=None) -> dict:
     """Select sessions, run the analyses their designs call for, write the report.
 
-    Parameters are those of :func:`analysis.report.analyze`; its errors come back as
+    Parameters are those of :func:`analysis.report.analyze` (``progress``: how far it has
+    got, e.g. :func:`app.api._say.progress_to_stderr`); its errors come back as
     :class:`~app.errors.AnalysisError`.
 
     Returns
@@ -35,7 +37,8 @@ def analyze(data: str | Path, out: str | Path, *, formats=("html", "md", "json")
     try:
         return _analyze(data, out, tuple(formats), protocol=protocol, kind=kind, status=status,
                         participants=participants, since=since, until=until,
-                        drop_invalid=drop_invalid, ids=ids, sim_device=sim_device)
+                        drop_invalid=drop_invalid, ids=ids, sim_device=sim_device,
+                        progress=progress)
     except (LoadError, StatsError) as exc:
         raise AnalysisError(str(exc)) from None
     except OSError as exc:
@@ -51,7 +54,8 @@ def export(data: str | Path, out: str | Path, fmt: str = "long-csv", **selection
     Returns
     -------
     list of Path
-        The files written, ``codebook.csv`` last.
+        The files written, ``codebook.csv`` last. ``progress`` in ``selection``: how far it
+        has got (as :func:`analyze`).
     """
     from analysis import LoadError, StatsError
     from analysis.export import FORMATS
