@@ -524,6 +524,46 @@ def test_text_in_report_tables_is_escaped(session, tmp_path):
     assert md.splitlines()[2] == "| a\\|b&lt;script&gt; | 1 |"
 
 
+def test_the_sample_of_write_points_meets_every_way_the_session_writes():
+    """benchmarks.crash.sample_points on a two-trial session's points as the harness logs
+    them: each kind at each file once (temporary names and trial numbers aside), the header
+    of trials.tsv and the first row's append, and the last update of session.json."""
+    from benchmarks.crash import sample_points
+
+    ses = "/d/sub-P01/ses-1"
+    log = [("mkdir", "/d/sub-P01"), ("mkdir", ses), ("mkdir", f"{ses}/traces"),
+           ("open", f"{ses}/session.lock"), ("write", f"{ses}/session.lock")]
+    atomic = [("open", "{}.tmp"), ("write", "{}.tmp"), ("fsync", "{}.tmp")]
+    log += [(k, f"{ses}/.protocol.toml.ab12cd34.tmp") for k, _ in atomic]
+    log += [("rename", f"{ses}/protocol.toml"), ("fsync", ses)]
+    row = [("open", f"{ses}/trials.tsv"), ("write", f"{ses}/trials.tsv"),
+           ("fsync", f"{ses}/trials.tsv")]
+    log += [*row, ("fsync", ses)]  # the header: 11-14
+    for tmp in ("q1w2e3r4", "z9x8c7v6"):  # session.json written, then its status updated
+        log += [(k, f"{ses}/.session.json.{tmp}.tmp") for k, _ in atomic]
+        log += [("rename", f"{ses}/session.json"), ("fsync", ses)]
+        if tmp == "q1w2e3r4":
+            for trial in (1, 2):  # each trial: its trace, then its row
+                log += [(k, f"{ses}/traces/.trial-000{trial}-0.npz.{tmp}.tmp")
+                        for k, _ in atomic]
+                log += [("fsync", f"{ses}/traces"), *row]
+    chosen = sample_points(log)
+    kinds = {kind for kind, _ in log}
+    assert {log[k - 1][0] for k in chosen} == kinds
+    header, first_row, second_row = [k for k, point in enumerate(log, 1)
+                                     if point == ("write", f"{ses}/trials.tsv")]
+    assert {header, first_row} <= set(chosen) and second_row not in chosen
+    last_json_write = max(k for k, (kind, path) in enumerate(log, 1)
+                          if kind == "write" and ".session.json." in path)
+    last_rename = max(k for k, (kind, path) in enumerate(log, 1)
+                      if kind == "rename" and path.endswith("session.json"))
+    assert {last_json_write, last_rename} <= set(chosen)
+    # the second trial's trace and the fsyncs that repeat are left to bench crash
+    second = [k for k, (_, path) in enumerate(log, 1) if "trial-0002" in path]
+    assert second and not set(second) & set(chosen)
+    assert len(chosen) < len(log)
+
+
 # ------------------------------------------------------------------ 8: the write points
 # `hapticlab bench crash --points all` kills at every one of them (56 runs of the CLI for this
 # protocol, 140 s on a quiet machine); the suite kills at a sample that meets each way the
