@@ -209,3 +209,25 @@ def test_a_client_of_version_2_as_first_published_still_runs_a_trial(target):
         client.port.close()
         stop_emulator(emu)
         print(f"the device's stderr:\n{emu.stderr()}")
+
+
+@pytest.mark.integration
+def test_this_host_adapts_to_a_device_that_speaks_version_2():
+    """The other side of the rule: hapticlab's host reads a version-2 device in version 2's
+    layouts, and what that version does not carry is None, not a made-up 0."""
+    from device.serial.link import Link
+
+    emu = start_emulator("--seed", "3")
+    link = Link(emu.port)
+    try:
+        ack = link.hello(2)  # what a device that speaks only version 2 chooses
+        assert ack.protocol == 2 and link.version == 2
+        lim = link.limits
+        assert lim.table_items > 0 and lim.link_bytes_s == 0
+        assert lim.capabilities is None and lim.can("seeded") is None
+        assert lim.tick_max_us is None and lim.max_window_ms is None
+        report = link.device_report()
+        assert report["frames"] >= 1 and report["estop_max_ms"] is None
+    finally:
+        link.shutdown()
+        stop_emulator(emu)
