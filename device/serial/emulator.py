@@ -135,6 +135,8 @@ class Emulator:
         self._stop = threading.Event()
         self._fault_sent = False
         self._fault_due = False  # a FAULT to tell once this turn's frames are handled
+        self._fault_told = False  # the latched fault was sent in a FAULT or a STATUS
+        self._told_at = 0.0  # device time [s] of that report's first
         self._estop_pending = False  # an ESTOP whose FAULT is not told yet
         self._clock0 = time.monotonic()  # power-up: the device clock counts from here
         self._ran = False  # a window or playback ran at the last clock sync
@@ -240,8 +242,7 @@ class Emulator:
                         self._handle(frame)
                     if self._fault_due:  # an ESTOP outside a run: told after the frames
                         self._fault_due = False  # read with it (a CLEAR_FAULT among them
-                        self._report_fault()  # finds it not yet told: docs §3)
-                        self._estop_pending = False
+                        self._report_fault()  # finds it not yet told: docs §4)
             # the device time before a look that finds the port empty: whatever comes
             # later arrived after it (the servo worker may move the clock meanwhile;
             # between runs the clock is brought up to now first)
@@ -314,12 +315,22 @@ class Emulator:
         out_mn = max(-2**31, min(2**31 - 1, int(round(out * 1000))))
         self.send(M.StatusReport(self._now_us(), state, out_mn,
                                  _FAULT[f.code] if f is not None else 0))
+        if f is not None:  # the fault told, an ESTOP read before this with it
+            self._told()
+
+    def _told(self) -> None:
+        """A FAULT or a STATUS with the fault just went: the first since it latched or since
+        the last ESTOP is when a host could first know of it."""
+        if not self._fault_told or self._estop_pending:
+            self._told_at = self.sim.time
+        self._fault_told = True
+        self._estop_pending = False
 
     def _report_fault(self) -> None:
         f = self.sim.fault
         if f is not None and not self._fault_sent:
             self._fault_sent = True
-            self._estop_pending = False
+            self._told()
             if f.code == "estop" and self._estop_rx is not None:
                 lat = max(0.0, f.t - self._estop_rx)
                 self._estop_max = lat if self._estop_max is None else max(self._estop_max, lat)
@@ -541,12 +552,15 @@ class Emulator:
             _log("host: ESTOP")
             return S.OK
         if isinstance(msg, M.ClearFault):
-            if self._estop_pending or (sim.fault is not None and not self._fault_sent):
-                return S.FAULT_LATCHED  # not told yet: sent with the ESTOP (docs §3)
+            # a fault the host cannot have seen reported (this frame was read after a look
+            # that found the port empty before the report went) stays: docs §4
+            if self._estop_pending or (sim.fault is not None and (
+                    not self._fault_told or self._rx_empty_at < self._told_at)):
+                return S.FAULT_LATCHED
             if sim.fault is not None:
                 sim.clear_fault()
                 self._homed_um = None
-            self._fault_sent = False
+            self._fault_sent = self._fault_told = False
             return S.OK
         if isinstance(msg, M.Zero):
             self._rehome = False

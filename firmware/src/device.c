@@ -128,11 +128,22 @@ static struct {
     volatile uint32_t estop_max_ticks; /* the longest from such a tick to the zeroing one */
     volatile uint8_t estop_seen;
     uint8_t fault_told; /* the latched fault was sent in a FAULT or a STATUS (main loop) */
+    uint8_t estop_untold; /* an ESTOP handled, no FAULT or STATUS sent since (main loop) */
+    uint64_t told_tick; /* when the first report of the fault (after the last ESTOP) went */
     /* the e-stop's own path (hl_device_rx_byte, in the UART's receive interrupt on a
      * board; it and the main loop share rx_mark and the estop_ fields under hal_lock):
      * the frame arriving */
     uint8_t sn_buf[SNIFF_MAX];
     uint8_t sn_len, sn_over;
+    /* when each frame began to arrive (the receive path, in order), for the main loop:
+     * a CLEAR_FAULT that began arriving before the device reported its fault was sent
+     * before the host could have seen the report (docs 4) */
+    uint8_t sn_in;
+    uint64_t sn_start;
+    uint64_t arrival[16];
+    volatile uint32_t arr_w;
+    uint32_t arr_r;
+    uint64_t frame_start; /* the frame being handled began to arrive at this tick */
     uint64_t gap_since;
     uint64_t next_status;
     /* the window whose traces and WINDOW_DONE are being sent */
@@ -779,13 +790,19 @@ static uint8_t execute(uint8_t type, const uint8_t *b, size_t len)
         }
         D.req_estop = 1;
         hal_unlock();
+        D.estop_untold = 1; /* a CLEAR_FAULT read before the device reports its fault again
+                             * was sent with it (docs 4) */
         return HL_OK;
     case HL_MSG_CLEAR_FAULT:
         if (hal_estop_pressed()) {
             return HL_FAULT_LATCHED; /* the button is still held */
         }
-        if (D.req_estop || (D.fault != HL_FAULT_NONE && !D.fault_told)) {
-            return HL_FAULT_LATCHED; /* not told yet: an ESTOP sent with it stays (docs 3) */
+        /* a fault the host cannot have seen reported yet (the CLEAR_FAULT began to arrive
+         * before the report went, or no report went since the last ESTOP) stays: an
+         * ESTOP sent with a CLEAR_FAULT is never undone by it (docs 4) */
+        if (D.req_estop || D.estop_untold ||
+            (D.fault != HL_FAULT_NONE && (!D.fault_told || D.frame_start < D.told_tick))) {
+            return HL_FAULT_LATCHED;
         }
         if (D.state == HL_FAULT) {
             hal_lock();
@@ -972,6 +989,17 @@ static void handle(const hl_frame *f, uint8_t version)
     }
 }
 
+/* a FAULT or a STATUS with the fault just went: the first since the fault latched or the
+ * last ESTOP is when a host could first know of it */
+static void fault_reported(void)
+{
+    if (!D.fault_told || D.estop_untold) {
+        D.told_tick = hl_device_ticks();
+    }
+    D.fault_told = 1;
+    D.estop_untold = 0;
+}
+
 static void send_events(void)
 {
     while (D.ev_r != D.ev_w) {
@@ -1005,7 +1033,9 @@ static void send_events(void)
         case EV_FAULT:
             hl_fault_set_code(b, e.code);
             hl_fault_set_time_us(b, e.time_us);
-            D.fault_told |= (uint8_t)send(HL_MSG_FAULT, b, HL_FAULT_SIZE, 1);
+            if (send(HL_MSG_FAULT, b, HL_FAULT_SIZE, 1)) {
+                fault_reported();
+            }
             break;
         default:
             break;
@@ -1127,6 +1157,16 @@ void hl_device_rx_idle(uint64_t tick)
 
 void hl_device_rx_byte(uint8_t b)
 {
+    if (b != 0 && !D.sn_in) { /* a frame's first byte: it arrived after the last empty look */
+        D.sn_in = 1;
+        D.sn_start = D.rx_mark > D.rx_empty_tick ? D.rx_mark : D.rx_empty_tick;
+    } else if (b == 0 && D.sn_in) {
+        D.sn_in = 0;
+        if (D.arr_w - D.arr_r < sizeof D.arrival / sizeof D.arrival[0]) {
+            D.arrival[D.arr_w % (sizeof D.arrival / sizeof D.arrival[0])] = D.sn_start;
+            D.arr_w = D.arr_w + 1;
+        }
+    }
     if (b != 0) { /* inside a frame: kept while it may still be an ESTOP */
         if (D.sn_len < SNIFF_MAX) {
             D.sn_buf[D.sn_len++] = b;
@@ -1174,6 +1214,14 @@ void hl_device_poll(void)
         }
         for (size_t i = 0; i < n; i++) {
             hl_frame f;
+            if (buf[i] == 0 && (D.rx.len > 0 || D.rx.overflow)) { /* a frame ends here */
+                if (D.arr_r != D.arr_w) { /* when it began to arrive, as the receive path saw */
+                    D.frame_start = D.arrival[D.arr_r % (sizeof D.arrival / sizeof D.arrival[0])];
+                    D.arr_r++;
+                } else { /* a build whose receive path does not say: now, at the latest */
+                    D.frame_start = hl_device_ticks();
+                }
+            }
             if (hl_receiver_push(&D.rx, buf[i], D.payload, &f)) {
                 handle(&f, D.payload[0]);
             }
@@ -1205,7 +1253,7 @@ void hl_device_poll(void)
         hl_status_set_output_mn(b, (int32_t)lroundf(D.current * KF * 1000.0f));
         hl_status_set_fault(b, D.fault);
         if (send(HL_MSG_STATUS, b, sizeof b, 0) && D.fault != HL_FAULT_NONE) {
-            D.fault_told = 1; /* a FAULT frame the UART had no room for: STATUS says it */
+            fault_reported(); /* a FAULT frame the UART had no room for: STATUS says it */
         }
     }
 }

@@ -85,6 +85,30 @@ static volatile uint32_t lock_depth;
                                    * line's 100,000 B/s, long enough to meet the host's
                                    * scheduler on a busy computer */
 static volatile uint32_t hal_ticks; /* servo ticks, for timing */
+/* QEMU's USART has no line rate of its own: the build keeps to the rate it states in
+ * LIMITS (docs 6a: a device never streams faster than its link_bytes_s), from the
+ * measurement on, with a millisecond's worth of slack */
+static uint32_t line_bytes_s; /* 0: not paced (before a HELLO, and while measuring) */
+static uint32_t line_t0;      /* hal_ticks at the measurement */
+static uint64_t on_line;      /* bytes sent since (main loop) */
+static uint32_t line_tail;    /* tx_tail when on_line was last brought up (main loop) */
+
+/* whether the main loop may start the next chunk: the line has carried what was sent */
+static int line_allows(void)
+{
+    uint32_t tail = tx_tail;
+    on_line += tail - line_tail;
+    line_tail = tail;
+    if (line_bytes_s == 0u) {
+        return 1;
+    }
+    uint64_t due = (uint64_t)(hal_ticks - line_t0) * line_bytes_s / HL_SERVO_HZ;
+    uint64_t slack = line_bytes_s / 1000u + 1u;
+    if (due > on_line + slack) {
+        on_line = due - slack; /* a line banks no idle time */
+    }
+    return due >= on_line;
+}
 #endif
 
 void hal_watchdog_kick(void)
@@ -139,13 +163,20 @@ static uint32_t ticks_to_send_probe(void)
 uint32_t hal_link_bytes_s(void)
 {
 #if HL_QEMU
+    line_bytes_s = 0; /* the probe goes as fast as QEMU takes it */
     uint32_t slowest = 0;
     for (unsigned i = 0; i < 3u; i++) {
         uint32_t t = ticks_to_send_probe();
         slowest = t > slowest ? t : slowest;
     }
     uint64_t measured = (uint64_t)TX_PROBE * HL_SERVO_HZ / TX_SHARE_DIV / slowest;
-    return measured < HL_LINK_BYTES_S ? (measured ? (uint32_t)measured : 1u) : HL_LINK_BYTES_S;
+    uint32_t rate = measured < HL_LINK_BYTES_S ? (measured ? (uint32_t)measured : 1u)
+                                               : HL_LINK_BYTES_S;
+    line_t0 = hal_ticks;
+    line_tail = tx_tail;
+    on_line = 0;
+    line_bytes_s = rate; /* and kept from now on */
+    return rate;
 #else
     return HL_LINK_BYTES_S;
 #endif
@@ -204,12 +235,24 @@ size_t hal_uart_space(void) { return TX_BYTES - (tx_head - tx_tail); }
 
 void hal_uart_write(const uint8_t *buf, size_t len)
 {
+    uint32_t head = tx_head;
     for (size_t i = 0; i < len; i++) {
-        tx_ring[tx_head % TX_BYTES] = buf[i];
-        tx_head++;
+        tx_ring[(head + i) % TX_BYTES] = buf[i];
     }
+    /* the bytes are in the ring before the interrupt may see them: tx_ring is not
+     * volatile, and the compiler once moved a byte's store after the head's increment,
+     * so that the interrupt, running between (the paced QEMU build kicks it every turn),
+     * sent the ring's old byte there (a LIMITS frame that failed its COBS) */
+    __asm__ volatile("" ::: "memory");
+    tx_head = head + (uint32_t)len;
     /* the interrupt sends them: TXE keeps it coming on the chip; pending it by hand starts
-     * it (QEMU 7.2's USART model raises no TXE interrupt, and its TXE is always set) */
+     * it (QEMU 7.2's USART model raises no TXE interrupt, and its TXE is always set; paced
+     * to the stated line, the QEMU build leaves the start to the servo tick) */
+#if HL_QEMU
+    if (line_bytes_s != 0u) {
+        return;
+    }
+#endif
     USART1_CR1 = CR1_BASE | CR1_TXEIE;
     NVIC_ISPR1 = 1u << (USART1_IRQ - 32u);
 }
@@ -243,7 +286,8 @@ void systick_handler(void)
 #endif
     hl_servo_tick();
 #if HL_QEMU
-    if (tx_tail != tx_head) { /* at least a chunk per tick, however busy the main loop */
+    if (tx_tail != tx_head && line_allows()) { /* at least a chunk per tick, however busy
+                                                * the main loop, as the stated line allows */
         tx_kick();
     }
 #endif
@@ -338,7 +382,8 @@ int main(void)
     for (;;) {
         hl_device_poll();
 #if HL_QEMU
-        if (tx_tail != tx_head) { /* the next chunk, between main-loop turns */
+        if (tx_tail != tx_head && line_bytes_s == 0u) { /* the next chunk, between turns
+                                                         * (paced: the tick starts it) */
             tx_kick();
         }
 #endif

@@ -652,6 +652,38 @@ static void test_versions(void)
     EXPECT(cmd(HL_MSG_HOME, h, sizeof h) == HL_BAD_MESSAGE);
 }
 
+/* Issue 53 item 4: an ESTOP and a CLEAR_FAULT sent together, the CLEAR_FAULT's bytes still
+ * arriving when the main loop has taken the ESTOP and the device has reported the fault
+ * (a board's loop is quicker than its UART): its first byte came before the report, so
+ * it clears nothing. One sent after the report clears the fault. */
+static void test_clear_fault_sent_with_an_estop(void)
+{
+    fresh(13);
+    EXPECT(scene_spring(1, 680.0f, 1.0f) == HL_OK);
+    EXPECT(home(20000) == HL_OK);
+    uint8_t none[1] = {0}, estop[32], clear[32];
+    size_t ne = hl_encode_frame(HL_MSG_ESTOP, ++seq, none, 0, estop, sizeof estop);
+    uint16_t clear_seq = ++seq;
+    size_t nc = hl_encode_frame(HL_MSG_CLEAR_FAULT, clear_seq, none, 0, clear, sizeof clear);
+    const size_t first = 3; /* the CLEAR_FAULT's first bytes */
+    memset(seen, 0, sizeof seen);
+    sim_uart_to_device(estop, ne);
+    sim_uart_to_device(clear, first);
+    hl_device_poll();
+    ticks(1, 1, 1); /* the ESTOP latched at this tick and its FAULT went */
+    EXPECT(seen[HL_MSG_FAULT] == 1 && hl_device_peek().fault == HL_FAULT_ESTOP);
+    seen[HL_MSG_ACK] = 0;
+    sim_uart_to_device(clear + first, nc - first); /* the rest of it */
+    hl_device_poll();
+    drain();
+    EXPECT(seen[HL_MSG_ACK] >= 1 && hl_ack_ack_seq(last_body[HL_MSG_ACK]) == clear_seq);
+    EXPECT(hl_ack_status(last_body[HL_MSG_ACK]) == HL_FAULT_LATCHED);
+    EXPECT(hl_device_peek().state == HL_FAULT);
+    ticks(10, 1, 1);
+    EXPECT(cmd0(HL_MSG_CLEAR_FAULT) == HL_OK); /* sent after the report */
+    EXPECT(hl_device_peek().state == HL_IDLE);
+}
+
 static void test_watchdog(void)
 {
     fresh(4);
@@ -874,6 +906,7 @@ int device_tests(void)
     test_refusal_changes_nothing();
     test_conformance();
     test_versions();
+    test_clear_fault_sent_with_an_estop();
     test_ramp_clamp_estop();
     test_zero_then_play_before_a_tick();
     test_watchdog();

@@ -181,13 +181,19 @@ class Host:
         return STATES[self.state]
 
     def reset(self) -> None:
-        """To IDLE with a committed spring, whatever ran before."""
-        self.ask(M.ClearFault())
-        self.ask(M.Zero())
+        """To IDLE with a committed spring, whatever ran before (a fault the device has not
+        reported yet is not cleared: asked again once a STATUS has said it, docs §4)."""
         end = time.monotonic() + 5
-        while self.settled_state() != "IDLE" and time.monotonic() < end:
-            pass
+        while True:
+            self.ask(M.ClearFault())
+            self.ask(M.Zero())
+            if self.settled_state() == "IDLE" or time.monotonic() > end:
+                break
         self.watchdog = False  # what was latched before the reset is cleared
+        # a stream the narrowest link carries (position, every 10th tick): at the default
+        # (every channel, every tick) a board's line is full, and the reports a stalled
+        # host's watchdog set off reach it only after the next attempt has begun
+        assert self.ask(M.TraceConfig(1, 10)) == M.Status.OK
         assert self.ask(SPRING) == M.Status.OK
         assert self.ask(M.SceneCommit(1, 0)) == M.Status.OK
 
