@@ -62,7 +62,7 @@ def deadline_kept(test):
     @functools.wraps(test)
     def run(host):
         def restart():
-            host.ask(M.ClearFault())
+            host.clear()
             assert host.ask(M.Hello(C.PROTOCOL)) == "hello"
 
         host.attempts(lambda: test(host), restart)
@@ -410,7 +410,7 @@ def test_a_host_that_stalls_past_the_watchdog_is_given_another_attempt(host):
     with pytest.raises(AssertionError, match="FaultCode"):  # the watchdog's, not ESTOP's
         _fault_ends_playback(host, stall=0.5)
     assert host.watchdog
-    host.ask(M.ClearFault())
+    host.clear()
     stalls = [0.5]
     tries = []
 
@@ -418,7 +418,7 @@ def test_a_host_that_stalls_past_the_watchdog_is_given_another_attempt(host):
         tries.append(1)
         _fault_ends_playback(host, stall=stalls.pop() if stalls else 0.0)
 
-    host.attempts(once, lambda: host.ask(M.ClearFault()))
+    host.attempts(once, host.clear)
     assert len(tries) >= 2  # (more when this machine stalled the process again)
     n = len(tries)
 

@@ -312,7 +312,7 @@ def test_every_target_refuses_every_field_beyond_its_range(firmware):
 def _ready(host: Host, scene: M.Message | None) -> None:
     """IDLE, a real sample begun and committed (ids 1), the rating and trace defaults; then
     ``scene`` begun (id 1), when given."""
-    host.ask(M.ClearFault())
+    host.clear()
     host.ask(M.Zero())
     host.ask(M.Hello(C.PROTOCOL))
     end = time.monotonic() + 5  # a playback the ZERO ended may take a moment to wind down

@@ -173,6 +173,19 @@ class Host:
             self.link_report = report
         return status
 
+    def clear(self) -> object:
+        """CLEAR_FAULT, asked again after the next STATUS while the device answers
+        FAULT_LATCHED for a fault it has not reported since it latched or since the last
+        ESTOP (docs §4), as a host that clears what it was told does; the last status."""
+        for _ in range(3):
+            status = self.ask(M.ClearFault())
+            if status != M.Status.FAULT_LATCHED:
+                return status
+            n = self.status_count
+            self._pump(lambda m, n=n: isinstance(m, M.StatusReport) and self.status_count > n,
+                       ANSWER_S)
+        return status
+
     def settled_state(self) -> str:
         """The state a STATUS sent after now reports (two reports on: one may be in flight)."""
         n = self.status_count
@@ -185,7 +198,7 @@ class Host:
         reported yet is not cleared: asked again once a STATUS has said it, docs §4)."""
         end = time.monotonic() + 5
         while True:
-            self.ask(M.ClearFault())
+            self.clear()
             self.ask(M.Zero())
             if self.settled_state() == "IDLE" or time.monotonic() > end:
                 break
