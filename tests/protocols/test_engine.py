@@ -265,6 +265,7 @@ class SessionMachine(RuleBasedStateMachine):
 
 TestSessionMachine = SessionMachine.TestCase
 TestSessionMachine.settings = settings(max_examples=40, stateful_step_count=60, deadline=None)
+TestSessionMachine.pytestmark = [pytest.mark.slow]  # 40 runs of up to 60 steps: seconds
 
 
 @given(seed=st.integers(0, 2**32), statuses=st.lists(STATUS, min_size=0, max_size=150))
@@ -389,6 +390,7 @@ def test_realism_never_shows_the_same_sample_twice_in_a_row(seed):
         dict.fromkeys(REALISM.phases[2].samples, 3)
 
 
+@pytest.mark.slow  # 400 examples of up to 120 attempts
 @settings(max_examples=400, deadline=None)  # ~1 s in all
 @given(seed=st.integers(0, 2**32),
        statuses=st.lists(st.sampled_from(["valid", "valid", "saturated", "requeued",
