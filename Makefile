@@ -10,9 +10,13 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 
-# setup.py builds the link's native threads (firmware/src/hostlink.c) with the package
-$(STAMP): pyproject.toml setup.py firmware/src/hostlink.c firmware/include/hl_hostlink.h | $(PY)
+# setup.py builds the link's native threads (firmware/src/hostlink.c) with the package; the
+# PsychoPy plugin (its own distribution, plugins/psychopy-hapticlab) installs beside it
+PLUGIN := plugins/psychopy-hapticlab
+$(STAMP): pyproject.toml setup.py firmware/src/hostlink.c firmware/include/hl_hostlink.h \
+          $(PLUGIN)/pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e '.[test,ui,lsl,docs]'
+	$(PY) -m pip install --quiet -e $(PLUGIN)
 	touch $(STAMP)
 
 venv: $(STAMP)

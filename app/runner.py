@@ -60,7 +60,7 @@ from .markers import MarkerSink
 from .participants import Responder
 from .recorder import SessionFiles
 
-__all__ = ["SessionRunner", "SessionInterrupted", "session_meta", "utc_now"]
+__all__ = ["SessionRunner", "SessionInterrupted", "session_meta", "utc_now", "trace_payload"]
 
 APP_VERSION = __version__
 
@@ -639,7 +639,7 @@ class SessionRunner:
         if self._expected is None and self.traces != "none":
             name = self.files.save_trace(
                 f"trial-{trial.trial_index:04d}-{k}.npz",
-                _trace_payload(res, self.traces, self.device.info, trial.samples[0]),
+                trace_payload(res, self.traces, self.device.info, trial.samples[0]),
                 res.contacts)
         kept = dataclasses.replace(res, traces={})
         self._spilled.append((kept, name, res.peak_current))
@@ -728,7 +728,7 @@ class SessionRunner:
                     self._spilled = [e for e in self._spilled if e[0] is not r]
                 elif r.traces:
                     trace_file = self.files.save_trace(
-                        f"{stem}-{k}.npz", _trace_payload(r, self.traces, self.device.info,
+                        f"{stem}-{k}.npz", trace_payload(r, self.traces, self.device.info,
                                                           played[k]), r.contacts)
             if len(results) > 1:
                 trace_file = f"traces/{stem}-*.npz"
@@ -784,7 +784,7 @@ def cell_problems(row: dict, asks: Response, trial: Trial, protocol: Protocol) -
                        {"response": asks.record()}, design)
 
 
-def _trace_payload(res, mode: str, info, sample: str) -> dict:
+def trace_payload(res, mode: str, info, sample: str) -> dict:
     """The device's own streams, in the device's own units where they are quantized.
 
     ``t0`` [s] and ``rate_hz`` [Hz] instead of a time column; ``position_counts`` (int32,

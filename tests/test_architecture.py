@@ -45,6 +45,46 @@ def test_dependency_direction(package):
             assert "psychopy" not in roots, f"{f.relative_to(ROOT)} imports PsychoPy"
 
 
+#: the PsychoPy plugin's own package (a separate distribution in plugins/): with app/, the
+#: one place PsychoPy is imported
+PLUGIN = ROOT / "plugins" / "psychopy-hapticlab" / "psychopy_hapticlab"
+
+
+def _source_files():
+    """Every .py of the repository but the tests' (which drive PsychoPy to test what imports
+    it) and what is not ours (the environment, build output)."""
+    skip = {".venv", "out", "build", "dist", "tests", ".git"}
+    for f in sorted(ROOT.rglob("*.py")):
+        if not skip & set(f.relative_to(ROOT).parts):
+            yield f
+
+
+def test_psychopy_is_imported_in_app_and_the_plugin_alone():
+    """PsychoPy is imported by app/ and by the plugin's package, nowhere else; and none of
+    our packages imports the plugin (it depends on hapticlab, never the other way)."""
+    allowed = (ROOT / "app", PLUGIN)
+    users = [f for f in _source_files() if "psychopy" in imported_roots(f)]
+    assert users and any(PLUGIN in f.parents for f in users)
+    bad = [str(f.relative_to(ROOT)) for f in users if not any(d in f.parents for d in allowed)]
+    assert not bad, f"PsychoPy imported outside app/ and the plugin: {bad}"
+    back = [str(f.relative_to(ROOT)) for f in _source_files()
+            if PLUGIN not in f.parents and "psychopy_hapticlab" in imported_roots(f)]
+    assert not back, f"our packages import the plugin: {back}"
+
+
+def test_the_plugin_uses_hapticlab_through_public_names():
+    """The plugin reaches hapticlab through public modules and names (no private module,
+    name or attribute of device/, no backend insides): it adds hapticlab to PsychoPy and
+    copies none of its device code."""
+    files = sorted(PLUGIN.rglob("*.py"))
+    assert files
+    for f in files:
+        bad = _private_device_uses(f)
+        assert not bad, f"{f.relative_to(ROOT)}: {bad}"
+        insides = sorted(m for m in imported_modules(f) if m.startswith(BACKEND_INSIDES))
+        assert not insides, f"{f.relative_to(ROOT)} imports {insides}"
+
+
 def test_liblsl_is_loaded_in_one_module_only():
     """pylsl (and with it liblsl, which talks on the network) is imported by app/markers.py
     alone, which checks for a private network first where one is required; among the

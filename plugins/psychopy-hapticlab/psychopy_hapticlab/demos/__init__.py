@@ -1,0 +1,1 @@
+"""The demo experiments shipped with the plugin (Builder files and their conditions)."""

@@ -1,0 +1,1 @@
+"""Coder examples (scripts to run, not modules to import)."""
