@@ -144,6 +144,8 @@ class HapticContact:
         self.forceEndRoutine = bool(forceEndRoutine)
         self.experiment = experiment
         self._phase = "idle"  # armed → running → done, this object's own (Builder sets status)
+        self._interrupted = False
+        self._clock = None  # the clock of the last record (a rescue records on it too)
         self.fields: dict[str, Any] = {**SCENE_DEFAULTS, **scene}
         self.status = None  # NOT_STARTED / STARTED / FINISHED (psychopy.constants)
         self.scene = None
@@ -251,6 +253,21 @@ class HapticContact:
             self.device.device.zero()
             self._phase = "idle"
 
+    def rescue(self) -> None:
+        """The experiment ends while this component's window runs (escape): the window ends
+        now and its row is recorded, status ``interrupted``, trace file and all, so that
+        nothing the device recorded is lost. Builder's code runs it at the experiment's end
+        (``runAtExit``); nothing happens when no window runs."""
+        if self._phase == "running":
+            self.stop()
+            self._interrupted = True
+            try:
+                self.record(raise_fault=False)
+            finally:
+                self._interrupted = False
+        elif self._phase == "armed":
+            self.stop()
+
     # ------------------------------------------------------------------ data
     @property
     def contacts(self) -> list:
@@ -274,7 +291,8 @@ class HapticContact:
                 out["reason"] = rec.error
             return out
         res = rec.result
-        status = ("estop" if rec.fault is not None and rec.fault.code == "estop" else
+        status = ("interrupted" if self._interrupted else
+                  "estop" if rec.fault is not None and rec.fault.code == "estop" else
                   "fault" if rec.fault is not None else "failed" if rec.error else
                   "timed_out" if res.timed_out else "saturated" if res.saturated else "valid")
         speeds = [round(float(c.velocity), 5) for c in res.contacts]
@@ -282,6 +300,7 @@ class HapticContact:
         out.update({
             "status": status,
             "reason": (f"{rec.fault.code}: {rec.fault.message}" if rec.fault is not None
+                       else "the experiment ended during the window" if self._interrupted
                        else rec.error),
             "n_contacts": len(res.contacts),
             "speeds": speeds,
@@ -328,7 +347,7 @@ class HapticContact:
                                                    self.scene.name), rec.result.contacts)
         return f"{self.traceFolder.name}/{rel}"
 
-    def record(self, handler=None, clock=None) -> dict[str, Any]:
+    def record(self, handler=None, clock=None, raise_fault: bool = True) -> dict[str, Any]:
         """End Routine: the routine's data into ``handler`` (default: the experiment given;
         anything with ``addData``) as ``<name>.<field>``, its trace file written first; an
         LSL ``trial_end`` marker with the same trial id; then a latched fault or a failed
@@ -341,8 +360,13 @@ class HapticContact:
         clock : psychopy.core.Clock, optional
             The clock the row's other times are on (Builder's ``globalClock``); PsychoPy's
             time base when None.
+        raise_fault : bool
+            Raise :class:`HapticFaultError` for a latched fault (after recording).
         """
         handler = handler if handler is not None else self.experiment
+        if clock is None:
+            clock = self._clock
+        self._clock = clock
         self.stop()
         trial = self.trialId()
         data = self.data(clock)
@@ -359,7 +383,8 @@ class HapticContact:
         logging.exp(f"hapticlab {self.name}: {data.get('status')}, "
                     f"{data.get('n_contacts', 0)} contacts, trace {data['trace_file'] or '-'}")
         self._phase = "idle"
-        self.device.raiseFault(self.record_)
+        if raise_fault:
+            self.device.raiseFault(self.record_)
         return data
 
 

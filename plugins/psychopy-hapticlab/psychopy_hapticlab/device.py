@@ -602,6 +602,12 @@ class HapticlabDevice(BaseResponseDevice, aliases=["hapticlab"]):
             logging.exp(f"hapticlab {self.label}: closed {self.spec} (output "
                         f"{self._dev.output_force:g} N)")
 
+    def __enter__(self) -> HapticlabDevice:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def _pending(self) -> list:
         """Responses queued, not yet dispatched (put back in order)."""
         items = []

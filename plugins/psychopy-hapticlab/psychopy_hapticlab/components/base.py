@@ -21,6 +21,8 @@ class HapticComponent(BaseDeviceComponent):
     version = "2026.2.0"
     beta = True
     hidden = True
+    #: the device class the component talks to (PsychoPy's tests resolve it)
+    deviceClasses = ["psychopy_hapticlab.device.HapticlabDevice"]
     #: the library class the written code drives: (its name, its module)
     library = ("", "")
     #: the label and hint of "End routine …"

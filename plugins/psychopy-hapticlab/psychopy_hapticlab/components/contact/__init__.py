@@ -173,10 +173,14 @@ class HapticContactComponent(HapticComponent):
             "    traces=%(traces)s, traceFolder=filename + '_%(name)s',\n"
             "    estopKeys=%(estopKeys)s, forceEndRoutine=%(forceEndRoutine)s,\n"
         )
+        tail = (
+            "# the experiment ending mid-window (escape) still records the window's row\n"
+            "runAtExit.append(%(name)s.rescue)\n"
+        )
         buff.writeIndentedLines(code % inits)
         if constants:
             buff.writeIndentedLines(f"    {constants},\n")
-        buff.writeIndentedLines(")\n")
+        buff.writeIndentedLines(")\n" + tail % inits)
 
     def writeRoutineStartCode(self, buff):
         self.writeParamUpdates(buff, "set every repeat")
