@@ -13,10 +13,17 @@ $(PY):
 # setup.py builds the link's native threads (firmware/src/hostlink.c) with the package; the
 # PsychoPy plugin (its own distribution, plugins/psychopy-hapticlab) installs beside it
 PLUGIN := plugins/psychopy-hapticlab
+# PsychoPy's Builder app, for the tests' screenshots of the plugin's dialogs: beside the
+# environment (it requires wxPython, which PyPI has for Linux only as source; Debian's
+# python3-wxgtk4.0 is used instead), with the packages it imports that PsychoPy does not
+BUILDER_APP := psychopy-app==2026.2.1 python-gitlab gitpython gitdb smmap pytz future \
+               requests-toolbelt
 $(STAMP): pyproject.toml setup.py firmware/src/hostlink.c firmware/include/hl_hostlink.h \
           $(PLUGIN)/pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e '.[test,ui,lsl,docs]'
 	$(PY) -m pip install --quiet -e $(PLUGIN)
+	$(PY) -m pip install --quiet --no-deps --upgrade --target $(VENV)/psychopy-app \
+	  $(BUILDER_APP)
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -44,15 +51,16 @@ system-deps:
 	    || ! command -v g++ >/dev/null 2>&1 || ! dpkg -s libusb-1.0-0-dev >/dev/null 2>&1 \
 	    || [ ! -d /usr/lib/arm-none-eabi/newlib ] \
 	    || [ ! -f /usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf ] \
-	    || ! dpkg -s libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 >/dev/null 2>&1; then \
-	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries, chromium, the compilers, QEMU, libFuzzer and strace from Debian's packages"; \
+	    || ! dpkg -s libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 >/dev/null 2>&1 \
+	    || ! dpkg -s python3-wxgtk4.0 python3-wxgtk-webview4.0 >/dev/null 2>&1; then \
+	  echo "installing Xvfb, Mesa GL, PortAudio, libsndfile, xdotool, tmux, fonts, Qt's X libraries, chromium, the compilers, QEMU, libFuzzer, strace and wxPython (PsychoPy's Builder) from Debian's packages"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
 	    xvfb libgl1-mesa-dri libglu1-mesa libportaudio2 libasound2 libsndfile1 xdotool tmux \
 	    fonts-dejavu-core libxcb-icccm4 libxcb-keysyms1 libxcb-cursor0 libxkbcommon-x11-0 \
 	    libxcb-image0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 \
 	    chromium gcc libc6-dev make gcc-arm-none-eabi libnewlib-arm-none-eabi \
 	    qemu-system-arm clang-14 libfuzzer-14-dev libclang-rt-14-dev strace \
-	    g++ libusb-1.0-0-dev >/dev/null; \
+	    g++ libusb-1.0-0-dev python3-wxgtk4.0 python3-wxgtk-webview4.0 >/dev/null; \
 	fi
 	@if ! command -v Rscript >/dev/null 2>&1 || ! Rscript -e '$(R_CHECK)' >/dev/null 2>&1; then \
 	  echo "installing R and the reference packages (afex, lme4, lmerTest, ordinal, car, effectsize, coin, multcompView) from Debian's packages"; \

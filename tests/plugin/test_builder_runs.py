@@ -228,3 +228,36 @@ def test_every_way_psychopy_ends_closes_the_device_with_zero_output(tmp_path, xd
         assert "SceneError: scene 'tap:q_sinusoid': transient: frequency: must be > 0, got " \
             "-5" in out.stderr, out.stderr[-2000:]
         assert d["tap.status"].dropna().tolist() == ["valid"]  # the first row, kept
+
+
+def test_builder_shows_the_components_dialog_and_the_device_manager(tmp_path, xdisplay,
+                                                                    artifacts):
+    """PsychoPy's Builder app (psychopy-app, on Debian's wxPython) opens the demo with the
+    plugin active: the Haptic contact's dialog on its Scene page and the Device Manager with
+    the hapticlab device, as screenshots in tests/artifacts/screens/ (look at them)."""
+    app = ROOT / ".venv" / "psychopy-app"
+    wx = Path("/usr/lib/python3/dist-packages/wx")
+    if not (app / "psychopy_app").is_dir() or not (wx / "html2.py").is_file():
+        pytest.fail("Builder is missing: `make test` installs Debian's python3-wxgtk4.0 and "
+                    "python3-wxgtk-webview4.0, and psychopy-app into .venv/psychopy-app")
+    (tmp_path / "wxpath").mkdir()
+    (tmp_path / "wxpath" / "wx").symlink_to(wx)  # wx alone, not Debian's other packages
+    psyexp = _shrunk(_copy_demo(tmp_path), tmp_path / "demo.psyexp")
+    _, env = _compiled(tmp_path, psyexp, "sim")  # a Device Manager that names 'haptic'
+    shots = artifacts / "screens"
+    shots.mkdir(parents=True, exist_ok=True)
+    names = ("builder-haptic-contact.png", "builder-device-manager.png")
+    for name in names:
+        (shots / name).unlink(missing_ok=True)
+    out = subprocess.run([sys.executable, str(HELPER.with_name("builder_dialog.py")),
+                          str(psyexp), "tap_first", str(shots)], capture_output=True,
+                         text=True, timeout=300,
+                         env={**env, "DISPLAY": xdisplay,
+                              "PYTHONPATH": f"{tmp_path / 'wxpath'}{os.pathsep}{app}"})
+    assert out.returncode == 0, out.stderr[-3000:]
+    from PIL import Image
+
+    for name in names:  # written by this run (the Builder app keeps stdout to itself)
+        img = Image.open(shots / name).convert("L")
+        assert img.size[0] > 400 and img.size[1] > 300
+        assert len(set(img.getdata())) > 20  # drawn controls and text, not a blank window

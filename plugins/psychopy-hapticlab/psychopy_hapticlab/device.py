@@ -275,12 +275,13 @@ class HapticlabDevice(BaseResponseDevice, aliases=["hapticlab"]):
         from app.api import device_list
 
         found = device_list()
-        out = [{"deviceName": f"hapticlab {s['description']}", "spec": s["spec"]}
+        out = [{"deviceName": f"hapticlab: {s['description']}", "spec": s["spec"]}
                for s in found["simulated"]]
         for p in found["ports"]:
             port = p["spec"].partition(":")[2]
             what = p["description"] if p["description"] not in ("", "n/a") else "serial port"
-            out.append({"deviceName": f"hapticlab device on {port} ({what})", "spec": p["spec"]})
+            out.append({"deviceName": f"hapticlab: a device on {port} ({what})",
+                        "spec": p["spec"]})
         return out
 
     def isSameDevice(self, other) -> bool:
