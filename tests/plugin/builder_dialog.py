@@ -22,7 +22,6 @@ def grab(window, path: Path) -> None:
 
 def main(psyexp: str, component: str, out: str) -> int:
     import wx
-
     from psychopy import plugins
 
     plugins.activatePlugins()

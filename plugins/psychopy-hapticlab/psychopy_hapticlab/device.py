@@ -517,13 +517,15 @@ class HapticlabDevice(BaseResponseDevice, aliases=["hapticlab"]):
                 self.label, fault=f)
 
     def estop(self, why: str = "e-stop") -> None:
-        """Latched emergency stop: output to zero now and until the fault is cleared; a
+        """Latched emergency stop: output to zero now and until the fault is cleared, and
+        the running window (if any) ends at the device's next report; a
         :class:`FaultResponse` says so. Callable from any thread."""
         from psychopy import clock
 
         try:
             self._dev.estop()
         finally:
+            self.endWindow()  # nothing is rendered any more: the trial is over
             self._queue.put(FaultResponse(clock.getTime(), "estop", None, False,
                                           message=why, device=self))
             logging.warning(f"hapticlab {self.label}: E-STOP latched ({why}): output is zero")
