@@ -308,6 +308,7 @@ def test_build_library_refuses_virtual_sources():
         build_library(SimDevice(), Scene("v", spring=100.0))
 
 
+@pytest.mark.slow  # builds the realism library when no test before it has
 def test_matched_scenes_are_closer_to_wood_on_foam_than_pulse_or_sinusoid(realism):
     """Spectral distance (device.matching.compare, 10–500 Hz) to taps on the real
     wood_on_foam, a 6-g balsa plate on foam (issue 14's block model).
