@@ -1,4 +1,5 @@
-"""Durable file writes shared by the session recorder and the transient libraries."""
+"""Durable file writes shared by the session recorder and the transient libraries, and what
+kind of file a path is (for the errors of the readers of a user's files)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,25 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write"]
+__all__ = ["atomic_write", "file_kind"]
+
+
+def file_kind(path: str | Path) -> str:
+    """What ``path`` is, in words: 'a regular file', 'a directory', 'a named pipe', 'a
+    character device', 'a block device', 'a socket' or 'missing' — a reader checks it before
+    opening, since opening a named pipe waits for a writer forever."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "missing"
+    for test, name in ((stat.S_ISREG, "a regular file"), (stat.S_ISDIR, "a directory"),
+                       (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
 
 
 def _umask() -> int:

@@ -22,6 +22,7 @@ import numpy as np
 
 from device import MAX_WINDOW_TICKS, DeviceInfo, LibraryTransient, Scene, SceneError, max_spring
 from device.errors import HapticlabError
+from device.fileio import file_kind
 from device.scene import AccelSinusoid, unknown_key
 
 from ._toml_lines import key_lines, line_of
@@ -76,13 +77,19 @@ def protocol_text(name_or_path: str | Path) -> tuple[str, str]:
     if s in BUILTIN:
         return f"{s}.toml", resources.files("protocols").joinpath(f"{s}.toml").read_text("utf-8")
     path = Path(s)
-    if not path.is_file():
+    kind = file_kind(path)
+    if kind == "missing":
         hint = f"; built-in protocols: {', '.join(BUILTIN)}" if "/" not in s else ""
         raise ProtocolError(s, None, "", f"no such protocol file{hint}")
+    if kind != "a regular file":  # a named pipe would block the read
+        raise ProtocolError(s, None, "", f"not a regular file ({kind}); a protocol is a "
+                                         ".toml text file")
     try:
         return str(path), path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise ProtocolError(s, None, "", f"not a UTF-8 text file ({exc.reason})") from None
+    except OSError as exc:
+        raise ProtocolError(s, None, "", f"cannot be read ({exc.strerror})") from None
 
 
 def load_protocol(name_or_path: str | Path, device: DeviceInfo | None = None) -> Protocol:
@@ -478,7 +485,7 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
     elif isinstance(sel, list) and sel:
         ids = []
         for k, sid in enumerate(sel):
-            if sid not in samples:
+            if not isinstance(sid, str) or sid not in samples:
                 hint = difflib.get_close_matches(str(sid), list(samples), n=1)
                 raise cx.error((*path, "samples", k), f"unknown sample {sid!r}"
                                + (f"; did you mean '{hint[0]}'?" if hint else ""))

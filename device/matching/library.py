@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import DeviceError
 from ..events import WindowResult
-from ..fileio import atomic_write
+from ..fileio import atomic_write, file_kind
 from ..info import DeviceInfo
 from ..scene import LibraryTransient, Scene, TransientTable
 from .inversion import METHODS, discretize, invert
@@ -118,6 +118,13 @@ class TransientLibrary:
     def load(cls, path: str | Path, device: DeviceInfo | None = None) -> TransientLibrary:
         """Read and verify a library; with ``device``, refuse one made on another device."""
         path = Path(path)
+        kind = file_kind(path)
+        if kind not in ("a regular file", "missing"):  # a named pipe would block np.load
+            raise LibraryError(f"{path}: not a regular file ({kind}); a transient library is "
+                               "a .npz file that `hapticlab library build` writes")
+        if kind == "a regular file" and not zipfile.is_zipfile(path):
+            raise LibraryError(f"{path}: corrupt, or not a transient library file (not a "
+                               "NumPy .npz archive)")
         try:
             with np.load(path, allow_pickle=False) as z:
                 v, f = z["velocities"], z["forces"]

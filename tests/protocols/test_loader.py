@@ -98,6 +98,9 @@ BAD = [
     (_mutate('id = "spring"', 'id = "wood"'), 14, "samples[1].id", "duplicate sample id 'wood'"),
     (_mutate('samples = "all"', 'samples = ["wood", "sprng"]'), 20, "phases[0].samples[1]",
      "did you mean 'spring'"),
+    # a list where a sample id goes (was a TypeError: unhashable type 'list')
+    (_mutate('samples = "all"', 'samples = ["wood", ["spring"]]'), 20, "phases[0].samples[1]",
+     "unknown sample ['spring']"),
     (_mutate("[[phases]]", "[saturation]\nmax_attempts = 0\n\n[[phases]]"), 19,
      "saturation.max_attempts", "a redraw cap of 0"),
     (_mutate("[[phases]]", "[limits]\nmax_current = 2.0\n\n[[phases]]"), 19, "limits.max_current",
@@ -168,3 +171,14 @@ def test_cli_validate_and_errors(tmp_path):
     out = subprocess.run([*CLI, "protocol", "validate", str(bad)], capture_output=True, text=True)
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert re.search(r"bad\.toml:21: phases\[0\]\.repetitions: must be >= 1", out.stderr)
+
+
+def test_a_folder_or_named_pipe_is_named_for_what_it_is(tmp_path):
+    """They were called missing ('no such protocol file'); a named pipe must not block."""
+    import os
+
+    (tmp_path / "folder.toml").mkdir()
+    os.mkfifo(tmp_path / "pipe.toml")
+    for name, kind in (("folder.toml", "a directory"), ("pipe.toml", "a named pipe")):
+        with pytest.raises(ProtocolError, match=rf"{name}: not a regular file \({kind}\)"):
+            protocol_text(tmp_path / name)
