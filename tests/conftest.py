@@ -518,29 +518,6 @@ def participant(xdisplay, tmp_path):
     return Participant(xdisplay, tmp_path / "screens.log")
 
 
-def built_once(tmp_path_factory, name: str, build) -> Path:
-    """A folder ``build(folder)`` fills once per test run, shared by every test that asks for
-    ``name``: with pytest-xdist the first worker to ask builds it while the others wait on
-    a lock, then all read the same folder. (Tests must not change what they are handed.)"""
-    import fcntl
-
-    base = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        base = base.parent  # the run's folder, above each worker's own
-    folder, done = base / f"shared-{name}", base / f"shared-{name}.done"
-    with open(base / f"shared-{name}.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not done.exists():
-            if folder.exists():  # a build that failed before: start again
-                import shutil
-
-                shutil.rmtree(folder)
-            folder.mkdir()
-            build(folder)
-            done.touch()
-    return folder
-
-
 _FIRMWARE_READY: list[bool] = []
 
 
