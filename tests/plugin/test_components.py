@@ -3,6 +3,7 @@ its components and its plugin template hands to plugins: syntax of the written s
 every start/stop, icons for each theme, parameters used, a set… method for each parameter
 that changes every repeat), and Builder's check of hapticlab's parameters."""
 
+import pytest
 from psychopy import experiment
 from psychopy.experiment.loops import TrialHandler
 from psychopy.tests.test_experiment.test_components.test_base_components import (
@@ -13,6 +14,10 @@ from psychopy_hapticlab import HapticCheck, HapticContact
 from psychopy_hapticlab.components.check import HapticCheckComponent
 from psychopy_hapticlab.components.contact import HapticContactComponent
 from psychopy_hapticlab.components.validation import ALERT
+
+#: PsychoPy's data and experiment packages look libraries up with ldconfig (a process) as they
+#: load: these in-process tests are in the integration tier
+pytestmark = [pytest.mark.integration]
 
 
 class TestHapticContactComponent(BaseComponentTests, _TestLibraryClassMixin):

@@ -20,6 +20,10 @@ from psychopy_hapticlab.scenes import builtin_samples, fields_scene, file_scene,
 
 from device import SceneError
 
+#: PsychoPy's data and experiment packages look libraries up with ldconfig (a process) as they
+#: load: these in-process tests are in the integration tier
+pytestmark = [pytest.mark.integration]
+
 
 @pytest.fixture
 def sim():
