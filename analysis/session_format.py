@@ -37,7 +37,8 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 __all__ = ["FORMAT_VERSION", "SessionStatus", "SessionRecord", "ProtocolRecord",
-           "ParticipantRecord", "TimesRecord", "upgrade_meta", "COLUMNS", "INT_COLUMNS",
+           "ParticipantRecord", "TimesRecord", "upgrade_meta", "COLUMNS", "OLDER_COLUMNS",
+           "INT_COLUMNS",
            "FLOAT_COLUMNS", "KINDS", "META_REQUIRED",
            "TrialsFileError", "SessionMetaError", "TornLine", "header_line", "format_row",
            "format_cell",
@@ -56,9 +57,12 @@ LOCK = "session.lock"  #: held (flock) by the one process writing the session
 COLUMNS = ("participant", "session", "phase", "trial_index", "item", "attempt", "sample",
            "block", "factors", "placement", "status", "n_taps", "tap_velocities", "peak_current",
            "rating", "response_time", "answer", "correct", "reason", "t_start", "t_end",
-           "trace_file")
+           "trace_file", "track", "intensity", "state")
+#: the header before adaptive phases recorded their procedure (``track``, ``intensity``,
+#: ``state``): read with those cells empty, and rewritten with them before a resume appends
+OLDER_COLUMNS = COLUMNS[:-3]
 INT_COLUMNS = ("session", "trial_index", "attempt", "n_taps")
-FLOAT_COLUMNS = ("peak_current", "rating", "response_time", "correct")
+FLOAT_COLUMNS = ("peak_current", "rating", "response_time", "correct", "intensity")
 
 #: every status a row of trials.tsv may carry, as the recorder writes it (lower case): the
 #: attempt statuses of :mod:`protocols.engine` and its control entries (a pause, a resume, a
@@ -209,7 +213,8 @@ def is_canonical(path: str | Path) -> bool:
     if not path.exists():
         return True
     raw = path.read_bytes()
-    return not raw.startswith(b"\xef\xbb\xbf") and b"\r" not in raw
+    return not raw.startswith(b"\xef\xbb\xbf") and b"\r" not in raw and (
+        not raw or raw.startswith(header_line().encode()))
 
 
 def _kind(path: Path) -> str:
@@ -271,7 +276,8 @@ def read_trial_fields(path: str | Path, digests: dict | None = None
     if complete:
         lines = lines[:-1]
     header = lines[0].split("\t")
-    if tuple(header) != COLUMNS:
+    older = tuple(header) == OLDER_COLUMNS
+    if tuple(header) != COLUMNS and not older:
         if len(lines) == 1 and not complete and header_line().startswith(lines[0]):
             return [], TornLine(1, lines[0])  # killed while writing the header
         unknown = [c for c in header if c not in COLUMNS]
@@ -282,7 +288,10 @@ def read_trial_fields(path: str | Path, digests: dict | None = None
                               f"({what or 'columns in another order'})")
     rows: list[list[str]] = []
     torn = None
-    width, ti, at = len(COLUMNS), _AT["trial_index"], _AT["attempt"]
+    # an older header (without the adaptive columns): its rows padded with their empty cells
+    width = len(OLDER_COLUMNS) if older else len(COLUMNS)
+    pad = [""] * (len(COLUMNS) - width)
+    ti, at = _AT["trial_index"], _AT["attempt"]
     for no, line in enumerate(lines[1:], start=2):
         fields = line.split("\t")
         last = no == len(lines)
@@ -298,7 +307,8 @@ def read_trial_fields(path: str | Path, digests: dict | None = None
                 torn = TornLine(no, line)
                 break
             raise TrialsFileError(f"{path}:{no}: corrupt line ({len(fields)} fields, expected "
-                                  f"{len(COLUMNS)}): {line[:80]!r}")
+                                  f"{width}): {line[:80]!r}")
+        fields += pad
         _check_row(fields, path, no)
         rows.append(fields)
     return rows, torn

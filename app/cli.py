@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 
 from analysis.session_format import SessionStatus
 from device.errors import HapticlabError
+from protocols.loader import BUILTIN
 
 from .errors import UsageError
 
@@ -49,7 +50,8 @@ def _protocol_validate(args: argparse.Namespace) -> int:
     v = validate_protocol(args.file, device=args.device, clear_fault=args.clear_fault)
     print(f"{v['source']}: valid protocol '{v['protocol']}' — "
           f"{_plural(v['samples'], 'sample')}, {_plural(v['phases'], 'phase')}, "
-          f"{_plural(v['trials'], 'trial')} without redraws"
+          f"{'at most ' if v.get('adaptive') else ''}{_plural(v['trials'], 'trial')} "
+          "without redraws"
           + (f"; checked against device '{v['device']}'"
              + (f"; {v['libraries']}" if v["libraries"] else "") if v["device"] else ""))
     for warning in v["warnings"]:
@@ -386,7 +388,7 @@ def _power(args: argparse.Namespace) -> int:
 
 
 #: what a command's protocol argument takes
-PROTOCOL_HELP = "a built-in name (realism, factorial, identification, comparison) or a file"
+PROTOCOL_HELP = f"a built-in name ({', '.join(BUILTIN)}) or a file"
 
 
 def _add_session_parsers(sub) -> None:
@@ -570,8 +572,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr = sub.add_parser("protocol", help="protocol files (validate, show)")
     psub = pr.add_subparsers(dest="protocol_command", required=True, metavar="ACTION")
     pv = psub.add_parser("validate", help="check a protocol file; exit 0 when valid")
-    pv.add_argument("file", help="built-in name (realism, factorial, identification, "
-                    "comparison) or a path")
+    pv.add_argument("file", help=f"built-in name ({', '.join(BUILTIN)}) or a path")
     pv.add_argument("--device", help="also check forces and currents against this device")
     _add_clear_fault(pv)
     pv.set_defaults(func=_protocol_validate)

@@ -75,6 +75,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -83,6 +84,7 @@ import numpy as np
 from device import SimulatedHand
 from protocols.kinds import REFERENCE, phase_kind
 
+from .observer import draw_observer
 from .participants import Responder
 
 __all__ = ["SimulatedParticipant", "felt_features", "name_surfaces", "FEATURES", "JND"]
@@ -278,10 +280,15 @@ class SimulatedParticipant(Responder):
     name = "simulated"
     stateful = True  # remembers references and the range of what it felt
 
-    def __init__(self, protocol, seed: int, group: str = ""):
+    def __init__(self, protocol, seed: int, group: str = "",
+                 discrimination: Mapping[str, float] | None = None):
         self.protocol = protocol
         self._mem_rng = np.random.default_rng(np.random.SeedSequence([seed, 7919]))
         self.person = Person.draw(self._mem_rng, group)
+        #: how it tells two renderings apart in a forced choice (app.observer): drawn from
+        #: its own stream, so the constants above stay those of the same seed
+        self.observer = draw_observer(np.random.default_rng(
+            np.random.SeedSequence([seed, 7919, 57])), discrimination)
         self.memory: dict[str, np.ndarray] = {}
         self._device = None
         self._familiar: list[np.ndarray] = []
@@ -396,6 +403,11 @@ class SimulatedParticipant(Responder):
         perceived with fresh noise [JND units]; NaN where nothing could be compared."""
         _key, ref = self._reference(trial)
         return [self.distance(felt_features(r), ref, rng) for r in results]
+
+    def judge_larger(self, parameter: str, values, rng) -> tuple[int, float]:
+        """Which of two renderings has the larger ``parameter`` (their ``values``, as the
+        device was asked to render them), as its observer says (:mod:`app.observer`)."""
+        return self.observer.judge(parameter, values, rng), self.response_time(1.2, rng)
 
     @staticmethod
     def response_time(median: float, rng) -> float:

@@ -184,8 +184,9 @@ class SessionFiles:
                 rows, torn = self.read_rows()
                 if torn is None:
                     atomic_write(self.trials, canonical_bytes(rows))
-                    done.append("rewrote trials.tsv with LF line endings and no byte-order "
-                                "mark")
+                    done.append("rewrote trials.tsv with LF line endings, no byte-order "
+                                "mark and the current header (the adaptive procedures' "
+                                "columns empty in earlier rows)")
             if self.trials.exists() and os.stat(self.trials).st_nlink > 1:
                 atomic_write(self.trials, self.trials.read_bytes())  # a new inode: its own
                 done.append("trials.tsv was a hard link shared with another name (a backup?): "

@@ -176,14 +176,15 @@ class SessionRunner:
         rows, torn = self.files.read_rows()
         if torn is not None:
             raise RuntimeError("set the torn line aside before loading the log")
-        self.log = [Attempt(r["item"], r["status"], r["reason"]) for r in rows]
+        self.log = [Attempt(r["item"], r["status"], r["reason"], correct=_correct(r))
+                    for r in rows]
 
     def _rng(self, trial: Trial) -> np.random.Generator:
         return np.random.default_rng(np.random.SeedSequence([self.seed, trial.trial_index,
                                                              trial.attempt]))
 
     def _total(self) -> int:
-        return len(self.engine.plan())
+        return self.engine.max_trials()  # an adaptive phase at its most
 
     def run(self) -> str:
         """Run to the end; returns "complete". Raises SessionInterrupted to stop early —
@@ -219,7 +220,8 @@ class SessionRunner:
                         ("operator", "participant asked")) or row["status"] in (
                         "aborted_device", "excluded_device"):
                     self._expected.pop(0)
-                    self.log.append(Attempt(row["item"], row["status"], row["reason"]))
+                    self.log.append(Attempt(row["item"], row["status"], row["reason"],
+                                            correct=_correct(row)))
                     continue
                 trial = self.engine.next_trial(self.log)
                 if trial is DONE or trial is PAUSED:
@@ -273,9 +275,9 @@ class SessionRunner:
         clear = f"nothing: remove the {self._on_device}" if self._on_device else "nothing"
         if phase_kind(trial.kind).surfaces:
             return f"{clear} (the scene's surfaces are virtual)", " / ".join(trial.samples)
-        sample = self.protocol.samples[trial.samples[0]]
+        sample = trial.sample_of(self.protocol, trial.samples[0])
         what = trial.placement or clear
-        detail = "real sample" if sample.is_real else f"virtual: {sample.id}"
+        detail = "real sample" if sample.is_real else f"virtual: {', then '.join(trial.samples)}"
         return what, detail
 
     def _block_line(self, trial: Trial) -> str:
@@ -283,7 +285,7 @@ class SessionRunner:
             return f"real reference block: {trial.placement}"
         if phase_kind(trial.kind).surfaces:  # surface 1's block is not the scene's
             return ""
-        sample = self.protocol.samples[trial.samples[0]]
+        sample = trial.sample_of(self.protocol, trial.samples[0])
         block = trial.block or sample.block
         if block is None and sample.reference is None:
             return ""
@@ -392,7 +394,7 @@ class SessionRunner:
         if phase.references == "none" or not kind.references:
             return
         if phase.references == "block" and not kind.surfaces:
-            refs = [self.protocol.samples[trial.samples[0]].reference]
+            refs = [trial.sample_of(self.protocol, trial.samples[0]).reference]
         else:
             refs = list(dict.fromkeys(self.protocol.samples[s].reference
                                       for s in phase.samples))
@@ -406,7 +408,7 @@ class SessionRunner:
         phase, in the protocol's order — never one that follows from the scene (surface 1's
         block would be its answer)."""
         if not phase_kind(trial.kind).surfaces:
-            ref = self.protocol.samples[trial.samples[0]].reference
+            ref = trial.sample_of(self.protocol, trial.samples[0]).reference
             return [] if ref is None else [(ref, self.protocol.samples[ref].placement or ref)]
         phase = next(p for p in self.protocol.phases if p.name == trial.phase)
         refs = dict.fromkeys(self.protocol.samples[s].reference for s in phase.samples)
@@ -614,7 +616,9 @@ class SessionRunner:
         declaration's columns), checked by the rules the analysis applies to them."""
         self.console.set_state("rating")  # answering: the operator's e acts
         self.markers.send("rating_onset")
-        question = Question(trial=trial, protocol=self.protocol, results=judged)
+        question = Question(trial=trial, protocol=self.protocol, results=judged,
+                            after=None if trial.stimulus is None else
+                            (lambda right: self.engine.state_after(trial, right)))
         value, rt = self.responder.answer(asks, question, rng)
         try:
             row = asks.answer_row(value, rt, question)
@@ -647,7 +651,7 @@ class SessionRunner:
 
     def _window(self, trial: Trial, sample_id: str, rng: np.random.Generator,
                 reseed: list | None = None):
-        sample = self.protocol.samples[sample_id]
+        sample = trial.sample_of(self.protocol, sample_id)
         dev = self.device
         dev.load_scene(sample.scene)
         # each window of an attempt its own stream (familiarization's several windows, a
@@ -709,7 +713,8 @@ class SessionRunner:
         trace_file = None
         if self._expected is not None:  # replaying: compare, do not record
             self._meet(trial, status, vel, extra)
-            self.log.append(Attempt(trial.item, status, reason))
+            self.log.append(Attempt(trial.item, status, reason, correct=_correct(
+                {"status": status, **extra})))
             return
         spilled = {id(r): name for r, name, _ in self._spilled if name}  # alive: ids hold
         peaks = {id(r): peak for r, _, peak in self._spilled}
@@ -748,7 +753,7 @@ class SessionRunner:
             **extra,
         }
         self.files.append_row(row)  # durable before anything else happens
-        self.log.append(Attempt(trial.item, status, reason))
+        self.log.append(Attempt(trial.item, status, reason, correct=_correct(row)))
         self.markers.trial(trial)
         self.markers.send("trial_end", status=status, reason=reason)
         self.markers.trial(None)
@@ -771,6 +776,14 @@ class SessionRunner:
                 f"{', '.join(f'{c}={row[c]!r}' for c in diff)}; replayed "
                 f"{', '.join(f'{c}={got[c]!r}' for c in diff)}): the session cannot be "
                 "resumed exactly")
+
+
+def _correct(row: dict) -> bool | None:
+    """What the engine takes of a row: whether a valid answer of an adaptive trial (one
+    with a track) was right; None for every other row."""
+    if row.get("status") != "valid" or not row.get("track"):
+        return None
+    return str(row.get("correct")) in ("1", "1.0", "True")
 
 
 def cell_problems(row: dict, asks: Response, trial: Trial, protocol: Protocol) -> str:

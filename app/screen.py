@@ -313,7 +313,7 @@ class PsychoPyScreen(Responder):
         kind = phase_kind(trial.kind)
         if kind.surfaces and sample_id in trial.samples:
             return f"{self.t('tap')} · {self.t('surface', i=trial.samples.index(sample_id) + 1)}"
-        if kind.items == "pairs" and sample_id in trial.samples:
+        if kind.items in ("pairs", "adaptive") and sample_id in trial.samples:
             return f"{self.t('tap')} · {self.t('pair', i=trial.samples.index(sample_id) + 1)}"
         return self.t("tap")
 
@@ -514,6 +514,13 @@ class PsychoPyScreen(Responder):
         keys = {"1": 0, "num_1": 0, "2": 1, "num_2": 1}
         key, rt = self._wait(keys, lambda: self._frame(self.t("choice"),
                                                        self.t("choice_keys")))
+        return keys[key], rt
+
+    def discriminate(self, trial, question: str, rng) -> tuple[int, float]:
+        """An adaptive phase's forced choice: the phase's question (which of the two had
+        more), 1 or 2 (number row or keypad), one key press."""
+        keys = {"1": 0, "num_1": 0, "2": 1, "num_2": 1}
+        key, rt = self._wait(keys, lambda: self._frame(question, self.t("discriminate_keys")))
         return keys[key], rt
 
     def identify(self, trial, choices, results, rng) -> tuple[list[str], float]:

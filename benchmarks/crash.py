@@ -38,8 +38,10 @@ from analysis.session_format import SessionStatus
 from ._common import emit, print_table
 from ._options import parse_points
 
+#: what a resumed session must repeat of the uninterrupted one (an adaptive trial's
+#: intensity and its procedure's state too)
 KEY = ("trial_index", "item", "attempt", "sample", "status", "rating", "answer", "n_taps",
-       "tap_velocities")
+       "tap_velocities", "track", "intensity", "state")
 
 
 def _rows(folder: Path) -> list[tuple]:

@@ -48,6 +48,7 @@ tapped for comparison) does not change the order.
 
 from __future__ import annotations
 
+import dataclasses
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -56,8 +57,9 @@ import numpy as np
 
 from device.errors import HapticlabError
 
+from .adaptive import Stimulus, Tracks, comparison_sample, value_at
 from .kinds import phase_kind
-from .model import Phase, Protocol
+from .model import Phase, Protocol, Sample
 from .williams import williams_square
 
 __all__ = ["SessionEngine", "Trial", "Attempt", "Done", "Paused", "DONE", "PAUSED",
@@ -89,7 +91,10 @@ _CAPPED = {"saturated": "excluded_saturated", "timed_out": "excluded_timeout",
 #: device that saturates on every attempt must still let the session end)
 SATURATION_SAFETY_CAP = 20
 _CONTROL = ("paused", "resumed", "reference")
-RNG_ALGORITHM = "numpy PCG64 via SeedSequence(seed).spawn(2): [plan, redraw]"
+RNG_ALGORITHM = ("numpy PCG64 via SeedSequence(seed).spawn(2): [plan, redraw]; an adaptive "
+                 "phase's trial k: SeedSequence([seed, 57, phase index, k])")
+#: the key's end of an adaptive phase's place in the plan
+_ADAPTIVE = "/*adaptive"
 
 
 class SessionSetupError(HapticlabError, ValueError):
@@ -115,6 +120,14 @@ class Item:
     samples: tuple[str, ...]
     block: str | None
     repetition: int
+    #: an adaptive phase's trial: its track, intensity and comparison (None otherwise)
+    stimulus: Stimulus | None = None
+
+    @property
+    def marker(self) -> bool:
+        """The place of an adaptive phase in the plan, not a trial: its trials are made
+        one at a time, from the answers so far, when it comes first."""
+        return self.key.endswith(_ADAPTIVE)
 
 
 @dataclass(frozen=True)
@@ -139,6 +152,9 @@ class Trial:
         What the operator places: a real sample, a placeholder block, or None.
     repetition : int
         1-based repetition of the sample within its phase.
+    stimulus : Stimulus or None
+        An adaptive phase's trial: its track, intensity, the comparison and which of the
+        two samples is the larger (:class:`~protocols.adaptive.Stimulus`).
     """
 
     item: str
@@ -150,6 +166,14 @@ class Trial:
     block: str | None
     placement: str | None
     repetition: int
+    stimulus: Stimulus | None = None
+
+    def sample_of(self, protocol: Protocol, sample_id: str) -> Sample:
+        """The sample ``sample_id`` of this trial: the protocol's, or the comparison an
+        adaptive trial made."""
+        if self.stimulus is not None and sample_id == self.stimulus.comparison.id:
+            return self.stimulus.comparison
+        return protocol.samples[sample_id]
 
     @property
     def sample(self) -> str:
@@ -159,11 +183,14 @@ class Trial:
 
 @dataclass(frozen=True)
 class Attempt:
-    """One log entry: the outcome of an attempt at ``item``, or a pause/resume marker."""
+    """One log entry: the outcome of an attempt at ``item``, or a pause/resume marker;
+    ``correct``: a valid trial of an adaptive phase, whether its answer was right (what its
+    procedure takes)."""
 
     item: str
     status: str
     reason: str = ""
+    correct: bool | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES + _CONTROL:
@@ -193,6 +220,9 @@ class _State:
     paused: bool = False
     last_placement: str | None = None
     finished: dict[str, str] = field(default_factory=dict)
+    tracks: dict[str, Tracks] = field(default_factory=dict)  # adaptive phase → its tracks
+    rng: np.random.Generator | None = None  # where redrawn items go back
+    entries: int = 0  # log entries taken
 
 
 def _can_spread(counts: Mapping[str, int], prev: str | None) -> bool:
@@ -277,6 +307,9 @@ class SessionEngine:
                                         f"0–{n - 1} ({n} orders; a row beyond them would "
                                         "repeat one silently)")
         self._no_repeat = {ph.name: ph.no_repeat for ph in protocol.phases}
+        self._phases = {ph.name: (i, ph) for i, ph in enumerate(protocol.phases)}
+        self._states: dict[tuple, object] = {}  # (phase, track, answers) → procedure state
+        self._last: tuple[list, _State] | None = None  # the last replay: its log and state
         self._plan = self._build_plan()
 
     # ------------------------------------------------------------------ identity
@@ -313,6 +346,8 @@ class SessionEngine:
                      before: Item | None) -> list[Item]:
         samples = self.protocol.samples
         items = phase_kind(phase.kind).items
+        if items == "adaptive":  # made one trial at a time from the answers (_fill)
+            return [Item(f"{phase.name}{_ADAPTIVE}", phase.name, phase.kind, (), None, 0)]
         if items == "pairs":  # both orders of every pair, each repetition, in a drawn order
             pairs = [(a, b) for a in phase.samples for b in phase.samples if a != b]
             out = []
@@ -363,60 +398,189 @@ class SessionEngine:
         return list(self._plan)
 
     def placements(self) -> list[str | None]:
-        """What the operator places for each item of :meth:`plan` (None: nothing)."""
+        """What the operator places for each item of :meth:`plan` (None: nothing, or an
+        adaptive phase's place, whose trials are not planned)."""
         out, previous = [], None
         for item in self._plan:
-            previous = self._placement(item, previous)
-            out.append(previous)
+            if not item.marker:
+                previous = self._placement(item, previous)
+            out.append(None if item.marker else previous)
         return out
 
+    def max_trials(self) -> int:
+        """The trials of the plan, an adaptive phase counted at its most (its tracks' cap
+        and its catch trials)."""
+        return sum(self._phases[i.phase][1].adaptive.max_total() if i.marker else 1
+                   for i in self._plan)
+
     # ------------------------------------------------------------------ replay
-    def _replay(self, log: Iterable[Attempt]) -> _State:
+    def _fresh(self) -> _State:
         _, redraw_ss = np.random.SeedSequence(self.seed).spawn(2)
-        rng = np.random.default_rng(redraw_ss)
-        st = _State(queue=list(self._plan))
-        final_of = {v: k for k, v in _CAPPED.items()}
-        for n, entry in enumerate(log):
-            if not isinstance(entry, Attempt):
-                raise LogMismatch(f"log entry {n + 1}: expected an Attempt, got {entry!r}")
-            if entry.status == "paused":
-                st.paused = True
-                continue
-            if entry.status == "resumed":
-                st.paused = False
-                continue
-            if entry.status == "reference" or is_reference(entry.item):
-                continue  # a real block tapped (or an e-stop while it was): not a plan item
-            if not st.queue:
-                raise LogMismatch(f"log entry {n + 1} ({entry.item}, {entry.status}) comes after "
-                                  "the session was complete")
-            head = st.queue[0]
-            if entry.item != head.key:
-                raise LogMismatch(f"log entry {n + 1} is for item {entry.item!r} but the session's "
-                                  f"order has {head.key!r} next: the log does not belong to this "
-                                  "protocol, seed and participant, or was edited")
-            st.n_attempts += 1
-            st.attempts[head.key] = st.attempts.get(head.key, 0) + 1
-            st.last_placement = self._placement(head, st.last_placement)
-            status = entry.status
-            kind = status if status in _CAPPED else final_of.get(status)
-            if kind is not None:
-                key = (kind, head.key)
-                st.failures[key] = st.failures.get(key, 0) + 1
-                if status == kind and st.failures[key] >= self.cap(kind):
-                    raise LogMismatch(f"log entry {n + 1}: attempt {st.failures[key]} of "
-                                      f"{head.key!r} is {status} at the cap of "
-                                      f"{self.cap(kind)}; it must be logged '{_CAPPED[kind]}'")
-            if status in FINAL_STATUSES:
-                st.queue.pop(0)
-                st.finished[head.key] = status
-            elif status in ("saturated", "requeued", "timed_out"):
-                st.queue.pop(0)
-                self._reinsert(st.queue, head, rng, self._no_repeat[head.phase])
-            else:
-                continue  # aborted_device, estop: the item stays first and is retried
-            self._spread_rest(st.queue, head, rng)
+        return _State(queue=list(self._plan), rng=np.random.default_rng(redraw_ss),
+                      tracks={ph.name: Tracks.of(ph.adaptive) for ph in self.protocol.phases
+                              if ph.adaptive is not None})
+
+    @staticmethod
+    def _copy(st: _State) -> _State:
+        import copy
+
+        return dataclasses.replace(
+            st, queue=list(st.queue), attempts=dict(st.attempts), failures=dict(st.failures),
+            finished=dict(st.finished), tracks={k: v.copy() for k, v in st.tracks.items()},
+            rng=copy.deepcopy(st.rng))
+
+    def _replay(self, log: Iterable[Attempt]) -> _State:
+        """The session's state after ``log``. The state after the last log replayed is kept,
+        so a log that extends it continues from there (the same result as replaying from
+        the start: an adaptive procedure is not run again for every trial)."""
+        log = list(log)
+        last = self._last
+        if last is not None and len(last[0]) <= len(log) and log[:len(last[0])] == last[0]:
+            st = self._copy(last[1])
+        else:
+            st = self._fresh()
+        for n in range(st.entries, len(log)):
+            self._take(st, n, log[n])
+        self._fill(st)
+        st.entries = len(log)
+        self._last = (log, self._copy(st))
         return st
+
+    def _take(self, st: _State, n: int, entry: Attempt) -> None:
+        """Log entry ``n`` into the state."""
+        final_of = {v: k for k, v in _CAPPED.items()}
+        if not isinstance(entry, Attempt):
+            raise LogMismatch(f"log entry {n + 1}: expected an Attempt, got {entry!r}")
+        if entry.status == "paused":
+            st.paused = True
+            return
+        if entry.status == "resumed":
+            st.paused = False
+            return
+        if entry.status == "reference" or is_reference(entry.item):
+            return  # a real block tapped (or an e-stop while it was): not a plan item
+        self._fill(st)
+        if not st.queue:
+            raise LogMismatch(f"log entry {n + 1} ({entry.item}, {entry.status}) comes after "
+                              "the session was complete")
+        head = st.queue[0]
+        if entry.item != head.key:
+            raise LogMismatch(f"log entry {n + 1} is for item {entry.item!r} but the session's "
+                              f"order has {head.key!r} next: the log does not belong to this "
+                              "protocol, seed and participant, or was edited")
+        st.n_attempts += 1
+        st.attempts[head.key] = st.attempts.get(head.key, 0) + 1
+        st.last_placement = self._placement(head, st.last_placement)
+        status = entry.status
+        kind = status if status in _CAPPED else final_of.get(status)
+        if kind is not None:
+            key = (kind, head.key)
+            st.failures[key] = st.failures.get(key, 0) + 1
+            if status == kind and st.failures[key] >= self.cap(kind):
+                raise LogMismatch(f"log entry {n + 1}: attempt {st.failures[key]} of "
+                                  f"{head.key!r} is {status} at the cap of "
+                                  f"{self.cap(kind)}; it must be logged '{_CAPPED[kind]}'")
+        if status in FINAL_STATUSES:
+            st.queue.pop(0)
+            st.finished[head.key] = status
+            if head.stimulus is not None:
+                self._ended(st, head, entry, n)
+        elif status in ("saturated", "requeued", "timed_out") and head.stimulus is None:
+            st.queue.pop(0)
+            self._reinsert(st.queue, head, st.rng, self._no_repeat[head.phase])
+        else:
+            # aborted_device, estop: the item stays first and is retried; an adaptive
+            # trial that saturated, timed out or was sent back is repeated at once, its
+            # procedure unchanged
+            return
+        self._spread_rest(st.queue, head, st.rng)
+
+    # ------------------------------------------------------------------ adaptive phases
+    def _fill(self, st: _State) -> None:
+        """While an adaptive phase's place is first: make its next trial from the answers
+        so far, or, when its tracks are done, go past it."""
+        while st.queue and st.queue[0].marker:
+            item = self._next_adaptive(st, st.queue[0].phase)
+            if item is None:
+                st.queue.pop(0)
+            else:
+                st.queue.insert(0, item)
+                return
+
+    def procedure_state(self, phase: str, track: str, answers: tuple[bool, ...]):
+        """The procedure of ``track`` in ``phase`` after ``answers`` (kept: each state is
+        made once per engine)."""
+        proc = self._phases[phase][1].adaptive.procedure
+        n = len(answers)
+        while n > 0 and (phase, track, answers[:n]) not in self._states:
+            n -= 1
+        if n == 0 and (phase, track, ()) not in self._states:
+            self._states[(phase, track, ())] = proc.begin()
+        state = self._states[(phase, track, answers[:n])]
+        for k in range(n, len(answers)):
+            state = proc.update(state, answers[k])
+            self._states[(phase, track, answers[:k + 1])] = state
+        return state
+
+    def _track_done(self, phase: Phase, tracks: Tracks, track: str) -> bool:
+        a = phase.adaptive
+        return tracks.ended[track] >= a.max_trials or a.procedure.done(
+            self.procedure_state(phase.name, track, tracks.answers[track]))
+
+    def _next_adaptive(self, st: _State, name: str) -> Item | None:
+        index, phase = self._phases[name]
+        a, tracks = phase.adaptive, st.tracks[name]
+        open_ = [t for t in a.tracks if not self._track_done(phase, tracks, t.name)]
+        if not open_:
+            return None
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, 57, index,
+                                                            tracks.made]))
+        track = open_[int(rng.integers(len(open_)))]
+        catch = bool(tracks.catch_done < a.max_catch() and rng.random() < a.catch)
+        first = int(rng.integers(2))  # the interval of the comparison
+        tracks.made += 1
+        answers = tracks.answers[track.name]
+        x = a.catch_intensity if catch else \
+            self.procedure_state(name, track.name, answers).x
+        standard = self.protocol.samples[track.standard]
+        value = value_at(getattr(standard.scene.transient, a.parameter), x, a.units,
+                         track.direction)
+        comparison = comparison_sample(standard, a.parameter, value)
+        pair = (comparison.id, standard.id) if first == 0 else (standard.id, comparison.id)
+        larger = first if track.direction == "up" else 1 - first
+        n = (f"c{tracks.catch_done + 1}" if catch else str(tracks.ended[track.name] + 1))
+        stim = Stimulus(track=track.name, intensity=float(x), catch=catch,
+                        standard=standard.id, comparison=comparison, larger=larger,
+                        answers=answers)
+        return Item(f"{name}/{track.name}#{n}", name, phase.kind, pair, standard.block, 0,
+                    stim)
+
+    def _ended(self, st: _State, head: Item, entry: Attempt, n: int) -> None:
+        """An adaptive trial ended: a valid answer goes to its track's procedure (a catch
+        trial's to none); any ending counts against the track's cap."""
+        s, tracks = head.stimulus, st.tracks[head.phase]
+        if s.catch:
+            tracks.catch_done += 1
+            return
+        tracks.ended[s.track] += 1
+        if entry.status == "valid":
+            if entry.correct is None:
+                raise LogMismatch(f"log entry {n + 1}: a valid trial of the adaptive phase "
+                                  f"{head.phase!r} without its answer (correct 0 or 1)")
+            tracks.answers[s.track] = (*tracks.answers[s.track], bool(entry.correct))
+
+    def state_after(self, trial: Trial, correct: bool) -> dict:
+        """What the trial row of an adaptive ``trial`` records of its procedure after the
+        answer ``correct``: the next intensity, step, reversals … (a catch trial: that it
+        was one)."""
+        s = trial.stimulus
+        if s is None:
+            raise ValueError(f"trial {trial.item} is not an adaptive phase's")
+        if s.catch:
+            return {"catch": True}
+        phase = self._phases[trial.phase][1]
+        state = self.procedure_state(trial.phase, s.track, (*s.answers, bool(correct)))
+        return state.summary(phase.adaptive.procedure)
 
     def _spread_rest(self, queue: list[Item], last: Item, rng: np.random.Generator) -> None:
         """With no_repeat, a next trial of the sample just tried (redraws and what the
@@ -469,7 +633,7 @@ class SessionEngine:
     def _placement(self, item: Item, previous: str | None) -> str | None:
         if phase_kind(item.kind).surfaces:  # the scene's surfaces are virtual
             return None
-        s = self.protocol.samples[item.samples[0]]
+        s = self.protocol.samples[item.stimulus.standard if item.stimulus else item.samples[0]]
         if s.placement is not None:
             return s.placement
         blocks = self.protocol.placeholders
@@ -491,7 +655,7 @@ class SessionEngine:
                      trial_index=st.n_attempts + 1, attempt=st.attempts.get(head.key, 0) + 1,
                      samples=head.samples, block=head.block,
                      placement=self._placement(head, st.last_placement),
-                     repetition=head.repetition)
+                     repetition=head.repetition, stimulus=head.stimulus)
 
     def failure_status(self, kind: str, trial: Trial, log: Sequence[Attempt]) -> str:
         """Status to log for a failed attempt of ``kind`` (``saturated``, ``timed_out``,

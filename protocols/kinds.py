@@ -13,8 +13,10 @@ reading it implements once (a new kind that reuses them needs no code elsewhere)
 ``items``
     How the phase's samples make its items: ``"each"`` (one item per sample, in blocks,
     in a drawn or fixed order), ``"all"`` (one item of all the samples, their order drawn
-    per item) or ``"pairs"`` (one item per ordered pair of samples: both orders of every
-    pair, so the order a pair is felt in is balanced).
+    per item), ``"pairs"`` (one item per ordered pair of samples: both orders of every
+    pair, so the order a pair is felt in is balanced) or ``"adaptive"`` (the samples are
+    standards; each trial pairs one with a comparison its track's procedure sets from the
+    answers so far: :mod:`protocols.adaptive`).
 ``windows``
     How an item's device windows run: ``"each_sample"`` (one window per sample of the
     item, in order), ``"until_done"`` (windows on the item's one sample until the
@@ -34,19 +36,24 @@ phase takes and how it is analysed follow from the response's declaration
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from ._registry import Registry
 from .responses import Response, response, responses
 
-__all__ = ["PhaseKind", "RATED", "FREE", "IDENTIFICATION", "COMPARISON", "REFERENCE",
+__all__ = ["PhaseKind", "RATED", "FREE", "IDENTIFICATION", "COMPARISON", "STAIRCASE",
+           "QUESTPLUS", "REFERENCE", "PROCEDURES",
            "phase_kind", "phase_kinds", "register"]
 
 #: the trial kind of a real reference block tapped between trials (the runner's, never a
 #: phase's): its row has status ``reference`` and no response
 REFERENCE = "reference"
 
-ITEMS = ("each", "all", "pairs")
+ITEMS = ("each", "all", "pairs", "adaptive")
+#: the adaptive procedures (a kind of items ``adaptive`` runs one; its phase's table of
+#: the same name configures it)
+PROCEDURES = ("staircase", "questplus")
 WINDOWS = ("each_sample", "until_done", "surfaces")
 
 
@@ -75,6 +82,8 @@ class PhaseKind:
         ``redraw`` policy (familiarization is not measured, so it is not).
     references : bool
         Whether the phase's real reference blocks are tapped and offered during it.
+    procedure : str or None
+        Items ``adaptive``: the procedure its tracks run (:data:`PROCEDURES`).
     """
 
     name: str
@@ -85,6 +94,7 @@ class PhaseKind:
     redraws_saturated: bool = True
     references: bool = True
     items: str = "each"
+    procedure: str | None = None
 
     def __post_init__(self) -> None:
         if self.items not in ITEMS:
@@ -93,6 +103,9 @@ class PhaseKind:
         if (self.items == "all") != (self.windows == "surfaces"):
             raise ValueError(f"phase kind {self.name!r}: an item of all the samples is "
                              "felt as surfaces, and only such an item is")
+        if (self.items == "adaptive") != (self.procedure in PROCEDURES):
+            raise ValueError(f"phase kind {self.name!r}: an adaptive kind names its procedure "
+                             f"({', '.join(PROCEDURES)}), and only such a kind does")
         if self.windows not in WINDOWS:
             raise ValueError(f"phase kind {self.name!r}: windows must be one of {WINDOWS}, "
                              f"got {self.windows!r}")
@@ -185,3 +198,21 @@ COMPARISON = register(PhaseKind(
                  "more like touching a real object: press 1 for the first, 2 for the "
                  "second. You must choose one, even when they feel alike.\n\n"
                  "Press SPACE to begin."))
+
+STAIRCASE = register(PhaseKind(
+    name="staircase",
+    summary="a standard and a comparison felt one after the other, then which was larger "
+            "(two-interval forced choice); the comparison set by a transformed up-down "
+            "staircase from the answers so far",
+    items="adaptive", procedure="staircase", windows="each_sample", response="forced_choice",
+    references=False,
+    instructions="You will tap on two samples, one after the other, and say which of the "
+                 "two had more of what the question asks: press 1 for the first, 2 for the "
+                 "second. You must choose one, even when they feel alike; guess then.\n\n"
+                 "Press SPACE to begin."))
+
+QUESTPLUS = register(dataclasses.replace(
+    STAIRCASE, name="questplus", procedure="questplus",
+    summary="a standard and a comparison felt one after the other, then which was larger "
+            "(two-interval forced choice); the comparison chosen by QUEST+ from the answers "
+            "so far"))

@@ -18,15 +18,15 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from device import MAX_WINDOW_TICKS, DeviceInfo, LibraryTransient, Scene, SceneError, max_spring
+from device import DeviceInfo, LibraryTransient, Scene, SceneError
 from device.errors import HapticlabError
 from device.fileio import file_kind
 from device.scene import AccelSinusoid, unknown_key
 
+from ._adaptive_loader import ADAPTIVE_KEYS, adaptive_design, fit_options
+from ._device_check import check_device
 from ._toml_lines import key_lines, line_of
-from .kinds import PhaseKind, phase_kind, phase_kinds
+from .kinds import PROCEDURES, PhaseKind, phase_kind, phase_kinds
 from .model import (
     ENTRIES,
     NORMALIZATIONS,
@@ -47,7 +47,8 @@ from .model import (
 
 __all__ = ["ProtocolError", "BUILTIN", "load_protocol", "parse_protocol", "protocol_text"]
 
-BUILTIN = ("realism", "factorial", "identification", "comparison")
+BUILTIN = ("realism", "factorial", "identification", "comparison", "thresholds",
+           "thresholds_quest")
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _MISSING = object()
 
@@ -255,7 +256,7 @@ def parse_protocol(text: str, source: str = "<protocol>", device: DeviceInfo | N
         placeholders=placeholders, limits=limits, cursor=cursor, sessions=sessions, text=text,
         attempts=attempts, texts=texts, participant_fields=fields_)
     if device is not None:
-        _check_device(cx, proto, device)
+        check_device(cx, proto, device)
     return proto
 
 
@@ -474,7 +475,8 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
            rating: RatingScale | None) -> Phase:
     path = ("phases", i)
     p = cx.table(path, raw, {"name", "kind", "samples", "repetitions", "order", "blocks",
-                             "block_order", "no_repeat", "analysis", "references"},
+                             "block_order", "no_repeat", "analysis", "references",
+                             *ADAPTIVE_KEYS},
                  {"name", "samples"})
     name = cx.ident((*path, "name"), p["name"])
     kind = phase_kind(cx.string((*path, "kind"), p.get("kind", phase_kinds()[0]),
@@ -532,7 +534,24 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
             raise cx.error((*path, "samples"), f"{real}: a{_an(kind.name)} {kind.name} "
                            "phase compares renderings, felt one after the other on the same "
                            "block; a real sample cannot be swapped in between the two")
-    design = _phase_design(cx, (*path, "analysis"), p.get("analysis", {}), kind, ids, samples)
+    adaptive, criterion = None, 0.75
+    if kind.items == "adaptive":
+        if blocks is not None:
+            raise cx.error((*path, "blocks"), f"a {kind.name} phase interleaves its tracks "
+                           "across the phase: it has no blocks")
+        raw = p.get("analysis", {})
+        crit = raw.get("criterion", 0.75) if isinstance(raw, Mapping) else 0.75
+        adaptive = adaptive_design(cx, path, p, kind, ids, samples,
+                                   crit if isinstance(crit, float) and 0.5 < crit < 1 else 0.75)
+        criterion = adaptive.procedure.target if kind.procedure == "staircase" \
+            else adaptive.procedure.criterion
+    else:
+        for key in ADAPTIVE_KEYS:
+            if key in p:
+                raise cx.error((*path, key), f"only an adaptive phase (kind "
+                               f"{' or '.join(PROCEDURES)}) takes '{key}'")
+    design = _phase_design(cx, (*path, "analysis"), p.get("analysis", {}), kind, ids, samples,
+                           criterion)
     has_refs = any(samples[s].reference for s in ids) and kind.references
     default = kind.default_references if has_refs else "none"
     references = cx.string((*path, "references"), p.get("references", default), REFERENCES)
@@ -541,7 +560,7 @@ def _phase(cx: _Ctx, i: int, raw: Any, samples: Mapping[str, Sample], answer: An
                        "(the real block to compare with)")
     return Phase(name=name, kind=kind.name, samples=ids, repetitions=reps, order=order,
                  blocks=blocks, block_order=block_order, no_repeat=no_repeat, design=design,
-                 references=references)
+                 references=references, adaptive=adaptive)
 
 
 def _an(word: str) -> str:
@@ -611,9 +630,10 @@ def _participant_fields(cx: _Ctx, raw: Any) -> dict:
 
 
 def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: PhaseKind, ids: tuple[str, ...],
-                  samples: Mapping[str, Sample]) -> PhaseDesign:
+                  samples: Mapping[str, Sample], criterion: float = 0.75) -> PhaseDesign:
     """A phase's ``analysis`` table: what it measures and how it is analysed."""
-    a = cx.table(path, raw, {"role", "within", "by", "normalize", "scoring"})
+    a = cx.table(path, raw, {"role", "within", "by", "normalize", "scoring", "criterion",
+                             "function", "lapse_max"})
     asks = kind.asks
     if asks is None:
         if a:
@@ -626,6 +646,9 @@ def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: PhaseKind, ids: tuple[s
             takes = ", ".join(f"'{o}'" for o in ("role", *asks.options))
             raise cx.error((*path, key), f"a{_an(kind.name)} {kind.name} phase is analysed "
                            f"{asks.analysed}; it takes {takes}")
+    if "criterion" in asks.options:  # an adaptive phase: a psychometric fit per track
+        return PhaseDesign(role=role, dv=kind.dv, within=(), scoring=None,
+                           fit=fit_options(cx, path, a, criterion))
     if "scoring" in asks.options:
         scoring = cx.string((*path, "scoring"), a.get("scoring", "all_correct"), SCORINGS)
         return PhaseDesign(role=role, dv=kind.dv, within=(), scoring=scoring)
@@ -677,48 +700,3 @@ def _phase_design(cx: _Ctx, path: tuple, raw: Any, kind: PhaseKind, ids: tuple[s
                        "samples compares every sample of the phase")
     return PhaseDesign(role=role, dv=kind.dv, within=tuple(within), by=by,
                        normalize=normalize)
-
-
-def _check_device(cx: _Ctx, proto: Protocol, device: DeviceInfo) -> None:
-    w = proto.window
-    most = MAX_WINDOW_TICKS / device.servo_rate_hz
-    if w.duration + w.timeout > most:
-        raise cx.error(("window", "timeout"),
-                       f"a window of {w.duration:g} s after a wait of up to {w.timeout:g} s "
-                       f"spans {w.duration + w.timeout:g} s, longer than the device "
-                       f"'{device.backend}' records in one window at "
-                       f"{device.servo_rate_hz:g} Hz: {most:g} s ({MAX_WINDOW_TICKS} ticks, "
-                       "each kept in memory)")
-    limit = device.current_limit
-    if proto.limits.max_current is not None:
-        if proto.limits.max_current > limit:
-            raise cx.error(("limits", "max_current"),
-                           f"{proto.limits.max_current:g} A exceeds the rating of the device "
-                           f"'{device.backend}' ({limit:g} A)")
-        limit = proto.limits.max_current
-    f_max = limit * device.force_constant
-    v = proto.limits.design_speed
-    k_max = max_spring(device)
-    for i, s in enumerate(proto.samples.values()):
-        if s.scene.spring is not None and s.scene.spring > k_max:
-            raise cx.error(("samples", i, "scene", "spring"),
-                           f"sample '{s.id}': {s.scene.spring:g} N/m is above the stiffest "
-                           f"spring the device '{device.backend}' renders, {k_max:.3g} N/m "
-                           "(full force within one encoder count, or the sampled spring "
-                           "unstable on the moving mass)")
-        tr = s.scene.transient
-        if tr is None or isinstance(tr, LibraryTransient):
-            continue  # a library's forces exist only once it is built on the device
-        path = ("samples", i, "scene", "transient")
-        try:
-            tr.check_for(device.servo_rate_hz)
-        except SceneError as exc:
-            raise cx.error((*path, exc.field) if exc.field else path,
-                           f"sample '{s.id}': {exc.reason}") from None
-        # what is played at the design speed (a table's rows, blend and attenuation)
-        table = tr.table(device.servo_rate_hz, device.effective_mass)
-        peak = float(np.max(np.abs(table.force_at(v))))
-        if not peak <= f_max:  # a NaN peak fails this too
-            raise cx.error(path, f"sample '{s.id}': transient peak {peak:.2f} N at {v:g} m/s "
-                           f"exceeds the {f_max:.2f} N the device can deliver ({limit:g} A × "
-                           f"{device.force_constant:g} N/A)")

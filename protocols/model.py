@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 from device import Scene
 
+from .adaptive import AdaptiveDesign
 from .kinds import RATED, phase_kind
 
 __all__ = ["Sample", "Window", "RatingScale", "Answer", "SaturationPolicy", "Attempts", "Limits",
@@ -185,6 +186,10 @@ class PhaseDesign:
         normalised each subject's ratings of one material's sets).
     scoring : str or None
         Identification answers: ``all_correct`` or ``per_surface``.
+    fit : mapping or None
+        An adaptive phase's psychometric fit: ``criterion`` (the proportion correct its
+        thresholds are read at), ``function`` (``weibull``, ``normal`` or ``logistic``)
+        and ``lapse_max`` (the bound of the free lapse rate).
     """
 
     role: str = "analysed"
@@ -193,6 +198,7 @@ class PhaseDesign:
     by: str | None = None
     normalize: str = "none"
     scoring: str | None = None
+    fit: Mapping[str, object] | None = None
 
     @property
     def analysed(self) -> bool:
@@ -200,7 +206,8 @@ class PhaseDesign:
 
     def to_dict(self) -> dict:
         return {"role": self.role, "dv": self.dv, "within": list(self.within), "by": self.by,
-                "normalize": self.normalize, "scoring": self.scoring}
+                "normalize": self.normalize, "scoring": self.scoring,
+                **({"fit": dict(self.fit)} if self.fit is not None else {})}
 
 
 @dataclass(frozen=True)
@@ -242,6 +249,8 @@ class Phase:
     no_repeat: bool = False
     design: PhaseDesign = field(default_factory=PhaseDesign)
     references: str = "none"  #: when the real reference blocks are tapped: none | block | start
+    #: an adaptive kind's phase: its parameter, units, procedure and tracks
+    adaptive: AdaptiveDesign | None = None
 
 
 @dataclass(frozen=True)
@@ -286,7 +295,9 @@ class Protocol:
             "sessions": self.sessions,
             "phases": [{"name": p.name, "kind": p.kind, "samples": list(p.samples),
                         "repetitions": p.repetitions, "blocks": p.blocks,
-                        **p.design.to_dict(), "response": _recorded(p)} for p in self.phases],
+                        **p.design.to_dict(), "response": _recorded(p),
+                        **({"adaptive": p.adaptive.to_dict()} if p.adaptive else {})}
+                       for p in self.phases],
             "samples": {sid: {"block": s.block, "factors": dict(s.factors),
                               "real": s.is_real, "rated": s.rated, "reference": s.reference,
                               "params": dict(s.params)}

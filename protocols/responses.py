@@ -28,7 +28,8 @@ from typing import Any
 from ._registry import Registry
 
 __all__ = ["Cell", "Wide", "Question", "Response", "response", "responses",
-           "register_response", "RATING", "ANSWER", "CHOICE", "CELL_TYPES", "WIDE_BY"]
+           "register_response", "RATING", "ANSWER", "CHOICE", "FORCED_CHOICE", "CELL_TYPES",
+           "WIDE_BY"]
 
 #: what a cell's text must be: a whole number, a number, any text, or names joined by
 #: ``sep`` (one per sample felt when ``count = "samples"``)
@@ -38,9 +39,10 @@ CELL_TYPES = ("integer", "number", "text", "names")
 AMONG = ("samples", "answer_choices")
 #: how an export makes one participant's cells of a response (one column per cell): per
 #: ``sample`` (the mean of ``value`` over the sample's repetitions), per ``repetition`` (the
-#: mean over the samples of one repetition), or per sample felt, ``chosen`` (the share of
-#: that sample's trials in which ``value`` named it)
-WIDE_BY = ("sample", "repetition", "chosen")
+#: mean over the samples of one repetition), per sample felt, ``chosen`` (the share of
+#: that sample's trials in which ``value`` named it), or per ``track`` of an adaptive phase
+#: (its threshold at the phase's criterion, fitted to ``value``: analysis.psychometric)
+WIDE_BY = ("sample", "repetition", "chosen", "track")
 
 
 @dataclass(frozen=True)
@@ -149,11 +151,19 @@ class Question:
     protocol : protocols.Protocol
     results : list of WindowResult
         The windows the participant is judged on, in the order of ``trial.samples``.
+    after : callable (bool) -> dict, optional
+        An adaptive trial: its procedure's state after a right (True) or wrong answer
+        (:meth:`protocols.SessionEngine.state_after`), which its row records.
     """
 
     trial: Any
     protocol: Any
     results: list
+    after: Callable[[bool], dict] | None = None
+
+    @property
+    def phase(self):
+        return next(p for p in self.protocol.phases if p.name == self.trial.phase)
 
 
 #: (responder, question, rng) -> (value, response time [s])
@@ -380,3 +390,49 @@ CHOICE = register_response(Response(
     texts={"choice": "Which felt more like touching a real object?",
            "choice_keys": "1 = the first        2 = the second"},
     marker=("answer",)))
+
+
+def _larger_row(value: Any, q: Question) -> dict:
+    s = q.trial.stimulus
+    n = len(q.trial.samples)
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= value < n:
+        raise ValueError(f"chose {value!r}, not one of the {n} samples felt")
+    correct = int(value) == s.larger
+    return {"answer": q.trial.samples[int(value)], "correct": int(correct),
+            **s.record(q.after(correct))}
+
+
+def _values(q: Question) -> tuple[float, ...]:
+    """The parameter the phase measures, of each sample the trial felt."""
+    name = q.phase.adaptive.parameter
+    return tuple(getattr(q.trial.sample_of(q.protocol, sid).scene.transient, name)
+                 for sid in q.trial.samples)
+
+
+FORCED_CHOICE = register_response(Response(
+    name="forced_choice", dv="forced_choice",
+    summary="which of two renderings had more of the phase's parameter (the comparison's "
+            "set by an adaptive procedure)",
+    cells=(Cell("answer", "", "the sample chosen as having more of the parameter asked about",
+                noun="choice", among="samples"),
+           _RT,
+           Cell("correct", "0/1", "1 when the sample chosen had the larger parameter",
+                type="integer", among=(0, 1), labels={"0": "wrong", "1": "right"}),
+           Cell("track", "", "the adaptive track: <standard>-<up|down>", noun="track"),
+           Cell("intensity", "the phase's units", "the intensity the procedure presented: "
+                "how far the comparison lay from the standard, in the phase's units "
+                "(linear, log10 ratio, or dB)", type="number", range=(0.0, None)),
+           Cell("state", "", "the procedure after the answer (JSON): next intensity, step "
+                "and reversals (staircase), or its estimate and credible interval (QUEST+); "
+                "catch trials say so")),
+    wide=Wide("correct", "track", "the phase's units",
+              "threshold of track {cell} at the phase's criterion", name="{cell}"),
+    ask=lambda r, q, rng: r.discriminate(q.trial, q.phase.adaptive.question, rng),
+    needs=None, options=("criterion", "function", "lapse_max"),
+    analysed="by a psychometric function fitted per track",
+    row=_larger_row,
+    scripted=lambda q, rng: (int(rng.integers(0, len(q.trial.samples))),
+                             float(rng.uniform(0.6, 2.0))),
+    simulated=lambda m, q, rng: m.judge_larger(q.phase.adaptive.parameter, _values(q), rng),
+    texts={"discriminate_keys": "1 = the first        2 = the second"},
+    marker=("answer", "correct", "intensity")))

@@ -72,7 +72,7 @@ _SHOWN_WHEN = {
     "reference": "references", "reference_detail": "references",
     "reference_which": "several", "reference_which_keys": "several",
     "surface": "surfaces", "choose": "surfaces", "tapped": "surfaces",
-    "switch_hint": "surfaces", "pair": "pairs",
+    "switch_hint": "surfaces", "pair": "two_windows",
     # each response's own texts: shown when a phase asks for it, or as it says
     **{k: r.shown_when.get(k, r.name) for r in map(response, responses()) for k in r.texts},
 }
@@ -95,6 +95,9 @@ def left_in_english(protocol) -> list[str]:
     several = any(phase_kind(ph.kind).surfaces and len(
         {protocol.samples[s].reference for s in ph.samples} - {None}) > 1 for ph in offered)
     shown = {"all", *(k.items for k in kinds), *(k.windows for k in kinds),
+             # "sample 1 of 2": a trial's two windows, a pair's or an adaptive trial's
+             *(("two_windows",) if any(k.items in ("pairs", "adaptive") for k in kinds)
+               else ()),
              *(k.response for k in kinds),
              *(("references",) if offered and any(
                  s.reference for s in protocol.samples.values()) else ()),

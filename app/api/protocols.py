@@ -118,8 +118,10 @@ def validate_protocol(protocol: str | Path, *, device: str | None = None,
         p = load_protocol(protocol)
     # the engine's own plan (any seed and counterbalance row plan as many trials)
     williams = any(ph.block_order == "williams" for ph in p.phases)
-    trials = len(SessionEngine(p, 0, "validate", 0 if williams else None).plan())
+    # (an adaptive phase's at its most: its tracks' caps and catch trials)
+    trials = SessionEngine(p, 0, "validate", 0 if williams else None).max_trials()
     note = english_note(p)
     return {"protocol": p.name, "source": p.source, "samples": len(p.samples),
-            "phases": len(p.phases), "trials": trials, "device": device,
+            "phases": len(p.phases), "trials": trials,
+            "adaptive": any(ph.adaptive is not None for ph in p.phases), "device": device,
             "libraries": libraries, "warnings": warnings, "notes": [note] if note else []}

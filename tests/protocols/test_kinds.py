@@ -53,7 +53,7 @@ SCALE = '[rating]\nmin = 1\nmax = 7\nquestion = "How real?"\n'
 
 def test_the_loader_offers_the_declared_kinds_and_asks_for_what_a_kind_needs():
     with pytest.raises(ProtocolError, match=r"phases\[0\]\.kind.*rated.*free.*identification"):
-        parse_protocol(MINI.replace("{kind}", "staircase"))
+        parse_protocol(MINI.replace("{kind}", "psi"))
     with pytest.raises(ProtocolError, match="an identification phase needs an \\[answer\\]"):
         parse_protocol(MINI.replace("{kind}", "identification"))
     assert SCALE in MINI
