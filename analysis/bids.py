@@ -89,6 +89,10 @@ BEH_COLUMNS = {
     "response_time": ("s", "from the answer screen's onset to the answer"),
     "answer": ("", "the participant's answer"),
     "correct": ("", "1 when the answer was right, else 0"),
+    "track": ("", "adaptive phases: the track (<standard>-<up|down>); n/a otherwise"),
+    "intensity": ("", "adaptive phases: the intensity presented, in the phase's units "
+                  "(log10 ratio, dB or the parameter's own; the task's sidecar gives them)"),
+    "state": ("", "adaptive phases: the procedure after the answer (JSON)"),
     "reason": ("", "why an attempt is not valid, in words"),
 }
 EXTRA_COLUMNS = {
@@ -483,6 +487,10 @@ def _top_level(out: Path, people: dict, tasks: dict) -> list[Path]:
         scale = _scale(meta)
         if scale:
             cols["rating"]["Levels"] = scale
+        units = [f"{ph['name']}: {ph['adaptive']['units']}" for ph in
+                 (meta.protocol.design or {}).get("phases") or [] if ph.get("adaptive")]
+        if units:  # an adaptive phase's intensity is in its own units
+            cols["intensity"]["Description"] += f" — {'; '.join(units)}"
         side = {"TaskName": task,
                 "TaskDescription": f"the protocol '{info['protocol']}' of hapticlab",
                 **cols}

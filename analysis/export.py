@@ -83,6 +83,12 @@ LONG_COLUMNS = {
     "scale": ("", "the rating scale, min-max"),
     "answer": ("", "the participant's answer"),
     "correct": ("0/1", "1 when the answer was right"),
+    "track": ("", "adaptive phases: the track (<standard>-<up|down>)"),
+    "intensity": ("the phase's units", "adaptive phases: the intensity presented"),
+    "state": ("", "adaptive phases: the procedure after the answer (JSON)"),
+    "reversal": ("0/1", "adaptive phases: 1 where the staircase reversed after this answer"),
+    "catch": ("0/1", "adaptive phases: 1 for a catch trial (at the catch intensity, not "
+                     "given to the procedure)"),
     "response_time": ("s", "from the answer screen's onset to the answer"),
     "n_taps": ("", "contacts in the trial's window"),
     "mean_tap_velocity": ("m/s", "mean incoming speed of the trial's taps"),
@@ -178,6 +184,12 @@ def _long(parts) -> pd.DataFrame:
         factors = list(phase.get("within", []))
         f["mean_tap_velocity"] = _mean_of_lists(f["tap_velocities"])
         f["rating_z"] = _z(f, phase)
+        if phase.get("adaptive"):  # what each state says, as columns any reader takes
+            from .thresholds import states
+
+            st = states(f)
+            f["reversal"] = [int(bool(s.get("reversal"))) for s in st]
+            f["catch"] = [int(bool(s.get("catch"))) for s in st]
         params = {sid: (v or {}).get("params") or {}
                   for sid, v in (_design.get("samples") or {}).items()}
         for name, col in (("frequency", "frequency_hz"), ("decay", "decay_per_s"),
@@ -207,6 +219,20 @@ def _chosen(rows: pd.DataFrame, value: str) -> pd.DataFrame:
     return pd.concat(parts, ignore_index=True)
 
 
+def _thresholds(rows: pd.DataFrame, phase: dict) -> pd.DataFrame:
+    """An adaptive phase's thresholds, one row per participant and track (as the report
+    fits them, without the bootstrap of their goodness of fit), with each participant's
+    group and device columns."""
+    from .thresholds import threshold_scores
+
+    fits = pd.DataFrame(threshold_scores(rows, phase, gof_samples=0)["fits"])
+    keep = [c for c in ("participant", "group", *DEVICE_COLUMNS) if c in rows]
+    people = rows[keep].drop_duplicates("participant").assign(
+        participant=lambda d: d["participant"].astype(str))
+    return fits[["participant", "track", "threshold"]].merge(people, on="participant",
+                                                              how="left")
+
+
 def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd.DataFrame, dict]:
     """One row per participant, one column per cell, as the phase's recorded response says
     (:data:`protocols.responses.WIDE_BY`); returns (table, column → meaning)."""
@@ -214,13 +240,17 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
     dv, cell = spec["value"], "repetition" if spec["by"] == "repetition" else "sample"
     if spec["by"] == "chosen":
         rows, dv = _chosen(rows, dv), "chosen"
+    elif spec["by"] == "track":
+        rows, dv, cell = _thresholds(rows, phase), "threshold", "track"
     vals = pd.to_numeric(rows[dv], errors="coerce")
     r = rows.assign(**{dv: vals}).dropna(subset=[dv])
     w = (r.groupby(["participant", cell], observed=True)[dv].mean().unstack(cell))
     present = set(r[cell])
     order = ([x for x in phase.get("samples", []) if x in present]  # the protocol's order
              + sorted(present - set(phase.get("samples", [])), key=str)
-             if cell == "sample" else sorted(present))
+             if cell == "sample" else
+             [t["name"] for t in (phase.get("adaptive") or {}).get("tracks", [])
+              if t["name"] in present] if cell == "track" else sorted(present))
     w = w.reindex(columns=order)
     normalized = phase.get("normalize") in ("zscore", "zscore_block")
     if normalized:  # the factorial ANOVA's dependent variable, beside the raw means
@@ -243,6 +273,11 @@ def _wide(design: dict, phase: dict, rows: pd.DataFrame, safe: bool) -> tuple[pd
     unit = spec["unit"]
     if response_columns(phase).get(spec["value"], {}).get("range") == "scale" and scale:
         unit = f"{unit} ({scale['min']}–{scale['max']})"
+    if cell == "track":  # an adaptive phase's thresholds: in its units, at its criterion
+        unit = (phase.get("adaptive") or {}).get("units", unit)
+        spec = {**spec, "meaning": spec["meaning"].replace(
+            "the phase's criterion",
+            f"{100 * (phase.get('fit') or {}).get('criterion', 0.75):g} % correct")}
     for c in order:
         name = spec["name"].format(cell=c)
         new = _safe(name) if safe else name
@@ -392,6 +427,15 @@ def export(data_dir: str | Path, out: str | Path, fmt: str = "long-csv",
                 _write_csv(w, p)
             written.append(p)
             book += _write_codebook(w, meaning, name)
+            if phase.get("adaptive") and fmt != "spss":  # and its trials, one by one
+                trials = _long([(design, phase, rows)])
+                if fmt == "jasp":
+                    trials.columns = [_safe(c) for c in trials.columns]
+                name = f"trials_{_safe(design['protocol'])}_{_safe(phase['name'])}.csv"
+                p = out / name
+                _write_csv(trials, p)
+                written.append(p)
+                book += _write_codebook(trials, _long_entries(trials.columns, answers), name)
         if fmt == "spss":  # the trials too, for mixed models in SPSS
             long = _long(parts)
             long.columns = [_safe(c) for c in long.columns]

@@ -11,7 +11,7 @@ import pandas as pd
 from .session_format import inside_session
 
 __all__ = ["rating_means", "rating_pmatrix", "factorial_interactions", "confusion", "accel_traces",
-           "session_length", "figure_prefix"]
+           "session_length", "figure_prefix", "staircases", "psychometric"]
 
 
 def _plt():
@@ -250,3 +250,110 @@ def session_length(a: dict, out: Path) -> list[str]:
                  "these data)", fontsize=10)
     fig.tight_layout()
     return _save(fig, out, f"{_name(a)}_session_length")
+
+
+def _track_data(a: dict, data: pd.DataFrame) -> pd.DataFrame:
+    from .thresholds import track_rows
+
+    d = data[(data["design_key"] == a["design_key"]) & (data["phase"] == a["phase"])]
+    return track_rows(d)
+
+
+def _per_track(a: dict, data: pd.DataFrame):
+    """(result, the phase's trials, its tracks, figure, an axis per track), or None when
+    there is nothing to draw."""
+    r = a["result"]
+    d = _track_data(a, data)
+    names = [g["track"] for g in r["group"]]
+    if d.empty or not names:
+        return None
+    fig, axes = _track_axes(_plt(), len(names))
+    return r, d, names, fig, axes
+
+
+def _track_axes(plt, n: int, width: float = 4.2, height: float = 3.2):
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(width * cols, height * rows), squeeze=False)
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    return fig, list(axes.ravel())
+
+
+def staircases(a: dict, data: pd.DataFrame, out: Path) -> list[str]:
+    """Each track's intensity trial by trial: a line per participant, right answers
+    filled, wrong ones open, reversals ringed (catch trials left out)."""
+    got = _per_track(a, data)
+    if got is None:
+        return []
+    r, d, names, fig, axes = got
+    for ax, name in zip(axes, names, strict=False):
+        for _pid, g in d[d["track"] == name].groupby("participant", sort=True):
+            g = g.reset_index(drop=True)
+            proc = g[~g["catch"]]
+            n = np.arange(1, len(proc) + 1)
+            line, = ax.plot(n, proc["intensity"], lw=0.8, alpha=0.7)
+            c = line.get_color()
+            right = proc["correct"].to_numpy() == 1
+            ax.scatter(n[right], proc["intensity"].to_numpy()[right], s=14, color=c)
+            ax.scatter(n[~right], proc["intensity"].to_numpy()[~right], s=14,
+                       facecolors="none", edgecolors=c)
+            rev = proc["reversal"].to_numpy()
+            ax.scatter(n[rev], proc["intensity"].to_numpy()[rev], s=60, facecolors="none",
+                       edgecolors="k", linewidths=0.6)
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("trial of the track")
+        ax.set_ylabel(f"intensity ({r['units']})")
+    fig.suptitle(f"{a['id']}: {r['parameter']} ({r['procedure']})", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, out, figure_prefix(a) + "tracks")
+
+
+def psychometric(a: dict, data: pd.DataFrame, out: Path) -> list[str]:
+    """Per track: proportion correct at each intensity (area ∝ trials there, all
+    participants pooled), each participant's fitted function, the criterion, and the
+    group's mean threshold."""
+    from .psychometric import levels
+
+    got = _per_track(a, data)
+    if got is None:
+        return []
+    r, d, names, fig, axes = got
+    for ax, name in zip(axes, names, strict=False):
+        g = d[d["track"] == name]
+        lv = levels(g["intensity"], g["correct"])
+        ax.scatter(lv["x"], lv["k"] / lv["n"], s=12 * lv["n"], alpha=0.45, color="0.3",
+                   edgecolors="none")
+        lo, hi = float(lv["x"].min()), float(lv["x"].max())
+        xs = np.geomspace(max(lo, 1e-9), hi, 200) if r["function"] == "weibull" and lo > 0 \
+            else np.linspace(lo, hi, 200)
+        for f in r["fits"]:
+            if f["track"] != name:
+                continue
+            ax.plot(xs, _curve(f, r, xs), lw=0.8, alpha=0.8)
+        ax.axhline(r["criterion"], color="0.6", lw=0.6)
+        mean = next(gr["threshold_mean"] for gr in r["group"] if gr["track"] == name)
+        if mean is not None:
+            ax.axvline(mean, color="k", ls="--", lw=0.8)
+        if r["function"] == "weibull" and lo > 0:
+            from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+            ax.set_xscale("log")  # plain numbers at the decades, no crowded minor labels
+            ax.xaxis.set_major_formatter(ScalarFormatter())
+            ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_ylim(0.35, 1.03)
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel(f"intensity ({r['units']})")
+        ax.set_ylabel("proportion correct")
+    fig.suptitle(f"{a['id']}: {r['parameter']}, criterion {100 * r['criterion']:g} %",
+                 fontsize=10)
+    fig.tight_layout()
+    return _save(fig, out, figure_prefix(a) + "psychometric")
+
+
+def _curve(fit: dict, r: dict, xs: np.ndarray) -> np.ndarray:
+    """A participant's fitted function at ``xs``, from its report entry (m and width are
+    kept there on F's axis)."""
+    from .psychometric import psi
+
+    return psi(r["function"], xs, fit["m"], fit["width"], 0.5, fit["lapse"])

@@ -595,17 +595,22 @@ def build_parser() -> argparse.ArgumentParser:
                    "factorial (why the factorial and identification findings differ, and "
                    "what would change them), "
                    "tick (the firmware's servo tick on the Cortex-M4), scale (analyze and "
-                   "export against 10³…10⁶ rows: time and peak memory)")
+                   "export against 10³…10⁶ rows: time and peak memory), "
+                   "thresholds (bias, CI coverage and trials of the staircase and QUEST+ "
+                   "against a simulated observer's known JND)")
     b.add_argument("--json", action="store_true", help="print JSON rows")
     b.add_argument("--repeats", type=int, default=BENCH_OPTIONS["repeats"],
                    help="timing repeats (median reported)")
     b.add_argument("--fuzz", type=int, default=BENCH_OPTIONS["fuzz"],
                    help="link: mutated frames to push through the decoder")
     b.add_argument("--kills", type=int, default=BENCH_OPTIONS["kills"], help="crash: kill -9 count")
+    b.add_argument("--sessions", type=int, default=BENCH_OPTIONS["sessions"],
+                   help="thresholds: simulated sessions per procedure")
     b.add_argument("--points", default=None, help="crash: kill after every write point "
                    "('all') or the listed ones ('3,17')")
     b.add_argument("--seeds", default=None, help="orderings: study seeds (default "
-                   "1,2,3,4,5); causes, factorial: device seeds (default 1,2)")
+                   "1,2,3,4,5); causes, factorial: device seeds (default 1,2); thresholds: "
+                   "the study seed (default 1)")
     b.add_argument("--firmware", choices=("host", "qemu"), default=None,
                    help="link: measure the reference firmware (against the Python emulator)")
     b.add_argument("--load", default=None, help="link: competing CPU-bound processes, e.g. "

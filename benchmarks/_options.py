@@ -18,7 +18,8 @@ __all__ = ["READ_BY", "LOAD_ONLY", "check_options", "parse_points"]
 #: option → the benchmarks that read it (``json`` is read by every one)
 READ_BY = {"repeats": ("accuracy", "analysis", "demo", "link", "scale", "sim"),
            "fuzz": ("link",), "kills": ("crash",), "points": ("crash",),
-           "seeds": ("causes", "factorial", "orderings"), "firmware": ("link",),
+           "seeds": ("causes", "factorial", "orderings", "thresholds"),
+           "sessions": ("thresholds",), "firmware": ("link",),
            "load": ("link",), "targets": ("link",), "seconds": ("link",),
            "baseline": ("link",), "no_window": ("link",), "rows": ("scale",)}
 #: options of ``link`` that only its ``--load`` run reads
@@ -112,6 +113,7 @@ def check_options(what: str, options: Mapping[str, Any], defaults: Mapping[str, 
     _whole("repeats", opts["repeats"], 1)
     _whole("fuzz", opts["fuzz"], 0)
     _whole("kills", opts["kills"], 1)
+    _whole("sessions", opts["sessions"], 1)
     if opts["points"] is not None:
         parse_points(opts["points"])
     if opts["seeds"] is not None:

@@ -142,7 +142,8 @@ def adaptive_design(cx, path: tuple, p: Mapping, kind, ids: tuple[str, ...], sam
     catch = float(cx.number((*path, "catch"), p.get("catch", 0.0), minimum=0, maximum=0.5))
     design = AdaptiveDesign(
         parameter=parameter, units=units, procedure=proc,
-        tracks=tuple(Track(s, d) for s in ids for d in dirs),
+        tracks=tuple(Track(s, d, float(getattr(samples[s].scene.transient, parameter)))
+                     for s in ids for d in dirs),
         max_trials=int(cx.number((*path, "max_trials"), p.get("max_trials", 60), minimum=1,
                                  maximum=2000, integer=True)),
         catch=catch,

@@ -376,11 +376,12 @@ class QuestState:
 # ---------------------------------------------------------------------- a phase's design
 @dataclass(frozen=True)
 class Track:
-    """One procedure run within a phase: on ``standard`` (a sample id), the comparison
-    ``direction`` of it; named ``<standard>-<direction>``."""
+    """One procedure run within a phase: on ``standard`` (a sample id, whose parameter is
+    ``value``), the comparison ``direction`` of it; named ``<standard>-<direction>``."""
 
     standard: str
     direction: str = "up"
+    value: float | None = None
 
     @property
     def name(self) -> str:
@@ -434,8 +435,8 @@ class AdaptiveDesign:
 
     def to_dict(self) -> dict:
         return {"parameter": self.parameter, "units": self.units,
-                "tracks": [{"name": t.name, "standard": t.standard, "direction": t.direction}
-                           for t in self.tracks],
+                "tracks": [{"name": t.name, "standard": t.standard, "direction": t.direction,
+                            "value": t.value} for t in self.tracks],
                 "max_trials": self.max_trials, "catch": self.catch,
                 "catch_intensity": self.catch_intensity, "question": self.question,
                 "presentation": self.presentation, **self.procedure.to_dict()}

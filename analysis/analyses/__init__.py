@@ -9,7 +9,8 @@ registered type that :attr:`~analysis.analyses.base.AnalysisType.matches` it:
 - ``identification`` (:mod:`.identification`): ``dv = "answer"``;
 - ``oneway`` (:mod:`.oneway`): ratings, ``within = ["sample"]``;
 - ``factorial`` (:mod:`.factorial`): ratings over two or three factors;
-- ``comparison`` (:mod:`.comparison`): ``dv = "choice"``, paired comparisons.
+- ``comparison`` (:mod:`.comparison`): ``dv = "choice"``, paired comparisons;
+- ``threshold`` (:mod:`.threshold`): ``dv = "forced_choice"``, adaptive phases' thresholds.
 
 A new type is a module that builds an ``AnalysisType`` and a line in :data:`TYPES`.
 """
@@ -27,12 +28,13 @@ from .comparison import COMPARISON
 from .factorial import FACTORIAL
 from .identification import IDENTIFICATION
 from .oneway import ONEWAY
+from .threshold import THRESHOLD
 
 __all__ = ["AnalysisType", "ResultNotReported", "TYPES", "analysis_for", "analysis_type",
            "analyse_phase", "analyse_recorded", "report_entry", "save_figures"]
 
 #: the analysis types, in the order a phase design is matched against them
-TYPES: tuple[AnalysisType, ...] = (IDENTIFICATION, ONEWAY, FACTORIAL, COMPARISON)
+TYPES: tuple[AnalysisType, ...] = (IDENTIFICATION, ONEWAY, FACTORIAL, COMPARISON, THRESHOLD)
 
 
 def analysis_for(phase: dict) -> AnalysisType:

@@ -387,6 +387,33 @@ def test_a_comparison_titles_its_two_windows_and_takes_one_key_of_1_or_2(xdispla
         scr.close()
 
 
+def test_an_adaptive_trial_asks_the_phases_question_and_takes_1_or_2(xdisplay, shots):
+    """The threshold kinds (issue 57): the two windows are numbered as a pair's, the
+    question is the phase's (what the parameter is, in words), and the answer one press of
+    1 or 2; screenshots of the tap and the question."""
+    p = load_protocol("thresholds")
+    phase = next(ph for ph in p.phases if ph.name == "frequency")
+    trial = SimpleNamespace(phase="frequency", samples=("wood@125.893", "wood"),
+                            trial_index=9, attempt=1, kind="staircase")
+    scr = make(p, Keys([], ["space", "n"], [], ["2"]))
+    try:
+        assert scr._tap_title(trial, "wood@125.893") == "Tap · sample 1 of 2"
+        assert scr._tap_title(trial, "wood") == "Tap · sample 2 of 2"
+        scr.screenshot(shots / "threshold-tap.png", text=scr._tap_title(trial, "wood"),
+                       progress=0.4)
+        k, rt = scr.discriminate(trial, phase.adaptive.question, None)
+        assert k == 1 and rt >= 0
+        assert scr.drawn_text[:2] == ["Which vibrated faster (the higher pitch)?",
+                                      "1 = the first        2 = the second"]
+        scr.screenshot(shots / "threshold-question.png", text=phase.adaptive.question,
+                       small=scr.t("discriminate_keys"))
+        for name in ("threshold-tap.png", "threshold-question.png"):
+            std, _ = image_stats(shots / name)
+            assert std > 5  # text was drawn, not a blank window
+    finally:
+        scr.close()
+
+
 def test_the_screen_log_has_a_line_per_screen_and_one_where_keys_start_to_count(
         xdisplay, tmp_path, monkeypatch):
     """HAPTICLAB_SCREEN_LOG: a line when what the screen says changes, and one on the first

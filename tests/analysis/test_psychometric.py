@@ -1,0 +1,123 @@
+"""Psychometric fits (issue 57, item 3) against psignifit 4 on the same data.
+
+psignifit 4 (Schütt et al. 2016; PyPI ``psignifit``) is Bayesian: its MAP estimate equals
+the maximum-likelihood fit when its priors are flat within the same bounds and its
+overdispersion η is fixed at 0. Each reference value is computed in the test by the call
+beside it::
+
+    psignifit.psignifit(np.c_[levels, k, n], sigmoid=SIGMOID, experiment_type="2AFC",
+                        fixed_parameters={"eta": 0.0}, bounds={"lambda": (0, 0.06)},
+                        priors=FLAT (1 inside the bounds, 0 outside), estimate_type="MAP")
+
+with the Weibull fitted by psignifit's ``weibull`` on ln x (as its documentation asks).
+Tolerances, stated: thresholds at 75 % and 85 % and psignifit's threshold m within 0.2 %
+(relative), widths within 0.5 %, lapse rates within 0.002; and our likelihood at least
+psignifit's (ours is the maximum; where they differ it is psignifit's optimizer that
+stopped short, by at most 0.3 % in width on these data).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from analysis.psychometric import FUNCTIONS, deviance, levels, psi, psychometric_fit
+
+psignifit = pytest.importorskip("psignifit", reason="`make test` installs the test extra")
+
+SIGMOID = {"weibull": "weibull", "normal": "norm", "logistic": "logistic"}
+
+
+def _adaptive():
+    """A 3-down/1-up staircase's trials as a simulated observer answered them (seed fixed;
+    many intensities, few trials each, a lapse)."""
+    from benchmarks.thresholds import _observer, _protocol, simulate_track
+
+    run = simulate_track(_protocol("staircase"), _observer(7, 3), 11)
+    return np.asarray(run["x"]), np.asarray(run["correct"])
+
+
+def _blocks(levels_, counts, n):
+    x = np.repeat(levels_, n)
+    k = np.concatenate([np.r_[np.ones(c), np.zeros(n - c)] for c in counts])
+    return x, k
+
+
+DATA = {
+    "adaptive": _adaptive,
+    "blocks": lambda: _blocks([0.02, 0.05, 0.1, 0.2, 0.4], (10, 12, 15, 19, 20), 20),
+    "lapses": lambda: _blocks([1.0, 2.0, 3.0, 4.0, 6.0, 8.0], (8, 8, 11, 13, 14, 14), 15),
+}
+
+
+def _box(lo, hi):
+    return lambda v: ((np.asarray(v) >= lo) & (np.asarray(v) <= hi)).astype(float)
+
+
+def _psignifit(x, k, function):
+    lv = levels(x, k)
+    u = np.log(lv["x"]) if function == "weibull" else lv["x"]
+    span = float(u.max() - u.min())
+    return psignifit.psignifit(
+        np.c_[u, lv["k"], lv["n"]], sigmoid=SIGMOID[function], experiment_type="2AFC",
+        fixed_parameters={"eta": 0.0}, bounds={"lambda": (0.0, 0.06)},
+        priors={"threshold": _box(float(u.min()) - span, float(u.max()) + span),
+                "width": _box(1e-9, 20 * span), "lambda": _box(0.0, 0.06)},
+        estimate_type="MAP", verbose=False), lv
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # psignifit's log(0) at its grid's edge
+@pytest.mark.parametrize("function", FUNCTIONS)
+@pytest.mark.parametrize("data", sorted(DATA))
+def test_the_fit_is_psignifits_map_under_flat_priors(data, function):
+    x, k = DATA[data]()
+    ref, lv = _psignifit(x, k, function)
+    est = ref.get_parameter_estimate()
+    back = math.exp if function == "weibull" else (lambda v: v)
+    for crit in (0.75, 0.85):
+        ours = psychometric_fit(x, k, function=function, criterion=crit, lapse_max=0.06,
+                                gof_samples=0)
+        theirs = back(float(ref.threshold(crit, return_ci=False)))
+        assert ours["threshold"] == pytest.approx(theirs, rel=2e-3), crit
+        assert ours["criterion"] == crit
+    assert ours["m"] == pytest.approx(est["threshold"], rel=2e-3, abs=1e-6)
+    assert ours["width"] == pytest.approx(est["width"], rel=5e-3)
+    assert ours["lapse"] == pytest.approx(est["lambda"], abs=2e-3)
+    # ours is the maximum: psignifit's estimate is no likelier under the same model
+    p_ref = psi(function, lv["x"], est["threshold"], est["width"], 0.5, est["lambda"])
+    ll_ref = float(np.sum(lv["k"] * np.log(p_ref) + (lv["n"] - lv["k"]) * np.log1p(-p_ref)))
+    assert ours["loglik"] >= ll_ref - 1e-6
+
+
+def test_the_interval_holds_the_threshold_and_narrows_with_trials():
+    x, k = DATA["blocks"]()
+    one = psychometric_fit(x, k, gof_samples=0)
+    four = psychometric_fit(np.tile(x, 4), np.tile(k, 4), gof_samples=0)
+    assert one["ci_low"] < one["threshold"] < one["ci_high"] and one["ci_note"] == ""
+    assert four["threshold"] == pytest.approx(one["threshold"], rel=1e-3)  # same proportions
+    assert four["ci_high"] - four["ci_low"] < 0.6 * (one["ci_high"] - one["ci_low"])
+    # the interval's ends are where the profile likelihood drops by χ²₁(.95)/2 = 1.92
+    lo = psychometric_fit(x, k, criterion=0.75, gof_samples=0, alpha=0.05)
+    assert lo["ci_level"] == 0.95
+
+
+def test_deviance_is_zero_for_a_saturated_fit_and_the_bootstrap_is_seeded():
+    assert deviance([3, 5], [10, 10], [0.3, 0.5]) == pytest.approx(0.0, abs=1e-12)
+    assert deviance([0, 10], [10, 10], [0.5, 0.5]) == pytest.approx(2 * 10 * math.log(2) * 2)
+    x, k = DATA["blocks"]()
+    a = psychometric_fit(x, k, gof_samples=9, seed=4)
+    b = psychometric_fit(x, k, gof_samples=9, seed=4)
+    assert a["gof_p"] == b["gof_p"] and 0 < a["gof_p"] <= 1 and a["seed"] == 4
+
+
+def test_what_cannot_be_fitted_is_said():
+    with pytest.raises(ValueError, match="two intensities at least"):
+        psychometric_fit([0.1, 0.1], [1, 0], gof_samples=0)
+    with pytest.raises(ValueError, match="above 0 only"):
+        psychometric_fit([-0.1, 0.2, 0.3], [0, 1, 1], gof_samples=0)
+    with pytest.raises(ValueError, match="function must be one of"):
+        psychometric_fit([0.1, 0.2], [0, 1], function="gompertz", gof_samples=0)
+    # a criterion the fitted function never reaches (above 1 − lapse): no threshold, said so
+    x, k = DATA["lapses"]()
+    r = psychometric_fit(x, k, criterion=0.97, gof_samples=0)
+    assert r["threshold"] is None and r["ci_low"] is None and "does not reach" in r["ci_note"]
