@@ -26,7 +26,7 @@ observer's true threshold at 75 %:
 
 Every session's observer and answers come from ``SeedSequence([seed, k])`` (``--seeds``:
 the study seed, default 1); ``--sessions`` sessions per procedure (default 200; the cap
-sweep runs a third as many per cap).
+sweep runs a third as many per cap, three at least).
 """
 
 from __future__ import annotations
@@ -157,7 +157,7 @@ def main(args) -> int:
     seed = parse_seeds(getattr(args, "seeds", None), [1])[0]
     n = int(getattr(args, "sessions", 200))
     cov = [coverage(p, n, seed) for p in PROCEDURES]
-    prec = [precision(p, max(10, n // 3), seed) for p in PROCEDURES]
+    prec = [precision(p, max(3, n // 3), seed) for p in PROCEDURES]
     if args.json:
         emit({"seed": seed, "sessions": n, "coverage": cov, "precision": prec}, True)
         return 0
