@@ -20,7 +20,9 @@ def test_a_phase_design_finds_its_type():
     assert analysis_for({"dv": "rating", "within": ["sample"]}).name == "oneway"
     assert analysis_for({"dv": "rating", "within": ["frequency", "decay"]}).name == "factorial"
     assert analysis_for({"dv": "choice", "within": []}).name == "comparison"
-    assert [t.name for t in TYPES] == ["identification", "oneway", "factorial", "comparison"]
+    assert analysis_for({"dv": "forced_choice", "within": []}).name == "threshold"
+    assert [t.name for t in TYPES][:4] == ["identification", "oneway", "factorial",
+                                           "comparison"]
     with pytest.raises(KeyError, match="identification, oneway, factorial"):
         analysis_type("staircase")
 
