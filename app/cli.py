@@ -70,13 +70,14 @@ def _protocol_show(args: argparse.Namespace) -> int:
 
     plan = protocol_plan(args.file, seed=args.seed, participant=args.participant, row=args.row)
     phases, estimate = plan["phases"], plan["duration_estimate"]
-    n = sum(len(ph["trials"]) for ph in phases)
+    n = sum(len(ph["trials"]) + ph.get("adaptive", {}).get("max_trials", 0) for ph in phases)
     windows, tapping = estimate["windows"], estimate["tapping_s"]
     if args.json:
         print(json.dumps(plan, indent=2))
         return 0
     print(f"{plan['title']} ({plan['source']}, sha256 {plan['sha256'][:12]}…), seed {args.seed}")
-    print(f"{_plural(n, 'trial')}, {_plural(windows, 'tapping window')} of "
+    most = "at most " if any("adaptive" in ph for ph in phases) else ""
+    print(f"{most}{_plural(n, 'trial')}, {_plural(windows, 'tapping window')} of "
           f"{estimate['window_s']:g} s: ≈ {estimate['total_s'] / 60:.0f} min without redraws "
           f"({tapping / 60:.1f} min tapping + {estimate['overhead_per_trial_s']:g} s per trial "
           "to place and answer, "
@@ -89,6 +90,13 @@ def _protocol_show(args: argparse.Namespace) -> int:
             + (f" per {design['by']}" if design["by"] else ""))
         if ph["no_repeat"]:
             what += "; never the same sample twice in a row"
+        if "adaptive" in ph:
+            a = ph["adaptive"]
+            print(f"\n{ph['name']} (at most {_plural(a['max_trials'], 'trial')}, made from the "
+                  f"answers; {what})\n       {a['parameter']} in {a['units']} units, tracks "
+                  f"{', '.join(a['tracks'])} interleaved; place: a placeholder block, "
+                  "swapped every trial (both renderings are virtual)")
+            continue
         print(f"\n{ph['name']} ({_plural(len(ph['trials']), 'trial')}; {what})")
         previous = None
         for i, t in enumerate(ph["trials"], 1):

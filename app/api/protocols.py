@@ -37,7 +37,9 @@ def protocol_plan(protocol: str | Path, *, seed: int, participant: str = "P00",
     dict
         ``protocol``, ``title``, ``source``, ``sha256``, ``seed``, ``participant``,
         ``phases`` (each its ``name``, ``no_repeat`` and ``trials``: sample or surfaces,
-        item key, placement, block), ``design`` and ``duration_estimate`` (``windows``,
+        item key, placement, block; an adaptive phase, whose trials follow the answers,
+        ``adaptive``: its ``tracks``, ``parameter``, ``units`` and ``max_trials``, counted at
+        that most in the estimate), ``design`` and ``duration_estimate`` (``windows``,
         ``window_s``, ``tapping_s`` [s], ``overhead_per_trial_s`` [s] and ``total_s`` [s]).
     """
     from protocols import SessionEngine, load_protocol
@@ -46,18 +48,26 @@ def protocol_plan(protocol: str | Path, *, seed: int, participant: str = "P00",
     engine = SessionEngine(p, seed, participant, row)
     phases: list[dict] = []
     no_repeat = {ph.name: ph.no_repeat for ph in p.phases}
+    adaptive = {ph.name: ph.adaptive for ph in p.phases if ph.adaptive is not None}
     for item, place in zip(engine.plan(), engine.placements(), strict=True):
         if not phases or phases[-1]["name"] != item.phase:
             phases.append({"name": item.phase, "no_repeat": no_repeat[item.phase],
                            "trials": []})
+        if item.marker:  # made from the answers: its tracks and its most trials, two windows each
+            a = adaptive[item.phase]
+            phases[-1]["adaptive"] = {"tracks": [tr.name for tr in a.tracks],
+                                      "parameter": a.parameter, "units": a.units,
+                                      "max_trials": a.max_total()}
+            continue
         trial = {"sample": item.samples[0] if len(item.samples) == 1 else list(item.samples),
                  "item": item.key, "placement": place}
         if item.block is not None:
             trial["block"] = item.block
         phases[-1]["trials"].append(trial)
-    n = sum(len(ph["trials"]) for ph in phases)
+    most = sum(ph["adaptive"]["max_trials"] for ph in phases if "adaptive" in ph)
+    n = sum(len(ph["trials"]) for ph in phases) + most
     windows = sum(len(t["sample"]) if isinstance(t["sample"], list) else 1
-                  for ph in phases for t in ph["trials"])
+                  for ph in phases for t in ph["trials"]) + 2 * most
     tapping = windows * p.window.duration
     return {"protocol": p.name, "title": p.title, "source": p.source, "sha256": p.sha256,
             "seed": seed, "participant": participant, "phases": phases, "design": p.design(),
