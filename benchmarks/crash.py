@@ -57,14 +57,17 @@ def _cmd(args: list[str]) -> list[str]:
 
 def kill_and_resume(kills: int, seed: int = 1, protocol: str = "realism", rng_seed: int = 0,
                     workdir: Path | None = None, delay: tuple[float, float] = (0.4, 2.0),
-                    traces: str = "contacts") -> dict:
+                    traces: str = "contacts", responder: str = "scripted") -> dict:
     """Run the harness; returns counts and whether every final sequence matched.
 
     Sessions are repeated (each in its own folder, each compared with the reference) until
-    ``kills`` kills have landed.
+    ``kills`` kills have landed. ``responder``: ``scripted`` (a dry run) or ``simulated``
+    (the simulated participant on the simulated device, whose resume replays what it felt).
     """
     work = Path(workdir or tempfile.mkdtemp(prefix="hapticlab-crash-"))
-    common = ["--participant", "P01", "--dry-run", "--seed", str(seed),
+    who = ["--dry-run"] if responder == "scripted" else ["--device", "sim", "--responder",
+                                                          responder]
+    common = ["--participant", "P01", *who, "--seed", str(seed),
               "--no-audio", "--quiet", "--traces", traces]
     ref_dir = work / "reference"
     subprocess.run(_cmd(["run", protocol, "--data", str(ref_dir), *common]), check=True,

@@ -16,9 +16,15 @@ def test_a_killed_adaptive_session_resumes_its_procedures_exactly(tmp_path):
     """kill -9 at random moments, then resume: every row kept, and the final rows — each
     trial's track, intensity and procedure state among them — those of the uninterrupted
     session (benchmarks.crash compares them column by column)."""
-    r = kill_and_resume(4, protocol=str(JND_MINI), workdir=tmp_path, delay=(0.5, 3.0),
-                        traces="none")
+    r = kill_and_resume(4, protocol=str(JND_MINI), workdir=tmp_path / "scripted",
+                        delay=(0.5, 3.0), traces="none")
     assert r["kills"] == 4 and r["lost_rows_events"] == 0
+    assert r["sequence_matches"], r["mismatched"]
+    # the simulated participant: its resume replays the recorded trials first, each
+    # against its row (intensity and state included), then goes on
+    r = kill_and_resume(2, protocol=str(JND_MINI), workdir=tmp_path / "simulated",
+                        delay=(1.0, 4.0), traces="none", responder="simulated")
+    assert r["kills"] == 2 and r["lost_rows_events"] == 0
     assert r["sequence_matches"], r["mismatched"]
 
 
