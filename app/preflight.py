@@ -249,6 +249,12 @@ def check_answers(protocol) -> Check:
             unreachable.append(f"answers {missing} have no number key (at most 9 choices)")
         parts.append("names: " + ", ".join(f"{k} = {c}" for k, c in keys.items()
                                             if not k.startswith("num_")))
+    from protocols.kinds import phase_kind
+
+    # answers that need no table (a choice between the samples felt): said by what they are
+    kinds = [phase_kind(ph.kind) for ph in protocol.phases]
+    parts += [f"{r.name}: {r.summary}" for r in {
+        k.asks.name: k.asks for k in kinds if k.asks is not None and k.needs is None}.values()]
     if unreachable:
         return Check("answers", False, "; ".join(unreachable), "set [rating] entry = \"typed\" "
                      "or \"slider\", or name fewer choices")
