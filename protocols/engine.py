@@ -422,12 +422,12 @@ class SessionEngine:
 
     @staticmethod
     def _copy(st: _State) -> _State:
-        import copy
-
+        rng = np.random.Generator(type(st.rng.bit_generator)())
+        rng.bit_generator.state = st.rng.bit_generator.state
         return dataclasses.replace(
             st, queue=list(st.queue), attempts=dict(st.attempts), failures=dict(st.failures),
             finished=dict(st.finished), tracks={k: v.copy() for k, v in st.tracks.items()},
-            rng=copy.deepcopy(st.rng))
+            rng=rng)
 
     def _replay(self, log: Iterable[Attempt]) -> _State:
         """The session's state after ``log``. The state after the last log replayed is kept,
@@ -443,7 +443,7 @@ class SessionEngine:
             self._take(st, n, log[n])
         self._fill(st)
         st.entries = len(log)
-        self._last = (log, self._copy(st))
+        self._last = (log, st)  # the callers only read it; a longer log continues a copy
         return st
 
     def _take(self, st: _State, n: int, entry: Attempt) -> None:

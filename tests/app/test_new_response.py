@@ -18,7 +18,7 @@ from protocols import kinds, parse_protocol, responses
 from protocols.kinds import PhaseKind
 from protocols.responses import Cell, Response, Wide
 
-pytestmark = [pytest.mark.slow]  # two short simulated sessions on the simulated device
+pytestmark = [pytest.mark.integration, pytest.mark.slow]  # two short simulated sessions (git)
 
 
 def _row(value, q):
