@@ -107,6 +107,9 @@ LONG_COLUMNS = {
 }
 
 
+#: the long file's columns of adaptive phases, left out of an export without one
+_ADAPTIVE_COLUMNS = ("track", "intensity", "state", "reversal", "catch")
+
 #: what the export adds to a response column's recorded meaning: the analyses it feeds
 _USES = {"rating": "the dependent variable of the one-way analyses (ANOVA, t-tests, Wilcoxon, "
                    "Friedman, mixed and ordinal models)"}
@@ -203,6 +206,8 @@ def _long(parts) -> pd.DataFrame:
     out = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=[*LONG_COLUMNS])
     if "group" in out and not out["group"].fillna("").astype(str).str.len().gt(0).any():
         out = out.drop(columns="group")  # no participant has a group: no empty column
+    if not any(phase.get("adaptive") for _d, phase, _r in parts):  # no adaptive phase: none
+        out = out.drop(columns=[c for c in _ADAPTIVE_COLUMNS if c in out])
     return out.sort_values(["protocol", "phase", "participant", "session", "trial_index"],
                            kind="stable").reset_index(drop=True)
 

@@ -349,6 +349,8 @@ def _identity(meta: SessionRecord, rows: list[list[str]], path: Path) -> dict[st
     design = meta.protocol.design or {}
     phases = {p["name"] for p in design.get("phases", [])}
     samples = set(design.get("samples") or {})
+    # an adaptive phase's comparison is its standard made for one trial: <standard>@<value>
+    adaptive = {p["name"] for p in design.get("phases", []) if p.get("adaptive")}
     first = ""
     named = {r[_PID] for r in rows}
     for line, r in enumerate(rows, start=2):
@@ -360,7 +362,10 @@ def _identity(meta: SessionRecord, rows: list[list[str]], path: Path) -> dict[st
             return {"identity": f"{path}:{line}: phase {r[_PHASE]!r} is not a phase of "
                                 f"protocol {meta.protocol.name!r} as session.json records it",
                     "identity_of": "protocol", "rows_participant": ""}
-        if samples and any(x not in samples for x in r[_SAMPLE].split("+")):
+        felt = r[_SAMPLE].split("+")
+        if r[_PHASE] in adaptive:
+            felt = [x.split("@", 1)[0] for x in felt]
+        if samples and any(x not in samples for x in felt):
             return {"identity": f"{path}:{line}: sample {r[_SAMPLE]!r} is not a sample of "
                                 f"protocol {meta.protocol.name!r} as session.json records it",
                     "identity_of": "protocol", "rows_participant": ""}
