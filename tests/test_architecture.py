@@ -59,6 +59,7 @@ def _source_files():
             yield f
 
 
+@pytest.mark.slow  # reads every module's imports, the plugin's too
 def test_psychopy_is_imported_in_app_and_the_plugin_alone():
     """PsychoPy is imported by app/ and by the plugin's package, nowhere else; and none of
     our packages imports the plugin (it depends on hapticlab, never the other way)."""

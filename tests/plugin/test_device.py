@@ -163,6 +163,7 @@ def test_scenes_from_samples_files_and_fields(tmp_path):
         fields_scene("c", 400.0, "wobble")
 
 
+@pytest.mark.integration  # saving the trace looks for a library with ldconfig
 def test_a_contact_records_its_row_and_its_trace_in_hapticlabs_format(sim, tmp_path):
     from psychopy import core, data
 
