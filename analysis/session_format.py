@@ -503,6 +503,10 @@ class SessionRecord(_Record):
         The words a complete session ended with.
     lsl : dict or None
         The markers' stream and each run of it.
+    discrimination : dict or None
+        A simulated participant's JNDs as measured (Weber fractions at 75 % correct by
+        transient parameter) when it drew its own around them instead of the assumed ones
+        (app.observer); None: the assumed ones.
     """
 
     protocol: ProtocolRecord
@@ -534,6 +538,7 @@ class SessionRecord(_Record):
     interruptions: list | None = None
     notes: list | None = None
     warnings: list | None = None
+    discrimination: dict | None = None
 
     _CHECKS = {"session": _WHOLE, "seed": _WHOLE, "kind": ("one of " + ", ".join(KINDS),
                                                          lambda v: v in KINDS),
@@ -543,9 +548,10 @@ class SessionRecord(_Record):
                "packages": _OBJECT, "python": _TEXT, "os": _TEXT, "resumes": _LIST,
                "timing": _OBJECT, "link": _OBJECT, "traces_mode": _TEXT, "limits": _OBJECT,
                "summary": _TEXT, "lsl": _OBJECT, "interruptions": _LIST, "notes": _LIST,
-               "warnings": _LIST}
+               "warnings": _LIST, "discrimination": _OBJECT}
     _OMIT = ("upgraded_from", "rng", "ui", "responder", "packages", "python", "os",
-             "traces_mode", "limits", "summary", "lsl", "interruptions", "notes", "warnings")
+             "traces_mode", "limits", "summary", "lsl", "interruptions", "notes", "warnings",
+             "discrimination")
     _PARTS = {"protocol": ProtocolRecord, "participant": ParticipantRecord,
               "times": TimesRecord}
 

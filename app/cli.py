@@ -186,6 +186,25 @@ def _demo(args: argparse.Namespace) -> int:
     return run_demo(seed=args.seed, out=args.out)
 
 
+def _measured_jnds(path: str) -> dict:
+    """``simulate --jnd``: the 75 % Weber fractions a report.json measured, said aloud."""
+    from app.observer import discrimination_from_report
+
+    try:
+        report = json.loads(open(path, encoding="utf-8").read())
+    except OSError as exc:
+        raise UsageError(f"--jnd {path}: cannot read it ({exc.strerror})") from None
+    except ValueError as exc:
+        raise UsageError(f"--jnd {path}: not a report.json (not JSON: {exc})") from None
+    try:
+        jnd = discrimination_from_report(report if isinstance(report, dict) else {})
+    except ValueError as exc:
+        raise UsageError(f"--jnd {path}: {exc}") from None
+    print("simulated participants' JNDs drawn around the measured ones: " + ", ".join(
+        f"{k} {100 * v:.1f} %" for k, v in sorted(jnd.items())), file=sys.stderr)
+    return jnd
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from app.api import simulate_study
 
@@ -197,9 +216,11 @@ def _simulate(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise UsageError(f"--seed must be >= 0, got {args.seed}")
 
+    discrimination = _measured_jnds(args.jnd) if args.jnd else None
     study = simulate_study(args.protocol, args.participants, seed=args.seed, data=args.data,
                            device=args.device, speed=args.speed, traces=args.traces,
-                           prefix=args.prefix, group=args.group, clear_fault=args.clear_fault)
+                           prefix=args.prefix, group=args.group, clear_fault=args.clear_fault,
+                           discrimination=discrimination)
     if not study.complete:
         last = study.sessions[-1]
         print(last.message, file=sys.stderr)
@@ -474,6 +495,9 @@ def _add_session_parsers(sub) -> None:
                    help="raw device streams kept per attempt (default contacts)")
     s.add_argument("--prefix", default="sim", help="participant ids are PREFIX01, PREFIX02, …")
     s.add_argument("--group", default="", help="group label of these participants")
+    s.add_argument("--jnd", default=None, metavar="REPORT", help="a report.json of measured "
+                   "thresholds: the simulated participants' JNDs drawn around its 75 %% "
+                   "Weber fractions instead of the assumed ones")
     _add_clear_fault(s)
     s.set_defaults(func=_simulate)
 

@@ -22,9 +22,11 @@ __all__ = ["make_responder", "open_audio", "Parts", "session_parts", "apply_limi
            "keep_markers", "drive", "earlier_sessions", "check_rows"]
 
 
-def make_responder(responder: str, protocol, seed: int, group: str, fullscreen: bool):
+def make_responder(responder: str, protocol, seed: int, group: str, fullscreen: bool,
+                   discrimination: dict | None = None):
     """What answers a session's trials, for the ``responder`` named (``person``,
-    ``simulated`` or ``scripted``)."""
+    ``simulated`` or ``scripted``); a simulated one draws its JNDs around
+    ``discrimination`` when given (measured Weber fractions, app.observer)."""
     if responder == "person":
         from app.screen import PsychoPyScreen
 
@@ -32,7 +34,7 @@ def make_responder(responder: str, protocol, seed: int, group: str, fullscreen: 
     if responder == "simulated":
         from app.participant_model import SimulatedParticipant
 
-        return SimulatedParticipant(protocol, seed, group)
+        return SimulatedParticipant(protocol, seed, group, discrimination)
     from app.participants import ScriptedResponder
 
     return ScriptedResponder()
@@ -66,13 +68,14 @@ class Parts:
 @contextmanager
 def session_parts(dev, proto, *, responder: str, seed: int, group: str, fullscreen: bool,
                    audio: bool, keys: bool, quiet: bool, console, lsl: bool,
-                   participant: str, say: Callable[[str], None]) -> Iterator[Parts]:
+                   participant: str, say: Callable[[str], None],
+                   discrimination: dict | None = None) -> Iterator[Parts]:
     """The participant's side, the sound, the operator's console and the markers of a
     session (run or resume) on ``dev``, each closed when it ends."""
     from app.console import make_console
 
-    parts = Parts(make_responder(responder, proto, seed, group, fullscreen), None, console,
-                   None)
+    parts = Parts(make_responder(responder, proto, seed, group, fullscreen, discrimination),
+                  None, console, None)
     try:
         parts.sound = open_audio(audio, dev.info.backend, say)
         if keys:

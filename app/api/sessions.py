@@ -50,7 +50,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 operator_keys: bool | None = None, clear_fault: bool = False,
                 info_fields: dict | None = None, new_session: bool = False,
                 say: Callable[[str], None] | None = None, lsl: bool = False,
-                lsl_wait: float = 300.0) -> SessionResult:
+                lsl_wait: float = 300.0, discrimination: dict | None = None) -> SessionResult:
     """Run one session to the end (or until it is stopped) and record it.
 
     Parameters
@@ -99,6 +99,9 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     lsl_wait : float [s]
         With ``lsl``, how long to wait for a recorder to receive the markers before the
         first trial; without one the session stops there (resumable, nothing lost).
+    discrimination : dict, optional
+        ``responder="simulated"``: measured JNDs the simulated participant draws its own
+        around (:func:`simulate_study`).
 
     Returns
     -------
@@ -181,7 +184,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
             with session_parts(dev, proto, responder=responder, seed=seed, group=group,
                                 fullscreen=fullscreen, audio=audio, keys=keys, quiet=quiet,
                                 console=console, lsl=lsl, participant=participant,
-                                say=say) as parts:
+                                say=say, discrimination=discrimination) as parts:
                 folder, n = new_session_dir(Path(data), participant)
                 files = SessionFiles(folder)
                 files.lock()
@@ -192,6 +195,8 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                                     KIND_OF[responder], libraries)
                 meta.traces_mode = traces
                 meta.limits = limits
+                if responder == "simulated" and discrimination:
+                    meta.discrimination = dict(discrimination)  # a resume draws the same
                 meta.participant.info = info
                 keep_markers(meta, parts.markers)
                 files.write_meta(meta)
@@ -297,7 +302,8 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
                             group=p.group, fullscreen=fullscreen,
                             audio=meta.audio if audio is None else audio,
                             keys=keys, quiet=quiet, console=console, lsl=lsl,
-                            participant=p.id, say=console.say) as parts:
+                            participant=p.id, say=console.say,
+                            discrimination=meta.discrimination) as parts:
             console = parts.console
             runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
                                    responder=parts.responder, participant=p.id,
@@ -332,7 +338,8 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
                    data: str | Path = DEFAULT_SIM_DATA, device: str = "sim", speed: float = 1.0,
                    traces: str = "contacts", prefix: str = "sim", group: str = "",
                    clear_fault: bool = False,
-                   progress: Callable[[str], None] | None = to_stderr) -> StudyResult:
+                   progress: Callable[[str], None] | None = to_stderr,
+                   discrimination: dict | None = None) -> StudyResult:
     """Simulated participants' sessions, headless, through the same path as a real session.
 
     Participant k (1-based) of a study with seed S gets the id ``PREFIXkk`` and the session
@@ -358,6 +365,11 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
         Clear a fault the device latched before the first session (the operator's decision).
     progress : callable, optional
         Called with a line after each participant.
+    discrimination : dict, optional
+        Measured JNDs, Weber fractions at 75 % correct by transient parameter (what
+        :func:`app.observer.discrimination_from_report` reads from a report): each
+        simulated participant draws its own around them instead of the assumed ones, and
+        its session.json records them.
 
     Returns
     -------
@@ -385,7 +397,7 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
                             responder="simulated", seed=session_seed(seed, k), group=group,
                             traces=traces, audio=False, quiet=True, operator_keys=False,
                             row=(k - 1) % rows if rows else None,
-                            clear_fault=clear_fault and k == 1)
+                            clear_fault=clear_fault and k == 1, discrimination=discrimination)
             out.append(r)
             if r.status != SessionStatus.COMPLETE:
                 break

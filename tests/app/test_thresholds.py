@@ -153,3 +153,54 @@ def test_exports_carry_the_procedure(study, tmp_path):
 
     sav, _ = pyreadstat.read_sav(str(export(tmp / "data", tmp_path / "s", "spss")[-2]))
     assert {"track", "intensity", "state"} <= set(sav.columns)
+
+
+def test_measured_jnds_replace_the_assumed_ones_and_a_resume_keeps_them(tmp_path):
+    """`simulate --jnd report.json`: the simulated participants draw their JNDs around a
+    report's measured Weber fractions. Measured at 5 % (a quarter of the 20 % assumed),
+    the fitted thresholds fall accordingly; session.json records them, and a session
+    resumed from its first rows answers as the uninterrupted one did."""
+    import json
+    import shutil
+    import subprocess
+    import sys
+
+    report = {"analyses": [{"type": "threshold", "group": [
+        {"parameter": "frequency", "criterion": 0.75, "weber_geomean": 0.05},
+        {"parameter": "slope", "criterion": 0.75, "weber_geomean": 0.05}]}]}
+    (tmp_path / "measured.json").write_text(json.dumps(report))
+    cli = [sys.executable, "-m", "app"]
+    out = subprocess.run([*cli, "simulate", str(JND_MINI), "--participants", "3", "--seed",
+                          "4", "--data", str(tmp_path / "data"), "--traces", "none",
+                          "--jnd", str(tmp_path / "measured.json")],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "frequency 5.0 %" in out.stderr
+    folder = tmp_path / "data" / "sub-sim01" / "ses-1"
+    meta = json.loads((folder / "session.json").read_text())
+    assert meta["discrimination"] == {"frequency": pytest.approx(0.05),
+                                      "slope": pytest.approx(0.05)}
+    out = subprocess.run([*cli, "analyze", str(tmp_path / "data"), "--out",
+                          str(tmp_path / "r"), "--format", "json"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    rep = json.loads((tmp_path / "r" / "report.json").read_text())
+    (a,) = [x for x in rep["analyses"] if x["id"] == "jnd_mini/frequency"]
+    up = next(g for g in a["group"] if g["track"] == "wood-up")
+    assert up["weber_geomean"] < 0.12  # not the ~20 % the assumed JNDs give
+    full = (folder / "trials.tsv").read_text()
+    copy = tmp_path / "resumed" / "sub-sim01" / "ses-1"
+    shutil.copytree(folder, copy)
+    lines = full.splitlines(keepends=True)
+    (copy / "trials.tsv").write_text("".join(lines[:20]))
+    meta["status"] = "interrupted"
+    (copy / "session.json").write_text(json.dumps(meta))
+    out = subprocess.run([*cli, "resume", str(copy), "--quiet"], capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+
+    def key(text):
+        return [[c for i, c in enumerate(ln.split("\t")) if i in (4, 16, 17, 22, 23, 24)]
+                for ln in text.splitlines()]
+
+    assert key((copy / "trials.tsv").read_text()) == key(full)
