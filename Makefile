@@ -109,7 +109,8 @@ contract: $(STAMP)
 SCREENS := realism-instructions realism-tap realism-rating factorial-rating factorial-tap \
            factorial-tap-1920x1080 identification-choose identification-answer debrief pause \
            between-trials-session reference-requested reference-block estop-pause \
-           info-dialog operator-view operator-end report-first-screen report-realism
+           info-dialog operator-view operator-end report-first-screen report-realism \
+           threshold-question
 screens:
 	@mkdir -p docs/screens
 	@for s in $(SCREENS); do cp tests/artifacts/screens/$$s.png docs/screens/ || exit 1; done
