@@ -273,7 +273,7 @@ class SessionRunner:
         """What the operator places for ``trial``, and what it is (never on the participant's
         screen)."""
         clear = f"nothing: remove the {self._on_device}" if self._on_device else "nothing"
-        if phase_kind(trial.kind).surfaces:
+        if trial.surfaces:
             return f"{clear} (the scene's surfaces are virtual)", " / ".join(trial.samples)
         sample = trial.sample_of(self.protocol, trial.samples[0])
         what = trial.placement or clear
@@ -283,7 +283,7 @@ class SessionRunner:
     def _block_line(self, trial: Trial) -> str:
         if trial.kind == REFERENCE:
             return f"real reference block: {trial.placement}"
-        if phase_kind(trial.kind).surfaces:  # surface 1's block is not the scene's
+        if trial.surfaces:  # surface 1's block is not the scene's
             return ""
         sample = trial.sample_of(self.protocol, trial.samples[0])
         block = trial.block or sample.block
@@ -393,7 +393,7 @@ class SessionRunner:
         kind = phase_kind(trial.kind)
         if phase.references == "none" or not kind.references:
             return
-        if phase.references == "block" and not kind.surfaces:
+        if phase.references == "block" and not trial.surfaces:
             refs = [trial.sample_of(self.protocol, trial.samples[0]).reference]
         else:
             refs = list(dict.fromkeys(self.protocol.samples[s].reference
@@ -407,7 +407,7 @@ class SessionRunner:
         is called). A rated trial's own block; in identification every real block of the
         phase, in the protocol's order — never one that follows from the scene (surface 1's
         block would be its answer)."""
-        if not phase_kind(trial.kind).surfaces:
+        if not trial.surfaces:
             ref = trial.sample_of(self.protocol, trial.samples[0]).reference
             return [] if ref is None else [(ref, self.protocol.samples[ref].placement or ref)]
         phase = next(p for p in self.protocol.phases if p.name == trial.phase)
@@ -501,7 +501,7 @@ class SessionRunner:
 
     def _attempt_windows(self, trial: Trial) -> None:
         kind = phase_kind(trial.kind)
-        self._on_device = None if kind.surfaces else trial.placement
+        self._on_device = None if trial.surfaces else trial.placement
         rng = self._rng(trial)
         t_start = utc_now()
         self.responder.ready(trial)
@@ -515,7 +515,7 @@ class SessionRunner:
         results, played = [], []
         try:
             # the windows the participant is judged on (a surface's last)
-            judged = self._WINDOWS[kind.windows](self, trial, rng, results, played)
+            judged = self._WINDOWS[trial.windows](self, trial, rng, results, played)
         except DeviceFaultError as exc:  # latched before the window (an e-stop between trials)
             fault = self.device.fault
             if fault is not None:
@@ -667,7 +667,7 @@ class SessionRunner:
 
         shown = 0
         ended = False
-        surfaces = trial.kind != REFERENCE and phase_kind(trial.kind).surfaces
+        surfaces = trial.kind != REFERENCE and trial.surfaces
 
         def progress(t, partial):
             nonlocal shown, ended

@@ -234,7 +234,10 @@ class PsychoPyScreen(Responder):
     def instructions(self, phase: str) -> None:
         ph = next((p for p in self.protocol.phases if p.name == phase), None)
         kind = phase_kind(ph.kind) if ph is not None else RATED
-        text = self.texts.get("instructions", {}).get(phase) or kind.instructions
+        default = kind.instructions
+        if ph is not None and ph.adaptive is not None and ph.adaptive.presentation == "surfaces":
+            default = self.t("discriminate_surfaces")  # two surfaces, not two intervals
+        text = self.texts.get("instructions", {}).get(phase) or default
         n = len(ph.samples) if ph is not None else 3
         text = _fmt(text, n=n, keys=", ".join(str(i + 1) for i in range(n)))
         self._wait(["space"], lambda: self._frame(text))
@@ -311,7 +314,7 @@ class PsychoPyScreen(Responder):
         if trial.kind == REFERENCE:
             return self.t("reference")
         kind = phase_kind(trial.kind)
-        if kind.surfaces and sample_id in trial.samples:
+        if _surfaces(trial) and sample_id in trial.samples:
             return f"{self.t('tap')} · {self.t('surface', i=trial.samples.index(sample_id) + 1)}"
         if kind.items in ("pairs", "adaptive") and sample_id in trial.samples:
             return f"{self.t('tap')} · {self.t('pair', i=trial.samples.index(sample_id) + 1)}"
@@ -325,13 +328,13 @@ class PsychoPyScreen(Responder):
                         if trial.kind == REFERENCE else
                         self.t("done_hint") if phase_kind(trial.kind).windows == "until_done"
                         else "")
-        if trial.kind != REFERENCE and phase_kind(trial.kind).surfaces \
+        if trial.kind != REFERENCE and _surfaces(trial) \
                 and sample_id in trial.samples:
             self._surface_now = now = trial.samples.index(sample_id)
             n = len(trial.samples)
             others = ", ".join(str(i + 1) for i in range(n) if i != now)
             self._detail = self.t("switch_hint", keys=others) + (
-                f"   — {self.t('name_hint')}" if self._visited | {now} >= set(range(n))
+                f"   — {self._answer_hint(trial)}" if self._visited | {now} >= set(range(n))
                 else "")
         self._frame(self._tapping, self._detail, cursor=True)
 
@@ -489,6 +492,12 @@ class PsychoPyScreen(Responder):
                 self._moving, self._moved_to = True, None
                 return
 
+    def _answer_hint(self, trial) -> str:
+        """What N does once every surface was tapped: name them (identification), or answer
+        (an adaptive phase's two surfaces)."""
+        adaptive = getattr(trial, "stimulus", None) is not None
+        return self.t("answer_hint" if adaptive else "name_hint")
+
     def moving_on(self) -> bool:
         return self._moving
 
@@ -506,7 +515,7 @@ class PsychoPyScreen(Responder):
         tapped = ", ".join(str(i + 1) for i in sorted(visited)) or "—"
         key, _ = self._wait(valid, lambda: self._frame(
             self.t("choose", keys=keys), self.t("tapped", list=tapped)
-            + (f"   — {self.t('name_hint')}" if len(visited) == n else ""), cursor=True))
+            + (f"   — {self._answer_hint(trial)}" if len(visited) == n else ""), cursor=True))
         return None if key == "n" else int(key.removeprefix("num_")) - 1
 
     def choose(self, trial, results, rng) -> tuple[int, float]:
@@ -574,6 +583,14 @@ class PsychoPyScreen(Responder):
         if self._log is not None:
             self._log.close()
             self._log = None
+
+
+def _surfaces(trial) -> bool:
+    """Whether ``trial``'s samples are surfaces the participant goes between: as the trial
+    says (an adaptive phase's presentation), else as its kind does."""
+    windows = getattr(trial, "windows", "") or (
+        "" if trial.kind == REFERENCE else phase_kind(trial.kind).windows)
+    return windows == "surfaces"
 
 
 def _default_texts() -> dict:

@@ -153,7 +153,7 @@ def adaptive_design(cx, path: tuple, p: Mapping, kind, ids: tuple[str, ...], sam
         question=cx.string((*path, "question"),
                            p.get("question", QUESTIONS.get(parameter, "Which was larger?"))),
         presentation=cx.string((*path, "presentation"), p.get("presentation", "intervals"),
-                               ("intervals",)))
+                               ("intervals", "surfaces")))
     for track in design.tracks:  # every comparison it can make is a valid transient
         for x in _extremes(design):
             try:

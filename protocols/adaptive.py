@@ -413,7 +413,10 @@ class AdaptiveDesign:
     question : str
         What the participant is asked (which of the two is larger).
     presentation : str
-        ``intervals``: the two renderings one after the other (two-interval forced choice).
+        ``intervals``: the two renderings one after the other, one window each
+        (two-interval forced choice); ``surfaces``: both as surfaces of one scene, the
+        participant going between them as often as they like before answering (a
+        two-alternative forced choice in space, as identification's surfaces).
     """
 
     parameter: str

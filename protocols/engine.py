@@ -122,6 +122,8 @@ class Item:
     repetition: int
     #: an adaptive phase's trial: its track, intensity and comparison (None otherwise)
     stimulus: Stimulus | None = None
+    #: how its windows run when not as its kind's (an adaptive phase's presentation)
+    windows: str | None = None
 
     @property
     def marker(self) -> bool:
@@ -155,6 +157,10 @@ class Trial:
     stimulus : Stimulus or None
         An adaptive phase's trial: its track, intensity, the comparison and which of the
         two samples is the larger (:class:`~protocols.adaptive.Stimulus`).
+    windows : str
+        How its windows run (:data:`protocols.kinds.WINDOWS`): its kind's, or an adaptive
+        phase's presentation (``each_sample`` for intervals, ``surfaces`` for two surfaces
+        the participant goes between); '' for a reference block's trial.
     """
 
     item: str
@@ -167,6 +173,12 @@ class Trial:
     placement: str | None
     repetition: int
     stimulus: Stimulus | None = None
+    windows: str = ""
+
+    @property
+    def surfaces(self) -> bool:
+        """Its samples are surfaces of one scene that the participant goes between."""
+        return self.windows == "surfaces"
 
     def sample_of(self, protocol: Protocol, sample_id: str) -> Sample:
         """The sample ``sample_id`` of this trial: the protocol's, or the comparison an
@@ -553,7 +565,7 @@ class SessionEngine:
                         standard=standard.id, comparison=comparison, larger=larger,
                         answers=answers)
         return Item(f"{name}/{track.name}#{n}", name, phase.kind, pair, standard.block, 0,
-                    stim)
+                    stim, "surfaces" if a.presentation == "surfaces" else None)
 
     def _ended(self, st: _State, head: Item, entry: Attempt, n: int) -> None:
         """An adaptive trial ended: a valid answer goes to its track's procedure (a catch
@@ -631,7 +643,7 @@ class SessionEngine:
         queue.insert(places[int(rng.integers(0, len(places)))], item)
 
     def _placement(self, item: Item, previous: str | None) -> str | None:
-        if phase_kind(item.kind).surfaces:  # the scene's surfaces are virtual
+        if (item.windows or phase_kind(item.kind).windows) == "surfaces":  # all virtual
             return None
         s = self.protocol.samples[item.stimulus.standard if item.stimulus else item.samples[0]]
         if s.placement is not None:
@@ -655,7 +667,8 @@ class SessionEngine:
                      trial_index=st.n_attempts + 1, attempt=st.attempts.get(head.key, 0) + 1,
                      samples=head.samples, block=head.block,
                      placement=self._placement(head, st.last_placement),
-                     repetition=head.repetition, stimulus=head.stimulus)
+                     repetition=head.repetition, stimulus=head.stimulus,
+                     windows=head.windows or phase_kind(head.kind).windows)
 
     def failure_status(self, kind: str, trial: Trial, log: Sequence[Attempt]) -> str:
         """Status to log for a failed attempt of ``kind`` (``saturated``, ``timed_out``,

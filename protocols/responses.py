@@ -434,5 +434,13 @@ FORCED_CHOICE = register_response(Response(
     scripted=lambda q, rng: (int(rng.integers(0, len(q.trial.samples))),
                              float(rng.uniform(0.6, 2.0))),
     simulated=lambda m, q, rng: m.judge_larger(q.phase.adaptive.parameter, _values(q), rng),
-    texts={"discriminate_keys": "1 = the first        2 = the second"},
+    texts={"discriminate_keys": "1 = the first        2 = the second",
+           "answer_hint": "press N to answer",
+           "discriminate_surfaces": "Two surfaces: press 1 or 2 to tap either one, as often "
+                                    "as you like. When you have tapped both, press N and say "
+                                    "which had more of what the question asks: 1 or 2. You "
+                                    "must choose one, even when they feel alike.\n\n"
+                                    "Press SPACE to begin."},
+    # the two surfaces' texts only where a phase presents its trials so
+    shown_when={"answer_hint": "surfaces", "discriminate_surfaces": "surfaces"},
     marker=("answer", "correct", "intensity")))

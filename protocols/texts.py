@@ -96,8 +96,14 @@ def left_in_english(protocol) -> list[str]:
         {protocol.samples[s].reference for s in ph.samples} - {None}) > 1 for ph in offered)
     shown = {"all", *(k.items for k in kinds), *(k.windows for k in kinds),
              # "sample 1 of 2": a trial's two windows, a pair's or an adaptive trial's
-             *(("two_windows",) if any(k.items in ("pairs", "adaptive") for k in kinds)
-               else ()),
+             *(("two_windows",) if any(
+                 phase_kind(ph.kind).items == "pairs" or (
+                     ph.adaptive is not None and ph.adaptive.presentation == "intervals")
+                 for ph in protocol.phases) else ()),
+             # an adaptive phase presented as two surfaces shows the surfaces' texts
+             *(("surfaces",) if any(ph.adaptive is not None and
+                                    ph.adaptive.presentation == "surfaces"
+                                    for ph in protocol.phases) else ()),
              *(k.response for k in kinds),
              *(("references",) if offered and any(
                  s.reference for s in protocol.samples.values()) else ()),

@@ -414,6 +414,32 @@ def test_an_adaptive_trial_asks_the_phases_question_and_takes_1_or_2(xdisplay, s
         scr.close()
 
 
+def test_an_adaptive_trial_as_two_surfaces_says_surface_and_n_answers(xdisplay, shots):
+    """Presented as two surfaces (2AFC in space), an adaptive trial's windows are titled
+    by surface, N answers once both were tapped, and the phase's instructions say so."""
+    from protocols import SessionEngine
+
+    source, text = protocol_text("thresholds")
+    p = parse_protocol(text.replace('parameter = "frequency"',
+                                    'parameter = "frequency"\npresentation = "surfaces"', 1),
+                       source)
+    trial = SessionEngine(p, 3, "P01").next_trial(
+        [__import__("protocols").Attempt("familiarization/wood#1", "valid")])
+    assert trial.surfaces and trial.phase == "frequency"
+    scr = make(p, Keys([], ["space"], [], ["1"], [], ["2"], [], ["n"]))
+    try:
+        scr.instructions("frequency")
+        assert scr.drawn_text[0].startswith("Two surfaces: press 1 or 2")
+        first = trial.samples[0]
+        assert scr._tap_title(trial, first) == "Tap · Surface 1"
+        assert scr.choose_surface(trial, set()) == 0
+        assert scr.choose_surface(trial, {0}) == 1
+        assert scr.choose_surface(trial, {0, 1}) is None  # N: to the question
+        assert scr.drawn_text[1].endswith("press N to answer")
+    finally:
+        scr.close()
+
+
 def test_the_screen_log_has_a_line_per_screen_and_one_where_keys_start_to_count(
         xdisplay, tmp_path, monkeypatch):
     """HAPTICLAB_SCREEN_LOG: a line when what the screen says changes, and one on the first

@@ -204,3 +204,25 @@ def test_measured_jnds_replace_the_assumed_ones_and_a_resume_keeps_them(tmp_path
                 for ln in text.splitlines()]
 
     assert key((copy / "trials.tsv").read_text()) == key(full)
+
+
+def test_a_phase_of_two_surfaces_runs_as_identification_runs(tmp_path):
+    """`presentation = "surfaces"`: the simulated participant taps each surface (each a
+    window, its trace kept), then answers; the rows are as an interval phase's."""
+    text = JND_MINI.read_text().replace('directions = ["up", "down"]',
+                                        'directions = ["up", "down"]\npresentation = "surfaces"')
+    f = tmp_path / "surfaces.toml"
+    f.write_text(text)
+    from app.api import simulate_study
+
+    s = simulate_study(f, 1, seed=2, data=tmp_path / "data", traces="full", progress=None)
+    assert s.complete
+    import pandas as pd
+
+    folder = tmp_path / "data" / "sub-sim01" / "ses-1"
+    d = pd.read_csv(folder / "trials.tsv", sep="\t", dtype=str, keep_default_na=False)
+    rows = d[(d["phase"] == "frequency") & (d["status"] == "valid")]
+    assert len(rows) > 10 and (rows["placement"] == "").all()  # the surfaces are virtual
+    for r in rows.itertuples():
+        assert len(list(folder.glob(r.trace_file))) >= 2  # a window a surface at least
+        assert r.answer in r.sample.split("+")

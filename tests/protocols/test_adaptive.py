@@ -274,3 +274,18 @@ def test_only_an_adaptive_phase_takes_a_procedure():
     text = MINI.replace('kind = "staircase"', 'kind = "free"')
     with pytest.raises(ProtocolError, match="only an adaptive phase"):
         parse_protocol(text)
+
+
+def test_a_phase_presents_its_trials_as_two_intervals_or_two_surfaces():
+    """Two-interval (one window each, in turn; a placeholder swapped as for any virtual
+    trial) or a two-alternative choice in space: both renderings as surfaces of one scene
+    that the participant goes between, as identification's."""
+    p = parse_protocol(MINI)
+    t = SessionEngine(p, 1, "P01").next_trial([])
+    assert (t.windows, t.surfaces, t.placement) == ("each_sample", False, "block A")
+    p = parse_protocol(MINI.replace('units = "log"', 'units = "log"\npresentation = "surfaces"'))
+    t = SessionEngine(p, 1, "P01").next_trial([])
+    assert (t.windows, t.surfaces, t.placement) == ("surfaces", True, None)
+    assert p.phases[0].adaptive.presentation == "surfaces"
+    with pytest.raises(ProtocolError, match="presentation: must be one of intervals, surfaces"):
+        parse_protocol(MINI.replace('units = "log"', 'units = "log"\npresentation = "mixed"'))
