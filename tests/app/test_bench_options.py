@@ -35,7 +35,9 @@ CLI = [sys.executable, "-m", "app"]
     ("crash", {"load": "0"}, "bench crash does not read --load (link does)"),
     ("link", {"seconds": 5.0}, "--seconds is read only with --load"),
     ("energy", {"seeds": "1"}, "bench energy does not read --seeds (causes, factorial, "
-                               "orderings do)"),
+                               "orderings, thresholds do)"),
+    ("crash", {"sessions": 5}, "bench crash does not read --sessions (thresholds does)"),
+    ("thresholds", {"sessions": 0}, "--sessions 0: a whole number >= 1"),
 ])
 def test_a_bad_option_value_is_named_before_anything_runs(what, options, words):
     with pytest.raises(UsageError) as err:
