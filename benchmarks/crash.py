@@ -204,9 +204,10 @@ def sample_points(log: list[tuple[str, str]]) -> list[int]:
             seen.add((kind, name))
             chosen.append(k)
     for kind, file in (("write", "session.json"), ("rename", "session.json")):
-        last = max(k for k, (kd, path) in enumerate(log, start=1)
-                   if kd == kind and file in path.rsplit("/", 1)[-1])
-        chosen.append(last)
+        last = max((k for k, (kd, path) in enumerate(log, start=1)
+                    if kd == kind and file in path.rsplit("/", 1)[-1]), default=None)
+        if last is not None:  # a session.json written in place has no rename
+            chosen.append(last)
     return sorted(set(chosen))
 
 
