@@ -99,9 +99,10 @@ LONG_COLUMNS = {
                            "device on a serial port"),
     "device_id": ("", "the device's model and serial number (#…), as it reported them"),
     "firmware": ("", "the device's firmware version, as it reported it"),
-    "simulated_plant": ("0/1", "1: the device was simulated (sim, the emulator, or a "
-                               "firmware build with its simulated plant): nobody touched a "
-                               "physical surface"),
+    "simulated_plant": ("0/1", "1: the device said its contact was simulated (the "
+                               "simulated device, the emulator, a firmware build with its "
+                               "simulated plant, a bridge over an SDK's stand-in): nobody "
+                               "touched a physical surface"),
     "libraries": ("", "transient libraries played: sample=sha256 of the file (first 12 hex "
                       "digits), joined by ;"),
 }

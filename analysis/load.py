@@ -8,7 +8,6 @@ from __future__ import annotations
 import datetime as dt
 import hashlib
 import os
-import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -43,7 +42,6 @@ DEVICE_COLUMNS = ("device_backend", "device_id", "firmware", "simulated_plant",
                   "libraries")
 #: firmware builds that serve the wire protocol with a simulated plant (nobody touches a
 #: physical surface): the Python emulator and the reference firmware's host and QEMU builds
-_SIMULATED_FIRMWARE = re.compile(r"^(emulator|hlfw-[0-9.]+ (host|stm32))")
 #: columns of ``load_sessions(...).attrs["session_table"]``, one row per session folder
 SESSION_COLUMNS = ("session_dir", "participant", "session", "protocol", "protocol_sha256",
                    "kind", "responder", "status", "created_utc", "seed", "rows", "valid_rows",
@@ -90,9 +88,10 @@ def _hash_design(design: dict) -> str:
 
 def _device(meta: SessionRecord) -> dict[str, str]:
     """What a session recorded of its device: backend, model and serial number, firmware,
-    whether the device was simulated (1: the ``sim`` backend, the emulator or a firmware
-    build with its simulated plant — nobody touched a physical surface), and the transient
-    libraries it played (sample=sha256, first 12 hex digits)."""
+    whether the device was simulated (1: it said its contact was simulated — the simulated
+    device, the emulator, a firmware build with its simulated plant, a bridge over an SDK's
+    stand-in: nobody touched a physical surface; :attr:`SessionRecord.simulated_contact`),
+    and the transient libraries it played (sample=sha256, first 12 hex digits)."""
     d = meta.device
     model, serial = str(d.get("model") or ""), str(d.get("serial_number") or "")
     libs = meta.libraries
@@ -100,8 +99,7 @@ def _device(meta: SessionRecord) -> dict[str, str]:
     return {"device_backend": backend,
             "device_id": " ".join(x for x in (model, serial and f"#{serial}") if x),
             "firmware": firmware,
-            "simulated_plant": int(backend == "sim"
-                                   or _SIMULATED_FIRMWARE.match(firmware) is not None),
+            "simulated_plant": int(meta.simulated_contact),
             "libraries": ";".join(f"{sid}={str((lib or {}).get('sha256', ''))[:12]}"
                                   for sid, lib in sorted(libs.items()))}
 
@@ -462,10 +460,9 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         or sample the recorded design does not have) disagrees with session.json leaves its
         session out whatever ``ids`` says: there is nothing to choose between.
     sim_device : bool
-        Keep people's (human) sessions on a simulated device (the ``sim`` backend, the
-        emulator, a firmware build with its simulated plant: nobody touched a physical
-        surface). Default False: they are left out of a human analysis and named — a
-        rehearsal is not a participant.
+        Keep people's (human) sessions on a simulated device (one that said its contact
+        was simulated: nobody touched a physical surface). Default False: they are left
+        out of a human analysis and named — a rehearsal is not a participant.
     every_session : bool
         Keep every session of a participant, whatever the design says it analyses (its
         ``sessions`` rule: the first complete one, or all); a raw export (BIDS) does.

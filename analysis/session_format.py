@@ -30,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
 from enum import StrEnum
@@ -45,12 +46,23 @@ __all__ = ["FORMAT_VERSION", "SessionStatus", "SessionRecord", "ProtocolRecord",
            "read_trials", "read_trial_fields", "read_meta", "session_kind", "canonical_bytes",
            "is_canonical",
            "TRIALS", "META", "PROTOCOL_COPY", "TRACES", "LOCK", "ROW_STATUSES",
-           "SessionPathError", "inside_session"]
+           "SessionPathError", "inside_session", "CAPABILITIES", "device_capabilities"]
 
-#: 3: the rating scale and answer choices are written once, in the design (2 also wrote
-#: them beside it, as protocol.rating and protocol.answer_choices); 2: the design and the
-#: session kind are recorded
-FORMAT_VERSION = 3
+#: 4: the device's capabilities are recorded (``device.simulated_contact``, ``seeded``,
+#: ``virtual_time``: what it said it is, never inferred from its name); 3: the rating scale
+#: and answer choices are written once, in the design (2 also wrote them beside it, as
+#: protocol.rating and protocol.answer_choices); 2: the design and the session kind are
+#: recorded
+FORMAT_VERSION = 4
+
+#: the capabilities a device states (:class:`device.DeviceInfo`), as session.json's
+#: ``device`` records them since format 4
+CAPABILITIES = ("simulated_contact", "seeded", "virtual_time")
+#: the firmware texts of older files' simulated devices (format < 4, which recorded no
+#: capabilities): the Python emulator, and the reference firmware's builds with the simulated
+#: plant: host (host-F4: host-board; host-san), QEMU's stm32, and the bridges over the SDKs'
+#: stand-ins (dhd-stub, cut to 16 bytes; hd-stub; hd-tsan). Each was seeded at its start.
+_SIMULATED_FIRMWARE = re.compile(r"^(emulator|hlfw-[0-9.]+ (host|stm32|dhd-stu|hd-stub|hd-tsan))")
 TRIALS, META, PROTOCOL_COPY, TRACES = "trials.tsv", "session.json", "protocol.toml", "traces"
 LOCK = "session.lock"  #: held (flock) by the one process writing the session
 
@@ -590,6 +602,13 @@ class SessionRecord(_Record):
         """The device spec the session was opened with (``serial:/dev/ttyACM0``)."""
         return str(self.device.get("spec") or "")
 
+    @property
+    def simulated_contact(self) -> bool:
+        """Whether the session's device was simulated — nobody touched a physical surface
+        (as the device said; for a file older than format 4, from what it recorded:
+        :func:`device_capabilities`)."""
+        return bool(self.device.get("simulated_contact"))
+
     def interrupted(self, why: str) -> None:
         """A run stopped early (``why``): resumed as any interruption."""
         self.status = SessionStatus.INTERRUPTED
@@ -641,7 +660,9 @@ def upgrade_meta(meta: dict, path: str | Path = "session.json") -> dict:
       (:func:`session_kind`);
     - format 2: ``protocol.rating`` and ``protocol.answer_choices`` (written beside the
       design) are dropped where the design holds the same; a session with no design keeps
-      none (nothing analyses it).
+      none (nothing analyses it);
+    - format 3 and older: the device's capabilities, which it did not record, are read from
+      what it did (:func:`device_capabilities`).
 
     ``upgraded_from`` names the format the file is in when it is older.
 
@@ -673,7 +694,24 @@ def upgrade_meta(meta: dict, path: str | Path = "session.json") -> dict:
                 raise SessionMetaError(f"{path}: protocol.{old} {value!r} disagrees with the "
                                        f"design's {new} {held!r}; correct one of them")
     meta["protocol"] = proto
+    if isinstance(meta.get("device"), dict):
+        meta["device"] = {**device_capabilities(meta["device"]), **meta["device"]}
     return meta
+
+
+def device_capabilities(device: dict) -> dict[str, bool]:
+    """The capabilities (:data:`CAPABILITIES`) of a device an older session file recorded
+    (format < 4) from the facts it recorded: its backend and firmware texts. The simulated
+    device (backend ``sim``) is simulated, seeded and in virtual time; the emulator and the
+    firmware's builds with the simulated plant are simulated and seeded (in real time); any
+    other device is taken as physical.
+
+    A file of format 4 or later records them as the device said; this is for older files.
+    """
+    backend, firmware = str(device.get("backend") or ""), str(device.get("firmware") or "")
+    virtual = backend == "sim"
+    simulated = virtual or _SIMULATED_FIRMWARE.match(firmware) is not None
+    return {"simulated_contact": simulated, "seeded": simulated, "virtual_time": virtual}
 
 
 def session_kind(meta: dict) -> str:

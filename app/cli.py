@@ -108,23 +108,20 @@ def _protocol_show(args: argparse.Namespace) -> int:
 
 
 def _device_list(args: argparse.Namespace) -> int:
-    """Serial ports and the simulated device, without opening any port (opening one can
-    reset a board)."""
+    """Every registered backend's devices on this computer, without opening any port
+    (opening one can reset a board)."""
     from .api import device_list
 
     found = device_list()
-    ports = found["ports"]
     if args.json:
         print(json.dumps(found, indent=2))
         return 0
-    print("simulated: sim (or sim:RATE) — no hardware")
-    if not ports:
-        print("serial ports: none found (is the device plugged in, and may this user open "
-              "it? on Linux: the dialout group)")
-    for d in ports:
-        print(f"{d['spec']:<32} {d['description']}  [{d['hwid']}]")
-    if ports:
-        print("check one with: hapticlab device selftest SPEC (it opens the port)")
+    for d in found["devices"]:
+        details = f"  [{d['details']}]" if d["details"] else ""
+        print(f"{d['spec']:<32} {d['description']}{details}")
+    for name, why in found["broken"].items():
+        print(f"backend {name}: cannot be used: {why}")
+    print("check one with: hapticlab device selftest SPEC (it opens the device)")
     return 0
 
 
@@ -257,10 +254,6 @@ def _run(args: argparse.Namespace) -> int:
                              "lab's device (for a rehearsal without a person: --dry-run, or "
                              "--responder simulated)")
         device = "sim"
-    if responder == "person" and (device == "sim" or device.startswith("sim:")):
-        print("hapticlab: warning: a person on the SIMULATED device — nothing they feel comes "
-              "from hardware; the session is recorded as human on backend 'sim'",
-              file=sys.stderr)
     r = run_session(args.protocol, args.participant, device=device, data=args.data,
                     responder=responder, seed=args.seed, row=args.row, group=args.group,
                     traces=args.traces, audio=not args.no_audio, fullscreen=args.fullscreen,
@@ -488,9 +481,11 @@ def _add_session_parsers(sub) -> None:
     s.add_argument("--data", default="sim-data", help="data folder (default ./sim-data: never "
                    "beside people's data)")
     s.add_argument("--device", default="sim",
-                   help="sim, sim:RATE, serial:PORT or serial:emulator (paced by --speed)")
+                   help="sim, sim:RATE, emulator, emulator:BUILD (each session starts its own, "
+                   "paced by --speed) or serial:PORT")
     s.add_argument("--speed", type=float, default=1.0,
-                   help="serial:emulator only: device seconds per wall second (default 1)")
+                   help="device seconds per wall second where the device's clock is paced (an "
+                   "emulator; default 1)")
     s.add_argument("--traces", choices=("full", "contacts", "none"), default="contacts",
                    help="raw device streams kept per attempt (default contacts)")
     s.add_argument("--prefix", default="sim", help="participant ids are PREFIX01, PREFIX02, …")

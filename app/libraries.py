@@ -22,13 +22,21 @@ from device.matching.library import LibraryError, TransientLibrary, build_into_s
 from .errors import MissingLibraryError
 
 __all__ = ["prepare_libraries", "with_libraries", "check_recorded", "build_line",
-           "LIBRARY_SEED", "BUILD_SECONDS"]
+           "builds_on_demand", "LIBRARY_SEED", "BUILD_SECONDS"]
 
 #: seed of the fresh simulated device a simulated library is built on (reproducible builds)
 LIBRARY_SEED = 20_260_001
 #: measured time to build one library on the simulated device (8 windows, identification,
 #: 12 inversions), for the announcement
 BUILD_SECONDS = 5
+
+
+def builds_on_demand(info) -> bool:
+    """Whether a missing library is built when a session first needs it on the device
+    ``info`` describes (:class:`~device.DeviceInfo`): on a simulated contact in virtual
+    time, where the build's tapping windows take seconds and nobody taps. On any other
+    device it is an experiment of its own, run by the operator (:func:`build_line`)."""
+    return bool(info.simulated_contact and info.virtual_time)
 
 
 def build_line(spec: str, protocol: str, source: str) -> str:
@@ -91,7 +99,7 @@ def prepare_libraries(protocol, device, spec: str, say: Callable[[str], None] = 
         except LibraryError as exc:
             broken.append(f"{', '.join(samples)}: {exc}")
             continue
-        if path is None and build and info.backend == "sim":
+        if path is None and build and builds_on_demand(info):
             say(f"building the {tr.source} library on this device, first use: "
                 f"~{BUILD_SECONDS} s (identification, 8 tapping windows, inversions)")
             fresh = opener() if opener is not None else open_device(spec, seed=LIBRARY_SEED)

@@ -203,14 +203,14 @@ def check_libraries(protocol, dev, spec: str, ref: str, say=None) -> Check:
     from device import SceneError
 
     from .errors import MissingLibraryError
-    from .libraries import prepare_libraries, with_libraries
+    from .libraries import builds_on_demand, prepare_libraries, with_libraries
 
-    sim = dev.info.backend == "sim"
+    on_demand = builds_on_demand(dev.info)
     try:
         found = prepare_libraries(protocol, dev, spec, say=say or (lambda _m: None),
-                                  build=sim and say is not None, ref=ref)
+                                  build=on_demand and say is not None, ref=ref)
     except MissingLibraryError as exc:
-        if sim:
+        if on_demand:
             return Check("libraries", True, "missing on this simulated device: built, "
                          "announced, when the session starts")
         return Check("libraries", False, str(exc))

@@ -1,7 +1,10 @@
-"""Haptic devices: the interface, scenes, events, and backends (``sim``; ``serial`` later).
+"""Haptic devices: the interface, scenes, events, and the backends that implement them.
 
-Importing this package does no I/O and imports no backend; ``open_device`` imports
-the backend it is asked for.
+Backends are found through the ``hapticlab.backends`` entry-point group
+(:mod:`device.registry`): :func:`backends` names them, :func:`available_devices` lists the
+devices this computer offers, :func:`open_device` opens one from its spec. Importing this
+package does no I/O and imports no backend; ``open_device`` imports the backend it is asked
+for.
 """
 
 from .base import (
@@ -9,13 +12,11 @@ from .base import (
     DeviceInfo,
     HapticDevice,
     SimulatedHand,
-    backends,
     max_spring,
-    open_device,
-    register_backend,
 )
 from .codes import Blend, SceneKind
 from .errors import (
+    BackendError,
     DeviceError,
     DeviceFaultError,
     DeviceSpecError,
@@ -31,6 +32,15 @@ from .events import (
     HostClock,
     SaturationEvent,
     WindowResult,
+)
+from .registry import (
+    AvailableDevice,
+    available_devices,
+    backend,
+    backends,
+    broken_backends,
+    open_device,
+    register_backend,
 )
 from .scene import (
     AccelSinusoid,
@@ -50,6 +60,8 @@ from .scene import (
 __all__ = [
     "MAX_WINDOW_TICKS",
     "AccelSinusoid",
+    "AvailableDevice",
+    "BackendError",
     "Blend",
     "HapticlabError",
     "SceneKind",
@@ -77,7 +89,10 @@ __all__ = [
     "Transient",
     "UnknownBackendError",
     "WindowResult",
+    "available_devices",
+    "backend",
     "backends",
+    "broken_backends",
     "open_device", "max_spring",
     "register_backend",
     "register_transient",

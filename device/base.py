@@ -1,17 +1,17 @@
-"""The :class:`HapticDevice` interface, its backend registry and the ``open_device`` factory.
+"""The :class:`HapticDevice` interface every backend implements.
 
-Backends register a name and a factory (python-can style). The factory receives the
-part of the spec after the colon (``"serial:/dev/ttyACM0"`` → ``"/dev/ttyACM0"``) and
-keyword options. Registration may name a ``"module:attribute"`` string so that a
-backend's heavy imports happen only when it is opened.
+Backends are found through the ``hapticlab.backends`` entry-point group and opened by
+:func:`device.registry.open_device`; what a backend offers beside a device (its opener, the
+devices it finds, its way into the conformance suite) are class methods here with safe
+defaults, in the manner of python-can's ``BusABC``.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,14 +22,12 @@ from .errors import (
     DeviceFaultError,
     DeviceSpecError,
     SceneError,
-    UnknownBackendError,
 )
 from .events import TRACE_CHANNELS, FaultEvent, HostClock, WindowResult
 from .info import DeviceInfo
 from .scene import Scene, Transient, TransientTable
 
-__all__ = ["DeviceInfo", "HapticDevice", "SimulatedHand", "register_backend", "open_device",
-           "backends", "max_spring", "MAX_WINDOW_TICKS"]
+__all__ = ["DeviceInfo", "HapticDevice", "SimulatedHand", "max_spring", "MAX_WINDOW_TICKS"]
 
 #: most servo ticks one window or playback may span (its wait for a first contact
 #: included): every tick is recorded, and the simulator's buffers and traces peak at 176
@@ -95,11 +93,53 @@ class HapticDevice(ABC):
         self._tables: dict[Transient, TransientTable] = {}
         self._current_limit: float | None = None
 
+    # ------------------------------------------------------------- the backend
+    @classmethod
+    def from_spec(cls, arg: str | None = None, **options: Any) -> HapticDevice:
+        """Open the device of the spec ``NAME:arg`` (``arg`` None for ``NAME`` alone).
+
+        Every backend takes the options ``seed``, ``live`` and ``speed``
+        (:mod:`device.registry`) and uses those that apply. The default opens ``cls()``
+        when there is no ``arg`` and no other option.
+
+        Raises
+        ------
+        DeviceSpecError
+            An argument or option this backend does not take.
+        """
+        for common in ("seed", "live", "speed"):
+            options.pop(common, None)
+        if arg or options:
+            raise DeviceSpecError(f"{cls.__name__} takes no spec argument or option "
+                                  f"({arg or ''}{', '.join(options)})")
+        return cls()
+
+    @classmethod
+    def available(cls) -> list:
+        """The devices of this backend this computer offers, found without opening any
+        (:class:`~device.registry.AvailableDevice` each). The default: none found."""
+        return []
+
+    @classmethod
+    def conformance_opener(cls) -> AbstractContextManager[Callable[[], HapticDevice]]:
+        """A context manager giving a zero-argument opener of a device of this backend
+        that the conformance suite (:mod:`device.suite`) runs against on a computer
+        without the hardware (a simulation, an emulator, the vendor's own simulator).
+
+        Raises
+        ------
+        NotImplementedError
+            The default: a backend that gives none fails the suite, never skips it.
+        """
+        raise NotImplementedError(f"{cls.__name__} gives no device for the conformance "
+                                  "suite: implement conformance_opener()")
+
     # ---------------------------------------------------------------- identity
     @property
     @abstractmethod
     def info(self) -> DeviceInfo:
-        """Static description of the device."""
+        """What the device is and can do (:class:`~device.info.DeviceInfo`): ask it, never
+        its backend's name."""
 
     @property
     def closed(self) -> bool:
@@ -462,38 +502,6 @@ class HapticDevice(ABC):
         self.close()
 
 
-_Factory = Callable[..., HapticDevice]
-_BACKENDS: dict[str, _Factory | str] = {
-    "sim": "device.sim.backend:SimDevice.from_spec",
-    "serial": "device.serial.backend:SerialDevice.from_spec",
-}
-
-
-def register_backend(name: str, factory: _Factory | str) -> None:
-    """Register ``factory(arg, **options) -> HapticDevice`` under ``name``.
-
-    ``factory`` may be a ``"module:attr.path"`` string, imported on first use.
-    """
-    if not name or ":" in name:
-        raise ValueError(f"backend name must be non-empty and contain no ':', got {name!r}")
-    _BACKENDS[name] = factory
-
-
-def backends() -> list[str]:
-    """Registered backend names, sorted."""
-    return sorted(_BACKENDS)
-
-
-def _resolve(factory: _Factory | str) -> _Factory:
-    if not isinstance(factory, str):
-        return factory
-    module, _, attr = factory.partition(":")
-    obj: Any = importlib.import_module(module)
-    for part in attr.split("."):
-        obj = getattr(obj, part)
-    return obj
-
-
 def max_spring(info) -> float:
     """The stiffest virtual spring [N/m] a device renders as a spring: the smaller of the
     force range over one encoder count (current limit × force constant / resolution:
@@ -504,23 +512,3 @@ def max_spring(info) -> float:
     if not info.encoder_resolution > 0:  # a device that reports no resolution
         return stable
     return min(f_max / info.encoder_resolution, stable)
-
-
-def open_device(spec: str, **options: Any) -> HapticDevice:
-    """Open a device from a spec string such as ``"sim"`` or ``"serial:/dev/ttyACM0"``.
-
-    Raises
-    ------
-    UnknownBackendError
-        When the backend name is not registered; the message lists those that are.
-    """
-    if not isinstance(spec, str) or not spec:
-        raise UnknownBackendError(f"device spec must be a non-empty string, got {spec!r}")
-    name, _, arg = spec.partition(":")
-    if name not in _BACKENDS:
-        port = spec.startswith(("/", "COM", "com", "\\\\.\\")) or name.startswith("tty")
-        hint = f": did you mean serial:{spec}?" if port else ""
-        raise UnknownBackendError(
-            f"unknown device backend {name!r} in spec {spec!r}{hint} (available: "
-            f"{', '.join(backends())}; a port is given as serial:PORT)")
-    return _resolve(_BACKENDS[name])(arg or None, **options)

@@ -14,6 +14,7 @@ __all__ = [
     "DeviceError",
     "SceneError",
     "UnknownBackendError",
+    "BackendError",
     "DeviceSpecError",
     "DeviceFaultError",
 ]
@@ -76,6 +77,12 @@ class DeviceSpecError(DeviceError, ValueError):
 
 class UnknownBackendError(DeviceSpecError):
     """``open_device`` was given a spec whose backend is not registered."""
+
+
+class BackendError(DeviceError):
+    """A registered backend cannot be used: its module fails to import, its entry point
+    names nothing or something that is not a device class (the message names the backend,
+    the entry point and the distribution it came from)."""
 
 
 class DeviceFaultError(DeviceError):

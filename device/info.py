@@ -10,7 +10,7 @@ __all__ = ["DeviceInfo"]
 
 @dataclass(frozen=True)
 class DeviceInfo:
-    """What a device says about itself (the handshake of a real device).
+    """What a device is and can do, as it says itself (the handshake of a real device).
 
     Attributes
     ----------
@@ -40,6 +40,21 @@ class DeviceInfo:
         The 99th percentile and the longest of the servo's tick periods since the device
         started, where its servo follows a computer's clock (the bridges to commercial
         devices, the host builds: LIMITS); None where not measured.
+    simulated_contact : bool
+        The stylus and what it touches are simulated (the simulated device, the emulator,
+        the firmware's builds with their simulated plant, the bridges over the SDKs'
+        stand-ins): nobody touches a physical surface. False (the safe default) for a
+        device that does not say.
+    seeded : bool
+        That simulation draws its randomness from a seed fixed when the device was opened
+        or started: the same seed gives the same run.
+    virtual_time : bool
+        The device's clock is simulated, not the world's: it runs as fast as the computer
+        can (paced to the wall clock only when opened ``live``), so a window of seconds may
+        take milliseconds.
+
+    Code outside a backend asks these, never :attr:`backend` or :attr:`firmware`: they
+    name a device for people and for the records, and decide nothing.
     """
 
     backend: str
@@ -56,6 +71,9 @@ class DeviceInfo:
     accelerometer: bool = True
     tick_p99_s: float | None = None
     tick_max_s: float | None = None
+    simulated_contact: bool = False
+    seeded: bool = False
+    virtual_time: bool = False
 
     @property
     def max_force(self) -> float:

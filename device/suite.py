@@ -21,7 +21,7 @@ from .errors import DeviceError, DeviceFaultError
 from .events import Flags, WindowResult
 from .scene import Material, Pulse, Ringing, Scene
 
-__all__ = ["CHECKS", "CheckFailed", "run_selftest", "SUITE_SCENES"]
+__all__ = ["CHECKS", "CheckFailed", "run_selftest", "check_backend", "SUITE_SCENES"]
 
 Opener = Callable[[], HapticDevice]
 
@@ -392,3 +392,21 @@ def run_selftest(spec: str, opener: Opener) -> dict:
         rows.append({"name": name, "ok": ok, "detail": detail})
     passed = sum(r["ok"] for r in rows)
     return {"backend": spec, "passed": passed, "failed": len(rows) - passed, "checks": rows}
+
+
+def check_backend(name: str) -> dict:
+    """Run every check against the registered backend ``name``, through the device it gives
+    for the suite (``conformance_opener``): what a backend's own tests call, in its own
+    distribution, to show it keeps the contract. Returns :func:`run_selftest`'s report.
+
+    Raises
+    ------
+    UnknownBackendError, BackendError
+        No such backend, or it cannot be loaded.
+    NotImplementedError
+        The backend gives no device for the suite.
+    """
+    from .registry import backend
+
+    with backend(name).conformance_opener() as opener:
+        return run_selftest(name, opener)

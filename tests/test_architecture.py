@@ -413,3 +413,82 @@ def test_the_record_checker_sees_keys(tmp_path):
     bad.write_text("a = meta['seed']\nb = self.meta.get('kind')\nc = meta.seed\n"
                    "d = row['seed']\ne = files.meta\nmeta.setdefault('notes', [])\n")
     assert [h.rsplit(":", 1)[1] for h in _raw_meta_uses(bad)] == ["1", "2", "6"]
+
+
+#: what names a device rather than saying what it can do: DeviceInfo's ``backend`` and
+#: ``firmware`` texts (and the variables that hold them)
+_NAME_FIELDS = ("backend", "firmware", "device_backend")
+
+
+def _names_a_device(node) -> bool:
+    return (isinstance(node, ast.Attribute) and node.attr in _NAME_FIELDS) \
+        or (isinstance(node, ast.Name) and node.id in _NAME_FIELDS) \
+        or (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "get" and bool(node.args)
+            and isinstance(node.args[0], ast.Constant) and node.args[0].value in _NAME_FIELDS)
+
+
+def _texts(node):
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        yield node.value
+    elif isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        for e in node.elts:
+            yield from _texts(e)
+
+
+def _name_comparisons(path: Path, names: set[str], exempt: tuple[str, ...] = ()) -> list[str]:
+    """Where ``path`` decides by a device's name: a comparison or a prefix or pattern test
+    of a backend's or a build's name (``info.backend == "sim"``, ``spec.startswith("sim:")``,
+    ``firmware in ("qemu", ...)``), outside the functions named in ``exempt``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    skip = {id(n) for f in ast.walk(tree) if isinstance(f, ast.FunctionDef) and f.name in exempt
+            for n in ast.walk(f)}
+    prefixes = names | {f"{n}:" for n in names}
+    hits = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Compare):
+            ops = [node.left, *node.comparators]
+            bad = any(_names_a_device(o) for o in ops) \
+                or any(t in prefixes for o in ops for t in _texts(o))
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+                and node.func.attr in ("startswith", "endswith", "match", "search",
+                                       "fullmatch"):
+            bad = _names_a_device(node.func.value) or any(_names_a_device(a) for a in node.args) \
+                or any(t in prefixes for a in node.args for t in _texts(a))
+        else:
+            continue
+        if bad:
+            hits.append(f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}:"
+                        f"{node.lineno}: {ast.unparse(node)}")
+    return hits
+
+
+def _device_names() -> set[str]:
+    from device import backends
+    from device.serial.firmware import BUILDS
+
+    return set(backends()) | set(BUILDS)
+
+
+def test_no_code_outside_a_backend_decides_by_a_device_name():
+    """Capabilities, not names (issue 54): the application, the protocols and the analysis
+    ask a device what it is and can do (DeviceInfo), never compare a backend's or a
+    firmware build's name. The one exception reads files older than format 4, which
+    recorded names and no capabilities (session_format.device_capabilities)."""
+    names = _device_names()
+    found = [hit for d in ("app", "protocols", "analysis")
+             for f in sorted((ROOT / d).rglob("*.py"))
+             for hit in _name_comparisons(f, names, ("device_capabilities",))]
+    assert not found, f"decided by a device's name: {found}"
+
+
+def test_the_name_checker_sees_them(tmp_path):
+    bad = tmp_path / "m.py"
+    bad.write_text("a = info.backend == 'x'\nb = spec.startswith('sim:')\n"
+                   "c = build in ('qemu', 'host')\nd = PATTERN.match(firmware)\n"
+                   "e = d.get('backend') != ''\nf = what == 'link'\n"
+                   "def device_capabilities(d):\n    return d.backend == 'sim'\n")
+    hits = _name_comparisons(bad, _device_names(), ("device_capabilities",))
+    assert [h.split(":")[1] for h in hits] == ["1", "2", "3", "4", "5"], hits

@@ -40,7 +40,10 @@ def make_responder(responder: str, protocol, seed: int, group: str, fullscreen: 
     return ScriptedResponder()
 
 
-def open_audio(enabled: bool, device_backend: str, say: Callable[[str], None]):
+def open_audio(enabled: bool, info, say: Callable[[str], None]):
+    """The session's sound (None without): on a device a person touches for real, a session
+    without it is refused (the masking noise hides the samples' own sound); on a simulated
+    contact there is nothing to hide, and the session goes on without."""
     if not enabled:
         return None
     from app.audio import Audio, AudioUnavailable
@@ -48,10 +51,11 @@ def open_audio(enabled: bool, device_backend: str, say: Callable[[str], None]):
     try:
         return Audio()
     except AudioUnavailable as exc:
-        if device_backend != "sim":
+        if not info.simulated_contact:
             raise UsageError(f"no audio device ({exc}): a real session needs masking noise "
                              "and the tap cue; fix the audio or pass --no-audio") from None
-        say(f"warning: no audio ({exc}); dry run continues without sound")
+        say(f"warning: no audio ({exc}); on this simulated device the session continues "
+            "without sound")
         return None
 
 
@@ -77,7 +81,7 @@ def session_parts(dev, proto, *, responder: str, seed: int, group: str, fullscre
     parts = Parts(make_responder(responder, proto, seed, group, fullscreen, discrimination),
                   None, console, None)
     try:
-        parts.sound = open_audio(audio, dev.info.backend, say)
+        parts.sound = open_audio(audio, dev.info, say)
         if keys:
             parts.console = make_console("keys", quiet, dev)
         parts.markers = open_markers(lsl, proto.name, participant, seed, dev, parts.console.say)

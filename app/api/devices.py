@@ -3,24 +3,28 @@ forecast saturation (``hapticlab device …``)."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+from device.serial.firmware import BUILDS
 
 from ..errors import UsageError
 from ..guards import close_at_exit
 from ._say import to_stderr
 
-__all__ = ["open_device_for", "session_device", "emulated_spec", "device_selftest",
-           "device_list", "EMULATORS", "emulate", "saturation_forecast"]
+__all__ = ["open_device_for", "session_device", "device_selftest", "device_list",
+           "EMULATORS", "emulate", "saturation_forecast"]
+
+#: what ``emulate`` can serve the wire protocol with, and the servo rate each runs at [Hz]
+#: (None: the Python emulator's ``rate``): the emulator backend's builds
+#: (:data:`device.serial.emulated.BUILDS`)
+EMULATORS = BUILDS
 
 
 def open_device_for(spec: str, *, clear_fault: bool = False,
                     say: Callable[[str], None] | None = None, seed: int = 0,
-                    person: bool = False):
+                    person: bool = False, speed: float = 1.0):
     """The device a command opens, with a fault it latched before (an e-stop, the watchdog)
     cleared when the operator said so: every command that opens a device goes through here.
 
@@ -34,10 +38,12 @@ def open_device_for(spec: str, *, clear_fault: bool = False,
     say : callable, optional
         Where the operator reads it (default: stderr).
     seed : int
-        The simulated device's seed (``sim`` only).
+        A simulated device's seed (a backend whose devices are not seeded ignores it).
     person : bool
-        A person sits at it: the simulated device is paced to the wall clock (unpaced it
-        tapped 910 times in 13 s of familiarization).
+        A person sits at it: a device in virtual time is paced to the wall clock (the
+        simulated device unpaced tapped 910 times in 13 s of familiarization).
+    speed : float
+        Device seconds per wall second where the device's clock is paced (an emulator).
 
     Raises
     ------
@@ -46,11 +52,10 @@ def open_device_for(spec: str, *, clear_fault: bool = False,
     """
     from device import open_device
 
-    dev = (open_device(spec, seed=seed, live=person) if spec == "sim" or spec.startswith("sim:")
-           else open_device(spec))
+    dev = open_device(spec, seed=seed, live=person, speed=speed)
     if clear_fault and dev.fault is not None:
-        (say or to_stderr)(f"clearing the latched {dev.fault.code} fault of {spec} (the operator's "
-                      "decision: --clear-fault)")
+        (say or to_stderr)(f"clearing the latched {dev.fault.code} fault of {spec} (the "
+                           "operator's decision: --clear-fault)")
         try:
             dev.clear_fault()
         except BaseException:
@@ -61,8 +66,9 @@ def open_device_for(spec: str, *, clear_fault: bool = False,
 
 @contextmanager
 def session_device(spec: str, seed: int, person: bool, clear_fault: bool, lsl: bool,
-                    say: Callable[[str], None]) -> Iterator:
-    """The device a session (run or resume) opens: LSL checked first when asked for (no
+                   say: Callable[[str], None], speed: float = 1.0) -> Iterator:
+    """The device a session (run or resume) opens (``seed``, ``person`` and ``speed`` as
+    :func:`open_device_for`): LSL checked first when asked for (no
     pylsl, or no private network where one is required, is said before anything opens),
     closed at exit whatever ends the process, a fault it latched before cleared when the
     operator said so."""
@@ -70,34 +76,10 @@ def session_device(spec: str, seed: int, person: bool, clear_fault: bool, lsl: b
         from app.markers import load_pylsl
 
         load_pylsl()
-    with open_device_for(spec, clear_fault=clear_fault, say=say, seed=seed,
-                         person=person) as dev:
+    with open_device_for(spec, clear_fault=clear_fault, say=say, seed=seed, person=person,
+                         speed=speed) as dev:
         close_at_exit(dev)
         yield dev
-
-
-@contextmanager
-def emulated_spec(spec: str, speed: float = 1.0, log: Path | None = None) -> Iterator[str]:
-    """``serial:emulator`` starts a device emulator on a pty for the run, paced at ``speed``
-    × real time; what it says (faults, the watchdog's timing) goes to ``log``."""
-    if spec != "serial:emulator":
-        yield spec
-        return
-    if log is not None:
-        log.parent.mkdir(parents=True, exist_ok=True)
-    with open(log if log is not None else os.devnull, "w") as err:
-        proc = subprocess.Popen([sys.executable, "-m", "app", "device", "emulate", "--speed",
-                                 repr(float(speed))],
-                                stdout=subprocess.PIPE, stderr=err, text=True)
-    try:
-        port = proc.stdout.readline().strip()
-        if not port:
-            raise UsageError("the device emulator did not start"
-                             + (f" (its log: {log})" if log is not None else ""))
-        yield f"serial:{port}"
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
 
 
 def saturation_forecast(protocol: str | Path, *, device: str, windows: int = 12,
@@ -144,30 +126,20 @@ def device_selftest(spec: str, *, clear_fault: bool = False,
 
 
 def device_list() -> dict:
-    """The registered backends, the serial ports this computer has and the simulated
-    device, without opening any port (opening one can reset a board).
+    """The registered backends and the devices they find on this computer, without
+    opening any (opening a serial port can reset a board): :func:`device.available_devices`.
 
     Returns
     -------
     dict
-        ``backends`` (names), ``ports`` (each ``spec``, ``description``, ``hwid``, sorted by
-        port) and ``simulated`` (each ``spec``, ``description``).
+        ``backends`` (names), ``devices`` (each ``spec``, ``backend``, ``description``,
+        ``details``, in the order of the backends' names) and ``broken`` (backend name →
+        why it cannot be used).
     """
-    from serial.tools import list_ports
+    from device import available_devices, backends, broken_backends
 
-    from device import backends
-
-    ports = [{"spec": f"serial:{p.device}", "description": p.description or "",
-              "hwid": p.hwid or ""} for p in sorted(list_ports.comports(), key=lambda p: p.device)]
-    return {"backends": list(backends()), "ports": ports,
-            "simulated": [{"spec": "sim", "description": "the simulated device (no hardware)"}]}
-
-
-#: what ``emulate`` can serve the wire protocol with, and the servo rate each runs at [Hz]
-#: (None: the Python emulator's ``rate``)
-EMULATORS = {"python": None, "host": 10_000.0, "host-board": 10_000.0, "host-san": 10_000.0,
-             "qemu": 10_000.0, "dhd-stub": 4_000.0, "hd-stub": 1_000.0,
-             "hd-stub-tsan": 1_000.0}
+    return {"backends": backends(), "devices": [d.to_dict() for d in available_devices()],
+            "broken": broken_backends()}
 
 
 def emulate(firmware: str = "python", *, rate: float | None = None, seed: int = 0,
@@ -194,29 +166,10 @@ def emulate(firmware: str = "python", *, rate: float | None = None, seed: int = 
     UsageError
         An option this emulator cannot honour, named.
     """
-    if firmware not in EMULATORS:
-        raise UsageError(f"no emulator named {firmware!r}; one of {', '.join(EMULATORS)}")
-    if not 0 < speed <= 20:
-        raise UsageError(f"--speed must be in (0, 20] (device seconds per wall second), "
-                         f"got {speed:g}")
-    if firmware != "python":
-        from device.serial.firmware import REAL_TIME_ONLY, serve
+    from device import DeviceSpecError
+    from device.serial.serving import serve
 
-        if rate is not None:
-            raise UsageError(f"the firmware's servo runs at its build's own rate "
-                             f"({EMULATORS[firmware]:,.0f} Hz for {firmware}): --rate applies "
-                             "to --firmware python only")
-        if firmware == "qemu" and speed != 1.0:
-            raise UsageError("the firmware under QEMU runs at the pace of its counted "
-                             "instructions and its sleeps: --speed applies to "
-                             "--firmware python, host, host-board, host-san and dhd-stub")
-        if firmware in REAL_TIME_ONLY and speed != 1.0:
-            raise UsageError(f"--firmware {firmware} runs in real time, in the HD "
-                             "scheduler's clock: --speed must be 1")
-        return serve(firmware, seed, speed)
-    from device.serial.emulator import main as serve_python
-
-    rate = 10_000.0 if rate is None else rate
-    if not 1_000 <= rate <= 20_000:
-        raise UsageError(f"--rate must be 1,000–20,000 Hz, got {rate:g}")
-    return serve_python(rate, seed, speed)
+    try:
+        return serve(firmware, rate=rate, seed=seed, speed=speed)
+    except DeviceSpecError as exc:
+        raise UsageError(str(exc)) from None

@@ -109,17 +109,17 @@ def validate_protocol(protocol: str | Path, *, device: str | None = None,
 
     info, found, warnings, libraries = None, {}, [], ""
     if device:
-        from app.libraries import prepare_libraries
+        from app.libraries import builds_on_demand, prepare_libraries
         from app.preflight import rendering_notes
 
         with session_device(device, 0, person=False, clear_fault=clear_fault, lsl=False,
                              say=to_stderr) as dev:
             info = dev.info
             p = load_protocol(protocol, device=info)
-            sim = info.backend == "sim"
+            built = builds_on_demand(info)
             found = prepare_libraries(p, dev, device, build=False, ref=str(protocol)) \
-                if not sim else {}
-        if sim and any(s.scene.kind == "library" for s in p.samples.values()):
+                if not built else {}
+        if built and any(s.scene.kind == "library" for s in p.samples.values()):
             libraries = "matched samples: a missing library is built on first use (simulated)"
         elif found:
             libraries = f"libraries found for {', '.join(sorted(found))}"

@@ -23,7 +23,7 @@ from ._session import (
     keep_markers,
     session_parts,
 )
-from .devices import emulated_spec, session_device
+from .devices import session_device
 from .results import SessionResult, StudyResult
 
 __all__ = ["KIND_OF", "DEFAULT_SIM_DATA", "run_session", "resume_session", "session_seed",
@@ -50,7 +50,8 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 operator_keys: bool | None = None, clear_fault: bool = False,
                 info_fields: dict | None = None, new_session: bool = False,
                 say: Callable[[str], None] | None = None, lsl: bool = False,
-                lsl_wait: float = 300.0, discrimination: dict | None = None) -> SessionResult:
+                lsl_wait: float = 300.0, discrimination: dict | None = None,
+                speed: float = 1.0) -> SessionResult:
     """Run one session to the end (or until it is stopped) and record it.
 
     Parameters
@@ -102,6 +103,9 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     discrimination : dict, optional
         ``responder="simulated"``: measured JNDs the simulated participant draws its own
         around (:func:`simulate_study`).
+    speed : float
+        Device seconds per wall second where the device's clock is paced (an emulator: a
+        simulated study run faster than real time); 1 for a person.
 
     Returns
     -------
@@ -162,7 +166,12 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
         early.append(check_display())
     if failed(early):
         raise PreflightError(failed(early))
-    with session_device(device, seed, responder == "person", clear_fault, lsl, say) as dev:
+    with session_device(device, seed, responder == "person", clear_fault, lsl, say,
+                        speed) as dev:
+        if responder == "person" and dev.info.simulated_contact:
+            say(f"warning: a person on a SIMULATED device ({device}) — nothing they feel "
+                "comes from a physical surface; the session is recorded as human, with the "
+                "device's capabilities (an analysis leaves it out unless asked)")
         again = (f"hapticlab run {protocol} --participant {participant} --device {device} "
                  "--clear-fault (with the session's other options)")
         checks = [check_device(dev, device, again), check_protocol_on(text, source, dev)]
@@ -356,9 +365,11 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
     data : path
         Default ``sim-data``: simulated sessions never land beside people's.
     device : str
-        ``sim``, ``sim:RATE``, ``serial:PORT`` or ``serial:emulator`` (paced by ``speed``).
+        Any device spec: ``sim``, ``sim:RATE``, ``emulator``, ``emulator:BUILD`` (each
+        session starts its own, seeded with the session's seed), ``serial:PORT``.
     speed : float
-        ``serial:emulator`` only: device seconds per wall second (≤ 20).
+        Device seconds per wall second where the device's clock is paced (an emulator),
+        ≤ 20; a simulated device in virtual time runs as fast as it can whatever it is.
     traces, prefix, group
         As :func:`run_session` (ids are PREFIX01, PREFIX02, …).
     clear_fault : bool
@@ -390,20 +401,20 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
     rows = len(SessionEngine(proto, 0, "x", 0).williams_rows(williams[0])) if williams else 0
     t0 = time.perf_counter()
     out: list[SessionResult] = []
-    with emulated_spec(device, speed, Path(data) / "emulator.log") as spec:
-        for k in range(1, participants + 1):
-            # a Williams-counterbalanced protocol: participant k takes row (k − 1) mod rows
-            r = run_session(protocol, f"{prefix}{k:02d}", device=spec, data=data,
-                            responder="simulated", seed=session_seed(seed, k), group=group,
-                            traces=traces, audio=False, quiet=True, operator_keys=False,
-                            row=(k - 1) % rows if rows else None,
-                            clear_fault=clear_fault and k == 1, discrimination=discrimination)
-            out.append(r)
-            if r.status != SessionStatus.COMPLETE:
-                break
-            if progress is not None:
-                progress(f"  {protocol}: participant {k}/{participants} done "
-                         f"({time.perf_counter() - t0:.0f} s)")
+    for k in range(1, participants + 1):
+        # a Williams-counterbalanced protocol: participant k takes row (k − 1) mod rows
+        r = run_session(protocol, f"{prefix}{k:02d}", device=device, data=data,
+                        responder="simulated", seed=session_seed(seed, k), group=group,
+                        traces=traces, audio=False, quiet=True, operator_keys=False,
+                        row=(k - 1) % rows if rows else None,
+                        clear_fault=clear_fault and k == 1, discrimination=discrimination,
+                        speed=speed)
+        out.append(r)
+        if r.status != SessionStatus.COMPLETE:
+            break
+        if progress is not None:
+            progress(f"  {protocol}: participant {k}/{participants} done "
+                     f"({time.perf_counter() - t0:.0f} s)")
     return StudyResult(out, time.perf_counter() - t0)
 
 

@@ -17,15 +17,17 @@ import threading
 import time
 import zlib
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
 from ..base import DeviceInfo, HapticDevice
 from ..codes import Blend, SceneKind
-from ..errors import DeviceError, DeviceFaultError, SceneError
+from ..errors import DeviceError, DeviceFaultError, DeviceSpecError, SceneError
 from ..events import ContactEvent, FaultEvent, HostClock, SaturationEvent, WindowResult
+from ..registry import AvailableDevice
 from ..scene import Material, Scene, TransientTable
 from . import messages as M
 from .contract import MAX_WINDOW_MS, PROTOCOL
@@ -298,11 +300,41 @@ class SerialDevice(HapticDevice):
             raise
         self.link.start_heartbeats(self._info.watchdog_s)
 
+    #: the name this backend is registered as, reported in :attr:`DeviceInfo.backend`
+    BACKEND = "serial"
+
     @classmethod
     def from_spec(cls, arg: str | None = None, **options: Any) -> SerialDevice:
+        """Open the device on port ``arg`` (``serial:/dev/ttyACM0``, or a pyserial URL);
+        ``seed``, ``live`` and ``speed`` do not apply to a device on a port (its clock is
+        its own, a simulated one was seeded when it started)."""
+        for common in ("seed", "live", "speed"):
+            options.pop(common, None)
         if not arg:
-            raise DeviceError("serial spec needs a port: 'serial:/dev/ttyACM0'")
+            raise DeviceSpecError("serial spec needs a port: 'serial:/dev/ttyACM0'")
+        if arg == "emulator":
+            raise DeviceSpecError("'serial:emulator' is now the emulator backend of its own: "
+                                  "--device emulator (or emulator:BUILD, e.g. emulator:host)")
         return cls(arg, **options)
+
+    @classmethod
+    def available(cls) -> list[AvailableDevice]:
+        """Every serial port this computer has (pyserial's list), sorted, none opened."""
+        from serial.tools import list_ports
+
+        return [AvailableDevice(f"serial:{p.device}", cls.BACKEND, p.description or "",
+                                p.hwid or "")
+                for p in sorted(list_ports.comports(), key=lambda p: p.device)]
+
+    @classmethod
+    @contextmanager
+    def conformance_opener(cls) -> Iterator[Callable[[], SerialDevice]]:
+        """The Python emulator on a pseudo-terminal for the checks, each a new connection
+        to it (stopped after)."""
+        from .serving import start_emulator
+
+        with start_emulator("python", seed=5) as emu:
+            yield lambda: cls.from_spec(emu.port)
 
     # ------------------------------------------------------------------ state from the wire
     def _on_message(self, msg: M.Message) -> None:
@@ -337,13 +369,15 @@ class SerialDevice(HapticDevice):
             self._fault_told = False
             self._output = 0.0
 
-    @staticmethod
-    def _identify(h: M.HelloAck, limits: M.Limits | None = None) -> DeviceInfo:
+    @classmethod
+    def _identify(cls, h: M.HelloAck, limits: M.Limits | None = None) -> DeviceInfo:
+        """What HELLO_ACK and LIMITS say the device is and can do (a device that sends no
+        capabilities is taken for a physical one, the safe reading)."""
         if not 1 <= h.protocol <= PROTOCOL:  # an older one is read by its own layouts
             raise ProtocolMismatchError(f"device speaks protocol {h.protocol}, this host "
                                         f"speaks 1 to {PROTOCOL}")
         model, serial_no, fw = h.strings
-        return DeviceInfo(backend="serial", model=model, serial_number=serial_no, firmware=fw,
+        return DeviceInfo(backend=cls.BACKEND, model=model, serial_number=serial_no, firmware=fw,
                           servo_rate_hz=float(h.servo_rate_hz),
                           current_limit=h.current_limit_ma / 1000, force_constant=h.force_constant
                           / 1000, effective_mass=h.effective_mass * 1e-6,
@@ -354,7 +388,11 @@ class SerialDevice(HapticDevice):
                           tick_p99_s=limits.tick_p99_us * 1e-6
                           if limits is not None and limits.tick_p99_us else None,
                           tick_max_s=limits.tick_max_us * 1e-6
-                          if limits is not None and limits.tick_max_us else None)
+                          if limits is not None and limits.tick_max_us else None,
+                          # a version-2 device states none (can: None): a physical one
+                          simulated_contact=bool(limits is not None
+                                                 and limits.can("simulated_contact")),
+                          seeded=bool(limits is not None and limits.can("seeded")))
 
     def _configure_traces(self, names: tuple[str, ...] | None = None) -> tuple[str, ...]:
         """Stream ``names`` (None: every base channel the device records, the channels

@@ -19,10 +19,10 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from ..errors import DeviceError
+from ..errors import DeviceError, DeviceSpecError
 
-__all__ = ["FIRMWARE_DIR", "HOST_BUILDS", "CONFORMANCE_TARGETS", "binary", "host_command",
-           "qemu_command", "serve", "QEMU_PTY"]
+__all__ = ["FIRMWARE_DIR", "HOST_BUILDS", "CONFORMANCE_TARGETS", "BUILDS", "binary",
+           "check_options", "host_command", "qemu_command", "serve", "QEMU_PTY"]
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 #: the builds, by name; ``board-qemu`` is the papers' board I/O built for QEMU (its peripheral
@@ -63,6 +63,48 @@ REAL_TIME_ONLY = ("hd-stub", "hd-stub-tsan")
 QEMU_ICOUNT = "shift=3,sleep=on"
 #: what qemu-system-arm prints when it puts a serial port on a pty
 QEMU_PTY = re.compile(r"char device redirected to (/dev/pts/\d+)")
+
+
+#: what can emulate a device, and the servo rate each runs at [Hz] (None: the Python
+#: emulator's ``rate``, 10,000 Hz by default): the Python emulator, the C firmware built for
+#: this machine (``host``; ``host-board`` with the STM32F405's buffers and 1-Mbaud link;
+#: ``host-san``, that under ASan and UBSan), run on an emulated STM32F405 under QEMU
+#: (``qemu``), and the bridges to commercial devices over hapticlab's stand-ins for their
+#: SDKs (``dhd-stub``: Force Dimension; ``hd-stub``: OpenHaptics, real time only;
+#: ``hd-stub-tsan``: that under ThreadSanitizer)
+BUILDS = {"python": None, "host": 10_000.0, "host-board": 10_000.0, "host-san": 10_000.0,
+          "qemu": 10_000.0, "dhd-stub": 4_000.0, "hd-stub": 1_000.0, "hd-stub-tsan": 1_000.0}
+
+
+def check_options(build: str, rate: float | None = None, speed: float = 1.0) -> None:
+    """Whether emulator ``build`` can run at servo ``rate`` [Hz] and ``speed`` (device
+    seconds per wall second).
+
+    Raises
+    ------
+    DeviceSpecError
+        No such build, or an option it cannot honour, named.
+    """
+    if build not in BUILDS:
+        raise DeviceSpecError(f"no emulator named {build!r}; one of {', '.join(BUILDS)}")
+    if not 0 < speed <= 20:
+        raise DeviceSpecError(f"--speed must be in (0, 20] (device seconds per wall second), "
+                              f"got {speed:g}")
+    if BUILDS[build] is None:
+        if rate is not None and not 1_000 <= rate <= 20_000:
+            raise DeviceSpecError(f"--rate must be 1,000–20,000 Hz, got {rate:g}")
+        return
+    if rate is not None:
+        raise DeviceSpecError(f"the firmware's servo runs at its build's own rate "
+                              f"({BUILDS[build]:,.0f} Hz for {build}): --rate applies to "
+                              "--firmware python only")
+    if build == "qemu" and speed != 1.0:
+        raise DeviceSpecError("the firmware under QEMU runs at the pace of its counted "
+                              "instructions and its sleeps: --speed applies to --firmware "
+                              "python, host, host-board, host-san and dhd-stub")
+    if build in REAL_TIME_ONLY and speed != 1.0:
+        raise DeviceSpecError(f"--firmware {build} runs in real time, in the HD scheduler's "
+                              "clock: --speed must be 1")
 
 
 def binary(build: str) -> Path:

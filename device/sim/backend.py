@@ -6,7 +6,8 @@ import hashlib
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, replace
 from typing import Any
 
@@ -15,6 +16,7 @@ import numpy as np
 from ..base import DeviceInfo, HapticDevice, SimulatedHand
 from ..errors import DeviceError, DeviceSpecError, SceneError
 from ..events import ContactEvent, FaultEvent, Flags, HostClock, SaturationEvent, WindowResult
+from ..registry import AvailableDevice
 from ..scene import MAX_REACH_M, Scene, TransientTable
 from . import kernel as K
 from .params import DeviceParams, HandParams
@@ -172,7 +174,8 @@ class SimDevice(HapticDevice):
             firmware="sim", servo_rate_hz=dev.servo_rate_hz, current_limit=dev.current_limit,
             force_constant=dev.force_constant, effective_mass=dev.effective_mass,
             watchdog_s=dev.watchdog_s, encoder_resolution=dev.encoder_resolution,
-            accel_range=dev.accel_range)
+            accel_range=dev.accel_range, simulated_contact=True, seeded=True,
+            virtual_time=True)
         self._vel_w = velocity_weights(dev)
         self._kernel_device = self._device_args()
         self._pull_gains = self._hand_gains()
@@ -294,6 +297,18 @@ class SimDevice(HapticDevice):
                 raise DeviceSpecError(f"sim spec 'sim:{arg}': expected a servo rate in Hz, "
                                   "e.g. 'sim:10000'") from None
         return cls(**options)
+
+    @classmethod
+    def available(cls) -> list[AvailableDevice]:
+        """The simulated device, on every computer."""
+        return [AvailableDevice("sim", "sim", "the simulated device, no hardware (sim:RATE "
+                                "sets its servo rate [Hz])")]
+
+    @classmethod
+    @contextmanager
+    def conformance_opener(cls) -> Iterator[Callable[[], SimDevice]]:
+        """Fresh simulated devices with one seed (each check opens its own)."""
+        yield lambda: cls.from_spec(None, seed=5)
 
     # ------------------------------------------------------------------ state
     @property

@@ -26,7 +26,8 @@ def test_the_device_is_on_the_record_and_a_person_on_sim_is_not_pooled(tmp_path)
     # P01 stands for a person on a serial device, S01 for a person on the simulator
     meta.update(kind="human", responder="person")
     meta["device"].update(backend="serial", model="hapticlab stylus", serial_number="0042",
-                          firmware="hl-2.1")
+                          firmware="hl-2.1", simulated_contact=False, seeded=False,
+                          virtual_time=False)  # what the lab's device says of itself
     meta_path.write_text(json.dumps(meta))
     s_path = tmp_path / "data" / "sub-S01" / "ses-1" / "session.json"
     s_meta = json.loads(s_path.read_text())

@@ -22,7 +22,8 @@ def _as_person(folder: Path, status: str = "complete") -> None:
     meta = json.loads((folder / "session.json").read_text())
     meta.update(kind="human", responder="person", ui="psychopy", status=status)
     meta["device"].update(backend="serial", model="hapticlab stylus", serial_number="HL-0042",
-                          firmware="1.3")
+                          firmware="1.3", simulated_contact=False, seeded=False,
+                          virtual_time=False)  # what the lab's device says of itself
     (folder / "session.json").write_text(json.dumps(meta))
 
 

@@ -145,3 +145,38 @@ def test_a_null_is_written_back_read_as_empty_or_refused_by_name(tmp_path):
     (tmp_path / "session.json").write_text(json.dumps(m))
     with pytest.raises(SessionMetaError, match="seed is null; expected a whole number"):
         read_meta(tmp_path / "session.json")
+
+
+@pytest.mark.parametrize("backend, firmware, simulated, virtual", [
+    ("sim", "sim", True, True),                     # the simulated device
+    ("serial", "emulator-2x10", True, False),       # the Python emulator at ×10
+    ("serial", "hlfw-2.0 host", True, False),       # the firmware's host build
+    ("serial", "hlfw-2.0 host-F4", True, False),    # host-board
+    ("serial", "hlfw-2.0 stm32", True, False),      # under QEMU
+    ("serial", "hlfw-2.0 dhd-stu", True, False),    # the Force Dimension bridge's stand-in
+    ("serial", "hlfw-2.0 hd-stub", True, False),    # the OpenHaptics bridge's stand-in
+    ("serial", "hlfw-2.0 hd-tsan", True, False),    # that under ThreadSanitizer
+    ("serial", "hlfw-2.0 board", False, False),     # the papers' board
+    ("serial", "hlfw-2.0 dhd", False, False),       # the bridge on the vendor's SDK
+    ("serial", "hl-2.1", False, False),             # a lab's own firmware
+])
+def test_an_older_file_gets_its_devices_capabilities_from_what_it_recorded(
+        tmp_path, backend, firmware, simulated, virtual):
+    """Format 3 recorded no capabilities: they are read from the backend and firmware texts
+    it did record (the bridges' stand-ins, missed before, are simulated)."""
+    old = _meta(3)
+    old["device"] = {"spec": "x", "backend": backend, "firmware": firmware}
+    (tmp_path / "session.json").write_text(json.dumps(old))
+    meta = read_meta(tmp_path / "session.json")
+    assert meta.upgraded_from == 3 and meta.simulated_contact is simulated
+    assert meta.device["seeded"] is simulated and meta.device["virtual_time"] is virtual
+    assert meta.device["firmware"] == firmware  # what was recorded stays
+
+
+def test_a_current_file_is_read_as_the_device_said_whatever_its_names(tmp_path):
+    m = _meta()
+    m["device"] = {"backend": "sim", "firmware": "emulator-2", "simulated_contact": False,
+                   "seeded": False, "virtual_time": False}
+    (tmp_path / "session.json").write_text(json.dumps(m))
+    meta = read_meta(tmp_path / "session.json")
+    assert meta.simulated_contact is False and meta.upgraded_from is None

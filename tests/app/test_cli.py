@@ -157,14 +157,19 @@ def test_version_and_every_option_explained():
 
 
 @pytest.mark.integration
-def test_device_list_opens_nothing_and_names_the_simulator(tmp_path):
+def test_device_list_opens_nothing_and_names_every_backends_devices(tmp_path):
     out = run("device", "list", "--json")
     assert out.returncode == 0, out.stderr
     found = json.loads(out.stdout)
-    assert found["simulated"][0]["spec"] == "sim" and "serial" in found["backends"]
-    assert all(p["spec"].startswith("serial:") for p in found["ports"])
+    from device import available_devices, backends
+
+    assert found["backends"] == backends() and found["broken"] == {}
+    assert found["devices"] == [d.to_dict() for d in available_devices()]
+    assert {d["backend"] for d in found["devices"]} <= set(found["backends"])
     text = run("device", "list")
-    assert text.returncode == 0 and "simulated: sim" in text.stdout
+    assert text.returncode == 0
+    for d in found["devices"]:
+        assert any(ln.startswith(d["spec"]) for ln in text.stdout.splitlines()), text.stdout
 
 
 def test_device_list_names_each_serial_port_as_a_spec(monkeypatch, capsys):
@@ -184,13 +189,14 @@ def test_device_list_names_each_serial_port_as_a_spec(monkeypatch, capsys):
     monkeypatch.setattr(list_ports, "comports", lambda: [usb, acm])
     assert main(["device", "list", "--json"]) == 0
     found = json.loads(capsys.readouterr().out)
-    assert [p["spec"] for p in found["ports"]] == ["serial:/dev/ttyACM0", "serial:/dev/ttyUSB3"]
-    assert found["ports"][0]["hwid"].endswith("SER=0042")
+    ports = [d for d in found["devices"] if d["backend"] == "serial"]
+    assert [p["spec"] for p in ports] == ["serial:/dev/ttyACM0", "serial:/dev/ttyUSB3"]
+    assert ports[0]["details"].endswith("SER=0042")
     assert main(["device", "list"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert any(ln.startswith("serial:/dev/ttyACM0") and "hapticlab stylus" in ln
                for ln in lines), lines
-    assert lines[-1] == "check one with: hapticlab device selftest SPEC (it opens the port)"
+    assert lines[-1] == "check one with: hapticlab device selftest SPEC (it opens the device)"
 
 
 @pytest.mark.integration

@@ -1,6 +1,7 @@
 """Simulated participants: ratings follow what is felt, studies are reproducible, and the
 papers' main findings emerge (or are listed in the issue note where they do not)."""
 
+import json
 import math
 import subprocess
 import sys
@@ -359,19 +360,23 @@ def test_simulate_is_reproducible(tmp_path):
 @pytest.mark.slow
 def test_simulate_over_the_serial_link_to_the_emulator(tmp_path):
     """The whole path of a real session: pyserial over a pty to the device emulator (×10
-    real time), the participant feeling the traces the link uploads. This is the run that
-    found the emulator crashing on aluminum's ringing (a rebound read at 3.7 m/s did not fit
-    the wire's contact field)."""
+    real time; the emulator backend starts one per session, seeded with the session's
+    seed), the participant feeling the traces the link uploads. This is the run that found
+    the emulator crashing on aluminum's ringing (a rebound read at 3.7 m/s did not fit the
+    wire's contact field)."""
     out = subprocess.run([*CLI, "simulate", "factorial", "--participants", "1", "--seed", "2",
-                          "--device", "serial:emulator", "--speed", "10", "--data",
+                          "--device", "emulator", "--speed", "10", "--data",
                           str(tmp_path), "--traces", "none"],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     d = load_sessions(tmp_path)
-    assert (d["status"] == "valid").sum() == 24 and set(d["device_backend"]) == {"serial"}
+    assert (d["status"] == "valid").sum() == 24 and set(d["device_backend"]) == {"emulator"}
     assert (d["status"] == "reference").sum() == 3  # each material's real block, tapped once
-    log = (tmp_path / "emulator.log").read_text()  # what the device said, kept for people
-    assert "emulating a 10000-Hz device" in log and "FAULT" not in log
+    meta = json.loads(next(tmp_path.rglob("session.json")).read_text())
+    # what the device said over the wire (LIMITS), recorded: simulated, seeded, at ×10
+    assert meta["device"]["firmware"] == "emulator-2x10" and meta["device"]["simulated_contact"]
+    assert meta["device"]["seeded"] and not meta["device"]["virtual_time"]
+    assert not meta.get("interruptions") and not meta.get("warnings")
     rated = d[d["status"] == "valid"]
     assert rated["rating"].between(1, 10).all() and rated["rating"].nunique() > 2
     bad = subprocess.run([*CLI, "simulate", "factorial", "--speed", "0"], capture_output=True,

@@ -1,32 +1,30 @@
 """The backend-independent device suite, run unchanged against every registered backend
-(``device.backends()``): ``sim``, and ``serial:<pty>`` on the emulator on a pseudo-terminal.
-A backend registered without a way into this suite fails it, never skips it."""
+(``device.backends()``: hapticlab's own and any installed), each through the opener it gives
+for the suite (``conformance_opener``). A backend registered without one fails the suite,
+never skips it."""
 
 import numpy as np
 import pytest
 
-from device import backends, open_device
+from device import backend, backends, open_device
 from device.base import HapticDevice
 from device.suite import CHECKS, CheckFailed, run_selftest
 
-#: how the suite reaches an instance of each registered backend, from the test's request
-#: (a new backend adds itself here)
-REACH = {
-    "sim": lambda request: lambda: open_device("sim", seed=5),
-    "serial": lambda request: (lambda port: lambda: open_device(f"serial:{port}"))(
-        request.getfixturevalue("emulator").port),
-}
 
-
-@pytest.fixture(params=backends())
+@pytest.fixture(scope="module", params=backends())
 def opener(request):
-    if request.param not in REACH:
+    """The backend's own way into the suite, for the module (an emulator it starts is
+    stopped after)."""
+    try:
+        reach = backend(request.param).conformance_opener()
+    except NotImplementedError as exc:
         pytest.fail(f"the registered backend {request.param!r} has no way into the device "
-                    "suite: add it to REACH in tests/device/test_backend_suite.py")
-    return REACH[request.param](request)
+                    f"suite: {exc}")
+    with reach as opener:
+        yield opener
 
 
-@pytest.mark.integration
+@pytest.mark.integration  # the serial and emulator backends' ways start an emulator
 @pytest.mark.realtime
 @pytest.mark.parametrize("check", sorted(CHECKS))
 def test_backend_contract(opener, check):
@@ -116,7 +114,7 @@ def test_checks_catch_a_device_that_breaks_its_contract(lie, check):
 
 
 def test_selftest_summary_shape():
-    report = run_selftest("sim", REACH["sim"](None))
+    report = run_selftest("sim", lambda: open_device("sim", seed=5))
     assert report["backend"] == "sim"
     assert report["passed"] == len(CHECKS) and report["failed"] == 0
     assert [r["name"] for r in report["checks"]] == list(CHECKS)
