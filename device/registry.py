@@ -58,18 +58,18 @@ class AvailableDevice:
     ----------
     spec : str
         What opens it (``open_device(spec)``, ``--device SPEC``).
-    backend : str
-        The backend's registered name.
     description : str
         What it is, in words (the system's description of a serial port, ...).
     details : str
         What identifies it further (a USB port's vendor and product ids), or "".
+    backend : str
+        The name its backend is registered as (:func:`available_devices` fills it in).
     """
 
     spec: str
-    backend: str
     description: str
     details: str = ""
+    backend: str = ""
 
     def to_dict(self) -> dict[str, str]:
         return {"spec": self.spec, "backend": self.backend, "description": self.description,

@@ -322,7 +322,7 @@ class SerialDevice(HapticDevice):
         """Every serial port this computer has (pyserial's list), sorted, none opened."""
         from serial.tools import list_ports
 
-        return [AvailableDevice(f"serial:{p.device}", cls.BACKEND, p.description or "",
+        return [AvailableDevice(f"serial:{p.device}", p.description or "",
                                 p.hwid or "")
                 for p in sorted(list_ports.comports(), key=lambda p: p.device)]
 

@@ -65,7 +65,7 @@ class EmulatedDevice(SerialDevice):
     def available(cls) -> list[AvailableDevice]:
         """The emulators, one entry: they need nothing but this computer."""
         builds = ", ".join(b for b in BUILDS if BUILDS[b] is not None)
-        return [AvailableDevice("emulator", cls.BACKEND, "an emulated device on a pseudo-"
+        return [AvailableDevice("emulator", "an emulated device on a pseudo-"
                                 "terminal, started when opened (emulator:BUILD for a firmware "
                                 f"build, built on first use: {builds})")]
 

@@ -301,7 +301,7 @@ class SimDevice(HapticDevice):
     @classmethod
     def available(cls) -> list[AvailableDevice]:
         """The simulated device, on every computer."""
-        return [AvailableDevice("sim", "sim", "the simulated device, no hardware (sim:RATE "
+        return [AvailableDevice("sim", "the simulated device, no hardware (sim:RATE "
                                 "sets its servo rate [Hz])")]
 
     @classmethod

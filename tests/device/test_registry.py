@@ -58,7 +58,7 @@ TWIN = """
 
         @classmethod
         def available(cls):
-            return [AvailableDevice("twin", "twin", "the lab's simulated twin")]
+            return [AvailableDevice("twin", "the lab's simulated twin")]
 
         @classmethod
         @contextmanager
