@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import optimize, signal
-from scipy.linalg import expm
 
 from ..scene import PUBLISHED_GRASP as PUBLISHED
 from ..scene import GraspModel, GraspTransient
@@ -59,12 +58,6 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
     """MATLAB compare's fit: 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖) [%]."""
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)
     return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / np.linalg.norm(y - y.mean())))
-
-
-def _rc(rate_hz: float, cutoff_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """First-order RC low-pass at ``cutoff_hz`` discretized exactly (pole matching, unit DC)."""
-    p = math.exp(-2 * math.pi * cutoff_hz / rate_hz)
-    return np.array([1 - p]), np.array([1.0, -p])
 
 
 def _behind_rc(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: float, rc_hz: float | None):
@@ -129,25 +122,16 @@ def foh_filter(m: float, c: float, k: float, rate_hz: float, rc_hz: float | None
                ) -> tuple[np.ndarray, np.ndarray]:
     """Exact discrete (b, a) of force → acceleration for a force linear between samples.
 
-    First-order hold: x[k+1] = Φx[k] + (Γa − Γb/T)·u[k] + (Γb/T)·u[k+1] with Γa, Γb from
-    the exponential of [[A, B, 0], [0, 0, 1], [0, 0, 0]]·T.
+    The plant (behind the RC when ``rc_hz`` is given) discretized with a first-order hold
+    (:func:`scipy.signal.cont2discrete`, ``method="foh"``) at ``rate_hz`` [Hz].
     """
     A, B, C, D = _plant(m, c, k, rc_hz)
-    n = A.shape[0]
-    T = 1.0 / rate_hz
-    M = np.zeros((n + 2, n + 2))
-    M[:n, :n] = A
-    M[:n, n] = B
-    M[n, n + 1] = 1.0
-    E = expm(M * T)
-    Phi, Ga, Gb = E[:n, :n], E[:n, n], E[:n, n + 1]
-    B0, B1 = Ga - Gb / T, Gb / T
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B[:, None], C[None, :], np.array([[D]])),
+                                             1.0 / rate_hz, method="foh")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", signal.BadCoefficients)
-        n0, den = signal.ss2tf(Phi, B0[:, None], C[None, :], np.array([[D]]))
-        n1, _ = signal.ss2tf(Phi, B1[:, None], C[None, :], np.zeros((1, 1)))
-    b = n0[0] + np.append(n1[0][1:], 0.0)  # z·n1(z): n1 is strictly proper
-    return b, den
+        b, a = signal.ss2tf(Ad, Bd, Cd, Dd)
+    return b[0], a
 
 
 def _model_accel(m: float, c: float, k: float, force: np.ndarray, rate_hz: float,

@@ -114,6 +114,46 @@ def test_the_modal_response_is_scipys_state_space_simulation():
     assert np.max(np.abs(ours - ref[:, 0])) <= 1e-9 * np.max(np.abs(ref))
 
 
+def _foh_by_hand(m, c, k, rate_hz, rc_hz):
+    """The first-order hold derived by hand (what grasp.py held before scipy's): with the
+    exponential of [[A, B, 0], [0, 0, 1], [0, 0, 0]]·T, x[k+1] = Φx[k] + (Γa − Γb/T)·u[k]
+    + (Γb/T)·u[k+1], as a transfer function in z."""
+    import warnings
+
+    from scipy import signal
+    from scipy.linalg import expm
+
+    from device.matching.grasp import _plant
+
+    A, B, C, D = _plant(m, c, k, rc_hz)
+    n, T = A.shape[0], 1.0 / rate_hz
+    M = np.zeros((n + 2, n + 2))
+    M[:n, :n], M[:n, n], M[n, n + 1] = A, B, 1.0
+    E = expm(M * T)
+    Phi, Ga, Gb = E[:n, :n], E[:n, n], E[:n, n + 1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", signal.BadCoefficients)
+        n0, den = signal.ss2tf(Phi, (Ga - Gb / T)[:, None], C[None, :], np.array([[D]]))
+        n1, _ = signal.ss2tf(Phi, (Gb / T)[:, None], C[None, :], np.zeros((1, 1)))
+    return n0[0] + np.append(n1[0][1:], 0.0), den
+
+
+@pytest.mark.parametrize("rate_hz, rc_hz", [(10_000.0, None), (10_000.0, 1_000.0),
+                                             (2_000.0, 300.0), (100_000.0, 1_000.0)])
+def test_the_models_first_order_hold_is_the_hand_derived_one(rate_hz, rc_hz):
+    """scipy's first-order hold (cont2discrete, foh) gives the response the hand derivation
+    gave, on a force linear between samples of a random walk, to 1e-9 of its peak."""
+    from scipy import signal
+
+    from device.matching.grasp import foh_filter
+
+    m, c, k = 0.023, 14.0, 75_000.0
+    force = np.cumsum(np.random.default_rng(3).normal(size=3000))
+    ours = signal.lfilter(*foh_filter(m, c, k, rate_hz, rc_hz), force)
+    ref = signal.lfilter(*_foh_by_hand(m, c, k, rate_hz, rc_hz), force)
+    assert np.max(np.abs(ours - ref)) <= 1e-9 * np.max(np.abs(ref))
+
+
 @pytest.mark.slow
 def test_impacts_with_a_mode_the_model_lacks_fit_as_the_papers_and_bias_the_relations():
     """The tissue rig (the published handle with TISSUE, 60 impacts, seed 1) is not a round
