@@ -372,11 +372,6 @@ class Link:
             self._events.clear()
             return items, self._gone
 
-    def put_back(self, items: list) -> None:
-        """Return events taken but not consumed to the front of the queue, in order."""
-        with self.cv:
-            self._events.extendleft(reversed(items))
-
     def clear_events(self) -> None:
         with self.cv:
             self._events.clear()

@@ -86,10 +86,6 @@ def _examples() -> list[tuple[str, M.Message]]:
 _V1 = {"hello", "trace_request", "trace_block"}
 
 
-def _frame_hex(frame: bytes) -> str:
-    return frame[:-1].hex()  # without the 0x00 delimiter
-
-
 def _raw(version: int, mtype: int, seq: int, body: bytes, crc_xor: int = 0) -> bytes:
     payload = struct.pack("<BBH", version, mtype, seq) + body
     payload += struct.pack("<I", (zlib.crc32(payload) ^ crc_xor) & 0xFFFFFFFF)
