@@ -77,9 +77,9 @@ INT_COLUMNS = ("session", "trial_index", "attempt", "n_taps")
 FLOAT_COLUMNS = ("peak_current", "rating", "response_time", "correct", "intensity")
 
 #: every status a row of trials.tsv may carry, as the recorder writes it (lower case): the
-#: attempt statuses of :mod:`protocols.engine` and its control entries (a pause, a resume, a
-#: reference block tapped). The engine keeps the same list (analysis imports nothing of
-#: ours; a test holds the two equal).
+#: values of the engine's named statuses (:class:`protocols.TrialStatus`: an attempt's
+#: outcomes, then the control entries — a pause, a resume, a reference block tapped), in
+#: their order. analysis imports nothing of ours: a test holds the two equal.
 ROW_STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "timed_out",
                 "excluded_timeout", "aborted_device", "excluded_device", "skipped", "estop",
                 "paused", "resumed", "reference")

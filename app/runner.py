@@ -47,6 +47,7 @@ from protocols import (
     Protocol,
     SessionEngine,
     Trial,
+    TrialStatus,
     is_reference,
     phase_kind,
     reference_item,
@@ -216,9 +217,11 @@ class SessionRunner:
         try:
             while self._expected:
                 row = self._expected[0]
-                if row["status"] in ("paused", "resumed", "estop") or row["reason"].startswith(
-                        ("operator", "participant asked")) or row["status"] in (
-                        "aborted_device", "excluded_device"):
+                status = TrialStatus(row["status"])
+                # what the operator, the participant or the device decided: taken as logged
+                if status.control or status in (TrialStatus.ESTOP, TrialStatus.ABORTED_DEVICE,
+                                                TrialStatus.EXCLUDED_DEVICE) \
+                        or row["reason"].startswith(("operator", "participant asked")):
                     self._expected.pop(0)
                     self.log.append(Attempt(row["item"], row["status"], row["reason"],
                                             correct=_correct(row)))
@@ -249,7 +252,7 @@ class SessionRunner:
             self._references_due(trial)
             action = self._wait_placed(trial)
             if action in ("skip", "requeue"):
-                status = "skipped" if action == "skip" else "requeued"
+                status = TrialStatus.SKIPPED if action == "skip" else TrialStatus.REQUEUED
                 self._record(trial, status, reason=f"operator {action}", t_start=utc_now())
                 self.console.say(f"{'s: skipped' if action == 'skip' else 'u: re-queued'} trial "
                                  f"{trial.trial_index} ({trial.item})")
@@ -384,7 +387,7 @@ class SessionRunner:
 
     # ------------------------------------------------------------------ reference blocks
     def _referenced(self, item: str) -> bool:
-        return any(a.item == item and a.status == "reference" for a in self.log)
+        return any(a.item == item and a.status == TrialStatus.REFERENCE for a in self.log)
 
     def _references_due(self, trial: Trial) -> None:
         """The real blocks the protocol calls for before this trial: the block's own at the
@@ -419,7 +422,7 @@ class SessionRunner:
         the taps are recorded as their own row (status ``reference``). An e-stop while it is
         placed or tapped pauses the session like any trial; the block is tapped again."""
         ref = self.protocol.samples[ref_id]
-        k = sum(a.status == "reference" for a in self.log)
+        k = sum(a.status == TrialStatus.REFERENCE for a in self.log)
         rtrial = dataclasses.replace(trial, item=reference_item(trial.phase, ref_id),
                                      kind=REFERENCE,
                                      samples=(ref_id,), placement=ref.placement or ref_id,
@@ -460,16 +463,16 @@ class SessionRunner:
                 continue
             if res.faults:
                 f = res.faults[0]
-                self._record(rtrial, "estop", reason=f"{f.code}: {f.message}", t_start=t_start,
-                             result=res)
+                self._record(rtrial, TrialStatus.ESTOP, reason=f"{f.code}: {f.message}",
+                             t_start=t_start, result=res)
                 if not self.console.interactive:
                     raise SessionInterrupted(f"{f.code} while tapping the real block {ref_id}: "
                                              "output is off and latched; once it is safe: "
                                              f"{self._resume_line()}")
                 self._fault_pause(f)
                 continue
-            self._record(rtrial, "reference", t_start=t_start, result=res, reason=reason)
-            self.console.result("reference", len(res.contacts), ref_id)
+            self._record(rtrial, TrialStatus.REFERENCE, t_start=t_start, result=res, reason=reason)
+            self.console.result(TrialStatus.REFERENCE, len(res.contacts), ref_id)
             return
 
     # ------------------------------------------------------------------ the end
@@ -480,7 +483,7 @@ class SessionRunner:
         for r in rows:
             c[r["status"]] = c.get(r["status"], 0) + 1
         excluded = sum(v for k, v in c.items() if k.startswith("excluded"))
-        sat = c.get("saturated", 0) + c.get("excluded_saturated", 0)
+        sat = c.get(TrialStatus.SATURATED, 0) + c.get(TrialStatus.EXCLUDED_SATURATED, 0)
         return (f"{c.get('valid', 0)} valid, {sat} saturated, {excluded} excluded, "
                 f"{c.get('skipped', 0)} skipped, {c.get('timed_out', 0)} timed out, "
                 f"{c.get('reference', 0)} reference taps; "
@@ -525,12 +528,12 @@ class SessionRunner:
                                          f"{self._resume_line()}") from exc
             raise _FaultStop(fault) from exc
         except DeviceError as exc:
-            status = self.engine.failure_status("aborted_device", trial, self.log)
+            status = self.engine.failure_status(TrialStatus.ABORTED_DEVICE, trial, self.log)
             cut = [exc.partial] if exc.partial is not None else []  # the window it cut short
             self._record(trial, status, reason=str(exc)[:200], t_start=t_start,
                          results=[*results, *cut], played=played)
             excluded = (f"; item {trial.item} failed {self.engine.cap('aborted_device')} times "
-                        "and is left out" if status == "excluded_device" else "")
+                        "and is left out" if status == TrialStatus.EXCLUDED_DEVICE else "")
             raise SessionInterrupted(f"device error during trial {trial.trial_index}: "
                                      f"{exc}{excluded}") from exc
         res = results[0]
@@ -538,21 +541,22 @@ class SessionRunner:
         if any(r.faults for r in results):  # an e-stop or the watchdog during the window
             f = next(r.faults[0] for r in results if r.faults)
             if self.console.interactive:  # the operator is there: pause until it is cleared
-                self._record(trial, "estop", reason=f"{f.code}: {f.message}",
+                self._record(trial, TrialStatus.ESTOP, reason=f"{f.code}: {f.message}",
                              t_start=t_start, result=res, results=results, played=played)
                 raise _FaultStop(f)
-            status = self.engine.failure_status("aborted_device", trial, self.log)
+            status = self.engine.failure_status(TrialStatus.ABORTED_DEVICE, trial, self.log)
             self._record(trial, status, reason=f"{f.code}: {f.message}",
                          t_start=t_start, result=res, results=results, played=played)
             raise SessionInterrupted(f"{f.code} during trial {trial.trial_index}: output is off "
                                      f"and latched; once it is safe: {self._resume_line()}")
         # a surface left without a tap, then tapped on a later visit, did not time out
         if any(r.timed_out for r in judged):
-            status = self.engine.failure_status("timed_out", trial, self.log)
+            status = self.engine.failure_status(TrialStatus.TIMED_OUT, trial, self.log)
             self._record(trial, status, reason="no contact before the timeout",
                          t_start=t_start, result=res, results=results, played=played)
             self.console.say(f"  no contact within {self.protocol.window.timeout:g} s: "
-                             + ("left out (timed out too often)" if status == "excluded_timeout"
+                             + ("left out (timed out too often)"
+                                if status == TrialStatus.EXCLUDED_TIMEOUT
                                 else "the item goes back into the pool"))
             return
         if any(r.saturated for r in results) and self.protocol.saturation.action == "redraw" \
@@ -561,16 +565,16 @@ class SessionRunner:
                 self.audio.low_tone()
             self.console.saturated()
             status = self.engine.saturated_status(trial, self.log)
-            self.responder.saturated(trial, comes_back=status == "saturated")
+            self.responder.saturated(trial, comes_back=status == TrialStatus.SATURATED)
             self._record(trial, status, t_start=t_start, result=res, results=results,
                          played=played)
             return
         row: dict[str, Any] = {}
         if kind.asks is not None:
             row = self._respond(kind.asks, trial, judged, rng)
-        self._record(trial, "valid", t_start=t_start, result=res, results=results, played=played,
-                     **row)
-        self.console.result("valid", len(velocities), ", ".join(
+        self._record(trial, TrialStatus.VALID, t_start=t_start, result=res, results=results,
+                     played=played, **row)
+        self.console.result(TrialStatus.VALID, len(velocities), ", ".join(
             f"{c} {row[c]}" for c in (kind.asks.marker if kind.asks else ())))
 
     # ------------------------------------------------------------------ a kind's windows

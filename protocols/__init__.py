@@ -35,6 +35,7 @@ from .model import (
     SaturationPolicy,
     Window,
 )
+from .statuses import TrialStatus
 from .williams import williams_square
 
 __all__ = [
@@ -44,6 +45,7 @@ __all__ = [
     "LogMismatch",
     "PAUSED", "Paused", "Phase", "PhaseDesign", "Protocol", "ProtocolError", "RNG_ALGORITHM",
     "RatingScale", "ResumeMismatch", "STATUSES", "Sample", "SaturationPolicy", "SessionEngine",
-    "SessionSetupError", "Trial", "Window", "load_protocol", "parse_protocol", "protocol_text",
+    "SessionSetupError", "Trial", "TrialStatus", "Window", "load_protocol", "parse_protocol",
+    "protocol_text",
     "seed_from_entropy", "williams_square",
 ]

@@ -60,10 +60,12 @@ from device.errors import HapticlabError
 from .adaptive import Stimulus, Tracks, comparison_sample, value_at
 from .kinds import phase_kind
 from .model import Phase, Protocol, Sample
+from .statuses import CAPPED, FINAL_STATUSES, STATUSES, TrialStatus
 from .williams import williams_square
 
 __all__ = ["SessionEngine", "Trial", "Attempt", "Done", "Paused", "DONE", "PAUSED",
            "LogMismatch", "ResumeMismatch", "SessionSetupError", "STATUSES", "FINAL_STATUSES",
+           "TrialStatus",
            "SATURATION_SAFETY_CAP", "reference_item", "is_reference"]
 
 #: a real reference block's row in trials.tsv: item ``<phase>/ref:<sample>``
@@ -80,17 +82,10 @@ def is_reference(item: str) -> bool:
     """Whether a row's item is a real reference block's (see :func:`reference_item`)."""
     return _REF in item
 
-STATUSES = ("valid", "saturated", "excluded_saturated", "requeued", "timed_out",
-            "excluded_timeout", "aborted_device", "excluded_device", "skipped", "estop")
-FINAL_STATUSES = ("valid", "excluded_saturated", "excluded_timeout", "excluded_device", "skipped")
-#: a counted failure → (the status at its cap, the protocol's cap)
-_CAPPED = {"saturated": "excluded_saturated", "timed_out": "excluded_timeout",
-           "aborted_device": "excluded_device"}
 #: saturations of one item after which it is excluded even with ``max_attempts = "none"``
 #: (the paper redrew without a cap; no participant saturates one sample this often, and a
 #: device that saturates on every attempt must still let the session end)
 SATURATION_SAFETY_CAP = 20
-_CONTROL = ("paused", "resumed", "reference")
 RNG_ALGORITHM = ("numpy PCG64 via SeedSequence(seed).spawn(2): [plan, redraw]; an adaptive "
                  "phase's trial k: SeedSequence([seed, 57, phase index, k])")
 #: the key's end of an adaptive phase's place in the plan
@@ -205,9 +200,12 @@ class Attempt:
     correct: bool | None = None
 
     def __post_init__(self) -> None:
-        if self.status not in STATUSES + _CONTROL:
-            raise ValueError(f"attempt status must be one of {', '.join(STATUSES + _CONTROL)}; "
-                             f"got {self.status!r}")
+        try:
+            object.__setattr__(self, "status", TrialStatus(self.status))
+        except ValueError:
+            raise ValueError(f"attempt status must be one of "
+                             f"{', '.join(s.value for s in TrialStatus)}; got "
+                             f"{self.status!r}") from None
 
 
 @dataclass(frozen=True)
@@ -227,7 +225,8 @@ DONE, PAUSED = Done(), Paused()
 class _State:
     queue: list[Item]
     attempts: dict[str, int] = field(default_factory=dict)
-    failures: dict[tuple[str, str], int] = field(default_factory=dict)  # (kind, item) → n
+    #: (counted failure, item) → how many times
+    failures: dict[tuple[TrialStatus, str], int] = field(default_factory=dict)
     n_attempts: int = 0
     paused: bool = False
     last_placement: str | None = None
@@ -460,16 +459,16 @@ class SessionEngine:
 
     def _take(self, st: _State, n: int, entry: Attempt) -> None:
         """Log entry ``n`` into the state."""
-        final_of = {v: k for k, v in _CAPPED.items()}
+        failure_of = {v: k for k, v in CAPPED.items()}  # an exclusion → the failure it caps
         if not isinstance(entry, Attempt):
             raise LogMismatch(f"log entry {n + 1}: expected an Attempt, got {entry!r}")
-        if entry.status == "paused":
+        if entry.status == TrialStatus.PAUSED:
             st.paused = True
             return
-        if entry.status == "resumed":
+        if entry.status == TrialStatus.RESUMED:
             st.paused = False
             return
-        if entry.status == "reference" or is_reference(entry.item):
+        if entry.status == TrialStatus.REFERENCE or is_reference(entry.item):
             return  # a real block tapped (or an e-stop while it was): not a plan item
         self._fill(st)
         if not st.queue:
@@ -484,20 +483,22 @@ class SessionEngine:
         st.attempts[head.key] = st.attempts.get(head.key, 0) + 1
         st.last_placement = self._placement(head, st.last_placement)
         status = entry.status
-        kind = status if status in _CAPPED else final_of.get(status)
-        if kind is not None:
-            key = (kind, head.key)
+        failure = status if status in CAPPED else failure_of.get(status)
+        if failure is not None:
+            key = (failure, head.key)
             st.failures[key] = st.failures.get(key, 0) + 1
-            if status == kind and st.failures[key] >= self.cap(kind):
+            if status == failure and st.failures[key] >= self.cap(failure):
                 raise LogMismatch(f"log entry {n + 1}: attempt {st.failures[key]} of "
                                   f"{head.key!r} is {status} at the cap of "
-                                  f"{self.cap(kind)}; it must be logged '{_CAPPED[kind]}'")
-        if status in FINAL_STATUSES:
+                                  f"{self.cap(failure)}; it must be logged "
+                                  f"'{CAPPED[failure]}'")
+        if status.final:
             st.queue.pop(0)
             st.finished[head.key] = status
             if head.stimulus is not None:
                 self._ended(st, head, entry, n)
-        elif status in ("saturated", "requeued", "timed_out") and head.stimulus is None:
+        elif status in (TrialStatus.SATURATED, TrialStatus.REQUEUED, TrialStatus.TIMED_OUT) \
+                and head.stimulus is None:
             st.queue.pop(0)
             self._reinsert(st.queue, head, st.rng, self._no_repeat[head.phase])
         else:
@@ -575,7 +576,7 @@ class SessionEngine:
             tracks.catch_done += 1
             return
         tracks.ended[s.track] += 1
-        if entry.status == "valid":
+        if entry.status == TrialStatus.VALID:
             if entry.correct is None:
                 raise LogMismatch(f"log entry {n + 1}: a valid trial of the adaptive phase "
                                   f"{head.phase!r} without its answer (correct 0 or 1)")
@@ -610,13 +611,13 @@ class SessionEngine:
         if _can_spread(counts, last.samples[0]):
             queue[:span] = no_repeat_order(queue[:span], rng, last.samples[0])
 
-    def cap(self, kind: str) -> int:
-        """How many counted failures of ``kind`` (saturated, timed_out, aborted_device) end
-        an item."""
-        if kind == "saturated":
+    def cap(self, failure: str) -> int:
+        """How many counted failures (``saturated``, ``timed_out``, ``aborted_device``) of
+        one item end it."""
+        if failure == TrialStatus.SATURATED:
             cap = self.protocol.saturation.max_attempts
             return SATURATION_SAFETY_CAP if cap is None else cap
-        if kind == "timed_out":
+        if failure == TrialStatus.TIMED_OUT:
             return self.protocol.attempts.max_timeouts
         return self.protocol.attempts.max_device_failures
 
@@ -670,19 +671,21 @@ class SessionEngine:
                      repetition=head.repetition, stimulus=head.stimulus,
                      windows=head.windows or phase_kind(head.kind).windows)
 
-    def failure_status(self, kind: str, trial: Trial, log: Sequence[Attempt]) -> str:
-        """Status to log for a failed attempt of ``kind`` (``saturated``, ``timed_out``,
-        ``aborted_device``): the kind itself or, when it reaches its cap, the exclusion."""
-        n = self._replay(log).failures.get((kind, trial.item), 0) + 1
-        return _CAPPED[kind] if n >= self.cap(kind) else kind
+    def failure_status(self, failure: str, trial: Trial, log: Sequence[Attempt]
+                       ) -> TrialStatus:
+        """Status to log for a failed attempt (``failure``: ``saturated``, ``timed_out``,
+        ``aborted_device``): the failure itself or, when it reaches its cap, the exclusion."""
+        failure = TrialStatus(failure)
+        n = self._replay(log).failures.get((failure, trial.item), 0) + 1
+        return CAPPED[failure] if n >= self.cap(failure) else failure
 
-    def saturated_status(self, trial: Trial, log: Sequence[Attempt]) -> str:
+    def saturated_status(self, trial: Trial, log: Sequence[Attempt]) -> TrialStatus:
         """Status to log for a saturated attempt: ``saturated`` or, at the cap, the exclusion."""
         if self.protocol.saturation.action == "keep":
-            return "valid"
-        return self.failure_status("saturated", trial, log)
+            return TrialStatus.VALID
+        return self.failure_status(TrialStatus.SATURATED, trial, log)
 
-    def outcomes(self, log: Sequence[Attempt]) -> dict[str, str]:
+    def outcomes(self, log: Sequence[Attempt]) -> dict[str, TrialStatus]:
         """Final status of every finished item (``valid``, ``skipped`` or an exclusion)."""
         return dict(self._replay(log).finished)
 
