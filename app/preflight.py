@@ -180,18 +180,16 @@ def rendering_notes(protocol, info) -> list[str]:
 
 
 def check_limit(protocol, dev) -> Check:
-    from device import DeviceError
+    from device import CurrentLimitError, DeviceError
 
     want = protocol.limits.max_current
     if want is None:
         return Check("current limit", True, f"the device's rating, {dev.info.current_limit:g} A")
-    rating = dev.info.current_limit
-    if want > rating * (1 + 1e-12):
-        return Check("current limit", False, f"the protocol's [limits] max_current of {want:g} A "
-                     f"is above this device's rating of {rating:g} A", "lower max_current, or "
-                     "use the device the protocol was written for")
     try:
-        got = dev.set_current_limit(min(want, rating))
+        got = dev.set_current_limit(want)
+    except CurrentLimitError as exc:
+        return Check("current limit", False, f"the protocol's [limits] max_current: {exc}",
+                     "lower max_current, or use the device the protocol was written for")
     except DeviceError as exc:
         return Check("current limit", False, str(exc), "use a device that can lower its "
                      "limit, or remove [limits] max_current")

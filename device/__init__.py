@@ -17,6 +17,7 @@ from .base import (
 from .codes import Blend, SceneKind
 from .errors import (
     BackendError,
+    CurrentLimitError,
     DeviceError,
     DeviceFaultError,
     DeviceSpecError,
@@ -62,6 +63,7 @@ __all__ = [
     "AccelSinusoid",
     "AvailableDevice",
     "BackendError",
+    "CurrentLimitError",
     "Blend",
     "HapticlabError",
     "SceneKind",

@@ -361,18 +361,17 @@ class HapticDevice(ABC):
         ------
         DeviceSpecError
             ``amps`` is not a finite number > 0.
+        CurrentLimitError
+            Above the rating (:meth:`DeviceInfo.ceiling`): a session must not start.
         DeviceError
-            Above the rating, or the device cannot lower its limit: a session must not start.
+            The device cannot lower its limit: a session must not start either.
         """
         self._check_open()
         a = float(amps) if isinstance(amps, (int, float)) and not isinstance(amps, bool) \
             else float("nan")
         if not (math.isfinite(a) and a > 0):
             raise DeviceSpecError(f"current limit must be a finite number > 0 A, got {amps!r}")
-        rating = self.info.current_limit
-        if a > rating * (1 + 1e-12):
-            raise DeviceError(f"a current limit of {a:g} A is above this device's rating of "
-                              f"{rating:g} A")
+        a = self.info.ceiling(a)
         self._set_current_limit(a)
         self._current_limit = a
         return a

@@ -15,6 +15,7 @@ __all__ = [
     "SceneError",
     "UnknownBackendError",
     "BackendError",
+    "CurrentLimitError",
     "DeviceSpecError",
     "DeviceFaultError",
 ]
@@ -83,6 +84,11 @@ class BackendError(DeviceError):
     """A registered backend cannot be used: its module fails to import, its entry point
     names nothing or something that is not a device class (the message names the backend,
     the entry point and the distribution it came from)."""
+
+
+class CurrentLimitError(DeviceError):
+    """A current limit above the device's rating was asked for (:meth:`DeviceInfo.ceiling`,
+    the one place that decides it)."""
 
 
 class DeviceFaultError(DeviceError):

@@ -75,6 +75,25 @@ class DeviceInfo:
     seeded: bool = False
     virtual_time: bool = False
 
+    def ceiling(self, amps: float) -> float:
+        """The current limit [A] a request of ``amps`` [A] sets on this device: ``amps``, never
+        above the rating (a request equal to the rating up to rounding, 1e-12 of it, is
+        the rating). The one place that decides it: a device's
+        :meth:`~device.HapticDevice.set_current_limit`, the preflight and the session all
+        go through it.
+
+        Raises
+        ------
+        CurrentLimitError
+            ``amps`` is above the rating.
+        """
+        from .errors import CurrentLimitError
+
+        if amps > self.current_limit * (1 + 1e-12):
+            raise CurrentLimitError(f"a current limit of {amps:g} A is above this device's "
+                                    f"rating of {self.current_limit:g} A")
+        return min(amps, self.current_limit)
+
     @property
     def max_force(self) -> float:
         """Largest force the amplifier can deliver [N]."""

@@ -95,12 +95,14 @@ def session_parts(dev, proto, *, responder: str, seed: int, group: str, fullscre
 def apply_limit(protocol, dev, recorded: float | None = None) -> dict:
     """Clamp the device's current at the protocol's ``[limits] max_current`` (the lower of
     it and the device's rating), for the whole session; what session.json records."""
+    from device import CurrentLimitError
+
     rating = dev.info.current_limit
     wanted = recorded if recorded is not None else protocol.limits.max_current
-    if wanted is not None and wanted > rating * (1 + 1e-12):
-        raise UsageError(f"the protocol's [limits] max_current of {wanted:g} A is above this "
-                         f"device's rating of {rating:g} A")
-    applied = dev.set_current_limit(min(wanted, rating) if wanted is not None else rating)
+    try:
+        applied = dev.set_current_limit(rating if wanted is None else wanted)
+    except CurrentLimitError as exc:  # the device's ceiling (DeviceInfo.ceiling) says no
+        raise UsageError(f"the protocol's [limits] max_current: {exc}") from None
     return {"current_limit_a": applied, "device_rating_a": rating,
             "protocol_max_current_a": protocol.limits.max_current}
 
