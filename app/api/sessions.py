@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-import re
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -14,33 +13,25 @@ import numpy as np
 from analysis.session_format import SessionStatus
 
 from ..errors import SessionFileError, UsageError
-from ._say import to_stderr
-from ._session import (
-    apply_limit,
-    check_rows,
-    drive,
-    earlier_sessions,
-    keep_markers,
-    session_parts,
+from ._new_session import (
+    KIND_OF,
+    check_before_opening,
+    checked_request,
+    participant_info,
+    ready_on,
+    record_and_run,
+    say_earlier_sessions,
 )
+from ._say import to_stderr
+from ._session import apply_limit, check_rows, drive, keep_markers, session_parts
 from .devices import session_device
 from .results import SessionResult, StudyResult
 
 __all__ = ["KIND_OF", "DEFAULT_SIM_DATA", "run_session", "resume_session", "session_seed",
            "simulate_study", "preflight", "preflight_line"]
 
-_GROUP = re.compile(r"^[A-Za-z0-9_.-]{1,32}$")
-
-#: the session kind each responder gives
-KIND_OF = {"person": "human", "scripted": "dry-run", "simulated": "simulated"}
 #: where simulated studies go unless told otherwise (never beside people's data)
 DEFAULT_SIM_DATA = "sim-data"
-
-
-def _responder(responder: str) -> str:
-    if responder not in KIND_OF:
-        raise UsageError(f"responder must be one of {', '.join(KIND_OF)}, got {responder!r}")
-    return responder
 
 
 def run_session(protocol: str | Path, participant: str, *, device: str,
@@ -54,6 +45,11 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                 speed: float = 1.0) -> SessionResult:
     """Run one session to the end (or until it is stopped) and record it.
 
+    The request is checked, the participant's earlier sessions said, the data folder and
+    the screens checked before the device opens; then the device is made ready, the
+    participant's details asked, and the session recorded and run (each step a function of
+    :mod:`app.api._new_session`, in that order).
+
     Parameters
     ----------
     protocol : str or Path
@@ -61,7 +57,8 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     participant : str
         Participant id (letters, digits, ``_``, ``-``; at most 32).
     device : str
-        Device spec: ``sim``, ``sim:RATE``, ``serial:PORT``.
+        Device spec of any registered backend: ``sim``, ``sim:RATE``, ``serial:PORT``,
+        ``emulator``, ... (``hapticlab device list``).
     data : path
         Data folder; the session goes to ``data/sub-<participant>/ses-<n>/``.
     responder : {'person', 'scripted', 'simulated'}
@@ -112,113 +109,21 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     SessionResult
     """
     from app.console import make_console
-    from app.ids import validate_participant
-    from app.libraries import prepare_libraries, with_libraries
-    from app.preflight import (
-        PreflightError,
-        check_answers,
-        check_device,
-        check_display,
-        check_protocol_on,
-        check_terminal,
-        data_folder_ready,
-        expected_session_bytes,
-        failed,
-    )
-    from app.recorder import SessionFiles, new_session_dir
-    from app.runner import SessionRunner, session_meta
-    from protocols import SessionEngine, parse_protocol, protocol_text, seed_from_entropy
-    from protocols.texts import english_note
 
-    responder = _responder(responder)
-    if traces not in ("full", "contacts", "none"):
-        raise UsageError(f"traces must be full, contacts or none, got {traces!r}")
-    participant = validate_participant(participant)
-    if group and not _GROUP.match(group):
-        raise UsageError(f"group {group!r}: use letters, digits, '_', '-' or '.' (at most 32)")
-    source, text = protocol_text(protocol)
-    proto = parse_protocol(text, source)
-    seed = seed_from_entropy() if seed is None else seed
-    if not isinstance(seed, int) or seed < 0:
-        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
-    engine = SessionEngine(proto, seed, participant, row)
     console = make_console(quiet=quiet)
     say = say or console.say
-    earlier = earlier_sessions(Path(data), participant, proto.name)
-    if earlier:
-        listed = "; ".join(earlier)
-        if responder == "person" and not new_session:
-            raise UsageError(f"participant {participant} already has {proto.name} session(s) "
-                             f"in {data}: {listed}. Check the participant id; start another "
-                             "session with --new-session, or continue an unfinished one with: "
-                             "hapticlab resume FOLDER")
-        say(f"participant {participant} already has {proto.name} session(s): {listed}; "
-            "this one is the next")
-    if responder == "person" and (note := english_note(proto)):
-        say(f"note: {note}")
-    keys = operator_keys if operator_keys is not None else responder == "person"
-    # before any device or window opens: nothing starts that cannot be kept or answered
-    data_folder_ready(data, expected_session_bytes(proto, traces))
-    early = [check_answers(proto)]
-    if keys:
-        early.append(check_terminal())
-    if responder == "person":
-        early.append(check_display())
-    if failed(early):
-        raise PreflightError(failed(early))
-    with session_device(device, seed, responder == "person", clear_fault, lsl, say,
-                        speed) as dev:
-        if responder == "person" and dev.info.simulated_contact:
-            say(f"warning: a person on a SIMULATED device ({device}) — nothing they feel "
-                "comes from a physical surface; the session is recorded as human, with the "
-                "device's capabilities (an analysis leaves it out unless asked)")
-        again = (f"hapticlab run {protocol} --participant {participant} --device {device} "
-                 "--clear-fault (with the session's other options)")
-        checks = [check_device(dev, device, again), check_protocol_on(text, source, dev)]
-        if failed(checks):
-            raise PreflightError(failed(checks))
-        limits = apply_limit(proto, dev)
-        libraries = prepare_libraries(proto, dev, device, say, ref=str(protocol))
-        proto = with_libraries(proto, libraries)
-        info = None
-        if info_fields:  # the participant's details, asked before the window opens
-            from app.screen import info_dialog
-
-            info = info_dialog(dict(proto.participant_fields or info_fields))
-            if info is None:
-                raise UsageError("the participant information dialog was cancelled; nothing "
-                                 "was recorded")
-        files = None
-        try:
-            with session_parts(dev, proto, responder=responder, seed=seed, group=group,
-                                fullscreen=fullscreen, audio=audio, keys=keys, quiet=quiet,
-                                console=console, lsl=lsl, participant=participant,
-                                say=say, discrimination=discrimination) as parts:
-                folder, n = new_session_dir(Path(data), participant)
-                files = SessionFiles(folder)
-                files.lock()
-                files.start(text)
-                meta = session_meta(proto, str(protocol), participant, n, seed, row, dev,
-                                    device, "psychopy" if responder == "person" else "none",
-                                    responder, parts.sound is not None, group,
-                                    KIND_OF[responder], libraries)
-                meta.traces_mode = traces
-                meta.limits = limits
-                if responder == "simulated" and discrimination:
-                    meta.discrimination = dict(discrimination)  # a resume draws the same
-                meta.participant.info = info
-                keep_markers(meta, parts.markers)
-                files.write_meta(meta)
-                parts.console.say(f"session {folder} (seed {seed})")
-                runner = SessionRunner(protocol=proto, engine=engine, device=dev, files=files,
-                                       responder=parts.responder, participant=participant,
-                                       session=n, seed=seed, console=parts.console,
-                                       audio=parts.sound, traces=traces, meta=meta,
-                                       markers=parts.markers)
-                return drive(runner, files, meta, parts.console, lsl_wait)
-        finally:
-            if files is not None:
-                files.release()
+    s = checked_request(protocol, participant, device=device, data=data, responder=responder,
+                        seed=seed, row=row, group=group, traces=traces,
+                        operator_keys=operator_keys, audio=audio, fullscreen=fullscreen,
+                        quiet=quiet, lsl=lsl, lsl_wait=lsl_wait,
+                        discrimination=discrimination)
+    say_earlier_sessions(s, new_session, say)
+    check_before_opening(s)
+    with session_device(device, s.seed, s.person, clear_fault, lsl, say, speed) as dev:
+        limits, libraries = ready_on(s, dev, say)
+        info = participant_info(s, info_fields)
+        return record_and_run(s, dev, console, say, limits=limits, libraries=libraries,
+                              info=info)
 
 
 def resume_session(folder: str | Path, *, device: str | None = None, audio: bool | None = None,
