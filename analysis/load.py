@@ -491,56 +491,91 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
             P03     False                             participant not selected
     """
     table = data.attrs["session_table"].copy()
-    if kind is None:  # people on a simulated device count only when they are asked for
-        counted = (table["kind"] != "human") | (table["simulated_plant"] == 0) | sim_device
-        present = set(table["kind"][counted])
-        kind = next((k for k in ("human", "simulated", "dry-run") if k in present), "human")
-        kind_note = f"kind {kind} (the default: " + ("people's sessions exist)"
-                                                       if kind == "human" else
-                                                       "no human sessions here)")
-    else:
+    kind, kind_note = _chosen_kind(table, kind, sim_device)
+    _check_choices(ids, status)
+    table, whose = _whose(table, ids)
+    window = _created_window(since, until)
+    protos = [protocol] if isinstance(protocol, str) else protocol
+    why = [_left_out_because(r, protos=protos, kind=kind, status=status,
+                             participants=participants, window=window, sim_device=sim_device)
+           for r in table.itertuples()]
+    table["reason"] = [who or w for who, w in zip(whose, why, strict=True)]
+    table["included"] = table["reason"] == ""
+    _leave_out_backups(table, data)
+    if not every_session:
+        _apply_session_rules(table, data.attrs.get("designs", {}))
+    for i in table.index[table["included"] & (table["reason"] == "")]:
+        table.loc[i, "reason"] = kind_note
+    return _rows_of(table, data), table
+
+
+# the steps of select_sessions, in its order
+
+
+def _chosen_kind(table: pd.DataFrame, kind: str | None, sim_device: bool) -> tuple[str, str]:
+    """The kind of session to analyse and how the table says so: the one asked for, or by
+    default people's when any exist (people on a simulated device count only when asked
+    for), else simulated, else dry runs."""
+    if kind is not None:
         if kind not in (*KINDS, "all"):
             raise LoadError(f"--kind must be one of {', '.join(KINDS)} or all, got {kind!r}")
-        kind_note = f"kind {kind}"
+        return kind, f"kind {kind}"
+    counted = (table["kind"] != "human") | (table["simulated_plant"] == 0) | sim_device
+    present = set(table["kind"][counted])
+    kind = next((k for k in ("human", "simulated", "dry-run") if k in present), "human")
+    return kind, f"kind {kind} (the default: " + ("people's sessions exist)" if kind == "human"
+                                                   else "no human sessions here)")
+
+
+def _check_choices(ids: str, status: str) -> None:
     if ids not in IDS:
         raise LoadError(f"--ids must be one of {', '.join(IDS)}, got {ids!r}")
-    table, whose = _whose(table, ids)
     if status not in ("complete", "all"):
         raise LoadError(f"--status must be complete or all, got {status!r}")
-    protos = [protocol] if isinstance(protocol, str) else protocol
+
+
+def _created_window(since: str | None, until: str | None
+                    ) -> tuple[dt.datetime | None, dt.datetime | None]:
+    """[since, until) as times; ``until`` a date includes that whole day."""
     t0, t1 = _date(since, "since"), _date(until, "until")
     if t1 is not None and len(str(until)) <= 10:
         t1 = t1 + dt.timedelta(days=1)
-    reasons = []
-    for r, who in zip(table.itertuples(), whose, strict=True):
-        why = ""
-        created = _date(r.created_utc, "created") if r.created_utc else None
-        if who:
-            why = who
-        elif protos is not None and r.protocol not in protos:
-            why = f"protocol {r.protocol} not selected"
-        elif kind != "all" and r.kind != kind:
-            why = f"{r.kind} session (selected: {kind})"
-        elif r.kind == "human" and r.simulated_plant and not sim_device:
-            why = (f"a person on a simulated device ({r.device_backend}, {r.firmware}): no "
-                   "physical contact; include with --sim-device")
-        elif status == "complete" and r.status != SessionStatus.COMPLETE:
-            why = f"status {r.status or 'unknown'} (selected: complete sessions)"
-        elif participants is not None and r.participant not in participants:
-            why = "participant not selected"
-        elif t0 is not None and (created is None or created < t0):
-            why = f"created {r.created_utc or 'at an unknown time'}, before --since"
-        elif t1 is not None and (created is None or created >= t1):
-            why = f"created {r.created_utc or 'at an unknown time'}, after --until"
-        elif r.rows == 0:
-            why = "no recorded attempts"
-        reasons.append(why)
-    table["reason"] = reasons
-    table["included"] = table["reason"] == ""
-    # backup copies: the same participant, protocol, seed and rows in two folders
+    return t0, t1
+
+
+def _left_out_because(r, *, protos, kind: str, status: str, participants, window,
+                      sim_device: bool) -> str:
+    """Why the session of row ``r`` is left out ('' when it is not), by the first criterion
+    it fails, in the order the report lists them (whose session it is comes first:
+    :func:`_whose`)."""
+    t0, t1 = window
+    created = _date(r.created_utc, "created") if r.created_utc else None
+    if protos is not None and r.protocol not in protos:
+        return f"protocol {r.protocol} not selected"
+    if kind != "all" and r.kind != kind:
+        return f"{r.kind} session (selected: {kind})"
+    if r.kind == "human" and r.simulated_plant and not sim_device:
+        return (f"a person on a simulated device ({r.device_backend}, {r.firmware}): no "
+                "physical contact; include with --sim-device")
+    if status == "complete" and r.status != SessionStatus.COMPLETE:
+        return f"status {r.status or 'unknown'} (selected: complete sessions)"
+    if participants is not None and r.participant not in participants:
+        return "participant not selected"
+    if t0 is not None and (created is None or created < t0):
+        return f"created {r.created_utc or 'at an unknown time'}, before --since"
+    if t1 is not None and (created is None or created >= t1):
+        return f"created {r.created_utc or 'at an unknown time'}, after --until"
+    if r.rows == 0:
+        return "no recorded attempts"
+    return ""
+
+
+def _leave_out_backups(table: pd.DataFrame, data: pd.DataFrame) -> None:
+    """Backup copies left out (in place): the same participant, protocol, seed and rows in
+    two folders; the copy nearest the top of the folder is kept (a backup usually sits
+    deeper)."""
     fingerprints: dict[tuple, str] = {}
     prints = session_fingerprints(data)  # every session's at once: one pass over the rows
-    # the copy nearest the top of the folder is kept (a backup usually sits deeper)
     order = sorted(table.index[table["included"]],
                    key=lambda i: (len(Path(table.at[i, "session_dir"]).parts),
                                   table.at[i, "session_dir"]))
@@ -551,31 +586,38 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
                                                            "(same participant, seed and rows)")
         else:
             fingerprints[key] = r.session_dir
-    # several sessions of a participant under one design: as the design declares
-    designs = data.attrs.get("designs", {})
+
+
+def _apply_session_rules(table: pd.DataFrame, designs: dict) -> None:
+    """Several sessions of a participant under one design, as the design declares (in
+    place): ``first`` keeps the first complete one (the first of any when none is), ``all``
+    pools them as repetitions."""
     inc = table[table["included"]].sort_values(["created_utc", "session"])
     for (_pid, key), g in inc.groupby(["participant", "design_key"], sort=False):
-        if len(g) < 2 or every_session:
+        if len(g) < 2:
             continue
         policy = (designs.get(key) or {}).get("sessions", "first")
-        if policy == "first":  # the first complete one; the first of any only if none is
-            done = [i for i in g.index if g.loc[i, "status"] == SessionStatus.COMPLETE]
-            first = done[0] if done else g.index[0]
-            what = "first complete session" if done else "first session (none is complete)"
-            for i in g.index:
-                if i == first:
-                    continue
-                when = "a later" if g.index.get_loc(i) > g.index.get_loc(first) else \
-                    f"an earlier {g.loc[i, 'status'] or 'unfinished'}"
-                table.loc[i, ["included", "reason"]] = (
-                    False, f"{when} session of {g.loc[i, 'participant']} (the protocol analyses "
-                           f"each participant's {what}: {table.loc[first, 'session_dir']})")
-        else:
+        if policy != "first":
             for i in g.index:
                 table.loc[i, "reason"] = (f"one of {len(g)} sessions of this participant, "
                                           "pooled as repetitions (the protocol analyses all)")
-    for i in table.index[table["included"] & (table["reason"] == "")]:
-        table.loc[i, "reason"] = kind_note
+            continue
+        done = [i for i in g.index if g.loc[i, "status"] == SessionStatus.COMPLETE]
+        first = done[0] if done else g.index[0]
+        what = "first complete session" if done else "first session (none is complete)"
+        for i in g.index:
+            if i == first:
+                continue
+            when = "a later" if g.index.get_loc(i) > g.index.get_loc(first) else \
+                f"an earlier {g.loc[i, 'status'] or 'unfinished'}"
+            table.loc[i, ["included", "reason"]] = (
+                False, f"{when} session of {g.loc[i, 'participant']} (the protocol analyses "
+                       f"each participant's {what}: {table.loc[first, 'session_dir']})")
+
+
+def _rows_of(table: pd.DataFrame, data: pd.DataFrame) -> pd.DataFrame:
+    """The rows of the included sessions, each under the id chosen for its session
+    (``ids``); the selection table in its attrs."""
     keep = set(table.loc[table["included"], "session_dir"])
     out = data[data["session_dir"].isin(keep)].copy()
     chosen = table["included"] & (table["participant"] != table["recorded_participant"]) | (
@@ -587,7 +629,7 @@ def select_sessions(data: pd.DataFrame, protocol: str | list[str] | None = None,
         out.loc[hit, "participant"] = out.loc[hit, "session_dir"].map(rename)
     out.attrs = dict(data.attrs)
     out.attrs["selection"] = kept(table)
-    return out, table
+    return out
 
 
 #: what a backup copy repeats: the rows' attempts and answers
