@@ -229,7 +229,7 @@ def is_canonical(path: str | Path) -> bool:
         not raw or raw.startswith(header_line().encode()))
 
 
-def _kind(path: Path) -> str:
+def _file_type(path: Path) -> str:
     """What kind of file ``path`` is, in words (for an error message)."""
     import stat
 
@@ -275,7 +275,7 @@ def read_trial_fields(path: str | Path, digests: dict | None = None
     if not path.exists():
         return [], None
     if not path.is_file():  # a FIFO or a device would block the read for ever
-        raise TrialsFileError(f"{path}: not a regular file ({_kind(path)}); a session's "
+        raise TrialsFileError(f"{path}: not a regular file ({_file_type(path)}); a session's "
                               "trials.tsv is a plain file — copy its contents into one")
     data = path.read_bytes()
     if digests is not None:
@@ -640,7 +640,7 @@ def read_meta(path: str | Path, digests: dict | None = None) -> SessionRecord:
     except SessionPathError as exc:
         raise SessionMetaError(str(exc)) from None
     if path.exists() and not path.is_file():
-        raise SessionMetaError(f"{path}: not a regular file ({_kind(path)})")
+        raise SessionMetaError(f"{path}: not a regular file ({_file_type(path)})")
     try:
         raw = path.read_bytes()
         if digests is not None:

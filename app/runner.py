@@ -105,8 +105,8 @@ def _versions() -> dict[str, str]:
 
 def session_meta(protocol: Protocol, protocol_ref: str, participant: str, session: int, seed: int,
                  counterbalance_row: int | None, device: HapticDevice, device_spec: str,
-                 ui: str, responder: str, audio: bool, group: str = "", kind: str = "dry-run",
-                 libraries: dict | None = None) -> SessionRecord:
+                 ui: str, responder: str, audio: bool, group: str = "",
+                 session_kind: str = "dry-run", libraries: dict | None = None) -> SessionRecord:
     """The record DESIGN.md asks for, at session start."""
     return SessionRecord(
         format_version=FORMAT_VERSION,
@@ -114,7 +114,7 @@ def session_meta(protocol: Protocol, protocol_ref: str, participant: str, sessio
         protocol=ProtocolRecord(name=protocol.name, ref=protocol_ref, source=protocol.source,
                                 sha256=protocol.sha256, copy=PROTOCOL_COPY,
                                 design=protocol.design()),  # the one place of scale, choices
-        kind=kind,
+        kind=session_kind,
         libraries=libraries or {},
         seed=seed,
         rng=RNG_ALGORITHM + "; per attempt: SeedSequence([seed, trial_index, attempt])",
@@ -393,8 +393,8 @@ class SessionRunner:
         """The real blocks the protocol calls for before this trial: the block's own at the
         start of each block, or all the phase's at its start."""
         phase = next(p for p in self.protocol.phases if p.name == trial.phase)
-        kind = phase_kind(trial.kind)
-        if phase.references == "none" or not kind.references:
+        declared = phase_kind(trial.kind)  # the phase kind's declaration (trial.kind: its name)
+        if phase.references == "none" or not declared.references:
             return
         if phase.references == "block" and not trial.surfaces:
             refs = [trial.sample_of(self.protocol, trial.samples[0]).reference]
@@ -503,7 +503,7 @@ class SessionRunner:
                 self._spilled.clear()
 
     def _attempt_windows(self, trial: Trial) -> None:
-        kind = phase_kind(trial.kind)
+        declared = phase_kind(trial.kind)  # the phase kind's declaration (trial.kind: its name)
         self._on_device = None if trial.surfaces else trial.placement
         rng = self._rng(trial)
         t_start = utc_now()
@@ -560,7 +560,7 @@ class SessionRunner:
                                 else "the item goes back into the pool"))
             return
         if any(r.saturated for r in results) and self.protocol.saturation.action == "redraw" \
-                and kind.redraws_saturated:
+                and declared.redraws_saturated:
             if self.audio is not None and self.protocol.saturation.tone:
                 self.audio.low_tone()
             self.console.saturated()
@@ -570,12 +570,12 @@ class SessionRunner:
                          played=played)
             return
         row: dict[str, Any] = {}
-        if kind.asks is not None:
-            row = self._respond(kind.asks, trial, judged, rng)
+        if declared.asks is not None:
+            row = self._respond(declared.asks, trial, judged, rng)
         self._record(trial, TrialStatus.VALID, t_start=t_start, result=res, results=results,
                      played=played, **row)
         self.console.result(TrialStatus.VALID, len(velocities), ", ".join(
-            f"{c} {row[c]}" for c in (kind.asks.marker if kind.asks else ())))
+            f"{c} {row[c]}" for c in (declared.asks.marker if declared.asks else ())))
 
     # ------------------------------------------------------------------ a kind's windows
     # each appends every window it begins to ``played`` and each it finishes to

@@ -663,7 +663,7 @@ class Emulator:
         table = TransientTable(sc["v"], forces, Blend(b.blend), b.attenuation)
         return Scene(name, surface_height=h, spring=b.spring, transient=TableTransient(table))
 
-    def _start(self, kind: str, target, msg) -> None:
+    def _start(self, what: str, target, msg) -> None:
         def run() -> None:
             try:
                 target(msg)
@@ -672,7 +672,7 @@ class Emulator:
                       file=sys.stderr, flush=True)
                 self.stop()
 
-        self._running = kind
+        self._running = what
         self._stop_asked = False
         self._worker = threading.Thread(target=run, daemon=True)
         self._worker.start()
