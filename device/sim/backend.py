@@ -19,11 +19,12 @@ from ..events import ContactEvent, FaultEvent, Flags, HostClock, SaturationEvent
 from ..registry import AvailableDevice
 from ..scene import MAX_REACH_M, Scene, TransientTable
 from . import kernel as K
+from ._window import STREAM_TICKS, Buffers, TracePieces, runs
+from .compiled import CompiledScene, compile_scene, velocity_weights
 from .params import DeviceParams, HandParams
-from .plant import N_INPUTS, Plant, build_plant, piece_propagators, port_forms, work_forms, zoh
 from .tapper import HoldPlan, Tapper
 
-__all__ = ["SimDevice", "CompiledScene", "compile_scene"]
+__all__ = ["SimDevice", "CompiledScene", "compile_scene", "velocity_weights"]
 
 _CHUNK_S = 0.1  # device time between progress callbacks / heartbeats in virtual time
 #: live mode: pacing granularity [wall s]. In wall time, so that a faster-than-real-time
@@ -38,78 +39,6 @@ _EVENTS = 4096
 #: racing to catch up [wall s]. Racing would run device time past heartbeats the link has
 #: received but not yet read, and trip the watchdog for a stall that was not the host's.
 _SLIP_S = 0.02
-
-
-class CompiledScene:
-    """A scene turned into what the servo kernel needs at one servo rate.
-
-    Only what the scene requires is built: virtual scenes get one mode and no
-    contact-switch propagators; spring-only scenes no transient table.
-    """
-
-    def __init__(self, scene: Scene, dev: DeviceParams, hand: HandParams,
-                 table: TransientTable | None = None):
-        self.scene = scene
-        self.plant: Plant = build_plant(dev, hand, scene.material, scene.surface_height)
-        p = self.plant
-        dt = dev.dt
-        ns = p.n_states
-        self.tick_prop = np.stack([zoh(p.A[m], p.B[m], dt) for m in range(p.n_modes)])
-        n = ns + N_INPUTS
-        free = port_forms(ns, None, p.surface_height)  # the actuator's port alone
-        if p.n_modes > 1:
-            h = dt / p.n_sub
-            self.pieces = np.stack([piece_propagators(p.A[m], p.B[m], h)
-                                    for m in range(p.n_modes)])
-            touching = port_forms(ns, (p.contact_stiffness, p.contact_damping),
-                                  p.surface_height)
-            self.work = np.stack([work_forms(p.A[m], p.B[m], q, h, pieces=self.pieces[m])
-                                  for m, q in enumerate((free, touching))])
-            self.tick_work = np.zeros((n, n))
-        else:
-            self.pieces = np.zeros((1, 1, ns, n))
-            self.work = np.zeros((1, 2, 1, n, n))
-            self.tick_work = np.ascontiguousarray(
-                work_forms(p.A[0], p.B[0], free, dt, levels=0)[0, 0])
-        if scene.is_real:
-            self.render = 0
-        elif scene.transient is None:
-            self.render = 1
-        else:
-            self.render = 2
-        self.spring = float(scene.spring or 0.0)
-        if self.render == 2:
-            if table is None:  # a transient played on this device's own parameters
-                table = scene.transient.table(dev.servo_rate_hz, dev.effective_mass)
-            self.transient_table = table
-        else:
-            self.transient_table = TransientTable([1.0], np.zeros((1, 1)))
-        tt = self.transient_table
-        self.table = tt.forces
-        self.table_v = tt.velocities
-        self.blend = int(tt.blend)
-        self.attenuation = float(tt.attenuation)
-        p = self.plant
-        #: what the servo loop needs of this scene (:func:`device.sim.kernel.run_ticks`)
-        self.kernel_args = (self.tick_prop, self.pieces, self.work, self.tick_work,
-                            int(p.n_sub), p.accel_row,
-                            float(p.surface_height), float(p.contact_stiffness),
-                            float(p.contact_damping), int(self.render), self.spring,
-                            self.table, self.table_v, self.blend, self.attenuation)
-
-
-def compile_scene(scene: Scene, dev: DeviceParams, hand: HandParams,
-                  table: TransientTable | None = None) -> CompiledScene:
-    """Build the kernel inputs of ``scene`` (see :class:`CompiledScene`); ``table`` is its
-    transient as the device plays it (built from the scene's own parameters when None)."""
-    return CompiledScene(scene, dev, hand, table)
-
-
-def velocity_weights(dev: DeviceParams) -> np.ndarray:
-    """Least-squares slope weights over the encoder buffer, oldest sample first [1/s]."""
-    n = max(2, int(round(dev.velocity_window_s * dev.servo_rate_hz)) + 1)
-    k = np.arange(n) - (n - 1) / 2.0
-    return k / np.sum(k * k) * dev.servo_rate_hz
 
 
 class SimDevice(HapticDevice):
@@ -512,13 +441,13 @@ class SimDevice(HapticDevice):
         self._fst[K.FST_EIN] = self._fst[K.FST_EOUT] = 0.0
         self._fst[K.FST_VIN] = self._fst[K.FST_VOUT] = np.nan
         tick0 = self._tick
-        buf = _Buffers(min(n_max, int(round(initial_s / dt))), plan, self._pull_gains, dt)
+        buf = Buffers(min(n_max, int(round(initial_s / dt))), plan, self._pull_gains, dt)
         ev_tick = np.zeros(_EVENTS, dtype=np.int64)
         ev_vel = np.zeros(_EVENTS)
         chunk_s = _LIVE_CHUNK_S * self.speed if self.live else _CHUNK_S  # [device s]
         chunk = max(1, int(round(chunk_s / dt)))
         state = (self._x, self._ist, self._fst, self._rb)
-        pieces = _TracePieces(self, buf) if self.live and self.trace_sink is not None else None
+        pieces = TracePieces(self, buf) if self.live and self.trace_sink is not None else None
         wall0 = start = time.perf_counter()
         slipped = 0.0
         late: list[float] = []
@@ -573,7 +502,7 @@ class SimDevice(HapticDevice):
                 break  # window complete
             if timeout is not None and self._ist[K.IST_FIRST] < 0 and n * dt >= timeout:
                 break  # nobody tapped
-            if pieces is not None and n - pieces.done >= _STREAM_TICKS:
+            if pieces is not None and n - pieces.done >= STREAM_TICKS:
                 self.trace_sink(pieces.done, pieces.take(n))
             if on_progress is not None:
                 on_progress(n * dt, self._result(buf, n, tick0, ev_tick, ev_vel))
@@ -622,8 +551,8 @@ class SimDevice(HapticDevice):
             self._fault = FaultEvent(t_f, "watchdog", f"no heartbeat for "
                                      f"{self.params.watchdog_s:g} s: output zeroed")
 
-    def _result(self, buf: _Buffers, n: int, tick0: int, ev_tick, ev_vel,
-                final: bool = False, pieces: _TracePieces | None = None) -> WindowResult:
+    def _result(self, buf: Buffers, n: int, tick0: int, ev_tick, ev_vel,
+                final: bool = False, pieces: TracePieces | None = None) -> WindowResult:
         dev = self.params
         dt = dev.dt
         nev = min(int(self._ist[K.IST_NEV]), len(ev_tick))
@@ -642,16 +571,16 @@ class SimDevice(HapticDevice):
         sat = (flags & np.uint16(Flags.SATURATED)) != 0
         res.saturations = [SaturationEvent((tick0 + a) * dt,
                                            float(np.max(np.abs(fcmd[a:b]))) / dev.force_constant,
-                                           (b - a) * dt) for a, b in _runs(sat)]
+                                           (b - a) * dt) for a, b in runs(sat)]
         ft = int(self._ist[K.IST_FAULT_TICK])
         if ft >= 0:  # the kernel zeroed output at tick ft
             self._latch((tick0 + ft) * dt)
             res.faults = [self._fault]
-        res.traces = (pieces or _TracePieces(self, buf)).joined(n)
+        res.traces = (pieces or TracePieces(self, buf)).joined(n)
         res.traces["t"] = (tick0 + np.arange(n)) * dt
         return res
 
-    def _traces(self, buf: _Buffers, a: int, b: int) -> dict[str, np.ndarray]:
+    def _traces(self, buf: Buffers, a: int, b: int) -> dict[str, np.ndarray]:
         """The recorded traces of ticks [a, b) of a window: sensor noise, clipping and
         quantization applied, velocity from the encoder. Pieces taken in order join into the
         traces taken at once (the noise stream is drawn in order)."""
@@ -684,41 +613,6 @@ class SimDevice(HapticDevice):
 
 
 _EMPTY = np.zeros(0)
-#: live mode with a trace sink: new ticks are handed over once this many have accumulated
-_STREAM_TICKS = 200
-
-
-class _TracePieces:
-    """A window's traces taken in order, piece by piece, as a streaming device sends them;
-    :meth:`joined` gives the whole (taking what is left)."""
-
-    def __init__(self, dev: SimDevice, buf: _Buffers):
-        self.dev, self.buf = dev, buf
-        self.done = 0
-        self.pieces: list[dict[str, np.ndarray]] = []
-
-    def take(self, n: int) -> dict[str, np.ndarray]:
-        piece = self.dev._traces(self.buf, self.done, n)
-        self.pieces.append(piece)
-        self.done = n
-        return piece
-
-    def joined(self, n: int) -> dict[str, np.ndarray]:
-        if n > self.done or not self.pieces:
-            self.take(n)
-        if len(self.pieces) == 1:
-            return dict(self.pieces[0])
-        return {k: np.concatenate([p[k] for p in self.pieces]) for k in self.pieces[0]}
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) index pairs of the True runs of a boolean array."""
-    if not mask.any():
-        return []
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
-
-
 #: contact changes per servo tick above which a window is said to have chattered: a tap
 #: makes two (touch and release) in a few thousand ticks; a stiff lossless contact on a
 #: light block bounces many times a tick, and each change is located by bisection
@@ -740,57 +634,3 @@ def _contact_warnings(name: str, switches: int, unresolved: int, ticks: int,
                    "substeps): the contact's physics there is approximate (its energy account "
                    "may not balance)")
     return out
-
-
-#: ticks of the hand's pull computed ahead of the servo at a time (1 s at 10 kHz)
-PULL_AHEAD = 10_000
-
-
-class _Buffers:
-    """Growable per-tick arrays of a window, with the hand input computed alongside."""
-
-    def __init__(self, capacity: int, plan, gains: tuple[float, float, float], dt: float):
-        self.plan, self.gains, self.dt = plan, gains, dt
-        self.n = 0
-        self.out = np.zeros((K.N_OUT, 0))
-        self.flags = np.zeros(0, dtype=np.int64)
-        self.u_hand = np.zeros(1)
-        self.pulled = 0  # ticks whose hand pull is computed
-        self._grow(capacity)
-
-    pos = property(lambda self: self.out[K.OUT_POS])
-    fcmd = property(lambda self: self.out[K.OUT_FCMD])
-    fout = property(lambda self: self.out[K.OUT_FOUT])
-    cur = property(lambda self: self.out[K.OUT_CUR])
-    acc = property(lambda self: self.out[K.OUT_ACC])
-    z2 = property(lambda self: self.out[K.OUT_Z2])
-    v2 = property(lambda self: self.out[K.OUT_V2])
-    a2 = property(lambda self: self.out[K.OUT_A2])
-
-    def ensure(self, n: int) -> None:
-        """Room for ticks [0, n) and the hand's pull computed up to tick n (and one beyond,
-        for its slope over the last tick). The pull is computed as the ticks come, never
-        ahead: for a window of 20 minutes all at once it held the interpreter for seconds,
-        and the emulator's serve loop fell silent meanwhile (issue 53 item 2)."""
-        if n > self.n:
-            self._grow(max(n, 2 * self.n))
-        if n + 1 > self.pulled:
-            start, end = self.pulled, min(self.n + 1, max(n + 1, self.pulled + PULL_AHEAD))
-            zr, vr, ar = self.plan.reference(np.arange(start, end) * self.dt)
-            kz, kv, ka = self.gains
-            self.u_hand[start:end] = kz * zr + kv * vr + ka * ar
-            self.pulled = end
-
-    def _grow(self, new: int) -> None:
-        """Room for ``new`` ticks (zeros: memory the window does not reach is never touched)."""
-        if new > self.n:
-            out = np.zeros((K.N_OUT, new))
-            out[:, : self.n] = self.out[:, : self.n]
-            self.out = out
-            f = np.zeros(new, dtype=np.int64)
-            f[: self.n] = self.flags[: self.n]
-            self.flags = f
-            u = np.zeros(new + 1)
-            u[: self.pulled] = self.u_hand[: self.pulled]
-            self.u_hand = u
-            self.n = new

@@ -246,7 +246,7 @@ def run_ticks(n0, n1, state, scene, device, u_hand, f_ext, zero_from, stop_after
         buffer (all updated in place).
     scene : tuple
         ``(tick_prop, pieces, work, tick_work, n_sub, accel_row, h, ks, bs, render, K,
-        table, tbl_v, blend, atten)`` from :class:`~device.sim.backend.CompiledScene`.
+        table, tbl_v, blend, atten)`` from :class:`~device.sim.compiled.CompiledScene`.
     device : tuple
         ``(enc_res, vel_w, hyst, kt, i_max, ramp_ticks, rate)`` from the device parameters.
     u_hand : ndarray
