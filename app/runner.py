@@ -8,33 +8,30 @@ continues with exactly the order the uninterrupted session would have had.
 Randomness: the engine draws from the session seed; the simulated device's tapping and a
 simulated participant's answers for an attempt come from
 ``SeedSequence([seed, trial_index, attempt])``, so a resumed attempt repeats exactly.
+
+Size: over 700 lines on purpose. :class:`SessionRunner` is one state machine — the wait
+for the operator's placing, pauses and faults, the real reference blocks, an attempt's
+windows as its phase kind declares them, the row of each — whose steps share the runner's
+state (device, console, log, markers, files) and read best in their order in one place.
+What has a job of its own lives beside it: the record a session starts with
+(:mod:`app.session_record`), who answers (:mod:`app.participants`), the files
+(:mod:`app.recorder`), the run's set-up (:mod:`app.api._new_session`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import datetime as _dt
-import platform
 import shlex
-import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
-from importlib import metadata
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from analysis.cells import row_problem
 from analysis.session_format import (
-    FORMAT_VERSION,
-    PROTOCOL_COPY,
-    ParticipantRecord,
-    ProtocolRecord,
     SessionRecord,
     SessionStatus,
-    TimesRecord,
     format_cell,
 )
 from device import DeviceError, DeviceFaultError, HapticDevice
@@ -42,7 +39,6 @@ from protocols import (
     DONE,
     PAUSED,
     REFERENCE,
-    RNG_ALGORITHM,
     Attempt,
     Protocol,
     SessionEngine,
@@ -54,16 +50,14 @@ from protocols import (
 )
 from protocols.responses import Question, Response
 
-from . import __version__
 from .console import PlainConsole
 from .errors import DataFolderError, SessionFileError
 from .markers import MarkerSink
 from .participants import Responder
 from .recorder import SessionFiles
+from .session_record import session_meta, utc_now
 
 __all__ = ["SessionRunner", "SessionInterrupted", "session_meta", "utc_now", "trace_payload"]
-
-APP_VERSION = __version__
 
 
 class _FaultStop(Exception):
@@ -76,59 +70,6 @@ class _FaultStop(Exception):
 
 class SessionInterrupted(Exception):
     """The session stopped before the end (device gone, operator abort); it can be resumed."""
-
-
-def utc_now() -> str:
-    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
-
-
-def _git_sha() -> str:
-    here = Path(__file__).resolve().parents[1]
-    try:
-        out = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True,
-                             text=True, timeout=5)
-        return out.stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-def _versions() -> dict[str, str]:
-    out = {}
-    for pkg in ("numpy", "scipy", "pandas", "statsmodels", "numba", "pyserial", "matplotlib",
-                "psychopy"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = "not installed"
-    return out
-
-
-def session_meta(protocol: Protocol, protocol_ref: str, participant: str, session: int, seed: int,
-                 counterbalance_row: int | None, device: HapticDevice, device_spec: str,
-                 ui: str, responder: str, audio: bool, group: str = "",
-                 session_kind: str = "dry-run", libraries: dict | None = None) -> SessionRecord:
-    """The record DESIGN.md asks for, at session start."""
-    return SessionRecord(
-        format_version=FORMAT_VERSION,
-        app={"name": "hapticlab", "version": APP_VERSION, "git_sha": _git_sha()},
-        protocol=ProtocolRecord(name=protocol.name, ref=protocol_ref, source=protocol.source,
-                                sha256=protocol.sha256, copy=PROTOCOL_COPY,
-                                design=protocol.design()),  # the one place of scale, choices
-        kind=session_kind,
-        libraries=libraries or {},
-        seed=seed,
-        rng=RNG_ALGORITHM + "; per attempt: SeedSequence([seed, trial_index, attempt])",
-        participant=ParticipantRecord(id=participant, counterbalance_row=counterbalance_row,
-                                      group=group),
-        session=session,
-        device={"spec": device_spec, **device.info.to_dict()},
-        ui=ui, responder=responder, audio=audio,
-        packages=_versions(),
-        python=sys.version.split()[0],
-        os=platform.platform(),
-        times=TimesRecord(created_utc=utc_now(), finished_utc=None),
-        status=SessionStatus.RUNNING,
-    )
 
 
 @dataclass(kw_only=True)

@@ -492,3 +492,21 @@ def test_the_name_checker_sees_them(tmp_path):
                    "def device_capabilities(d):\n    return d.backend == 'sim'\n")
     hits = _name_comparisons(bad, _device_names(), ("device_capabilities",))
     assert [h.split(":")[1] for h in hits] == ["1", "2", "3", "4", "5"], hits
+
+
+#: the most lines a module holds before it must say why at its top (issue 54)
+MODULE_LINES = 700
+
+
+def test_a_module_over_700_lines_says_why_at_its_top():
+    """Modules with one job: one over 700 lines in app/, device/, analysis/ or protocols/
+    states the reason in its docstring, in a paragraph that starts with ``Size:``."""
+    unexplained = []
+    for d in ("app", "device", "analysis", "protocols"):
+        for f in sorted((ROOT / d).rglob("*.py")):
+            text = f.read_text(encoding="utf-8")
+            if text.count("\n") > MODULE_LINES and \
+                    "\nSize: " not in (ast.get_docstring(ast.parse(text)) or ""):
+                unexplained.append(f"{f.relative_to(ROOT)} ({text.count(chr(10))} lines)")
+    assert not unexplained, f"over {MODULE_LINES} lines without a reason at the top: " \
+        f"{unexplained}"

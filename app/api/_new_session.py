@@ -232,7 +232,8 @@ def record_and_run(s: NewSession, dev, console, say: Callable[[str], None], *, l
     new session folder (locked, the protocol copied, session.json written), then the trials
     to the end (:func:`app.api._session.drive`)."""
     from app.recorder import SessionFiles, new_session_dir
-    from app.runner import SessionRunner, session_meta
+    from app.runner import SessionRunner
+    from app.session_record import session_meta
 
     files = None
     try:

@@ -8,6 +8,13 @@ lost, and reconnecting is only done by :meth:`SerialDevice.reconnect`.
 
 The driver installs no signal or exit handlers: the application does (``app.guards``), so
 a library user decides what a signal means in their program.
+
+Size: over 700 lines on purpose. :class:`SerialDevice` is the whole device interface over
+one link — a scene uploaded in chunks and committed, homing, windows with their streamed
+traces, playbacks, faults and their accounts, the device's clock — and each method is a
+command sequence on the same link state, read best beside the others. What has a job of
+its own lives beside it: the link (:mod:`.link`), the messages and framing (:mod:`.messages`,
+:mod:`.framing`), the contract (:mod:`.contract`), the emulator backend (:mod:`.emulated`).
 """
 
 from __future__ import annotations

@@ -8,6 +8,12 @@ clock, traces streamed during the window through a bounded ring) with the richer
 ringing, the simulated person's hand. Windows and playbacks run live (paced to the wall
 clock, ``speed`` × real time) in a worker thread while the main loop keeps reading
 commands, so heartbeats, e-stop and STOP_WINDOW act during a window.
+
+Size: over 700 lines on purpose. The emulator is the device's side of the whole wire
+protocol in one class, as the firmware's ``src/device.c`` is: the state × command table,
+every command's checks and effects, the window worker and the trace ring share one state,
+and a reader follows a command from its frame to its answer in one place. The plant is
+:mod:`device.sim`; serving it as a process is :mod:`.serving`.
 """
 
 from __future__ import annotations
