@@ -87,8 +87,8 @@ class BackendError(DeviceError):
 
 
 class CurrentLimitError(DeviceError):
-    """A current limit above the device's rating was asked for (:meth:`DeviceInfo.ceiling`,
-    the one place that decides it)."""
+    """A current limit above the device's rating was asked for
+    (:meth:`device.info.DeviceInfo.ceiling`, the one place that decides it)."""
 
 
 class DeviceFaultError(DeviceError):

@@ -231,7 +231,7 @@ _TRANSIENTS: dict[str, Callable[[str, Mapping[str, Any]], Transient]] = {}
 
 
 def register_transient(kind: str, parser: Callable[[str, Mapping[str, Any]], Transient]) -> None:
-    """Make a transient kind available to :meth:`Scene.from_dict`.
+    """Make a transient kind available to :meth:`device.scene.Scene.from_dict`.
 
     ``parser(where, data)`` receives the table without its ``kind`` key and returns
     a :class:`Transient`, raising :class:`SceneError` naming ``where`` on bad data.
