@@ -21,6 +21,11 @@ keeps instruments as data: a new message is one entry here, then ``make contract
 Ranges are inclusive; a bound that is a string names a field of
 ``LIMITS`` (or ``current_limit_ma`` of ``HELLO_ACK``), the device's own resources. Rules that
 tie two fields together are stated in ``rules`` and checked by hand on every target.
+
+Size: over 700 lines on purpose. It is the contract as one table of data (every message,
+field and range, the state × command table, the published versions' rule) with the
+renderers that turn it into the header and the document; split, the one place the
+protocol is written would be several.
 """
 
 from __future__ import annotations

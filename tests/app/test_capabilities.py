@@ -52,7 +52,7 @@ def _run(tmp_path, dev, **kw):
     return r, said
 
 
-@pytest.mark.slow  # a session in process, ~1.5 s
+@pytest.mark.integration  # a session in process: it records its provenance with git
 def test_without_sound_a_physical_device_is_refused_and_a_simulated_one_goes_on(
         tmp_path, bench, no_audio):
     """The masking noise hides a real sample's own sound: a device that says its contact is
@@ -67,7 +67,7 @@ def test_without_sound_a_physical_device_is_refused_and_a_simulated_one_goes_on(
     assert any("warning: no audio" in s and "simulated device" in s for s in said), said
 
 
-@pytest.mark.slow  # two sessions in process, ~1.5 s
+@pytest.mark.integration  # two sessions in process: their provenance with git
 def test_session_json_records_what_the_device_said_it_is(tmp_path, bench):
     for pid, dev in (("sim", "sim"), ("bench", bench)):
         from app.api import run_session

@@ -152,18 +152,19 @@ def test_a_window_computes_the_hand_as_it_goes_not_all_at_its_start():
     from dataclasses import replace
 
     from device.scene import Scene
-    from device.sim.backend import PULL_AHEAD, SimDevice, _Buffers
+    from device.sim._window import PULL_AHEAD, Buffers
+    from device.sim.backend import SimDevice
 
     sim = SimDevice(seed=4)
     sim.load_scene(Scene("s", spring=680.0))
     sim.home(0.02)
     plan = replace(sim.tapper, top=0.02).plan(sim.rng_tapping, 5.0, 0.0)
     n = int(sim.max_window_s / sim.params.dt)  # the longest window it runs
-    buf = _Buffers(n, plan, sim._pull_gains, sim.params.dt)
+    buf = Buffers(n, plan, sim._pull_gains, sim.params.dt)
     assert buf.n == n and buf.pulled == 0
     buf.ensure(25)  # the first chunk of ticks
     assert buf.pulled <= PULL_AHEAD + 1
-    whole = _Buffers(3 * PULL_AHEAD, plan, sim._pull_gains, sim.params.dt)
+    whole = Buffers(3 * PULL_AHEAD, plan, sim._pull_gains, sim.params.dt)
     for end in range(25, 3 * PULL_AHEAD, 25):
         buf.ensure(end)
     whole.ensure(3 * PULL_AHEAD - 1)

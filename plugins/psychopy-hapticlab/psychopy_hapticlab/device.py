@@ -269,20 +269,15 @@ class HapticlabDevice(BaseResponseDevice, aliases=["hapticlab"]):
     # ------------------------------------------------------------------ DeviceManager
     @staticmethod
     def getAvailableDevices() -> list[dict]:
-        """What ``hapticlab device list`` finds, without opening any port (opening one can
-        reset a board): the simulated device and every serial port, each a dict of the
-        keyword arguments that open it (``spec``) and a ``deviceName``."""
-        from app.api import device_list
+        """What ``hapticlab device list`` finds (:func:`device.available_devices`: every
+        registered backend's devices, hapticlab's own and any installed), without opening
+        any (opening a serial port can reset a board), each a dict of the keyword arguments
+        that open it (``spec``) and a ``deviceName``."""
+        from device import available_devices
 
-        found = device_list()
-        out = [{"deviceName": f"hapticlab: {s['description']}", "spec": s["spec"]}
-               for s in found["simulated"]]
-        for p in found["ports"]:
-            port = p["spec"].partition(":")[2]
-            what = p["description"] if p["description"] not in ("", "n/a") else "serial port"
-            out.append({"deviceName": f"hapticlab: a device on {port} ({what})",
-                        "spec": p["spec"]})
-        return out
+        return [{"deviceName": f"hapticlab: {d.spec}"
+                 + (f" ({d.description})" if d.description not in ("", "n/a") else ""),
+                 "spec": d.spec} for d in available_devices()]
 
     def isSameDevice(self, other) -> bool:
         """True when ``other`` (a HapticlabDevice, or a dict with ``spec``) names this
