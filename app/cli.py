@@ -2,6 +2,11 @@
 
 Every :class:`~device.errors.HapticlabError` prints one line to stderr and exits 2, never a
 traceback. Heavy modules are imported inside the command that needs them.
+
+Size: about 700 lines on purpose. The argument parser of every command, with its help, is
+one tree read (and generated into the reference) as a whole, and each command's handler is a
+few lines over :mod:`app.api`; the library and identification commands have their own module
+(:mod:`app.matching_cli`).
 """
 
 from __future__ import annotations
