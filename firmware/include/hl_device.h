@@ -12,26 +12,27 @@
 
 #include "hl_wire.h"
 
-/* ratings of the papers' one-axis device (SPEC section 1), as HELLO_ACK reports them; the
- * bridges to commercial devices (src/io_dhd.c, src/io_hd.c) build with their own. The
- * servo rate divides 1,000,000 and is a multiple of 1,000 (1 kHz at the least) */
+/* ratings of the papers' one-axis device (SPEC section 1), as HELLO_ACK reports them. The
+ * bridges to commercial devices (src/io_dhd.c, src/io_hd.c, built with HL_REAL_DEVICE) take
+ * none of these: each is the lab's, from the device's data sheet (BRIDGE_RATINGS). Their
+ * ranges are checked once, in device.c. The servo rate divides 1,000,000 and is a multiple
+ * of 1,000 (1 kHz at the least) */
 #ifndef HL_SERVO_HZ
 #define HL_SERVO_HZ 10000u
 #endif
-#ifndef HL_ENCODER_NM
-#define HL_ENCODER_NM 10000u          /* encoder resolution [nm], whole micrometres */
-#endif
-#if HL_ENCODER_NM % 1000u != 0u || HL_ENCODER_NM == 0u
-#error "HL_ENCODER_NM must be a whole number of micrometres"
-#endif
 #ifndef HL_FORCE_CONSTANT_MN_A
 #define HL_FORCE_CONSTANT_MN_A 2150u  /* [mN/A] */
+#endif
+#ifndef HL_REAL_DEVICE
+#ifndef HL_ENCODER_NM
+#define HL_ENCODER_NM 10000u          /* encoder resolution [nm], whole micrometres */
 #endif
 #ifndef HL_CURRENT_RATING_MA
 #define HL_CURRENT_RATING_MA 1400u    /* [mA] */
 #endif
 #ifndef HL_EFFECTIVE_MASS_MG
 #define HL_EFFECTIVE_MASS_MG 55000u   /* [mg] */
+#endif
 #endif
 #if HL_SERVO_HZ < 1000u || HL_SERVO_HZ % 1000u != 0u || 1000000u % HL_SERVO_HZ != 0u
 #error "HL_SERVO_HZ must be a multiple of 1000 that divides 1000000"
@@ -107,6 +108,10 @@ void hl_device_poll(void);
 void hl_device_rx_byte(uint8_t b);
 void hl_device_rx_idle(uint64_t tick);
 uint64_t hl_device_ticks(void); /* the device clock [servo ticks], read whole */
+/* the current rating [A] as the device's clamp holds it (HL_CURRENT_RATING_MA, the binary32
+ * at or just below it) and HELLO_ACK reports it: what a bridge checks against the device's
+ * own force limits at start, so that the check and the clamp cannot read the rating apart */
+float hl_device_current_rating(void);
 /* host build only: the device runs at `speed` x real time, so the watchdog (a limit on
  * the host's wall-clock silence) counts `speed` x as many ticks */
 void hl_device_pace(float speed);

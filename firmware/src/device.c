@@ -15,6 +15,39 @@
 #include "hl_contract.h"
 #include "hl_hal.h"
 
+/* The device's ratings, checked here once (not in each file that includes hl_device.h): a
+ * real device's build takes each from the lab (BRIDGE_RATINGS, docs/howto/run-on-your-
+ * device.md), and each must fit what the clamp and HELLO_ACK hold it in. A missing rating
+ * is given a placeholder after its error only so that this compile ends at that error. */
+#ifdef HL_REAL_DEVICE
+#ifndef HL_EFFECTIVE_MASS_MG
+#error "a real device's build needs HL_EFFECTIVE_MASS_MG, its effective mass at the handle [mg] from its data sheet, in BRIDGE_RATINGS (docs/howto/run-on-your-device.md)"
+#define HL_EFFECTIVE_MASS_MG 1u
+#endif
+#ifndef HL_CURRENT_RATING_MA
+#error "a real device's build needs HL_CURRENT_RATING_MA, the current [mA] that stands for its largest force along the axis, in BRIDGE_RATINGS (docs/howto/run-on-your-device.md)"
+#define HL_CURRENT_RATING_MA 1u
+#endif
+#ifndef HL_ENCODER_NM
+#error "a real device's build needs HL_ENCODER_NM, its encoder's resolution at the handle [nm, whole micrometres], in BRIDGE_RATINGS (docs/howto/run-on-your-device.md)"
+#define HL_ENCODER_NM 1000u
+#endif
+#endif
+/* signed comparisons first, so that a negative value is out of range, not a huge unsigned */
+#if !((HL_CURRENT_RATING_MA) >= 1 && (HL_CURRENT_RATING_MA) <= 65535)
+#error "HL_CURRENT_RATING_MA must be 1 to 65535 mA: the clamp and HELLO_ACK hold it in 16 bits"
+#endif
+#if !((HL_EFFECTIVE_MASS_MG) >= 1 && (HL_EFFECTIVE_MASS_MG) <= 4294967295)
+#error "HL_EFFECTIVE_MASS_MG must be 1 to 4294967295 mg: HELLO_ACK holds it in 32 bits, and no stylus is massless"
+#endif
+#if !((HL_ENCODER_NM) >= 1000 && (HL_ENCODER_NM) <= 4294967000)
+#error "HL_ENCODER_NM must be 1000 to 4294967000 nm: 1 um to 4294967 um per count, in HELLO_ACK's 32 bits"
+#elif (HL_ENCODER_NM) % 1000 != 0
+#error "HL_ENCODER_NM must be a whole number of micrometres: heights are counted in um"
+#endif
+/* the current rating as every reader of it takes it: 16 bits, unsigned (HELLO_ACK's field) */
+#define RATED_MA ((uint16_t)(HL_CURRENT_RATING_MA))
+
 #define RAMP_TICKS (HL_SERVO_HZ / 20u)      /* the enable ramp: 50 ms */
 /* speed estimate: least squares over the last 1 ms (10 ticks at 10 kHz), and over at least
  * 3 ticks (2 ms at 1 kHz), where two would be a bare difference */
@@ -176,6 +209,8 @@ static float clamp_of(uint32_t ma)
     float a = (float)ma / 1000.0f;
     return (double)a > (double)ma / 1000.0 ? nextafterf(a, 0.0f) : a;
 }
+
+float hl_device_current_rating(void) { return clamp_of(RATED_MA); }
 
 static uint64_t ticks_to_us(uint64_t t) { return t * (1000000u / HL_SERVO_HZ); }
 
@@ -538,7 +573,7 @@ static void send_hello_ack(void)
     uint8_t b[HL_HELLO_ACK_SIZE];
     hl_hello_ack_set_protocol(b, D.proto);
     hl_hello_ack_set_servo_rate_hz(b, HL_SERVO_HZ);
-    hl_hello_ack_set_current_limit_ma(b, HL_CURRENT_RATING_MA);
+    hl_hello_ack_set_current_limit_ma(b, RATED_MA);
     hl_hello_ack_set_force_constant(b, HL_FORCE_CONSTANT_MN_A);
     hl_hello_ack_set_effective_mass(b, HL_EFFECTIVE_MASS_MG);
     hl_hello_ack_set_watchdog_ms(b, HL_WATCHDOG_MS);
@@ -930,7 +965,7 @@ static void handle(const hl_frame *f, uint8_t version)
         D.position_due = 0;
         D.enabled = 0;
         D.prev_enabled = 0;
-        D.limit = clamp_of(HL_CURRENT_RATING_MA);
+        D.limit = clamp_of(RATED_MA);
         D.mask = HL_CHANNEL_MASK;
         D.decim = 1;
         D.nch = popcount16(HL_CHANNEL_MASK);
@@ -1122,7 +1157,7 @@ void hl_device_init(const char *serial_number)
     memset(&S, 0, sizeof S);
     hl_receiver_init(&D.rx);
     D.state = HL_IDLE;
-    D.limit = clamp_of(HL_CURRENT_RATING_MA);
+    D.limit = clamp_of(RATED_MA);
     D.mask = D.run_mask = HL_CHANNEL_MASK;
     D.decim = D.run_decim = 1;
     D.nch = D.run_nch = popcount16(HL_CHANNEL_MASK);

@@ -134,7 +134,7 @@ static void check_limits(const dhd_model *m)
         from = "the SDK's force limit (dhdGetMaxForce)";
     }
 #endif
-    double axis = (double)HL_CURRENT_RATING_MA * 1e-3 * KF;
+    double axis = (double)hl_device_current_rating() * KF; /* the clamp's own */
     double most = sqrt(axis * axis + 2.0 * BRIDGE_HOLD_MAX_N * BRIDGE_HOLD_MAX_N);
     if (most > limit) {
         refuse("the ratings it was built with allow %.2f N along the axis, %.2f N with the "

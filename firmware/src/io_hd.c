@@ -84,7 +84,7 @@ static void check_limits(void)
     check("reading HD_NOMINAL_MAX_FORCE");
     hdGetDoublev(HD_NOMINAL_MAX_CONTINUOUS_FORCE, &cont);
     check("reading HD_NOMINAL_MAX_CONTINUOUS_FORCE");
-    double axis = (double)HL_CURRENT_RATING_MA * 1e-3 * KF;
+    double axis = (double)hl_device_current_rating() * KF; /* the clamp's own */
     double most = sqrt(axis * axis + 2.0 * BRIDGE_HOLD_MAX_N * BRIDGE_HOLD_MAX_N);
     if (!(axis <= cont && most <= peak)) {
         refuse("the ratings it was built with allow %.2f N along the axis (%.2f N with the "

@@ -93,6 +93,81 @@ def openhaptics(root: Path, header_edit=None, driver: bool = True, ldconfig: boo
     return prefix
 
 
+@pytest.fixture(scope="module")
+def fd_sdk(tmp_path_factory) -> Path:
+    """One stand-in Force Dimension SDK folder for the tests that only build against it."""
+    return dhd_sdk(tmp_path_factory.mktemp("fd"))
+
+
+def _ratings(**settings: str) -> str:
+    """BRIDGE_RATINGS with RATINGS's values, each setting given replaced (None: left out)."""
+    given = dict(w[2:].split("=", 1) for w in RATINGS.split())
+    given.update(settings)
+    return " ".join(f"-D{k}={v}" for k, v in given.items() if v is not None)
+
+
+@pytest.mark.parametrize(("setting", "value", "said"), [
+    # a negative current once built and started ("at most -0.01 N"), the clamp then
+    # reading it as 4.3 million A and HELLO_ACK as 65.531 A
+    ("HL_CURRENT_RATING_MA", "-5", "HL_CURRENT_RATING_MA must be 1 to 65535 mA"),
+    ("HL_CURRENT_RATING_MA", "0u", "HL_CURRENT_RATING_MA must be 1 to 65535 mA"),
+    ("HL_CURRENT_RATING_MA", "65536u", "HL_CURRENT_RATING_MA must be 1 to 65535 mA"),
+    ("HL_EFFECTIVE_MASS_MG", "0u", "HL_EFFECTIVE_MASS_MG must be 1 to 4294967295 mg"),
+    ("HL_EFFECTIVE_MASS_MG", "-55000", "HL_EFFECTIVE_MASS_MG must be 1 to 4294967295 mg"),
+    ("HL_ENCODER_NM", "4294967296u", "HL_ENCODER_NM must be 1000 to 4294967000 nm"),
+    ("HL_ENCODER_NM", "0u", "HL_ENCODER_NM must be 1000 to 4294967000 nm"),
+    ("HL_ENCODER_NM", "1500u", "HL_ENCODER_NM must be a whole number of micrometres"),
+])
+def test_a_rating_the_device_cannot_carry_is_refused_at_build_once(setting, value, said,
+                                                                     fd_sdk, tmp_path):
+    """Each rating within what the firmware's clamp and HELLO_ACK hold it in (the current in
+    16 bits, from 1 mA; the mass and the encoder's step in 32, from 1 mg and 1 µm), or the
+    lab's build stops before anything is compiled, saying so once (the check sits in one
+    file, not in each that includes the ratings)."""
+    run = _make("dhd", f"DHD_SDK={fd_sdk}", f"BRIDGE_OUT={tmp_path}",
+                f"BRIDGE_RATINGS={_ratings(**{setting: value})}")
+    out = run.stdout + run.stderr
+    assert run.returncode != 0 and not (tmp_path / "hlfw-dhd").exists()
+    assert out.count(said) == 1, out
+    assert "check-sdk:" not in out  # refused before the SDK is looked at
+
+
+@pytest.mark.parametrize(("ratings", "said"), [
+    (_ratings(HL_CURRENT_RATING_MA=None), "BRIDGE_RATINGS lacks HL_CURRENT_RATING_MA"),
+    (_ratings(HL_EFFECTIVE_MASS_MG=None), "BRIDGE_RATINGS lacks HL_EFFECTIVE_MASS_MG"),
+    (_ratings(HL_ENCODER_NM=None), "BRIDGE_RATINGS lacks HL_ENCODER_NM"),
+    (_ratings(HL_CURRENT_RATING_MA=None, HL_CURRENT_MA="400u"),
+     "BRIDGE_RATINGS: -DHL_CURRENT_MA=400u is not a rating"),
+    (_ratings() + " -DHL_WATCHDOG_MS=1000u", "-DHL_WATCHDOG_MS=1000u is not a rating"),
+    (_ratings(HL_ENCODER_NM=""), "-DHL_ENCODER_NM= has no value"),
+    (_ratings() + " -DHL_ENCODER_NM=1000u", "names HL_ENCODER_NM twice"),
+])
+def test_every_rating_is_the_labs_and_nothing_else_passes(ratings, said, fd_sdk, tmp_path):
+    """A real device's build takes each of its three ratings from the lab, none from the
+    papers' device (a left-out current once built at 1400 mA, a left-out mass at 55 g, the
+    encoder at the Makefile's 1 µm), and refuses a name it does not know (a misspelled
+    -DHL_CURRENT_MA once built, silently unused), by name, before anything is compiled."""
+    run = _make("dhd", f"DHD_SDK={fd_sdk}", f"BRIDGE_OUT={tmp_path}",
+                f"BRIDGE_RATINGS={ratings}")
+    out = run.stdout + run.stderr
+    assert run.returncode != 0 and not (tmp_path / "hlfw-dhd").exists()
+    assert said in out, out
+    assert "docs/howto/run-on-your-device.md" in out  # where the ratings are explained
+    assert "check-sdk:" not in out
+
+
+def test_a_real_device_build_has_no_default_rating_even_outside_make():
+    """The C side refuses too: compiled as a real device's bridge (HL_REAL_DEVICE) without
+    its ratings, the device core names each that is missing rather than taking the papers'
+    device's."""
+    run = subprocess.run(["cc", "-std=c11", "-fsyntax-only", "-DHL_REAL_DEVICE",
+                          f"-I{FIRMWARE_DIR / 'include'}", str(FIRMWARE_DIR / "src" / "device.c")],
+                         capture_output=True, text=True)
+    assert run.returncode != 0
+    for name in ("HL_EFFECTIVE_MASS_MG", "HL_CURRENT_RATING_MA", "HL_ENCODER_NM"):
+        assert f"a real device's build needs {name}" in run.stderr, run.stderr
+
+
 def test_check_sdk_finds_each_stand_in_whole_and_says_its_version(tmp_path):
     """A lab runs `make -C firmware check-sdk` first: it compiles the bridge's declarations
     with the SDK's own headers, prints the version it found and whether the link works."""
@@ -214,9 +289,12 @@ def test_the_labs_build_command_builds_a_bridge_against_an_installed_sdk(target,
             assert not dev.info.accelerometer
             assert dev.info.current_limit == pytest.approx(0.4)  # BRIDGE_RATINGS's
             assert dev.info.encoder_resolution == pytest.approx(2e-6)  # the lab's, not 1 µm
+            told = dev.info.max_force
     finally:
         proc.terminate()
         _, err = proc.communicate(timeout=30)
+    # the start-up check read the rating as the clamp and HELLO_ACK do
+    assert f"at most {told:.2f} N along the axis" in err, err
     assert ("zero force, forces off, closed" if target == "dhd"
             else "force output off, device disabled") in err
 
