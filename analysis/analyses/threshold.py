@@ -103,6 +103,11 @@ def _markdown(a: dict) -> tuple[list[str], list[str]]:
     if notes:
         out.append("\nOf the intervals of each participant's fits (appendix): "
                    + "; ".join(notes) + " (for some).\n")
+    if a["procedure"] == "questplus":
+        out.append("\nQUEST+ chose these intensities for its own model: its posterior estimate "
+                   "and credible interval (appendix) are the better read of a QUEST+ phase, "
+                   "the refit's interval tending to be too narrow (`hapticlab bench "
+                   "thresholds` measures both against simulated observers).\n")
     if a["unfit"]:
         out.append("\nNot fitted: " + "; ".join(f"{u['participant']} {u['track']} ({u['why']})"
                                              for u in a["unfit"]) + ".\n")
