@@ -124,6 +124,10 @@ def test_the_report_fits_what_the_files_hold(study):
         assert f["n_trials"] == len(rows)
     md = (tmp / "report" / "report.md").read_text()
     assert "at 75 % correct" in md and "reversal average" in md and "QUEST+ estimate" in md
+    for phase in ("frequency", "amplitude"):  # each track's staircase, the fitted functions
+        for fig in ("tracks", "psychometric"):
+            name = f"jnd_mini-{phase}_{fig}.png"
+            assert (tmp / "report" / name).stat().st_size > 5000 and name in md
 
 
 def test_exports_carry_the_procedure(study, tmp_path):
