@@ -8,12 +8,13 @@
  *   open        drdOpen (libdrd opens it for libdhd too, as CHAI3D's driver does)
  *   model       dhdGetSystemType against the table below: an unknown model is refused by
  *               name, and so is one whose highest rate is below this build's servo rate
+ *   limits      the force the lab's ratings allow along the axis, with the holding forces
+ *               on the other two, against dhdGetMaxForce where the SDK has it and a limit
+ *               is set, else the model's nominal force (bridge_check_limits): before the
+ *               calibration, so that ratings it refuses never move the arm
  *   calibration drdIsInitialized; if not, drdAutoInit moves the arm to its limits, so the
  *               operator is asked first (`--calibrate` answers yes ahead; with no
  *               terminal to ask on and no --calibrate, the bridge refuses)
- *   limits      the force the lab's ratings allow along the axis, with the holding forces
- *               on the other two at their most, against dhdGetMaxForce where the SDK has it
- *               and a limit is set, else the model's nominal force
  *   gravity     dhdSetGravityCompensation on: the SDK carries the arm's own weight
  *   forces      off until the host enables output
  * Every tick: one position read, one status read (the device's own force switch and why it
@@ -109,13 +110,14 @@ static void calibrate(const dhd_model *m)
         fprintf(stderr, "calibration: the %s is calibrated (drdIsInitialized)\n", m->name);
         return;
     }
-    if (!bridge_operator_agrees("The Force Dimension device is not calibrated. Calibrating "
-                                "moves its arm to each of its limits under power. Keep hands "
-                                "and objects clear of it. Calibrate now?")) {
+    int yes = bridge_operator_agrees("The Force Dimension device is not calibrated. "
+                                     "Calibrating moves its arm to each of its limits under "
+                                     "power. Keep hands and objects clear of it. Calibrate "
+                                     "now?");
+    if (yes != BRIDGE_YES) {
         refuse("the %s is not calibrated (drdIsInitialized), so its heights are not "
-               "absolute; calibrating moves the arm, and the operator did not agree to it "
-               "(run the bridge from a terminal to be asked, or with --calibrate once the "
-               "arm is clear)", m->name);
+               "absolute; calibrating moves the arm, and %s%s", m->name, bridge_why_not(yes),
+               yes == BRIDGE_NOBODY ? " once the arm is clear" : "");
     }
     if (drdAutoInit(id) < 0 || drdStop(true, id) < 0 || !drdIsInitialized(id)) {
         refuse("calibrating the %s failed (%s)", m->name, dhdErrorGetLastStr());
@@ -123,26 +125,25 @@ static void calibrate(const dhd_model *m)
     fprintf(stderr, "calibration: the %s calibrated itself (drdAutoInit)\n", m->name);
 }
 
+/* the ratings against the SDK's force limit where one is set (dhdGetMaxForce, SDK 3.17.5; a
+ * negative answer: none set), else the model's nominal force, taken as what it gives without
+ * end (bridge_check_limits) */
 static void check_limits(const dhd_model *m)
 {
-    double limit = m->force_n;
-    const char *from = "the model's nominal force";
+    bridge_limits lim = {m->name, m->force_n, "", "the model's nominal force", NAN, NULL};
 #if HL_DHD_HAS_MAX_FORCE
     double set = dhdGetMaxForce(id);
-    if (isfinite(set) && set > 0.0 && set < limit) {
-        limit = set;
-        from = "the SDK's force limit (dhdGetMaxForce)";
+    if (isfinite(set) && set < 0.0) {
+        fprintf(stderr, "limits: no force limit set in the SDK (dhdGetMaxForce %.2f)\n", set);
+    } else {
+        bridge_check_figure("Force Dimension bridge", m->name, set, "dhdGetMaxForce");
+        if (set < lim.force_n) {
+            lim.force_n = set;
+            lim.force_from = "the SDK's force limit (dhdGetMaxForce)";
+        }
     }
 #endif
-    double axis = (double)hl_device_current_rating() * KF; /* the clamp's own */
-    double most = sqrt(axis * axis + 2.0 * BRIDGE_HOLD_MAX_N * BRIDGE_HOLD_MAX_N);
-    if (most > limit) {
-        refuse("the ratings it was built with allow %.2f N along the axis, %.2f N with the "
-               "holding forces, above the %s's %.2f N (%s): rebuild with a lower "
-               "HL_CURRENT_RATING_MA in BRIDGE_RATINGS", axis, most, m->name, limit, from);
-    }
-    fprintf(stderr, "limits: at most %.2f N along the axis and %.2f N in all, within the %s's "
-            "%.2f N (%s)\n", axis, most, m->name, limit, from);
+    bridge_check_limits("Force Dimension bridge", &lim);
 }
 
 void hal_io_init(uint64_t seed)
@@ -181,8 +182,8 @@ void hal_io_init(uint64_t seed)
     fprintf(stderr, "Force Dimension device: %s (type %d), serial number %s, servo %u Hz%s\n",
             m->name, type, serial_number[0] ? serial_number : "unknown", HL_SERVO_HZ,
             extra_axes ? "; its wrist and gripper are held at zero torque and force" : "");
+    check_limits(m); /* before a calibration moves the arm: ratings it refuses move nothing */
     calibrate(m);
-    check_limits(m);
     if (dhdSetGravityCompensation(HL_DHD_ON, id) < 0) {
         refuse("gravity compensation refused (%s)", dhdErrorGetLastStr());
     }

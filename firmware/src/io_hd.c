@@ -9,9 +9,9 @@
  *   model        HD_DEVICE_MODEL_TYPE against the models CHAI3D's driver knows; another is
  *                refused by name. HD_OUTPUT_DOF: a 6-DOF Phantom's gimbal torques are held
  *                at zero every frame
- *   limits       the force the lab's ratings allow along the axis against the device's
- *                HD_NOMINAL_MAX_CONTINUOUS_FORCE, and with the holding forces at their most
- *                against HD_NOMINAL_MAX_FORCE
+ *   limits       the force the lab's ratings allow along the axis and the holding forces,
+ *                both continuous, against the device's HD_NOMINAL_MAX_CONTINUOUS_FORCE and
+ *                HD_NOMINAL_MAX_FORCE (bridge_check_limits)
  *   rate         the scheduler set to the build's 1 kHz and HD_UPDATE_RATE read back
  *   calibration  hdCheckCalibration in the scheduler's thread, as the vendor's examples and
  *                the ROS driver do; an update is made where the device's style needs no
@@ -54,6 +54,7 @@ static int32_t counts = INT32_MAX; /* the last good reading: far above, until th
 static double x, z, x_prev, z_prev; /* [m] */
 static char serial_number[16], model[64];
 static HDerror first_error; /* the first error the HD API reported during a tick */
+static uint64_t auto_updates; /* automatic calibration updates made while output was off */
 
 static void close_device(void)
 {
@@ -64,7 +65,8 @@ static void close_device(void)
     hdDisable(HD_FORCE_OUTPUT);
     hdDisableDevice(device);
     device = HD_INVALID_HANDLE;
-    fprintf(stderr, "OpenHaptics device: force output off, device disabled\n");
+    fprintf(stderr, "OpenHaptics device: force output off, device disabled; %llu automatic "
+            "calibration updates while output was off\n", (unsigned long long)auto_updates);
 }
 
 #define refuse(...) bridge_refuse("OpenHaptics bridge", __VA_ARGS__)
@@ -79,20 +81,14 @@ static void check(const char *what)
 
 static void check_limits(void)
 {
-    HDdouble peak = 0.0, cont = 0.0;
+    HDdouble peak = NAN, cont = NAN;
     hdGetDoublev(HD_NOMINAL_MAX_FORCE, &peak);
     check("reading HD_NOMINAL_MAX_FORCE");
     hdGetDoublev(HD_NOMINAL_MAX_CONTINUOUS_FORCE, &cont);
     check("reading HD_NOMINAL_MAX_CONTINUOUS_FORCE");
-    double axis = (double)hl_device_current_rating() * KF; /* the clamp's own */
-    double most = sqrt(axis * axis + 2.0 * BRIDGE_HOLD_MAX_N * BRIDGE_HOLD_MAX_N);
-    if (!(axis <= cont && most <= peak)) {
-        refuse("the ratings it was built with allow %.2f N along the axis (%.2f N with the "
-               "holding forces), above the %s's %.2f N continuous (%.2f N peak): rebuild with "
-               "a lower HL_CURRENT_RATING_MA in BRIDGE_RATINGS", axis, most, model, cont, peak);
-    }
-    fprintf(stderr, "limits: at most %.2f N along the axis, %.2f N in all, within the %s's "
-            "%.2f N continuous and %.2f N peak\n", axis, most, model, cont, peak);
+    bridge_limits lim = {model, cont, "continuous", "HD_NOMINAL_MAX_CONTINUOUS_FORCE", peak,
+                         "HD_NOMINAL_MAX_FORCE"};
+    bridge_check_limits("OpenHaptics bridge", &lim);
 }
 
 void hal_io_init(uint64_t seed)
@@ -202,14 +198,22 @@ int bridge_hd_start(void)
             q = ask_scheduler(0);
             continue;
         }
-        if (cal_style == HD_CALIBRATION_ENCODER_RESET &&
-            !bridge_operator_agrees("Hold the device's arm in its reset position, then "
-                                    "answer: reset its encoders now?")) {
-            refuse("the %s needs its encoders reset (HD_CALIBRATION_ENCODER_RESET) and the "
-                   "operator did not agree (run the bridge from a terminal to be asked, or "
-                   "with --calibrate with the arm in its reset position)", model);
+        if (cal_style == HD_CALIBRATION_ENCODER_RESET) {
+            int yes = bridge_operator_agrees("Hold the device's arm in its reset position, "
+                                             "then answer: reset its encoders now?");
+            if (yes != BRIDGE_YES) {
+                refuse("the %s needs its encoders reset (HD_CALIBRATION_ENCODER_RESET) and "
+                       "%s%s", model, bridge_why_not(yes),
+                       yes == BRIDGE_NOBODY ? " with the arm in its reset position" : "");
+            }
         }
         q = ask_scheduler(1);
+        fprintf(stderr, "calibration: the %s's %s (hdUpdateCalibration, %s)\n", model,
+                cal_style == HD_CALIBRATION_ENCODER_RESET ? "encoders were reset"
+                                                          : "calibration was updated",
+                cal_style == HD_CALIBRATION_AUTO ? "automatic: no motion"
+                : cal_style == HD_CALIBRATION_ENCODER_RESET ? "encoder reset"
+                                                             : "inkwell");
         if (q.calibration != HD_CALIBRATION_OK && q.calibration != HD_CALIBRATION_NEEDS_MANUAL_INPUT) {
             refuse("the %s's calibration update failed (hdCheckCalibration still says it "
                    "needs one)", model);
@@ -272,6 +276,7 @@ void bridge_hd_frame_end(void)
             bridge_fault(HL_FAULT_CALIBRATION); /* heights may jump: never render on */
         } else if (cal == HD_CALIBRATION_NEEDS_UPDATE && cal_style == HD_CALIBRATION_AUTO) {
             hdUpdateCalibration(cal_style); /* no motion, no force: made at once */
+            auto_updates++;                 /* said at exit, never from the callback */
         }
     }
 }

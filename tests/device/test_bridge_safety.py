@@ -69,9 +69,15 @@ CLOSED = {"dhd-stub": "libdhd stand-in: at exit the device was closed, forces of
                                               "bridge was built for 4000 Hz"),
     ("dhd-stub", {"HL_STUB_DHD_MAX_FORCE": "2"}, "above the omega.3's 2.00 N (the SDK's force "
                                                  "limit (dhdGetMaxForce))"),
-    ("dhd-stub", {"HL_STUB_DHD_UNCALIBRATED": "1"}, "the operator did not agree"),
+    ("dhd-stub", {"HL_STUB_DHD_UNCALIBRATED": "1"}, "nobody was there to answer"),
     ("hd-stub", {"HL_STUB_HD_MODEL": "Touch X"}, 'unknown model: "Touch X"'),
     ("hd-stub", {"HL_STUB_HD_MAX_CONT_FORCE": "0.88"}, "above the Touch's 0.88 N continuous"),
+    # 3.01 N along the axis fits 3.02 N continuous alone, not with the holding spring, which
+    # pushes as long as the hand strays: continuous too (the page's Touch example was so)
+    ("hd-stub", {"HL_STUB_HD_MAX_CONT_FORCE": "3.02"},
+     "rebuild with HL_CURRENT_RATING_MA at most 1394 mA"),
+    ("dhd-stub", {"HL_STUB_DHD_MAX_FORCE": "3.02"},
+     "rebuild with HL_CURRENT_RATING_MA at most 1394 mA"),
     ("hd-stub", {"HL_STUB_HD_MODEL": "PHANTOM Premium 1.5 6DOF",
                  "HL_STUB_HD_CALIBRATION": "update"}, "needs its encoders reset"),
 ])
@@ -86,10 +92,61 @@ def test_what_the_bridge_cannot_run_safely_is_refused_by_name_and_the_device_clo
     assert CLOSED[kind] in err, err
 
 
-def test_a_calibration_that_moves_the_arm_waits_for_the_operators_yes(tmp_path):
-    """An uncalibrated Force Dimension device (drdIsInitialized false): drdAutoInit moves
-    the arm, so the bridge asks on its terminal and calibrates on a yes; `--calibrate` is
-    that yes given ahead. Either way heights are absolute before the pty is offered."""
+@pytest.mark.parametrize(("kind", "env", "said"), [
+    ("hd-stub", {"HL_STUB_HD_MAX_CONT_FORCE": "nan"},
+     "HD_NOMINAL_MAX_CONTINUOUS_FORCE is not a number"),
+    ("hd-stub", {"HL_STUB_HD_MAX_CONT_FORCE": "0"}, "HD_NOMINAL_MAX_CONTINUOUS_FORCE is zero"),
+    ("hd-stub", {"HL_STUB_HD_MAX_FORCE": "-1"}, "HD_NOMINAL_MAX_FORCE is negative (-1.00 N)"),
+    ("hd-stub", {"HL_STUB_HD_MAX_FORCE": "nan"}, "HD_NOMINAL_MAX_FORCE is not a number"),
+    ("dhd-stub", {"HL_STUB_DHD_MAX_FORCE": "nan"}, "dhdGetMaxForce is not a number"),
+])
+def test_a_device_limit_that_means_nothing_is_said_in_words(kind, env, said):
+    """A device that reports a force limit of NaN, zero or below is refused (its ratings
+    cannot be checked against it), saying what it reported in words and that the device or
+    its driver is at fault, not telling the lab to lower a rating below 'nan N'."""
+    err = refused(kind, env)
+    assert said in err, err
+    assert "reports no force limit the ratings can be checked against" in err, err
+    assert "nan N" not in err and "HL_CURRENT_RATING_MA" not in err, err
+
+
+@pytest.mark.parametrize(("kind", "env", "hold"), [
+    ("hd-stub", {"HL_STUB_HD_MAX_CONT_FORCE": "3.3", "HL_STUB_HD_OFF_AXIS_MM": "10"}, 0.96),
+    ("dhd-stub", {"HL_STUB_DHD_MAX_FORCE": "3.3", "HL_STUB_DHD_OFF_AXIS_MM": "10"}, 0.96),
+])
+def test_the_holding_forces_take_only_what_the_continuous_limit_leaves(kind, env, hold):
+    """The holding spring and the axis's rated force are both continuous: together within the
+    device's continuous limit. A hand 10 mm off the axis would draw 3 N from the 300-N/m
+    spring; with 3.01 N rated along the axis and 3.3 N continuous, the spring takes at most
+    what is left, sqrt(3.3² − 3.01²)/√2 = 0.96 N on each other axis, said at start and kept
+    to while rendering (the stand-in's largest off-axis force)."""
+    b = Bridge(kind, env)
+    assert b.port.startswith("/dev/"), b.stop()
+    try:
+        with SerialDevice(b.port) as dev:
+            dev.load_scene(Scene("firm", spring=680.0))
+            dev.home()
+            dev.run_window(0.3, from_first_contact=False)
+    finally:
+        err = b.stop()
+    assert f"holding forces at most {hold:.2f} N on each other axis" in err, err
+    largest = re.search(r"largest force off the axis ([0-9.]+) N", err)
+    assert largest, err
+    assert hold - 0.01 <= float(largest[1]) <= hold + 0.005, largest[0]
+
+
+def test_limits_are_checked_before_a_calibration_moves_the_arm():
+    """Ratings the device will refuse never move its arm: the Force Dimension bridge checks
+    them before drdAutoInit, even with the operator's yes given ahead."""
+    err = refused("dhd-stub", {"HL_STUB_DHD_UNCALIBRATED": "1", "HL_STUB_DHD_MAX_FORCE": "2"},
+                  "--calibrate")
+    assert "above the omega.3's 2.00 N" in err, err
+    assert "drdAutoInit moved the arm" not in err, err
+
+
+def _answered(answer: bytes) -> tuple[subprocess.Popen, str, str]:
+    """An uncalibrated Force Dimension bridge started on a terminal the test types on: what
+    it asked, then `answer` typed; returns the process, its first line and its stderr."""
     env = {**os.environ, "HL_STUB_DHD_UNCALIBRATED": "1"}
     master, slave = os.openpty()
 
@@ -106,21 +163,38 @@ def test_a_calibration_that_moves_the_arm_waits_for_the_operators_yes(tmp_path):
         if select.select([master], [], [], 0.5)[0]:
             asked += os.read(master, 1024)
     assert b"Calibrating moves its arm" in asked, asked
-    os.write(master, b"y\n")
+    os.write(master, answer)
     try:
-        assert proc.stdout.readline().startswith("/dev/")
+        port = proc.stdout.readline().strip()
     finally:
-        proc.terminate()
+        if proc.poll() is None:
+            proc.terminate()
         _, err = proc.communicate(timeout=30)
         os.close(master)
+    return proc, port, err
+
+
+def test_a_calibration_that_moves_the_arm_waits_for_the_operators_yes():
+    """An uncalibrated Force Dimension device (drdIsInitialized false): drdAutoInit moves
+    the arm, so the bridge asks on its terminal and calibrates on a yes; `--calibrate` is
+    that yes given ahead. Either way heights are absolute before the pty is offered. A no
+    is refused in its own words: the operator answered, so "run it from a terminal to be
+    asked" would be wrong."""
+    _, port, err = _answered(b"y\n")
+    assert port.startswith("/dev/"), err
     assert "drdAutoInit moved the arm" in err and "calibrated itself (drdAutoInit)" in err, err
+    proc, port, err = _answered(b"n\n")
+    assert port == "" and proc.returncode == 1, err
+    assert "the operator answered no" in err and "from a terminal" not in err, err
+    assert "drdAutoInit moved the arm" not in err, err
     ahead = Bridge("dhd-stub", {"HL_STUB_DHD_UNCALIBRATED": "1"}, "--calibrate")
     err = ahead.stop()
     assert ahead.port.startswith("/dev/") and "drdAutoInit moved the arm" in err, err
 
 
 @pytest.mark.parametrize(("cal", "said"), [
-    ("update", "calibration: the Touch is calibrated"),
+    ("update", "calibration: the Touch's calibration was updated (hdUpdateCalibration, "
+               "automatic: no motion)"),
     ("inkwell:1", "put the Touch's stylus in its inkwell"),
 ])
 def test_a_touch_is_calibrated_before_its_pty_is_offered(cal, said):

@@ -27,8 +27,12 @@
  *                               not applied: the last force holds, as the SDK's time guard
  *   HL_STUB_DHD_MAX_FORCE=N     dhdGetMaxForce's answer (default -1: no limit set)
  *   HL_STUB_DHD_COM_KHZ=F       dhdGetComFreq's answer (default the stand-in's own rate)
+ *   HL_STUB_DHD_OFF_AXIS_MM=D   the hand holds the stylus D mm off the axis along x (the
+ *                               holding spring pulls it back; the largest force it applied
+ *                               off the axis is said at exit)
  * At exit it says on stderr how it was left: open or closed, forces on or off, the last
- * force, and how many force commands did not hold an active wrist or gripper at zero. */
+ * force, the largest force applied off the axis with forces on, and how many force commands
+ * did not hold an active wrist or gripper at zero. */
 #include <math.h>
 #include <stdbool.h>
 #include <stddef.h>
@@ -54,7 +58,7 @@ static uint64_t seed;
 static struct {
     int open, forces_on, initialized, gravity, model, off_cause, off_fired, at_exit;
     uint64_t refreshes, fail_after, off_after, commands, uncommanded, timeguard_k;
-    double saturate_n, max_force_n, com_khz, last_force[3];
+    double saturate_n, max_force_n, com_khz, last_force[3], off_axis_m, off_axis_n;
     int error;
     const char *error_str;
 } S;
@@ -91,10 +95,10 @@ static int has_gripper(void) { return is_7dof() || S.model == 35 || S.model == 3
 static void report(void)
 {
     fprintf(stderr, "libdhd stand-in: at exit the device was %s, forces %s, last force "
-            "(%g, %g, %g) N; %llu force commands, %llu not holding an active wrist or "
-            "gripper at zero\n", S.open ? "OPEN" : "closed", S.forces_on ? "ON" : "off",
-            S.last_force[0], S.last_force[1], S.last_force[2],
-            (unsigned long long)S.commands, (unsigned long long)S.uncommanded);
+            "(%g, %g, %g) N, largest force off the axis %.4f N; %llu force commands, %llu not "
+            "holding an active wrist or gripper at zero\n", S.open ? "OPEN" : "closed",
+            S.forces_on ? "ON" : "off", S.last_force[0], S.last_force[1], S.last_force[2],
+            S.off_axis_n, (unsigned long long)S.commands, (unsigned long long)S.uncommanded);
 }
 
 static int open_device(void)
@@ -126,6 +130,7 @@ static int open_device(void)
     S.timeguard_k = (uint64_t)env_num("HL_STUB_DHD_TIMEGUARD", 0);
     S.max_force_n = env_num("HL_STUB_DHD_MAX_FORCE", -1.0);
     S.com_khz = env_num("HL_STUB_DHD_COM_KHZ", DHD_STUB_HZ / 1000.0);
+    S.off_axis_m = env_num("HL_STUB_DHD_OFF_AXIS_MM", 0.0) * 1e-3;
     static int registered;
     if (!registered) {
         registered = 1;
@@ -236,7 +241,7 @@ int dhdGetPosition(double *px, double *py, double *pz, char ID)
     if (S.refreshes >= S.fail_after) {
         return fail(E_COM, "communication error (HL_STUB_FAIL_AFTER)");
     }
-    *px = 0.0;
+    *px = S.off_axis_m;
     *py = 0.0;
     *pz = (double)plant_encoder() * (double)STUB_ENC_M;
     return 0;
@@ -254,6 +259,10 @@ static int command(double fx, double fy, double fz)
         double k = mag > S.saturate_n ? S.saturate_n / mag : 1.0;
         for (int i = 0; i < 3; i++) {
             S.last_force[i] = f[i] * k;
+        }
+        double off = hypot(S.last_force[0], S.last_force[1]);
+        if (S.forces_on && off > S.off_axis_n) {
+            S.off_axis_n = off;
         }
         rc = k < 1.0 ? HL_DHD_MOTOR_SATURATED : 0;
     }

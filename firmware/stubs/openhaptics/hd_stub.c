@@ -31,11 +31,15 @@
  *                                 hdEndFrame, then an HD_FORCE_ERROR for the force it did
  *                                 not apply (so the stack's order matters), and turns
  *                                 force output off
+ *   HL_STUB_HD_OFF_AXIS_MM=D      the hand holds the stylus D mm off the axis along x (the
+ *                                 holding spring pulls it back; the largest force applied
+ *                                 off the axis is said at exit)
  *   HL_STUB_HD_SCHED_PRIORITY=P   the scheduler's thread asks for SCHED_FIFO at P (default
  *                                 40; 0: normal scheduling), running at normal priority
  *                                 where that is not granted
- * At exit it says on stderr how it was left (force output, the last force, the frames that
- * did not hold a 6-DOF device's gimbal torques at zero). */
+ * At exit it says on stderr how it was left (force output, the last force, the largest
+ * force applied off the axis, the frames that did not hold a 6-DOF device's gimbal torques
+ * at zero). */
 #define _GNU_SOURCE
 #include "HD/hd.h"
 
@@ -74,7 +78,7 @@ static struct {
     uint64_t seed;
     int open, force_on, in_frame, running, dof6, torque_zeroed;
     HDulong rate;
-    double force[3], rate_now, max_force, max_cont;
+    double force[3], rate_now, max_force, max_cont, off_axis_mm, off_axis_n;
     char model[64];
     callback cb[MAX_CALLBACKS];
     HDErrorInfo errors[MAX_ERRORS];
@@ -112,10 +116,10 @@ static double env_num(const char *name, double fallback)
 static void report(void)
 {
     fprintf(stderr, "HD stand-in: at exit the device was %s, force output %s, last force (%g, "
-            "%g, %g) N; %llu frames, %llu of them not holding the gimbal torques at zero\n",
-            H.open ? "ENABLED" : "disabled", H.force_on ? "ON" : "off", H.force[0],
-            H.force[1], H.force[2], (unsigned long long)H.frames,
-            (unsigned long long)H.torque_missed);
+            "%g, %g) N, largest force off the axis %.4f N; %llu frames, %llu of them not "
+            "holding the gimbal torques at zero\n", H.open ? "ENABLED" : "disabled",
+            H.force_on ? "ON" : "off", H.force[0], H.force[1], H.force[2], H.off_axis_n,
+            (unsigned long long)H.frames, (unsigned long long)H.torque_missed);
 }
 
 static void read_knobs(void)
@@ -125,6 +129,7 @@ static void read_knobs(void)
     H.dof6 = strstr(H.model, "6DOF") != NULL;
     H.max_force = env_num("HL_STUB_HD_MAX_FORCE", 10.0);
     H.max_cont = env_num("HL_STUB_HD_MAX_CONT_FORCE", 5.0);
+    H.off_axis_mm = env_num("HL_STUB_HD_OFF_AXIS_MM", 0.0);
     const char *fail_at = getenv("HL_STUB_FAIL_AFTER");
     H.fail_after = fail_at ? (uint64_t)(atof(fail_at) * (double)H.rate) : UINT64_MAX;
     const char *cal = getenv("HL_STUB_HD_CALIBRATION");
@@ -231,6 +236,8 @@ void HDAPIENTRY hdEndFrame(HHD hHD)
         H.torque_missed++; /* the gimbal's motors keep whatever they were last told */
     }
     if (H.force_on) {
+        double off = hypot(H.force[0], H.force[2]);
+        H.off_axis_n = off > H.off_axis_n ? off : H.off_axis_n;
         H.frames_on++;
         if (H.frames_on >= H.error_at) { /* the device's own safety: forces off */
             H.error_at = UINT64_MAX;
@@ -261,7 +268,7 @@ void HDAPIENTRY hdGetDoublev(HDenum pname, HDdouble *params)
             fail(HD_DEVICE_FAULT);
             return;
         }
-        params[0] = 0.0;
+        params[0] = H.off_axis_mm;
         params[1] = (double)plant_encoder() * (double)STUB_ENC_M * 1e3 +
                     (H.calibrated ? 0.0 : UNCALIBRATED_MM);
         params[2] = 0.0;
