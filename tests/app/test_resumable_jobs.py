@@ -150,8 +150,9 @@ def test_a_person_clears_a_fault_and_the_build_measures_again(firmware, terminal
 # ------------------------------------------------------------------ suggested commands
 SOURCES = [p for pkg in ("app", "device", "protocols", "analysis") for p in
            (ROOT / pkg).rglob("*.py")]
-#: a command line suggested in a message ends where the sentence does
-_END = re.compile(r"\s*(?:[;)\n]|\. |\.$| \(|$)")
+#: a command line suggested in a message ends where the sentence does, or where its quote
+#: (a backtick, as in "a file that `hapticlab library build` writes") closes
+_END = re.compile(r"\s*(?:[;)`\n]|\. |\.$| \(|$)")
 
 
 def _strings(path: Path):
@@ -204,10 +205,12 @@ def test_every_suggested_command_line_parses():
 def test_the_scan_would_see_a_command_that_does_not_exist(tmp_path, capsys):
     bad = tmp_path / "m.py"
     bad.write_text('MSG = f"continue with: hapticlab library build --device {x} --resume"\n'
-                   'OK = "resume with: hapticlab resume data/sub-P1/ses-1 --clear-fault"\n')
+                   'OK = "resume with: hapticlab resume data/sub-P1/ses-1 --clear-fault"\n'
+                   'QUOTED = "a .npz file that `hapticlab library build` writes"\n')
     cmds = suggested_commands([bad], tmp_path)
     assert [c for _, c in cmds] == ["library build --device X --resume",
-                                    "resume data/sub-P1/ses-1 --clear-fault"]
+                                    "resume data/sub-P1/ses-1 --clear-fault",
+                                    "library build"]  # a quoted command ends at its quote
     assert unparsable(cmds) == ["m.py:1: hapticlab library build --device X --resume"]
 
 
