@@ -372,19 +372,22 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _range(text: str) -> list[int]:
-    """'5..30' (step 5 for subjects, 1 otherwise is given by --step) or '5,10,20'."""
+def _range(text: str, step: int = 1) -> list[int]:
+    """'A..B' (every ``step``-th count from A up to B) or a list 'a,b,c' (each count named,
+    whatever the step)."""
     if ".." in text:
         a, b = text.split("..", 1)
-        return list(range(int(a), int(b) + 1))
+        return list(range(int(a), int(b) + 1, step))
     return [int(x) for x in text.split(",") if x]
 
 
 def _power(args: argparse.Namespace) -> int:
     from .api import power
 
+    if args.step < 1:
+        raise UsageError(f"--step {args.step}: a step over the subjects range is 1 or more")
     try:
-        subjects = _range(args.subjects)[:: args.step]
+        subjects = _range(args.subjects, args.step)
         reps = _range(args.reps)
     except ValueError:
         raise UsageError("--subjects and --reps take 'A..B' or 'a,b,c'") from None
@@ -559,7 +562,8 @@ def build_parser() -> argparse.ArgumentParser:
     pw.add_argument("protocol", help=PROTOCOL_HELP)
     pw.add_argument("--subjects", default="5..30", help="participant counts: A..B (with "
                     "--step) or a list 5,10,20 (default 5..30)")
-    pw.add_argument("--step", type=int, default=5, help="step over the subjects range")
+    pw.add_argument("--step", type=int, default=5, help="step over a subjects range A..B; a "
+                    "list is taken whole (default 5)")
     pw.add_argument("--reps", default="1..5", help="repetitions per cell: A..B or a list "
                     "(default 1..5)")
     pw.add_argument("--effect", type=float, default=1.0, help="key contrast [scale points]")

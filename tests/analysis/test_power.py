@@ -84,3 +84,25 @@ def test_variance_components_recover_known_sds():
     assert vc["sd_trial"] == pytest.approx(0.9, rel=0.03)
     assert vc["sd_interaction"] == pytest.approx(0.5, rel=0.1)
     assert vc["sd_subject"] == pytest.approx(0.8, rel=0.1)
+
+
+@pytest.mark.parametrize("subjects, step, expected", [
+    ("5,10,20", 5, [5, 10, 20]),  # a list is every count named, whatever --step says
+    ("5..20", 5, [5, 10, 15, 20]),  # a range takes --step
+    ("4..6", 1, [4, 5, 6]),
+])
+def test_power_command_takes_a_list_of_subjects_whole(subjects, step, expected, capsys):
+    from app.cli import main
+
+    assert main(["power", "realism", "--subjects", subjects, "--step", str(step), "--reps", "1",
+                 "--experiments", "20", "--json"]) == 0
+    import json
+
+    assert [r["subjects"] for r in json.loads(capsys.readouterr().out)["rows"]] == expected
+
+
+def test_power_command_refuses_a_step_below_one(capsys):
+    from app.cli import main
+
+    assert main(["power", "realism", "--subjects", "5..20", "--step", "0"]) == 2
+    assert "--step" in capsys.readouterr().err
