@@ -1,11 +1,11 @@
 """``hapticlab bench accuracy``: what the servo rate costs and what it buys, scene by scene.
 
-Rows: every scene of the three built-in protocols × tap × servo rate (1, 2, 4, 5, 10 and
-20 kHz), each against the same scene and tap simulated at 100 kHz. The taps are single
-taps at 0.05, 0.11 and 0.25 m/s (the papers' range: SPEC §1 reports 0.11 ± 0.033 m/s),
-and ``people``: a 3-s window of taps drawn from the simulated participants' population,
-N(0.11, 0.033²) m/s (:class:`device.sim.tapper.Tapper`'s defaults), the same taps at every
-rate (one seed). Per row, with no sensor noise:
+Rows: every scene of the built-in protocols (``protocols.BUILTIN``) × tap × servo rate (1,
+2, 4, 5, 10 and 20 kHz), each against the same scene and tap simulated at 100 kHz. The taps
+are single taps at 0.05, 0.11 and 0.25 m/s (the papers' range: SPEC §1 reports 0.11 ± 0.033
+m/s), and ``people``: a 3-s window of taps drawn from the simulated participants'
+population, N(0.11, 0.033²) m/s (:class:`device.sim.tapper.Tapper`'s defaults), the same
+taps at every rate (one seed). Per row, with no sensor noise:
 
 * ``accel_err``: ‖a − a_ref‖₂ / ‖a_ref‖₂ of the true tip acceleration over the window,
   compared at the coarse rate's tick times;
@@ -219,7 +219,7 @@ def print_report(payload: dict) -> None:
                                        key=abs, default=math.nan)),
                               f"{rt:.0f}"))
     print_table(f"accuracy against {REF_RATE // 1000} kHz: the worst scene of each kind "
-                f"(every scene of the three protocols; taps in m/s, 'people' = N(0.11, 0.033²))",
+                f"(every scene of the built-in protocols; taps in m/s, 'people' = N(0.11, 0.033²))",
                 ["kind", "tap", "rate [Hz]", "accel error (worst)", "JND (worst)",
                  "peak force (worst)", "× real time (median)"], worst)
     print_table(f"lowest rate at which every tap is felt within {NOTICEABLE:g} JND of "

@@ -1,12 +1,12 @@
 """``hapticlab bench energy``: does any simulated sample give the stylus more than it took?
 
-Rows: every sample of the three built-in protocols × servo rate (1, 10, 20 kHz), each a
-30-s window of taps sweeping 0.02–0.4 m/s (:func:`device.sim.audit.energy_audit`):
-energy the stylus put into the actuator and the sample, energy they gave back, the
-largest restitution of single taps at 0.02, 0.11 and 0.4 m/s, the fastest arrival at the
-surface and the fastest departure from it (true tip speeds), the device's own estimate of
-the fastest contact, the fastest intended tap, and the verdict. Every real sample must be
-passive; a virtual scene's verdict says when and why it is active.
+Rows: every sample of the built-in protocols (``protocols.BUILTIN``) × servo rate (1, 10, 20
+kHz), each a 30-s window of taps sweeping 0.02–0.4 m/s
+(:func:`device.sim.audit.energy_audit`): energy the stylus put into the actuator and the
+sample, energy they gave back, the largest restitution of single taps at 0.02, 0.11 and 0.4
+m/s, the fastest arrival at the surface and the fastest departure from it (true tip speeds),
+the device's own estimate of the fastest contact, the fastest intended tap, and the verdict.
+Every real sample must be passive; a virtual scene's verdict says when and why it is active.
 
 Baseline, in the same process: a lossless real contact (70 kN/m, no damping) audited the
 same way. It stores and returns energy without loss, so its out/in is what the accounting
@@ -23,15 +23,14 @@ from ._common import emit, library_store, print_table
 
 RATES = (1_000, 10_000, 20_000)
 WINDOW_S = 30.0
-PROTOCOLS = ("realism", "factorial", "identification")
 
 
 def samples() -> list[tuple[str, object]]:
     """(protocol/sample, scene) of every sample of the built-in protocols, each scene once."""
-    from protocols import load_protocol
+    from protocols import BUILTIN, load_protocol
 
     out, seen = [], set()
-    for name in PROTOCOLS:
+    for name in BUILTIN:
         for sid, s in load_protocol(name).samples.items():
             if s.scene not in seen:
                 seen.add(s.scene)

@@ -100,7 +100,7 @@ def protocol_text(name_or_path: str | Path) -> tuple[str, str]:
 
 
 def load_protocol(name_or_path: str | Path, device: DeviceInfo | None = None) -> Protocol:
-    """Load a built-in protocol (``realism``, ``factorial``, ``identification``) or a file.
+    """Load a built-in protocol (one of :data:`BUILTIN`, by name) or a protocol file.
 
     Parameters
     ----------

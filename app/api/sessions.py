@@ -53,7 +53,7 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
     Parameters
     ----------
     protocol : str or Path
-        A built-in protocol name (``realism``, ``factorial``, ``identification``) or a file.
+        A built-in protocol's name (one of :data:`protocols.BUILTIN`) or a protocol file.
     participant : str
         Participant id (letters, digits, ``_``, ``-``; at most 32).
     device : str
