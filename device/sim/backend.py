@@ -131,10 +131,11 @@ class SimDevice(HapticDevice):
         #: window or playback as it is simulated (a device streaming its traces); the
         #: pieces joined are the result's traces
         self.trace_sink: Callable[[int, dict[str, np.ndarray]], None] | None = None
-        #: live mode: called before each block of ticks; it may wait (the device's clock
-        #: then slips). An emulator waits there until it has read its input: a device reads
-        #: what arrived between ticks, so its watchdog never judges the host on time in
-        #: which the device itself was not listening
+        #: called before each block of ticks of a window or playback, live or in virtual
+        #: time; it may wait (a live device's clock then slips). An emulator waits there
+        #: until it has read its input: a device reads what arrived between ticks, so its
+        #: watchdog never judges the host on time in which the device itself was not
+        #: listening. In virtual time it is where a test acts at a device time it chose
         self.input_gate: Callable[[], None] | None = None
 
     def _device_args(self) -> tuple:
@@ -454,7 +455,7 @@ class SimDevice(HapticDevice):
         n = 0
         self._stop_requested = False
         while n < n_max and not self._stop_requested:
-            if self.live and self.input_gate is not None:
+            if self.input_gate is not None:
                 self.input_gate()
             if heartbeats:
                 self.heartbeat()

@@ -108,11 +108,28 @@ def test_close_zeroes_output_and_device_manager_closes_it(sim):
 
 
 def test_an_estop_during_a_window_is_a_psychopy_error_naming_it(sim):
+    """The e-stop key is pressed (from this thread, as a key handler would) while the window
+    waits at a block of ticks past 0.05 s for it: in virtual time a 20-s window takes some
+    75 ms of wall time, so a wall-clock timer raced it (and lost on a busy host)."""
     sim.prepare(fields_scene("spring", 400.0, "none"))
+    dev = sim.device
+    start, waiting, pressed = dev.time, threading.Event(), threading.Event()
+
+    def gate():  # before each block of ticks, in the window's thread
+        if dev.time >= start + 0.05 and not waiting.is_set():
+            waiting.set()
+            pressed.wait(60)  # a bound for a broken test, never a deadline
+
+    dev.input_gate = gate
     sim.startWindow(20.0, fromFirstContact=False)
-    threading.Timer(0.05, sim.estop, args=("the e-stop key",)).start()
+    assert waiting.wait(60), "the window never reached 0.05 s"
+    at = dev.time
+    sim.estop("the e-stop key")
+    pressed.set()
     rec = sim.finishWindow()
     assert rec.fault is not None and rec.fault.code == "estop"
+    assert rec.fault.t == pytest.approx(at)  # when it was pressed, in device time
+    assert rec.result.traces["t"][-1] < start + 20.0  # and the window ended there
     with pytest.raises(HapticFaultError, match=r"^sim \(sim\): an e-stop latched output at "
                                                r"zero \(estop: ") as err:
         sim.raiseFault(rec)
