@@ -194,21 +194,48 @@ def test_the_longest_tick_period_reads_a_hold_up_as_long_as_it_was(host):
 
 
 # ---- issue 53 item 4: one answer where the document was silent (docs §3, §4, §6a)
-def _estop_and_clear_together(host: Host) -> tuple[int, int]:
-    """ESTOP and CLEAR_FAULT in one write; their ACKs' statuses."""
+def _estop_and_clear_together(host: Host) -> tuple[int, int, bool]:
+    """ESTOP and CLEAR_FAULT in one write: their ACKs' statuses, and whether the device
+    reported the fault (a FAULT frame, or a STATUS in FAULT) between the two ACKs."""
     host.seq += 2
     estop, clear = host.seq - 1, host.seq
     host.write(M.encode(M.EStop(), estop, host.version)
                + M.encode(M.ClearFault(), clear, host.version))
     acks: dict[int, int] = {}
+    reported = []
 
     def both(m) -> bool:
         if isinstance(m, M.Ack):
             acks[m.ack_seq] = m.status
+        elif estop in acks and clear not in acks and (
+                isinstance(m, M.Fault) or isinstance(m, M.StatusReport) and m.fault):
+            reported.append(m)
         return clear in acks and estop in acks
 
     host._pump(both, 5.0)
-    return acks[estop], acks[clear]
+    return acks[estop], acks[clear], bool(reported)
+
+
+def _sent_together(host: Host, prepare) -> tuple[int, int]:
+    """The two ACKs of an ESTOP and a CLEAR_FAULT the device took as sent together.
+
+    A CLEAR_FAULT that arrives after the device reported the fault may clear it (docs §4).
+    Written in one write, the two frames reach every target at once except QEMU's board,
+    whose emulated UART takes a byte only after the firmware read the one before: on a busy
+    computer QEMU's I/O thread may deliver the CLEAR_FAULT after the report went. That
+    attempt says nothing about the rule; it is made again (after ``prepare()``)."""
+    for _ in range(5):
+        prepare()
+        e, c, reported = _estop_and_clear_together(host)
+        if not reported:
+            return e, c  # nothing reported between them: the device cannot have cleared
+        if c == S.FAULT_LATCHED:
+            return e, c  # reported between, and still judged sent with the ESTOP
+        assert host.target == "qemu", (
+            f"{host.target} cleared a fault it reported after the ESTOP and before the "
+            "CLEAR_FAULT written with it: its link delivers one write at once")
+    pytest.skip("QEMU delivered the CLEAR_FAULT after the device's report on 5 attempts "
+                "(a busy computer): these attempts say nothing about the rule")
 
 
 @pytest.mark.integration
@@ -219,11 +246,21 @@ def test_an_estop_is_never_undone_by_a_clear_fault_sent_with_it(host):
     """The emulator ended IDLE with no fault, the firmware in FAULT. A CLEAR_FAULT that
     reaches the device before it has reported the fault (FAULT or STATUS) clears nothing:
     FAULT_LATCHED; one sent after the report clears it."""
-    spring_homed(host)
-    for state in ("HOMED", "FAULT"):  # outside a run, then with a fault latched and told
-        if state == "FAULT":
+
+    def homed():
+        state = host.settled_state()
+        if state != "HOMED":
+            if state != "IDLE":
+                host.reset()
+            spring_homed(host)
+
+    def fault_told():  # a fault latched and reported
+        if host.settled_state() != "FAULT":
+            assert host.ask(M.EStop()) == S.OK
             assert host.settled_state() == "FAULT"
-        assert _estop_and_clear_together(host) == (S.OK, S.FAULT_LATCHED), state
+
+    for state, prepare in (("HOMED", homed), ("FAULT", fault_told)):
+        assert _sent_together(host, prepare) == (S.OK, S.FAULT_LATCHED), state
         assert host.settled_state() == "FAULT"
     assert host.ask(M.ClearFault()) == S.OK  # the fault told: now it clears
     assert host.settled_state() == "IDLE"
