@@ -1,17 +1,26 @@
 #!/bin/sh
 # What a bridge's link needs, checked before the build (called by `make check-sdk`):
-#   tools/sdk-prereqs.sh CC SYMBOL LINK-FLAGS...
-# links a one-line program that calls SYMBOL (a function of the vendor's library) with the
-# build's own link flags. If that fails, each -lNAME is tried alone, and every library the
-# linker cannot use, or that a vendor's shared library needs and the system lacks, is named
-# with what provides it (a Debian package, or the vendor's installer). Exit 0 when the link
-# works, 1 otherwise.
+#   tools/sdk-prereqs.sh CC "SYMBOLS" HEADERS-VERSION LINK-FLAGS...
+# links a program that references every function the bridge calls (SYMBOLS, the vendor's
+# library's) with the build's own link flags, then loads it. If the link fails, each -lNAME
+# is tried alone, and every library the linker cannot use, or that a vendor's shared library
+# needs and the system lacks, is named with what provides it (a Debian package, or the
+# vendor's installer); a function the library lacks is named with the headers' version
+# (HEADERS-VERSION) and, for Force Dimension's, the version the library itself says it is:
+# a library older than its headers. Exit 0 when the link works and loads, 1 otherwise.
 set -u
-cc=$1 symbol=$2
-shift 2
+cc=$1 headers=$3
+# shellcheck disable=SC2086
+symbols=$(printf '%s ' $2) # one line, each name once followed by a space
+shift 3
 dir=$(mktemp -d) || exit 1
 trap 'rm -rf "$dir"' EXIT
-printf 'void %s(void);\nint main(void) { %s(); return 0; }\n' "$symbol" "$symbol" > "$dir/probe.c"
+{
+    for s in $symbols; do printf 'void %s(void);\n' "$s"; done
+    printf 'void (*const hl_probe[])(void) = {'
+    for s in $symbols; do printf '%s, ' "$s"; done
+    printf '};\nint main(void) { return hl_probe[0] == 0; }\n'
+} > "$dir/probe.c"
 
 provider() {
     case $1 in
@@ -32,13 +41,21 @@ if "$cc" -o "$dir/probe" "$dir/probe.c" "$@" > "$dir/log" 2>&1; then
     status=0
     for lib in $(ldd "$dir/probe" 2>/dev/null | sed -n 's/^[[:space:]]*\([^ ]*\) => not found.*/\1/p'); do
         status=1
-        found=""
+        found="" here=""
         for f in "$@"; do
             case $f in
-                -L*) [ -z "$found" ] && ls "${f#-L}/$lib".* > /dev/null 2>&1 && found=${f#-L} ;;
+                -L*)
+                    [ -z "$here" ] && [ -e "${f#-L}/$lib" ] && here=${f#-L}
+                    [ -z "$found" ] && ls "${f#-L}/$lib".* > /dev/null 2>&1 && found=${f#-L}
+                    ;;
             esac
         done
-        if [ -n "$found" ]; then
+        if [ -n "$here" ]; then
+            # the link is there: the loader is not told to look in that folder
+            echo "missing: $lib, which the bridge loads at run time: $here holds $lib, but" \
+                "the loader does not look there: the link flags need -Wl,-rpath,$here (the" \
+                "Makefile's own DHD_LIBS and HD_LIBS have it)"
+        elif [ -n "$found" ]; then
             echo "missing: $lib, which the bridge loads at run time: $found holds only" \
                 "$(cd "$found" && ls "$lib".* | head -1); make the link with" \
                 "\`ldconfig -n $found\` (as root), as the vendor's installer does in the" \
@@ -72,6 +89,49 @@ for need in $(sed -n 's/.*: \(lib[^ ,]*\), needed by .*/\1/p' "$dir/log" | sort 
     echo "missing: $need, which the vendor's library needs: install $(provider "$need")"
     missing=1
 done
+# a function the bridge calls that the library lacks: "undefined reference to `X'"
+if [ "$missing" = 0 ]; then
+    lacks=""
+    for s in $symbols; do
+        grep -q "undefined reference to .$s'" "$dir/log" && lacks="$lacks $s"
+    done
+    if [ -n "$lacks" ]; then
+        missing=1
+        for s in $lacks; do
+            echo "missing: the SDK's library lacks $s, which the SDK's headers ($headers)" \
+                "declare and the bridge calls"
+        done
+        case " $symbols " in
+            *" dhdGetSDKVersion "*)
+                # what the library says it is (every libdhd has dhdGetSDKVersion)
+                printf '%s\n' '#include <stdio.h>' \
+                    'void dhdGetSDKVersion(int *, int *, int *, int *);' \
+                    'int main(void) { int a = 0, b = 0, c = 0, d = 0;' \
+                    '    dhdGetSDKVersion(&a, &b, &c, &d); printf("%d.%d.%d\n", a, b, c); return 0; }' \
+                    > "$dir/version.c"
+                if "$cc" -o "$dir/version" "$dir/version.c" "$@" > /dev/null 2>&1 &&
+                    lib=$("$dir/version") && [ -n "$lib" ]; then
+                    case $headers in
+                        "$lib" | "$lib"-*) echo "the library says it is $lib, as its headers:" \
+                            "it lacks what they declare; reinstall the SDK" ;;
+                        *) older=$(printf '%s\n%s\n' "$lib" "$headers" | sort -V | head -1)
+                           if [ "$older" = "$lib" ]; then
+                               echo "the library is older than its headers: it says it is $lib" \
+                                   "(dhdGetSDKVersion); install one SDK version's headers and" \
+                                   "library together"
+                           else
+                               echo "the library is not its headers' version: it says it is" \
+                                   "$lib (dhdGetSDKVersion); install one SDK version's headers" \
+                                   "and library together"
+                           fi ;;
+                    esac
+                fi
+                ;;
+            *) echo "the library is older than its headers, or another SDK's: install one" \
+                   "version's headers and library together" ;;
+        esac
+    fi
+fi
 if [ "$missing" = 0 ]; then
     echo "the link with $* fails:"
     sed 's/^/  /' "$dir/log" | head -20

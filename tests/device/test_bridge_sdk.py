@@ -39,10 +39,13 @@ def _make(*args: str, env: dict | None = None, wrap: tuple = ()) -> subprocess.C
                           capture_output=True, text=True, timeout=300, env=env)
 
 
-def dhd_sdk(root: Path, header_edit=None) -> Path:
+def dhd_sdk(root: Path, header_edit=None, lib_defines: tuple[str, ...] = (),
+            shared: bool = False) -> Path:
     """A Force Dimension SDK folder as the vendor lays it out: its C++ headers in include/,
     libdrd (which holds libdhd) in lib/release/lin-x86_64-gcc; here the stand-in, packed as
-    that library. `header_edit(text) -> text` changes dhdc.h first."""
+    that library. `header_edit(text) -> text` changes dhdc.h first; `lib_defines` compile
+    the library otherwise (an older SDK's); `shared` packs it as the SDK's shared library,
+    libdrd.so.3.17.5 with the links its install guide makes (libdrd.so.3, libdrd.so)."""
     binary("dhd-stub")  # the stand-in's own SDK check (build/stub-sdk/hl_sdk_dhd.h)
     sdk = root / "fd-sdk"
     (sdk / "include").mkdir(parents=True)
@@ -56,10 +59,16 @@ def dhd_sdk(root: Path, header_edit=None) -> Path:
     objs = []
     for src in (STUBS / "dhd" / "dhd_stub.c", FIRMWARE_DIR / "src" / "plant.c"):
         obj = root / (src.stem + ".o")
-        _cc("-c", f"-I{FIRMWARE_DIR / 'include'}", f"-I{FIRMWARE_DIR / 'build' / 'stub-sdk'}",
-            str(src), "-o", str(obj))
+        _cc("-c", "-fPIC", f"-I{FIRMWARE_DIR / 'include'}",
+            f"-I{FIRMWARE_DIR / 'build' / 'stub-sdk'}", *lib_defines, str(src), "-o", str(obj))
         objs.append(str(obj))
-    subprocess.run(["ar", "rcs", str(lib / "libdrd.a"), *objs], check=True)
+    if shared:
+        _cc("-shared", "-Wl,-soname,libdrd.so.3", *objs, "-lm", "-o",
+            str(lib / "libdrd.so.3.17.5"))
+        (lib / "libdrd.so.3").symlink_to("libdrd.so.3.17.5")
+        (lib / "libdrd.so").symlink_to("libdrd.so.3")
+    else:
+        subprocess.run(["ar", "rcs", str(lib / "libdrd.a"), *objs], check=True)
     return sdk
 
 
@@ -182,6 +191,65 @@ def test_check_sdk_finds_each_stand_in_whole_and_says_its_version(tmp_path):
     assert "the OpenHaptics bridge links" in oh.stdout
     bare = _make("check-sdk")
     assert bare.returncode != 0 and "needs DHD_SDK=" in bare.stdout
+
+
+def test_a_library_older_than_its_headers_is_named_by_check_sdk(tmp_path):
+    """SDK 3.17.5's headers over SDK 3.7.0's libdrd: the headers declare dhdGetMaxForce, so
+    the bridge calls it, and the library lacks it. The link probe references every function
+    the bridge calls (it called dhdGetSDKVersion alone, and said "links"), so check-sdk names
+    the function and both versions instead of the build's bare undefined reference."""
+    sdk = dhd_sdk(tmp_path, lib_defines=("-DHL_DHD_HAS_MAX_FORCE=0",
+                                          "-DHL_STUB_DHD_SDK_VERSION=3,7,0"))
+    run = _make("check-sdk", f"DHD_SDK={sdk}", f"BRIDGE_OUT={tmp_path}")
+    out = run.stdout + run.stderr
+    assert run.returncode != 0, out
+    assert "the Force Dimension bridge links" not in out
+    assert ("lacks dhdGetMaxForce, which the SDK's headers (3.17.5) declare and the bridge "
+            "calls") in out, out
+    assert "the library is older than its headers: it says it is 3.7.0" in out, out
+
+
+def test_an_sdk_with_its_shared_library_links_and_loads(tmp_path):
+    """An SDK folder holding the shared libdrd.so.3.17.5 and the links its install guide
+    makes (libdrd.so.3, libdrd.so): -ldrd takes the shared library, so the bridge needs the
+    folder in its run path (the Force Dimension flags had none: check-sdk then advised
+    `ldconfig -n` for a link that existed). And where the lab's own DHD_LIBS leave the run
+    path out, check-sdk says that, not the wrong remedy."""
+    sdk = dhd_sdk(tmp_path, shared=True)
+    run = _make("dhd", f"DHD_SDK={sdk}", f"BRIDGE_OUT={tmp_path}",
+                f"BRIDGE_RATINGS={RATINGS}")
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "the Force Dimension bridge links" in run.stdout
+    out = subprocess.run(["timeout", "-s", "INT", "2", str(tmp_path / "hlfw-dhd")],
+                         capture_output=True, text=True, timeout=30)
+    assert out.stdout.startswith("/dev/"), out.stderr
+    lib = sdk / "lib" / "release" / "lin-x86_64-gcc"
+    bare = _make("check-sdk", f"DHD_SDK={sdk}", f"BRIDGE_OUT={tmp_path}",
+                 f"DHD_LIBS=-L{lib} -ldrd -lm -lpthread")
+    assert bare.returncode != 0
+    assert f"{lib} holds libdrd.so.3, but the loader does not look there" in bare.stdout, (
+        bare.stdout)
+    assert "ldconfig -n" not in bare.stdout
+
+
+def test_a_wrong_or_relative_sdk_folder_is_said_as_such(fd_sdk, tmp_path):
+    """A folder that holds no SDK is said to hold none, not taken for a missing DHD_SDK; a
+    relative folder is the caller's (make -C leaves the shell's PWD as it was), as a lab
+    typing `make -C firmware check-sdk DHD_SDK=sdk` means it."""
+    wrong = tmp_path / "nothing-here"
+    for target, var, needs in (("dhd", "DHD_SDK", "include/dhdc.h"),
+                               ("hd", "OPENHAPTICS", "include/HD/hd.h")):
+        run = _make(target, f"{var}={wrong}", f"BRIDGE_OUT={tmp_path}",
+                    f"BRIDGE_RATINGS={RATINGS}")
+        assert run.returncode != 0
+        assert f"{var}={wrong} does not hold {needs}" in run.stdout, run.stdout
+    caller = fd_sdk.parent
+    rel = subprocess.run(["make", "--no-print-directory", "-C", str(FIRMWARE_DIR), "check-sdk",
+                          f"DHD_SDK={fd_sdk.name}", f"BRIDGE_OUT={tmp_path}"], cwd=caller,
+                         env={**os.environ, "PWD": str(caller)}, capture_output=True,
+                         text=True, timeout=300)
+    assert rel.returncode == 0, rel.stdout + rel.stderr
+    assert f"Force Dimension SDK 3.17.5 ({fd_sdk}/include)" in rel.stdout, rel.stdout
 
 
 def _swap(old: str, new: str):

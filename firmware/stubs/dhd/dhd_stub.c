@@ -187,11 +187,18 @@ int dhdGetSerialNumber(unsigned short *sn, char ID)
     return 0;
 }
 
+/* the SDK version the library says it is: 3.17.5, or another where a test packs the
+ * stand-in as an older SDK's library (-DHL_STUB_DHD_SDK_VERSION=3,7,0) */
+#ifndef HL_STUB_DHD_SDK_VERSION
+#define HL_STUB_DHD_SDK_VERSION 3, 17, 5
+#endif
+
 void dhdGetSDKVersion(int *major, int *minor, int *release, int *revision)
 {
-    *major = 3;
-    *minor = 17;
-    *release = 5;
+    static const int v[3] = {HL_STUB_DHD_SDK_VERSION};
+    *major = v[0];
+    *minor = v[1];
+    *release = v[2];
     *revision = 0;
 }
 
