@@ -126,6 +126,8 @@ def _device_list(args: argparse.Namespace) -> int:
         print(f"{d['spec']:<32} {d['description']}{details}")
     for name, why in found["broken"].items():
         print(f"backend {name}: cannot be used: {why}")
+    for name, hint in found["none_found"].items():
+        print(f"backend {name}: {hint}")
     print("check one with: hapticlab device selftest SPEC (it opens the device)")
     return 0
 

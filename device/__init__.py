@@ -40,6 +40,7 @@ from .registry import (
     backend,
     backends,
     broken_backends,
+    none_found_hints,
     open_device,
     register_backend,
 )
@@ -95,6 +96,7 @@ __all__ = [
     "backend",
     "backends",
     "broken_backends",
+    "none_found_hints",
     "open_device", "max_spring",
     "register_backend",
     "register_transient",

@@ -121,6 +121,12 @@ class HapticDevice(ABC):
         return []
 
     @classmethod
+    def none_found(cls) -> str:
+        """What to check when :meth:`available` finds no device of this backend, in words
+        (``hapticlab device list`` says it); "" for nothing to say (the default)."""
+        return ""
+
+    @classmethod
     def conformance_opener(cls) -> AbstractContextManager[Callable[[], HapticDevice]]:
         """A context manager giving a zero-argument opener of a device of this backend
         that the conformance suite (:mod:`device.suite`) runs against on a computer

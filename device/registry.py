@@ -40,7 +40,7 @@ from typing import Any
 from .errors import BackendError, UnknownBackendError
 
 __all__ = ["ENTRY_POINT_GROUP", "AvailableDevice", "register_backend", "backends", "backend",
-           "open_device", "available_devices", "broken_backends"]
+           "open_device", "available_devices", "broken_backends", "none_found_hints"]
 
 #: the entry-point group backends are registered in
 ENTRY_POINT_GROUP = "hapticlab.backends"
@@ -219,6 +219,23 @@ def available_devices() -> list[AvailableDevice]:
         except Exception:  # noqa: BLE001 - broken_backends() says why
             continue
         out += [replace(d, backend=name) for d in found]  # the name it is registered as
+    return out
+
+
+def none_found_hints() -> dict[str, str]:
+    """What to check, by backend name, for each usable backend that finds no device on this
+    computer and has something to say (its ``none_found()``: the serial backend's dialout
+    group); what ``hapticlab device list`` says after the devices. A backend that cannot be
+    used is :func:`broken_backends`' to name, not this."""
+    out: dict[str, str] = {}
+    for name in backends():
+        try:
+            cls = backend(name)
+            hint = "" if cls.available() else cls.none_found()
+        except Exception:  # noqa: BLE001 - broken_backends() says why
+            continue
+        if hint:
+            out[name] = hint
     return out
 
 

@@ -133,13 +133,14 @@ def device_list() -> dict:
     -------
     dict
         ``backends`` (names), ``devices`` (each ``spec``, ``backend``, ``description``,
-        ``details``, in the order of the backends' names) and ``broken`` (backend name →
-        why it cannot be used).
+        ``details``, in the order of the backends' names), ``broken`` (backend name →
+        why it cannot be used) and ``none_found`` (backend name → what to check, for a
+        backend that found no device and says what: the serial backend's dialout group).
     """
-    from device import available_devices, backends, broken_backends
+    from device import available_devices, backends, broken_backends, none_found_hints
 
     return {"backends": backends(), "devices": [d.to_dict() for d in available_devices()],
-            "broken": broken_backends()}
+            "broken": broken_backends(), "none_found": none_found_hints()}
 
 
 def emulate(firmware: str = "python", *, rate: float | None = None, seed: int = 0,

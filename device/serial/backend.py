@@ -334,6 +334,13 @@ class SerialDevice(HapticDevice):
                 for p in sorted(list_ports.comports(), key=lambda p: p.device)]
 
     @classmethod
+    def none_found(cls) -> str:
+        """No serial port: the device is unplugged, or this user may not see it."""
+        return ("no serial port found: is the device plugged in, and may this user open it? "
+                "On Linux a user opens serial ports as a member of the dialout group "
+                "(sudo usermod -aG dialout $USER, then log in again)")
+
+    @classmethod
     @contextmanager
     def conformance_opener(cls) -> Iterator[Callable[[], SerialDevice]]:
         """The Python emulator on a pseudo-terminal for the checks, each a new connection

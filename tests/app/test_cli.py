@@ -199,6 +199,29 @@ def test_device_list_names_each_serial_port_as_a_spec(monkeypatch, capsys):
     assert lines[-1] == "check one with: hapticlab device selftest SPEC (it opens the device)"
 
 
+def test_device_list_without_serial_ports_says_to_check_the_dialout_group(monkeypatch, capsys):
+    """pyserial finds no port: the serial backend says what to check (the device plugged
+    in, the dialout group); with a port it says nothing."""
+    from serial.tools import list_ports
+    from serial.tools.list_ports_common import ListPortInfo
+
+    from app import guards
+    from app.cli import main
+
+    monkeypatch.setattr(guards, "install_signal_guards", lambda: None)  # pytest's own signals
+    monkeypatch.setattr(list_ports, "comports", lambda: [])
+    assert main(["device", "list", "--json"]) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert "dialout group" in found["none_found"]["serial"]
+    assert main(["device", "list"]) == 0
+    out = capsys.readouterr().out
+    assert f"backend serial: {found['none_found']['serial']}" in out.splitlines(), out
+    acm = ListPortInfo("/dev/ttyACM0", skip_link_detection=True)
+    monkeypatch.setattr(list_ports, "comports", lambda: [acm])
+    assert main(["device", "list"]) == 0
+    assert "dialout" not in capsys.readouterr().out
+
+
 @pytest.mark.integration
 def test_protocol_show_says_what_to_place_and_how_long():
     out = run("protocol", "show", "realism", "--seed", "3")
