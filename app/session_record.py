@@ -58,8 +58,11 @@ def _versions() -> dict[str, str]:
 def session_meta(protocol: Protocol, protocol_ref: str, participant: str, session: int, seed: int,
                  counterbalance_row: int | None, device: HapticDevice, device_spec: str,
                  ui: str, responder: str, audio: bool, group: str = "",
-                 session_kind: str = "dry-run", libraries: dict | None = None) -> SessionRecord:
-    """The record DESIGN.md asks for, at session start."""
+                 session_kind: str = "dry-run", libraries: dict | None = None,
+                 speed: float = 1.0) -> SessionRecord:
+    """The record DESIGN.md asks for, at session start; ``speed`` is how the device was
+    opened beside its spec (device seconds per wall second where its clock is paced), so a
+    resume opens it the same way."""
     return SessionRecord(
         format_version=FORMAT_VERSION,
         app={"name": "hapticlab", "version": APP_VERSION, "git_sha": _git_sha()},
@@ -73,7 +76,7 @@ def session_meta(protocol: Protocol, protocol_ref: str, participant: str, sessio
         participant=ParticipantRecord(id=participant, counterbalance_row=counterbalance_row,
                                       group=group),
         session=session,
-        device={"spec": device_spec, **device.info.to_dict()},
+        device={"spec": device_spec, "speed": float(speed), **device.info.to_dict()},
         ui=ui, responder=responder, audio=audio,
         packages=_versions(),
         python=sys.version.split()[0],

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -53,6 +54,8 @@ class NewSession:
     data : Path
     discrimination : dict or None
         A simulated participant's measured JNDs to draw its own around (recorded).
+    speed : float
+        Device seconds per wall second where the device's clock is paced (recorded).
     """
 
     ref: str
@@ -75,6 +78,7 @@ class NewSession:
     lsl_wait: float
     data: Path
     discrimination: dict | None = None
+    speed: float = 1.0
 
     @property
     def person(self) -> bool:
@@ -89,11 +93,20 @@ def check_responder(responder: str) -> str:
     return responder
 
 
+def check_speed(speed) -> float:
+    """``speed`` (device seconds per wall second) when it is a number in (0, 20]."""
+    if not (isinstance(speed, (int, float)) and not isinstance(speed, bool)
+            and math.isfinite(speed) and 0 < speed <= 20):
+        raise UsageError(f"speed must be in (0, 20] (device seconds per wall second), got "
+                         f"{speed!r}")
+    return float(speed)
+
+
 def checked_request(protocol, participant: str, *, device: str, data, responder: str,
                     seed: int | None, row: int | None, group: str, traces: str,
                     operator_keys: bool | None, audio: bool, fullscreen: bool, quiet: bool,
-                    lsl: bool, lsl_wait: float, discrimination: dict | None = None
-                    ) -> NewSession:
+                    lsl: bool, lsl_wait: float, discrimination: dict | None = None,
+                    speed: float = 1.0) -> NewSession:
     """Step 1: the request checked, the protocol parsed, the seed drawn when not given.
 
     Raises
@@ -112,6 +125,7 @@ def checked_request(protocol, participant: str, *, device: str, data, responder:
         raise UsageError(f"group {group!r}: use letters, digits, '_', '-' or '.' (at most 32)")
     source, text = protocol_text(protocol)
     proto = parse_protocol(text, source)
+    speed = check_speed(speed)
     seed = seed_from_entropy() if seed is None else seed
     if not isinstance(seed, int) or seed < 0:
         raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
@@ -121,7 +135,7 @@ def checked_request(protocol, participant: str, *, device: str, data, responder:
         group=group, responder=responder, traces=traces, device=device, seed=seed, row=row,
         keys=operator_keys if operator_keys is not None else responder == "person",
         audio=audio, fullscreen=fullscreen, quiet=quiet, lsl=lsl, lsl_wait=lsl_wait,
-        data=Path(data), discrimination=discrimination)
+        data=Path(data), discrimination=discrimination, speed=speed)
 
 
 def say_earlier_sessions(s: NewSession, new_session: bool, say: Callable[[str], None]) -> None:
@@ -248,7 +262,7 @@ def record_and_run(s: NewSession, dev, console, say: Callable[[str], None], *, l
             meta = session_meta(s.protocol, s.ref, s.participant, n, s.seed, s.row, dev,
                                 s.device, "psychopy" if s.person else "none", s.responder,
                                 parts.sound is not None, s.group, KIND_OF[s.responder],
-                                libraries)
+                                libraries, speed=s.speed)
             meta.traces_mode = s.traces
             meta.limits = limits
             if s.responder == "simulated" and s.discrimination:

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -16,6 +15,7 @@ from ..errors import SessionFileError, UsageError
 from ._new_session import (
     KIND_OF,
     check_before_opening,
+    check_speed,
     checked_request,
     participant_info,
     ready_on,
@@ -102,7 +102,8 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
         around (:func:`simulate_study`).
     speed : float
         Device seconds per wall second where the device's clock is paced (an emulator: a
-        simulated study run faster than real time); 1 for a person.
+        simulated study run faster than real time), in (0, 20]; 1 for a person. Recorded in
+        session.json (``device.speed``): a resume runs at it.
 
     Returns
     -------
@@ -116,10 +117,10 @@ def run_session(protocol: str | Path, participant: str, *, device: str,
                         seed=seed, row=row, group=group, traces=traces,
                         operator_keys=operator_keys, audio=audio, fullscreen=fullscreen,
                         quiet=quiet, lsl=lsl, lsl_wait=lsl_wait,
-                        discrimination=discrimination)
+                        discrimination=discrimination, speed=speed)
     say_earlier_sessions(s, new_session, say)
     check_before_opening(s)
-    with session_device(device, s.seed, s.person, clear_fault, lsl, say, speed) as dev:
+    with session_device(device, s.seed, s.person, clear_fault, lsl, say, s.speed) as dev:
         limits, libraries = ready_on(s, dev, say)
         info = participant_info(s, info_fields)
         return record_and_run(s, dev, console, say, limits=limits, libraries=libraries,
@@ -142,6 +143,8 @@ def resume_session(folder: str | Path, *, device: str | None = None, audio: bool
         The session folder (``.../sub-P01/ses-1``).
     device : str, optional
         Another device spec than the recorded one (e.g. the same device on another port).
+        It is opened at the speed the session recorded (an emulator's ``--speed``; 1 for a
+        file that predates the record).
     audio : bool, optional
         Default: as recorded.
     clear_fault : bool
@@ -207,8 +210,12 @@ def _resume(files, meta, console, device, audio, clear_fault, fullscreen, quiet,
     if responder not in KIND_OF:
         responder = "person" if meta.ui == "psychopy" else "scripted"
     spec = device or meta.device_spec
+    try:  # the pace it was opened at (1 in a file that predates the key)
+        speed = check_speed(meta.device.get("speed", 1.0))
+    except UsageError as exc:
+        raise SessionFileError(f"{files.meta}: device.speed: {exc}") from None
     with session_device(spec, meta.seed, responder == "person", clear_fault, lsl,
-                         console.say) as dev:
+                         console.say, speed) as dev:
         limits = apply_limit(proto, dev, (meta.limits or {}).get("current_limit_a"))
         check_recorded(meta.libraries, dev)
         keys = operator_keys if operator_keys is not None else responder == "person"
@@ -296,9 +303,7 @@ def simulate_study(protocol: str | Path, participants: int, *, seed: int = 0,
         raise UsageError(f"participants must be at least 1, got {participants!r}")
     if not isinstance(seed, int) or seed < 0:
         raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
-    if not (isinstance(speed, (int, float)) and math.isfinite(speed) and 0 < speed <= 20):
-        raise UsageError(f"speed must be in (0, 20] (device seconds per wall second), got "
-                         f"{speed!r}")
+    check_speed(speed)
     from protocols import SessionEngine, load_protocol
 
     proto = load_protocol(protocol)

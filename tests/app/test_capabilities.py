@@ -95,3 +95,43 @@ def test_a_missing_library_is_built_on_demand_only_where_it_costs_seconds(simula
     info = dataclasses.replace(SimDevice().info, backend="any", simulated_contact=simulated,
                                virtual_time=virtual)
     assert builds_on_demand(info) is built
+
+
+class PacedStandIn(SimDevice):
+    """A simulated device that keeps the pace each open asked for (as an emulator runs at
+    its ``speed``)."""
+
+    opened: list = []
+
+    @classmethod
+    def from_spec(cls, arg=None, **options):
+        cls.opened.append(options.get("speed"))
+        return super().from_spec(arg, **options)
+
+
+@pytest.mark.integration  # a session in process: it records its provenance with git
+def test_a_resumed_session_runs_at_the_speed_it_was_recorded_at(tmp_path, monkeypatch):
+    """A session on a paced device (an emulator at --speed 3) records its speed beside the
+    spec; its resume opens the device at it, not at 1 (follow-up 6). A speed session.json
+    cannot hold is refused naming the file and the key, before the device opens."""
+    from app.api import resume_session
+    from app.errors import SessionFileError
+
+    monkeypatch.setitem(device.registry._REGISTERED, "paced", PacedStandIn)
+    monkeypatch.setattr(PacedStandIn, "opened", [])
+    r, _ = _run(tmp_path, "paced", audio=False, speed=3.0)
+    meta_path = r.folder / "session.json"
+    meta = json.loads(meta_path.read_text())
+    assert meta["device"]["spec"] == "paced" and meta["device"]["speed"] == 3.0
+    trials = r.folder / "trials.tsv"
+    trials.write_text("".join(trials.read_text().splitlines(keepends=True)[:3]))
+    for bad in ("fast", 0, 25.0):
+        meta["device"]["speed"], meta["status"] = bad, "interrupted"
+        meta_path.write_text(json.dumps(meta))
+        with pytest.raises(SessionFileError, match=rf"session\.json: device\.speed: .*{bad!r}"):
+            resume_session(r.folder, quiet=True, operator_keys=False)
+    meta["device"]["speed"] = 3.0
+    meta_path.write_text(json.dumps(meta))
+    done = resume_session(r.folder, quiet=True, operator_keys=False)
+    assert done.status == "complete", done.message
+    assert PacedStandIn.opened == [3.0, 3.0]
