@@ -10,7 +10,8 @@ hapticlab's own backends (``sim``, ``serial``, ``emulator``) are registered so i
 ``pyproject.toml``, and a backend in another distribution is found by installing it: nothing
 in hapticlab names it. A backend says what a device is and can do in its
 :class:`~device.info.DeviceInfo` (simulated contact, seeded, virtual time, accelerometer,
-servo rate), never through its name, and answers three class methods:
+servo rate), never through its name, and answers three class methods (and a fourth,
+``none_found()``, when it has something to say):
 
 ``from_spec(arg, **options)``
     Opens the device of the spec ``NAME:arg`` (``arg`` None for ``NAME`` alone). Every
@@ -24,6 +25,9 @@ servo rate), never through its name, and answers three class methods:
 ``conformance_opener()``
     A context manager giving a zero-argument opener of a device of this backend that the
     conformance suite (:mod:`device.suite`) runs against on a computer without the hardware.
+``none_found()``
+    What to check when ``available()`` finds nothing, in words ("" by default): the serial
+    backend names the dialout group. ``hapticlab device list`` prints it.
 
 Loading is lazy: importing :mod:`device` imports no backend, and a backend's module is imported
 when it is first opened or asked. The entry points are read each time they are asked for (a few

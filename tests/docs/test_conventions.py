@@ -4,6 +4,7 @@ shows them."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -77,3 +78,13 @@ def test_readme_links_reach_files() -> None:
             continue
         target = (readme.parent / href.split("#")[0]).resolve()
         assert target.exists(), f"README.md links to {href}, which does not exist"
+
+
+def test_the_architecture_links_each_way_to_extend_it() -> None:
+    """How hapticlab is built names where it grows (a backend, a phase kind, a field of the
+    wire protocol, an analysis type): each mention links the how-to guide that adds one,
+    so a reader goes from the map to the recipe."""
+    text = (DOCS / "explanation" / "architecture.md").read_text(encoding="utf-8")
+    guides = sorted(p.stem for p in (DOCS / "howto").glob("add-*.md"))
+    missing = [g for g in guides if not re.search(r"\{doc\}`[^`]*howto/" + g + "`", text)]
+    assert len(guides) >= 4 and not missing, f"architecture.md does not link {missing}"
