@@ -283,6 +283,7 @@ class SimDevice(HapticDevice):
 
     def _load_scene(self, scene: Scene, table: TransientTable | None) -> None:
         self._scene = self._compiled(scene, table)
+        self._load_kernel(self._scene)
         self._enabled = False
         self._homed_clearance = None
         self._output_force = 0.0
@@ -305,6 +306,18 @@ class SimDevice(HapticDevice):
         self._enabled = True
         self._output_force = 0.0
         self.heartbeat()
+
+    def _load_kernel(self, cs: CompiledScene) -> None:
+        """Run the servo loop for no ticks on ``cs``, so that its compiled code is loaded
+        now, not inside a window: the first call in a process loads it (numba's cache, some
+        0.5 s), and in a live window that stalled the paced clock at the window's first tick
+        (the clock slipped), so an e-stop pressed half a second in was timed at the
+        window's start. The call changes no state."""
+        state = (np.zeros(cs.plant.n_states), np.zeros(K.IST, dtype=np.int64),
+                 np.zeros(K.FST), np.zeros(len(self._vel_w)))
+        none = np.zeros(0, dtype=np.int64)
+        K.run_ticks(0, 0, state, cs.kernel_args, self._kernel_device, np.zeros(1), _EMPTY, 0,
+                    -1, np.zeros((K.N_OUT, 0)), none, none.copy(), np.zeros(0))
 
     def _reset_loop_state(self, z: float) -> None:
         """Servo-loop state after enabling at rest at height ``z`` [m]."""
@@ -421,6 +434,7 @@ class SimDevice(HapticDevice):
         if self._free_air is None:
             far = Scene("free-air", surface_height=-MAX_REACH_M, spring=0.0)  # out of reach
             self._free_air = compile_scene(far, self.params, self.hand)
+            self._load_kernel(self._free_air)
         self._x = np.zeros(self._free_air.plant.n_states)
         # output already on (homed) stays on, its ramp long done; off, it ramps up now
         since = self._tick - self._tick_enabled if self._enabled else 0
