@@ -22,6 +22,18 @@ def people(n) -> str:
     return f"{n} participant{'' if n == 1 else 's'}"
 
 
+def left_out_text(res, what: str) -> str:
+    """The methods' sentence on the participants of the selected sessions an analysis whose
+    every participant with a valid ``what`` is in it left out (``res["exclusions"]``,
+    ``res["n_selected"]``: :func:`analysis.study.not_analysed`), or "" when none was."""
+    n = sum(int(r["n_excluded"]) for r in res["exclusions"])
+    if not n:
+        return ""
+    return (f" Of the {people(res['n_selected'])} of the selected sessions, {n} gave no "
+            f"valid {what} in this phase (never reached it, or every attempt excluded) and "
+            f"{'is' if n == 1 else 'are'} listed under exclusions.")
+
+
 def scale_text(design: dict) -> str:
     """The rating scale of a recorded design, '1–7', or '—' without one."""
     s = design.get("scale")

@@ -98,11 +98,12 @@ def _exclusion(check: str, who, detail: str, policy: str) -> dict:
             "subjects_excluded": ",".join(who), "n_excluded": len(who)}
 
 
-def not_analysed(everyone, reached, rated, where: str) -> list[dict]:
+def not_analysed(everyone, reached, rated, where: str, what: str = "rating") -> list[dict]:
     """Exclusion rows (the preflight table's columns) for the participants of ``everyone``
-    who have no rated row in ``where``: those with no row there at all (``never_reached``:
-    their session stopped before it) and those whose rows there are none of them a valid
-    rating (``no_valid_rating``: every attempt excluded, skipped or invalid)."""
+    who have no valid ``what`` (``rating``, ``answer``, ``choice``) in ``where``: those
+    with no row there at all (``never_reached``: their session stopped before it) and those
+    whose rows there are none of them valid (``no_valid_<what>``: every attempt excluded,
+    skipped or invalid)."""
     everyone, reached, rated = set(everyone), set(reached), set(rated)
     out = []
     never = everyone - reached
@@ -112,8 +113,8 @@ def not_analysed(everyone, reached, rated, where: str) -> list[dict]:
                               "not in this analysis: nothing to analyse"))
     unrated = (everyone & reached) - rated
     if unrated:
-        out.append(_exclusion("no_valid_rating", unrated, f"{{n}} participant(s) reached "
-                              f"{where} without a valid rating in it (every attempt "
+        out.append(_exclusion(f"no_valid_{what}", unrated, f"{{n}} participant(s) reached "
+                              f"{where} without a valid {what} in it (every attempt "
                               "excluded, skipped or invalid)",
                               "not in this analysis: nothing to analyse"))
     return out
@@ -503,8 +504,12 @@ def choice_scores(data: pd.DataFrame, levels: list[str] | None = None,
     dict
         ``pairs`` (:func:`analysis.stats.pair_preferences`), ``samples`` (per sample:
         ``wins``, ``n``, ``prop_won``, best first), ``order``
-        (:func:`analysis.stats.order_bias`), ``n_subjects`` and ``n_choices``.
+        (:func:`analysis.stats.order_bias`), ``n_subjects`` and ``n_choices``;
+        ``exclusions`` (each participant the analysis answers for, :func:`participants_of`,
+        who made no valid choice: never reached the phase, or none valid) and
+        ``n_selected`` (``n_subjects`` plus those excluded).
     """
+    everyone = participants_of(data, subject)
     d = data[data["valid"]].copy()
     if d.empty:
         raise StatsError("no valid choices")
@@ -524,7 +529,17 @@ def choice_scores(data: pd.DataFrame, levels: list[str] | None = None,
             samples.append({"sample": s, "wins": wins, "n": n, "prop_won": wins / n})
     samples.sort(key=lambda r: -r["prop_won"])
     return {"pairs": pairs, "samples": samples, "order": order,
-            "n_subjects": int(d[subject].nunique()), "n_choices": int(len(d))}
+            "n_subjects": int(d[subject].nunique()), "n_choices": int(len(d)),
+            **_left_out(everyone, data, d, subject, "choice")}
+
+
+def _left_out(everyone: list[str], data: pd.DataFrame, valid: pd.DataFrame, subject: str,
+              what: str) -> dict:
+    """``exclusions`` (:func:`not_analysed` in this phase) and ``n_selected`` of an analysis
+    whose every participant with a valid row is in it."""
+    return {"exclusions": not_analysed(everyone, data[subject].astype(str),
+                                       valid[subject].astype(str), "this phase", what),
+            "n_selected": len(everyone)}
 
 
 def answer_scores(data: pd.DataFrame, scoring: str = "all_correct",
@@ -535,7 +550,12 @@ def answer_scores(data: pd.DataFrame, scoring: str = "all_correct",
     ``scoring = "all_correct"``: a repetition is correct only when every surface is named
     right (chance 1/k! for k surfaces); ``per_surface``: each surface counts on its own
     (chance 1/k).
+
+    ``exclusions`` lists each participant the analysis answers for
+    (:func:`participants_of`) who gave no valid answer (never reached the phase, or none
+    valid); ``n_selected`` is ``n_subjects`` plus those.
     """
+    everyone = participants_of(data, subject)
     d = data[data["valid"]].copy()
     if d.empty:
         raise StatsError("no valid identification answers")
@@ -564,7 +584,8 @@ def answer_scores(data: pd.DataFrame, scoring: str = "all_correct",
             "surfaces": k, "scoring": scoring, "n_subjects": int(d[subject].nunique()),
             "per_participant": per_person,
             "groups_compared": None if isinstance(per_person, str) else
-            per_person.attrs.get("groups")}
+            per_person.attrs.get("groups"),
+            **_left_out(everyone, data, d, subject, "answer")}
 
 
 def device_summary(data: pd.DataFrame, subject: str = SUBJECT) -> dict:

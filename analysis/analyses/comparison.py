@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ..report_text import md_text, p_text, people
+from ..report_text import left_out_text, md_text, p_text, people
 from ..report_text import table as _table
 from ..study import choice_scores
 from .base import AnalysisType
@@ -26,7 +26,8 @@ def _analyse(rows: pd.DataFrame, phase: dict, alpha: float):
 
 def _entry(r) -> dict:
     return {"pairs": r["pairs"], "samples": r["samples"], "order": r["order"],
-            "n_subjects": r["n_subjects"], "n_choices": r["n_choices"]}
+            "n_subjects": r["n_subjects"], "n_choices": r["n_choices"],
+            "exclusions": r["exclusions"], "n_selected": r["n_selected"]}
 
 
 def _methods(res, phase: dict, design: dict) -> str:
@@ -41,7 +42,7 @@ def _methods(res, phase: dict, design: dict) -> str:
             "told apart. Each sample's share of the comparisons it won orders the samples. "
             "The share of choices of the sample felt first is tested against 1/2 the same "
             "way: a bias of the procedure, which presenting both orders cancels in each "
-            "pair's share.")
+            "pair's share." + left_out_text(res, "choice"))
 
 
 def _summary(a: dict) -> str:
@@ -67,7 +68,9 @@ def _markdown(a: dict) -> tuple[list[str], list[str]]:
                    f"smallest Holm-adjusted p any pair can reach is {min(floor, 1.0):.2g} "
                    f"({len(a['pairs'])} pairs × 2 × 0.5^n, every choice one way): no pair "
                    "can reach .05 whatever the choices; more people, or repetitions, can.\n")
-    out += ["\n#### Order of presentation (the sample felt first chosen)\n", _table(a["order"])]
+    out += ["\n#### Order of presentation (the sample felt first chosen)\n", _table(a["order"]),
+            "\n#### Exclusions\n", _table(a["exclusions"]) if a["exclusions"] else
+            "No participant of the selected sessions was left out.\n"]
     return out, []
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ..report_text import md_text, p_text, people
+from ..report_text import left_out_text, md_text, p_text, people
 from ..report_text import table as _table
 from ..study import answer_scores
 from .base import AnalysisType
@@ -26,7 +26,8 @@ def _analyse(rows: pd.DataFrame, phase: dict, alpha: float):
 def _entry(r) -> dict:
     return {"table": r["table"], "chance": r["chance"], "scoring": r["scoring"],
             "n_subjects": r["n_subjects"], "per_participant": r["per_participant"],
-            "groups_compared": r["groups_compared"],
+            "groups_compared": r["groups_compared"], "exclusions": r["exclusions"],
+            "n_selected": r["n_selected"],
             "confusion": None if r["confusion"] is None else
             {k: {kk: int(vv) for kk, vv in row.items()} for k, row in
              r["confusion"].to_dict(orient="index").items()}}
@@ -43,7 +44,7 @@ def _methods(res, phase: dict, design: dict) -> str:
             "binomial test over all answers, which treats a person's repeated answers as "
             "independent, and, with each participant as the unit, by a one-sided exact sign "
             "test of the participants above chance and a one-sample t-test of their "
-            "proportions correct.")
+            "proportions correct." + left_out_text(res, "answer"))
 
 
 def _summary(a: dict) -> str:
@@ -76,6 +77,9 @@ def _markdown(a: dict) -> tuple[list[str], list[str]]:
     if a["confusion"]:
         out.append("\n#### Confusion (rows presented, columns answered)\n")
         out.append(_table([{"presented": k, **a["confusion"][k]} for k in a["confusion"]]))
+    out.append("\n#### Exclusions\n")
+    out.append(_table(a["exclusions"]) if a["exclusions"] else
+               "No participant of the selected sessions was left out.\n")
     return out, []
 
 

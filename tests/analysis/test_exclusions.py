@@ -16,7 +16,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "r"))
 import studies  # noqa: E402
 
 #: the checks that leave a participant out of an analysis, in the order they are asked
-LEFT_OUT = ("never_reached", "no_valid_rating", "missing_cells", "constant_ratings")
+LEFT_OUT = ("never_reached", "no_valid_rating", "no_valid_answer", "no_valid_choice",
+            "missing_cells", "constant_ratings")
 
 
 def _left_out(exclusions) -> dict[str, set[str]]:
@@ -133,3 +134,51 @@ def test_the_oneway_analysis_names_who_never_reached_its_phase():
     assert res["n_subjects"] + 2 == len(d.attrs["participants"])
     methods = ONEWAY.methods(res, {}, {"scale": {"min": 1, "max": 7}})
     assert "2 participant(s) of the selected sessions left no valid rating" in methods
+
+
+def _phase(rows: list[dict], everyone: list[str]) -> pd.DataFrame:
+    """A phase's rows, answering for ``everyone`` (as :func:`analysis.study.phase_rows`)."""
+    d = pd.DataFrame(rows)
+    d.attrs["participants"] = everyone
+    return d
+
+
+@pytest.mark.parametrize("kind", ["identification", "comparison"])
+def test_identification_and_comparison_name_everyone_they_leave_out(kind):
+    """P1–P3 answered; P4 reached the phase with every attempt invalid; P5's session stopped
+    before it. Both are listed, each under its reason; the methods' counts add up to the
+    five selected; the report's entry and Markdown carry the list."""
+    from analysis.analyses.base import report_entry
+    from analysis.analyses.comparison import COMPARISON
+    from analysis.analyses.identification import IDENTIFICATION
+    from analysis.report import _clean
+    from analysis.study import answer_scores, choice_scores
+
+    everyone = ["P1", "P2", "P3", "P4", "P5"]
+    rows = []
+    for p in everyone[:4]:
+        for rep in (1, 2):
+            if kind == "identification":
+                answer = "wood,rubber" if p != "P2" or rep == 1 else "rubber,wood"
+                rows.append({"participant": p, "sample": "wood+rubber", "answer": answer,
+                             "correct": int(answer == "wood,rubber"), "repetition": rep,
+                             "group": "", "valid": p != "P4"})
+            else:
+                for first, second in (("a", "b"), ("b", "a")):
+                    rows.append({"participant": p, "sample": f"{first}+{second}",
+                                 "answer": "a" if p != "P3" else second, "repetition": rep,
+                                 "group": "", "valid": p != "P4"})
+    d = _phase(rows, everyone)
+    kind_, res = ((IDENTIFICATION, answer_scores(d)) if kind == "identification" else
+                  (COMPARISON, choice_scores(d, ["a", "b"])))
+    what = {"identification": "answer", "comparison": "choice"}[kind]
+    assert _left_out(res["exclusions"]) == {"never_reached": {"P5"},
+                                            f"no_valid_{what}": {"P4"}}
+    assert res["n_subjects"] == 3 and res["n_selected"] == 5  # 3 + 2 left out
+    entry, methods = report_entry(kind_, res, {}, {})
+    assert methods.startswith("3 participants ")
+    assert (f"Of the 5 participants of the selected sessions, 2 gave no valid {what} in this "
+            "phase") in methods
+    assert entry["exclusions"] == res["exclusions"] and entry["n_selected"] == 5
+    md = "".join(kind_.markdown(_clean({"id": kind, **entry}))[0])  # as the report does
+    assert "#### Exclusions" in md and "P4" in md and "P5" in md
