@@ -17,15 +17,29 @@ as observed, lapses and guesses included) reaches it; a 2-down/1-up staircase co
 fraction of 19 % at 71 % correct was 34 % at 84 % in the review Jones & Tan 2013 cite), so
 every threshold here carries its criterion.
 
-Its confidence interval is the profile likelihood interval (the thresholds t for which the
-likelihood maximised with the threshold held at t is within χ²₁(1 − α)/2 of the maximum),
-not a bootstrap: it needs no random numbers and is exact in its own terms; an end beyond
-the intensities tested is not extrapolated but said (None, with ``ci_note``). Goodness of
-fit is the deviance against the saturated model, its p from a parametric bootstrap (the
-deviance of ``gof_samples`` data sets drawn from the fitted function at the same
-intensities and counts, each refitted; Wichmann & Hill 2001), with a generator from the
-recorded ``seed``: adaptive data have few trials per intensity, where the χ² approximation
-of the deviance does not hold.
+The threshold stated, and its interval, come from the posterior over (m, w, λ) on a grid
+(:func:`threshold_posterior`): the threshold at the criterion is a function of the three,
+its posterior median is the estimate and the central 1 − α of its marginal posterior the
+credible interval. The priors are psignifit 4's defaults (m flat over the intensities tested
+with cosine flanks of half their span; λ Beta(1, 10) within its bound; w within psignifit's
+support, from the finest step between intensities to three times their span, with its cosine
+flanks), except that w's is flat in ln w where psignifit's is flat in w: with adaptive data,
+crowded around one point, a prior flat in w favours shallow functions and pulls the
+threshold at a criterion below the point the procedure converged on (by about 5 % in
+simulated sessions; flat in ln w, by under 2 % either way). The posterior needs no random
+numbers, and an adaptive procedure's choice of intensities, which depends on the answers
+alone, leaves it unchanged (the likelihood principle); whether its interval holds the truth
+at the nominal rate on adaptive data is measured by ``hapticlab bench thresholds``. An end
+the answers do not bound — they fit as well with the threshold as far as the prior reaches —
+is not stated as a number but said (None, with ``ci_note``), and so is an end the function
+may never reach. The maximum-likelihood threshold's profile likelihood interval (the
+thresholds t for which the likelihood maximised with the threshold held at t is within
+χ²₁(1 − α)/2 of the maximum) is kept for comparison (``interval="profile"``): on adaptive
+data it is too narrow. Goodness of fit is the deviance against the saturated model, its p from a
+parametric bootstrap (the deviance of ``gof_samples`` data sets drawn from the fitted
+function at the same intensities and counts, each refitted; Wichmann & Hill 2001), with a
+generator from the recorded ``seed``: adaptive data have few trials per intensity, where the
+χ² approximation of the deviance does not hold.
 """
 
 from __future__ import annotations
@@ -39,7 +53,7 @@ import pandas as pd
 from scipy import optimize, special, stats
 
 __all__ = ["FUNCTIONS", "Psychometric", "fit_psychometric", "psychometric_fit",
-           "fit_tracks", "levels", "deviance", "psi"]
+           "threshold_posterior", "fit_tracks", "levels", "deviance", "psi", "LAPSE_PRIOR"]
 
 FUNCTIONS = ("weibull", "normal", "logistic")
 _ALPHA_W = 0.05  # the width spans F = 0.05 to 0.95, as psignifit's default
@@ -72,6 +86,16 @@ def _ppf(function: str, q: float) -> float:
     if function == "logistic":
         return float(special.logit(q))
     return float(np.log(-np.log1p(-q)))
+
+
+def _ppf_array(function: str, q):
+    """:func:`_ppf` over an array."""
+    q = np.asarray(q, dtype=float)
+    if function == "normal":
+        return special.ndtri(q)
+    if function == "logistic":
+        return special.logit(q)
+    return np.log(-np.log1p(-q))
 
 
 def _check_function(function: str) -> None:
@@ -124,12 +148,23 @@ def _loglik(k, n, p) -> float:
     return float(np.sum(k * np.log(p) + (n - k) * np.log1p(-p)))
 
 
+def _round_sig(x, digits: int = 12):
+    """``x`` rounded to ``digits`` significant digits (0 and non-finite values as they are)."""
+    x = np.asarray(x, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = np.where(np.isfinite(x) & (x != 0), np.floor(np.log10(np.abs(x))), 0.0)
+    return np.round(x / 10.0 ** e, digits - 1) * 10.0 ** e
+
+
 def levels(x, correct) -> pd.DataFrame:
-    """Trials pooled by intensity: ``x``, ``k`` (right), ``n`` (trials), ascending."""
-    d = pd.DataFrame({"x": np.asarray(x, dtype=float),
-                      "k": np.asarray(correct, dtype=float)})
+    """Trials pooled by intensity: ``x``, ``k`` (right), ``n`` (trials), ascending.
+
+    Intensities equal to 12 significant digits are one level: a procedure that steps in
+    log units and back reaches the same intensity by sums that differ in the last bits."""
+    x = np.asarray(x, dtype=float)
+    d = pd.DataFrame({"x": x, "key": _round_sig(x), "k": np.asarray(correct, dtype=float)})
     d = d.dropna()
-    g = d.groupby("x")["k"].agg(["sum", "count"]).reset_index()
+    g = d.groupby("key").agg(x=("x", "first"), sum=("k", "sum"), count=("k", "count"))
     return pd.DataFrame({"x": g["x"].to_numpy(), "k": g["sum"].to_numpy(),
                          "n": g["count"].to_numpy()})
 
@@ -334,7 +369,8 @@ def _profile_ci(fit: Psychometric, x, k, n, criterion: float, lapse_max: float,
 
 def psychometric_fit(x, correct, *, function: str = "weibull", criterion: float = 0.75,
                      guess: float = 0.5, lapse_max: float = 0.06, alpha: float = 0.05,
-                     gof_samples: int = 199, seed: int = 0) -> dict:
+                     gof_samples: int = 199, seed: int = 0, interval: str = "posterior"
+                     ) -> dict:
     """Fit a psychometric function to forced-choice trials and read its threshold.
 
     Parameters
@@ -356,13 +392,21 @@ def psychometric_fit(x, correct, *, function: str = "weibull", criterion: float 
         Bootstrap data sets for the deviance's p (0: none).
     seed : int
         The bootstrap generator's seed (recorded in the result).
+    interval : {'posterior', 'profile'}
+        Which threshold and interval are stated: the posterior median with the central
+        credible interval (the default; it holds the truth at its nominal rate on adaptive
+        data, ``hapticlab bench thresholds``), or the maximum-likelihood threshold with its
+        profile-likelihood interval (too narrow on adaptive data: kept for comparison).
 
     Returns
     -------
     dict
-        ``function``, ``criterion``, ``threshold`` [units] with ``ci_low`` and ``ci_high``
-        (``ci_note`` says where an end was extrapolated beyond the intensities tested, or
-        lies too far beyond them to say: None), ``ci_level``, ``m`` and ``width``
+        ``function``, ``criterion``, ``interval``, ``threshold`` [units] with ``ci_low``
+        and ``ci_high`` (``ci_note`` says where an end was extrapolated beyond the
+        intensities tested, or why it is not stated: None), ``ci_level``,
+        ``threshold_ml`` (the maximum-likelihood function's threshold, whatever
+        ``interval``), ``p_never`` (the posterior probability that ψ never reaches the
+        criterion; None for ``profile``), ``m`` and ``width``
         (psignifit's threshold and width of F, on ln x for the Weibull), ``alpha_w`` and
         ``beta`` (the Weibull's α, β; None otherwise), ``slope`` (dψ/dx at the threshold
         [1/units]), ``lapse``, ``lapse_max``, ``guess``, ``deviance``, ``gof_p``
@@ -375,14 +419,26 @@ def psychometric_fit(x, correct, *, function: str = "weibull", criterion: float 
     >>> x = np.repeat([0.02, 0.05, 0.1, 0.2, 0.4], 20)
     >>> k = np.concatenate([np.r_[np.ones(n), np.zeros(20 - n)] for n in (10, 12, 15, 19, 20)])
     >>> r = psychometric_fit(x, k, gof_samples=0)
-    >>> round(r["threshold"], 3), r["criterion"], r["n_trials"]
-    (0.1, 0.75, 100)
+    >>> round(r["threshold"], 3), round(r["threshold_ml"], 3), r["criterion"], r["n_trials"]
+    (0.098, 0.1, 0.75, 100)
+    >>> round(r["ci_low"], 3), round(r["ci_high"], 3), r["interval"]
+    (0.058, 0.154, 'posterior')
     """
+    if interval not in ("posterior", "profile"):
+        raise ValueError(f"interval must be 'posterior' or 'profile', got {interval!r}")
     lv = levels(x, correct)
     fit = fit_psychometric(lv["x"], lv["k"], lv["n"], function, guess, lapse_max)
-    lo, hi, note = _profile_ci(fit, lv["x"].to_numpy(), lv["k"].to_numpy(),
-                               lv["n"].to_numpy(), criterion, lapse_max, alpha)
     t = fit.threshold(criterion)
+    never = None
+    if interval == "profile":
+        lo, hi, note = _profile_ci(fit, lv["x"].to_numpy(), lv["k"].to_numpy(),
+                                   lv["n"].to_numpy(), criterion, lapse_max, alpha)
+        stated = t if math.isfinite(t) else None
+    else:
+        post = threshold_posterior(lv["x"], lv["k"], lv["n"], function, guess, lapse_max,
+                                   criterion, alpha)
+        stated, lo, hi, note, never = (post["median"], post["low"], post["high"],
+                                       post["note"], post["never"])
     dev = deviance(lv["k"], lv["n"], fit(lv["x"]))
     gof = None
     if gof_samples:
@@ -396,9 +452,10 @@ def psychometric_fit(x, correct, *, function: str = "weibull", criterion: float 
             devs.append(deviance(kb, lv["n"], fb(lv["x"])))
         gof = float((1 + np.sum(np.asarray(devs) >= dev - 1e-9)) / (1 + gof_samples))
     wb = fit.weibull
-    return {"function": function, "criterion": criterion,
-            "threshold": t if math.isfinite(t) else None, "ci_low": lo, "ci_high": hi,
+    return {"function": function, "criterion": criterion, "interval": interval,
+            "threshold": stated, "ci_low": lo, "ci_high": hi,
             "ci_level": 1 - alpha, "ci_note": note,
+            "threshold_ml": t if math.isfinite(t) else None, "p_never": never,
             "m": fit.m, "width": fit.w, "alpha_w": None if wb is None else wb[0],
             "beta": None if wb is None else wb[1],
             "slope": fit.slope(t) if math.isfinite(t) else None, "lapse": fit.lapse,
@@ -416,3 +473,149 @@ def fit_tracks(data: pd.DataFrame, by: Sequence[str], **kw) -> pd.DataFrame:
         rows.append({**dict(zip(by, key, strict=True)),
                      **psychometric_fit(g["intensity"], g["correct"], **kw)})
     return pd.DataFrame(rows)
+
+
+
+def _prior_m(m, lo: float, hi: float):
+    """The prior density of m (psignifit 4's): flat over the intensities tested [lo, hi],
+    falling as a cosine to 0 at half their span beyond either end."""
+    sp = hi - lo
+    m = np.asarray(m, dtype=float)
+    p = np.where((m > lo) & (m < hi), 1.0, 0.0)
+    left = (m >= lo - sp / 2) & (m <= lo)
+    right = (m >= hi) & (m <= hi + sp / 2)
+    p = np.where(left, (1 + np.cos(2 * np.pi * (lo - m) / sp)) / 2, p)
+    return np.where(right, (1 + np.cos(2 * np.pi * (m - hi) / sp)) / 2, p)
+
+
+def _prior_w(w, wmin: float, wmax: float):
+    """The prior density of the width w (F from 0.05 to 0.95): psignifit 4's shape — flat
+    from twice the finest step between the intensities tested to their span, falling as a
+    cosine to 0 at that step and at three times the span — over w, i.e. flat in ln w
+    within it (where psignifit's is flat in w)."""
+    w = np.asarray(w, dtype=float)
+    p = np.where((w > 2 * wmin) & (w < wmax), 1.0, 0.0)
+    left = (w >= wmin) & (w <= 2 * wmin)
+    right = (w >= wmax) & (w <= 3 * wmax)
+    p = np.where(left, (1 - np.cos(np.pi * (w - wmin) / wmin)) / 2, p)
+    return np.where(right, (1 + np.cos(np.pi / 2 * (w - wmax) / wmax)) / 2, p) / w
+
+
+#: the lapse rate's prior, psignifit 4's Beta(1, 10), cut at the bound
+LAPSE_PRIOR = (1.0, 10.0)
+_GRID = (120, 60, 13)  # m × w × λ points of the fine grid
+_COARSE = (40, 30, 4)
+
+
+def _grid_posterior(function, x, k, n, guess, ms, ws, lams, lo, hi, wmin):
+    """The log posterior (up to a constant) and log likelihood on ms × ws × lams, the w
+    grid geometric (a point's mass is its density times w)."""
+    M, W, L = np.meshgrid(ms, ws, lams, indexing="ij")
+    ll = -_nll(function, x, k, n, M, W, guess, L)
+    with np.errstate(divide="ignore"):
+        lp = ll + np.log(_prior_m(M, lo, hi)) + np.log(_prior_w(W, wmin, hi - lo) * W) \
+            + stats.beta.logpdf(L, *LAPSE_PRIOR)
+    return lp, ll, M, W, L
+
+
+def threshold_posterior(x, k, n, function: str = "weibull", guess: float = 0.5,
+                        lapse_max: float = 0.06, criterion: float = 0.75,
+                        alpha: float = 0.05) -> dict:
+    """The posterior of the threshold at ``criterion`` on a grid over m, w and λ, and its
+    central 1 − ``alpha`` credible interval (module docstring).
+
+    Parameters
+    ----------
+    x, k, n : array-like
+        Intensities [units], right answers and trials at each (:func:`levels`).
+    function, guess, lapse_max, criterion, alpha
+        As :func:`psychometric_fit`.
+
+    Returns
+    -------
+    dict
+        ``median`` [units] (None where the function more probably never reaches the
+        criterion), ``low`` and ``high`` (None where the answers do not bound that side or
+        the criterion may never be reached), ``note`` (why an end is None, or that it lies
+        beyond the intensities tested), ``never`` (the posterior probability that ψ never
+        reaches the criterion).
+    """
+    _check_function(function)
+    x, k, n = (np.asarray(a, dtype=float) for a in (x, k, n))
+    u = _axis(function, x)
+    lv = np.unique(_round_sig(u))
+    if lv.size < 2:
+        raise ValueError(f"needs trials at two intensities at least, got {lv.size}")
+    lo, hi = float(lv[0]), float(lv[-1])
+    sp = hi - lo
+    wmin = float(np.min(np.diff(lv)))
+    lams = np.linspace(0.0, lapse_max, _GRID[2]) if lapse_max > 0 else np.array([0.0])
+    # a coarse pass over the priors' support, then a fine grid where the posterior is
+    ms = np.linspace(lo - sp / 2, hi + sp / 2, _COARSE[0])
+    ws = np.geomspace(wmin, 3 * sp, _COARSE[1])
+    lp, ll, *_ = _grid_posterior(function, x, k, n, guess, ms, ws,
+                                 np.linspace(0.0, lapse_max, _COARSE[2]), lo, hi, wmin)
+    # a side is open when the answers fit as well (within the χ²₁ cut) with m at the
+    # prior's far end there: the data do not bound the threshold on that side, the prior
+    # would, and an end set by the prior is not stated as a number
+    cut = stats.chi2.ppf(1 - alpha, 1) / 2.0
+    top = float(np.max(ll))
+    open_lo, open_hi = top - float(np.max(ll[0])) < cut, top - float(np.max(ll[-1])) < cut
+    keep = lp >= np.max(lp) - 15.0
+    im, iw = np.flatnonzero(keep.any(axis=(1, 2))), np.flatnonzero(keep.any(axis=(0, 2)))
+    ms = np.linspace(ms[max(im[0] - 1, 0)], ms[min(im[-1] + 1, ms.size - 1)], _GRID[0])
+    ws = np.geomspace(ws[max(iw[0] - 1, 0)], ws[min(iw[-1] + 1, ws.size - 1)], _GRID[1])
+    lp, _, M, W, L = _grid_posterior(function, x, k, n, guess, ms, ws, lams, lo, hi, wmin)
+    post = np.exp(lp - np.max(lp))
+    post /= post.sum()
+    f = (criterion - guess) / (1.0 - guess - L)
+    reach = (f > 0) & (f < 1)
+    t = _loc(function, M, W) + _scale(function, W) * _ppf_array(function,
+                                                                np.where(reach, f, 0.5))
+    order = np.argsort(np.where(reach, t, np.inf), axis=None)
+    t_s, p_s = t.ravel()[order], post.ravel()[order]
+    fin = reach.ravel()[order]
+    never = float(p_s[~fin].sum())
+    below = f.max() <= 0  # the criterion is at or under the guess rate everywhere
+    c = np.cumsum(p_s[fin]) - p_s[fin] / 2
+
+    def quantile(q):
+        if below or q > 1 - never:
+            return None
+        return float(_back(function, np.interp(q, c, t_s[fin])))
+
+    med, low, high = quantile(0.5), quantile(alpha / 2), quantile(1 - alpha / 2)
+    notes = []
+    if below:
+        notes.append("no threshold: the criterion is at or below the guess rate")
+    elif med is None:
+        notes.append("no threshold: the function more probably never reaches the criterion")
+        low = high = None
+    elif high is None:
+        notes.append("the upper end is not stated: the function may never reach the "
+                     "criterion (a lapse rate above 1 − criterion is credible)")
+    for side, is_open, end, edge in (("lower", open_lo, low, float(np.min(x))),
+                                     ("upper", open_hi, high, float(np.max(x)))):
+        if end is None:
+            continue
+        if is_open:
+            notes.append(f"the {side} end is not bounded by the answers: thresholds as far "
+                         f"as the prior reaches (half the span of the intensities tested "
+                         f"beyond the {'lowest' if side == 'lower' else 'highest'}) fit "
+                         "them about as well as the best")
+            if side == "lower":
+                low = None
+            else:
+                high = None
+            if med is not None and ((side == "lower" and med < edge) or
+                                    (side == "upper" and med > edge)):
+                # the median itself is the prior's: the answers put the threshold beyond
+                # the intensities tested and do not say how far
+                med = None
+                notes.insert(0, f"no threshold: the answers put it "
+                                f"{'below the lowest' if side == 'lower' else 'above the highest'}"
+                                " intensity tested, and do not say how far")
+        elif (side == "lower" and end < edge) or (side == "upper" and end > edge):
+            notes.append(f"the {side} end is extrapolated beyond the intensities tested")
+    return {"median": med, "low": low, "high": high, "note": "; ".join(notes),
+            "never": never}

@@ -99,8 +99,10 @@ def threshold_scores(data: pd.DataFrame, phase: dict, alpha: float = 0.05,
     -------
     dict
         ``fits``: one row per participant and track — ``participant``, ``track``,
-        ``standard``, ``direction``, ``criterion``, ``threshold`` [units] with ``ci_low``,
-        ``ci_high``, ``ci_note``; ``weber`` (and its interval), ``width``, ``slope``,
+        ``standard``, ``direction``, ``criterion``, ``threshold`` [units] (the posterior
+        median) with ``ci_low``, ``ci_high`` (its credible interval), ``ci_note``;
+        ``threshold_ml`` (the maximum-likelihood function's, which the figures draw);
+        ``weber`` (and its interval), ``width``, ``slope``,
         ``lapse``, ``deviance``, ``gof_p``, ``n_trials``, ``n_catch``, ``catch_correct``,
         ``procedure_estimate`` (the reversal average, or QUEST+'s) with its spread;
         ``group``: one row per track — ``n``, ``threshold_mean``, ``threshold_sd``,
@@ -140,6 +142,7 @@ def threshold_scores(data: pd.DataFrame, phase: dict, alpha: float = 0.05,
             "participant": str(pid), "track": name, "standard": t.get("standard"),
             "direction": direction, "criterion": crit, "threshold": r["threshold"],
             "ci_low": r["ci_low"], "ci_high": r["ci_high"], "ci_note": r["ci_note"],
+            "threshold_ml": r["threshold_ml"],
             "weber": weber(r["threshold"], units, v, direction),
             "weber_ci_low": weber(r["ci_low"], units, v, direction),
             "weber_ci_high": weber(r["ci_high"], units, v, direction),

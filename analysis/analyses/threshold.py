@@ -1,7 +1,7 @@
 """Thresholds of adaptive phases: a phase design ``dv = "forced_choice"`` (a ``staircase``
 or ``questplus`` phase). Per participant and track, a psychometric function fitted by
-maximum likelihood and its threshold at the phase's criterion with its interval, beside the
-procedure's own estimate; per track, the group's Weber fractions
+maximum likelihood, its threshold at the phase's criterion from the posterior (median and
+credible interval), beside the procedure's own estimate; per track, the group's Weber fractions
 (:func:`analysis.thresholds.threshold_scores`)."""
 
 from __future__ import annotations
@@ -66,12 +66,16 @@ def _methods(res, phase: dict, design: dict) -> str:
             f"order, had more of it (two-interval forced choice). Each track ran "
             f"{_procedure_text(d)}, at most {d['max_trials']} trials, its tracks interleaved"
             f"{catch}. The intensity is in {_UNITS[res['units']]}. For each participant and "
-            f"track a {_FUNCTION[res['function']]} psychometric function was fitted to every "
-            f"valid trial by maximum likelihood, the guess rate fixed at 1/2 and the lapse "
-            f"rate free in [0, {res['lapse_max']:g}]; the threshold is the intensity at "
-            f"{100 * res['criterion']:g} % correct (of the fitted function, lapses included), "
-            f"with a {level} % profile-likelihood interval, and its Weber fraction "
-            f"(|comparison − standard| / standard). Goodness of fit is the deviance, its p "
+            f"track a {_FUNCTION[res['function']]} psychometric function of every valid "
+            f"trial, the guess rate fixed at 1/2 and the lapse rate in "
+            f"[0, {res['lapse_max']:g}], was fitted by maximum likelihood (the figures' "
+            f"curves, the width and lapse in the appendix). The threshold is the intensity "
+            f"at {100 * res['criterion']:g} % correct (lapses included): its posterior median "
+            f"with the central {level} % credible interval, from the posterior over the "
+            f"function's threshold, width and lapse on a grid, with psignifit 4's priors "
+            f"(Schütt et al. 2016) but the width's flat in its logarithm; and its Weber "
+            f"fraction (|comparison − standard| / standard). Goodness of fit is the deviance, "
+            f"its p "
             f"from {res['gof_samples']} data sets drawn from the fitted function and refitted "
             f"(Wichmann & Hill 2001). Across participants, the Weber fractions of a track are "
             f"summarised by their geometric mean with a t-interval on their logarithms.")
@@ -104,10 +108,10 @@ def _markdown(a: dict) -> tuple[list[str], list[str]]:
         out.append("\nOf the intervals of each participant's fits (appendix): "
                    + "; ".join(notes) + " (for some).\n")
     if a["procedure"] == "questplus":
-        out.append("\nQUEST+ chose these intensities for its own model: its posterior estimate "
-                   "and credible interval (appendix) are the better read of a QUEST+ phase, "
-                   "the refit's interval tending to be too narrow (`hapticlab bench "
-                   "thresholds` measures both against simulated observers).\n")
+        out.append("\nQUEST+ chose these intensities for its own model: its own posterior "
+                   "estimate and credible interval are in the appendix beside the fit's "
+                   "(`hapticlab bench thresholds` measures both against simulated "
+                   "observers).\n")
     if a["unfit"]:
         out.append("\nNot fitted: " + "; ".join(f"{u['participant']} {u['track']} ({u['why']})"
                                              for u in a["unfit"]) + ".\n")

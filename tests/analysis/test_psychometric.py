@@ -21,7 +21,15 @@ import math
 import numpy as np
 import pytest
 
-from analysis.psychometric import FUNCTIONS, deviance, levels, psi, psychometric_fit
+from analysis.psychometric import (
+    FUNCTIONS,
+    LAPSE_PRIOR,
+    deviance,
+    levels,
+    psi,
+    psychometric_fit,
+    threshold_posterior,
+)
 
 psignifit = pytest.importorskip("psignifit", reason="`make test` installs the test extra")
 
@@ -78,7 +86,7 @@ def test_the_fit_is_psignifits_map_under_flat_priors(data, function):
         ours = psychometric_fit(x, k, function=function, criterion=crit, lapse_max=0.06,
                                 gof_samples=0)
         theirs = back(float(ref.threshold(crit, return_ci=False)))
-        assert ours["threshold"] == pytest.approx(theirs, rel=2e-3), crit
+        assert ours["threshold_ml"] == pytest.approx(theirs, rel=2e-3), crit
         assert ours["criterion"] == crit
     assert ours["m"] == pytest.approx(est["threshold"], rel=2e-3, abs=1e-6)
     assert ours["width"] == pytest.approx(est["width"], rel=5e-3)
@@ -89,16 +97,109 @@ def test_the_fit_is_psignifits_map_under_flat_priors(data, function):
     assert ours["loglik"] >= ll_ref - 1e-6
 
 
+def _their_width_prior(wmin, wmax):
+    """psignifit's own width prior (psignifit._priors.width_prior) over w: the shape of
+    ours, flat in ln w where psignifit's default is flat in w."""
+    from psignifit._priors import width_prior
+
+    return lambda w: width_prior(np.asarray(w, dtype=float), 0.05, wmin, wmax) / np.maximum(
+        np.asarray(w, dtype=float), 1e-300)
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("data", sorted(DATA))
+def test_the_credible_interval_is_psignifits_under_the_same_priors(data):
+    """With the lapse rate held at 0 the threshold at 75 % correct is psignifit's m (F = 1/2),
+    and our grid's central 95 % of its posterior is psignifit's percentile interval of m::
+
+        psignifit.psignifit(np.c_[ln levels, k, n], sigmoid="weibull",
+                            experiment_type="2AFC",
+                            fixed_parameters={"eta": 0.0, "lambda": 0.0},
+                            priors={"width": psignifit's width prior / w},
+                            grid_steps={"threshold": 400, "width": 200})
+        .confidence_intervals["threshold"]["0.95"]
+
+    (its default threshold prior; a finer grid than its default 40 steps, whose percentile
+    interval is off by half a step). Tolerance 1.5 % of each end: our grid's and
+    psignifit's steps."""
+    x, k = DATA[data]()
+    lv = levels(x, k)
+    u = np.log(lv["x"].to_numpy())
+    ref = psignifit.psignifit(
+        np.c_[u, lv["k"], lv["n"]], sigmoid="weibull", experiment_type="2AFC",
+        fixed_parameters={"eta": 0.0, "lambda": 0.0},
+        priors={"width": _their_width_prior(float(np.min(np.diff(u))), float(np.ptp(u)))},
+        grid_steps={"threshold": 400, "width": 200}, verbose=False)
+    lo, hi = np.exp(ref.confidence_intervals["threshold"]["0.95"])
+    ours = psychometric_fit(x, k, lapse_max=0.0, criterion=0.75, gof_samples=0)
+    assert ours["interval"] == "posterior" and ours["ci_note"] == ""
+    assert ours["ci_low"] == pytest.approx(lo, rel=1.5e-2)
+    assert ours["ci_high"] == pytest.approx(hi, rel=1.5e-2)
+    assert ours["ci_low"] < ours["threshold"] < ours["ci_high"]
+
+
+def test_the_lapse_prior_is_psignifits():
+    from psignifit._priors import lambda_prior
+
+    v = np.linspace(0.001, 0.06, 7)
+    from scipy import stats
+    assert stats.beta.pdf(v, *LAPSE_PRIOR) == pytest.approx(lambda_prior(v), rel=1e-12)
+
+
 def test_the_interval_holds_the_threshold_and_narrows_with_trials():
     x, k = DATA["blocks"]()
     one = psychometric_fit(x, k, gof_samples=0)
     four = psychometric_fit(np.tile(x, 4), np.tile(k, 4), gof_samples=0)
     assert one["ci_low"] < one["threshold"] < one["ci_high"] and one["ci_note"] == ""
-    assert four["threshold"] == pytest.approx(one["threshold"], rel=1e-3)  # same proportions
+    # the same proportions: the same maximum-likelihood threshold, and the posterior's
+    # median, pulled by the prior, nearer to it with four times the answers
+    assert four["threshold_ml"] == pytest.approx(one["threshold_ml"], rel=1e-3)
+    ml = one["threshold_ml"]
+    assert abs(four["threshold"] - ml) < 0.5 * abs(one["threshold"] - ml)
     assert four["ci_high"] - four["ci_low"] < 0.6 * (one["ci_high"] - one["ci_low"])
-    # the interval's ends are where the profile likelihood drops by χ²₁(.95)/2 = 1.92
     lo = psychometric_fit(x, k, criterion=0.75, gof_samples=0, alpha=0.05)
     assert lo["ci_level"] == 0.95
+    # the profile interval, kept for comparison, beside the maximum-likelihood threshold
+    pr = psychometric_fit(x, k, gof_samples=0, interval="profile")
+    assert pr["interval"] == "profile" and pr["threshold"] == one["threshold_ml"]
+    assert pr["ci_low"] < pr["threshold"] < pr["ci_high"] and pr["p_never"] is None
+
+
+N5 = np.array([0.02, 0.05, 0.1, 0.2, 0.4]), np.full(5, 20)
+
+
+@pytest.mark.parametrize("k, side, why", [
+    (np.full(5, 20), "lower", "below the lowest intensity tested"),  # all right
+    (np.zeros(5), "upper", "above the highest intensity tested"),  # all wrong
+    (np.full(5, 10), "upper", "above the highest intensity tested"),  # at chance
+])
+def test_a_threshold_the_answers_do_not_bound_is_said_not_numbered(k, side, why):
+    x, n = N5
+    r = threshold_posterior(x, k, n)
+    assert r["median"] is None and r[{"lower": "low", "upper": "high"}[side]] is None
+    assert why in r["note"] and f"the {side} end is not bounded" in r["note"]
+
+
+def test_the_edges_of_the_lapse_and_the_criterion():
+    x, n = N5
+    # lapses at the bound: the interval is still stated where the answers bound it
+    r = threshold_posterior(x, np.array([10, 12, 15, 17, 17]), n, lapse_max=0.06)
+    assert r["low"] < r["median"] < r["high"] and r["note"] == "" and r["never"] == 0.0
+    # a criterion the function may never reach: the upper end is said, not numbered
+    r = threshold_posterior(x, np.array([10, 12, 15, 19, 20]), n, criterion=0.97)
+    assert r["high"] is None and "may never reach the criterion" in r["note"]
+    assert 0.05 < r["never"] < 0.5 and r["low"] < r["median"]
+    # a criterion at the guess rate: no threshold anywhere
+    r = threshold_posterior(x, np.array([10, 12, 15, 19, 20]), n, criterion=0.5)
+    assert (r["median"], r["low"], r["high"]) == (None, None, None)
+    assert "at or below the guess rate" in r["note"]
+    with pytest.raises(ValueError, match="two intensities at least"):  # one intensity only
+        threshold_posterior([0.1, 0.1 + 1e-15], [3, 4], [5, 5])
+
+
+def test_equal_intensities_reached_by_different_sums_are_one_level():
+    lv = levels([0.1, 0.3 - 0.2, 0.2], [1, 0, 1])
+    assert lv["n"].tolist() == [2, 1] and lv["k"].tolist() == [1, 1]
 
 
 def test_deviance_is_zero_for_a_saturated_fit_and_the_bootstrap_is_seeded():
@@ -119,5 +220,10 @@ def test_what_cannot_be_fitted_is_said():
         psychometric_fit([0.1, 0.2], [0, 1], function="gompertz", gof_samples=0)
     # a criterion the fitted function never reaches (above 1 − lapse): no threshold, said so
     x, k = DATA["lapses"]()
-    r = psychometric_fit(x, k, criterion=0.97, gof_samples=0)
-    assert r["threshold"] is None and r["ci_low"] is None and "does not reach" in r["ci_note"]
+    for interval, why in (("posterior", "more probably never reaches"),
+                          ("profile", "does not reach")):
+        r = psychometric_fit(x, k, criterion=0.97, gof_samples=0, interval=interval)
+        assert r["threshold"] is None and r["ci_low"] is None and r["ci_high"] is None
+        assert why in r["ci_note"] and r["threshold_ml"] is None
+    with pytest.raises(ValueError, match="interval must be"):
+        psychometric_fit(x, k, gof_samples=0, interval="bootstrap")

@@ -114,13 +114,16 @@ def test_the_report_fits_what_the_files_hold(study):
         ours = psychometric_fit(x, k, criterion=0.75, gof_samples=0)
         assert ours["loglik"] >= theirs - 1e-6  # ours is the maximum
         assert ours["threshold"] == pytest.approx(f["threshold"], rel=1e-9)
+        assert ours["threshold_ml"] == pytest.approx(f["threshold_ml"], rel=1e-9)
+        assert f["ci_low"] is None or f["ci_low"] < f["threshold"]
+        assert f["ci_high"] is None or f["threshold"] < f["ci_high"]
         # the same threshold within 1 % where the likelihood has one peak (a width above
         # the finest step between the intensities tested; below it the answers flip
         # between two neighbouring intensities and any threshold between them is as
         # likely). 30 trials of a staircase leave a flat top: psignifit's optimizer stops
         # up to 0.6 % away on these, at a lower likelihood than ours (asserted above)
         if f["width"] > float(np.min(np.diff(u))):
-            assert f["threshold"] == pytest.approx(t, rel=1e-2), f
+            assert f["threshold_ml"] == pytest.approx(t, rel=1e-2), f
         assert f["n_trials"] == len(rows)
     md = (tmp / "report" / "report.md").read_text()
     assert "at 75 % correct" in md and "reversal average" in md and "QUEST+ estimate" in md
