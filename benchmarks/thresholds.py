@@ -9,15 +9,18 @@ are the observer's from the parameter values each trial renders, as in a simulat
 on the simulated device; the device's windows are not run (the observer's answers do not
 depend on them, and a session of taps costs seconds a trial). Each session's answers are
 fitted as ``hapticlab analyze`` fits them (a Weibull, guess 1/2, lapse ≤ 0.06, the
-threshold at 75 % with its 95 % profile-likelihood interval) and compared with the
-observer's true threshold at 75 %:
+threshold at 75 %: the posterior median with its 95 % credible interval) and compared with
+the observer's true threshold at 75 %:
 
 * ``bias``: mean of log10(estimate / truth), and as a share of the true threshold (the JND
   in the procedure's units); ``rmse``: its root mean square, which a few wild fits swell;
   ``median`` and ``p90``: the median and 90th percentile of |log10(estimate / truth)|, and
   the share of fits off by more than 0.2 log10 (a factor 1.6);
-* ``coverage``: the share of sessions whose 95 % interval holds the truth (nominal 95 %; a
-  binomial SE of about 1.5 points at 200 sessions);
+* ``coverage``: the share of sessions whose 95 % credible interval holds the truth
+  (nominal 95 %; a binomial SE of about 1.5 points at 200 sessions); an end not stated (the
+  answers do not bound it) is open on that side;
+* beside them, the maximum-likelihood threshold's bias and the coverage of its 95 %
+  profile-likelihood interval (``interval="profile"``), which the report stated before;
 * the procedure's own estimate beside the fit: the staircase's reversal average (which
   estimates the 79.4 % point it converges on, not 75 %: its bias against the 75 % truth is
   shown, and against its own 79.4 % truth), QUEST+'s posterior mean and the coverage of
@@ -97,30 +100,40 @@ def _observer(seed: int, k: int):
     return draw_observer(np.random.default_rng(np.random.SeedSequence([seed, k, 1])))
 
 
-def _fit(run: dict) -> dict:
+def _fit(run: dict, interval: str = "posterior") -> dict:
     from analysis.psychometric import psychometric_fit
 
     return psychometric_fit(run["x"], run["correct"], function="weibull", criterion=CRITERION,
-                            lapse_max=0.06, gof_samples=0)
+                            lapse_max=0.06, gof_samples=0, interval=interval)
+
+
+def _covers(fit: dict, truth: float) -> bool:
+    """Whether ``fit``'s interval holds ``truth``; an end not stated is open on its side."""
+    lo, hi = fit["ci_low"], fit["ci_high"]
+    return (lo is None or lo <= truth) and (hi is None or truth <= hi)
 
 
 def coverage(procedure: str, sessions: int, seed: int = 1, cap: int | None = None) -> dict:
     """Bias, RMS error and interval coverage of ``sessions`` simulated sessions."""
     protocol = _protocol(procedure, cap)
     err, covered, own_err, own_target_err, own_cov, widths, trials = [], [], [], [], [], [], []
+    ml_err, prof_covered, unstated = [], [], 0
     t0 = time.perf_counter()
     for k in range(sessions):
         obs = _observer(seed, k)
         truth = obs.threshold("frequency", CRITERION, "log")
         run = simulate_track(protocol, obs, int(np.random.SeedSequence([seed, k])
                                                 .generate_state(1, np.uint64)[0] % 2**63))
-        fit = _fit(run)
+        fit, prof = _fit(run), _fit(run, "profile")
         trials.append(len(run["x"]))
         if fit["threshold"] is not None:
             err.append(math.log10(fit["threshold"] / truth))
+        if fit["threshold_ml"] is not None:
+            ml_err.append(math.log10(fit["threshold_ml"] / truth))
+        covered.append(_covers(fit, truth))
+        prof_covered.append(_covers(prof, truth))
         lo, hi = fit["ci_low"], fit["ci_high"]
-        # an end beyond the intensities tested is open on that side
-        covered.append((lo is None or lo <= truth) and (hi is None or truth <= hi))
+        unstated += lo is None or hi is None
         if lo is not None and hi is not None:
             widths.append(math.log10(hi / lo))
         est = run["estimate"]
@@ -141,7 +154,10 @@ def coverage(procedure: str, sessions: int, seed: int = 1, cap: int | None = Non
             "median_abs_log10": float(np.median(off)),
             "p90_abs_log10": float(np.quantile(off, 0.9)),
             "off_by_0_2": float(np.mean(off > 0.2)),
-            "coverage": float(np.mean(covered)),
+            "coverage": float(np.mean(covered)), "ends_unstated": unstated,
+            "ml_bias_log10": float(np.mean(ml_err)),
+            "ml_rmse_log10": float(np.sqrt(np.mean(np.square(ml_err)))),
+            "profile_coverage": float(np.mean(prof_covered)),
             "ci_width_log10_median": float(np.median(widths)) if widths else None,
             "own_bias_log10": float(np.mean(own_err)) if own_err else None,
             "own_p90_abs_log10": float(np.quantile(np.abs(own_err), 0.9)) if own_err else None,
@@ -169,15 +185,21 @@ def main(args) -> int:
         emit({"seed": seed, "sessions": n, "coverage": cov, "precision": prec}, True)
         return 0
     print_table(f"the observer's true 75 % threshold against each procedure ({n} sessions; "
-                "bias and RMS in log10 of estimate/truth; nominal coverage 95 %)",
+                "bias and RMS in log10 of estimate/truth; nominal coverage 95 %; the "
+                "posterior median and credible interval, then the maximum-likelihood "
+                "threshold and its profile interval)",
                 ["procedure", "trials (median)", "bias", "bias (% of JND)", "RMS", "median |err|",
-                 "90 % |err|", "> 0.2", "coverage", "CI width (median)",
+                 "90 % |err|", "> 0.2", "coverage", "ends unstated", "CI width (median)",
+                 "ML: bias", "ML: RMS", "profile coverage",
                  "own estimate: bias", "vs its own target", "its 90 % |err|", "own coverage"],
                 [(r["procedure"], f"{r['trials_median']:.0f}", f"{r['bias_log10']:+.4f}",
                   f"{100 * r['bias_share']:+.1f} %", f"{r['rmse_log10']:.4f}",
                   f"{r['median_abs_log10']:.4f}", f"{r['p90_abs_log10']:.4f}",
                   f"{100 * r['off_by_0_2']:.1f} %",
-                  f"{100 * r['coverage']:.1f} %", f"{r['ci_width_log10_median']:.3f}",
+                  f"{100 * r['coverage']:.1f} %", r["ends_unstated"],
+                  f"{r['ci_width_log10_median']:.3f}",
+                  f"{r['ml_bias_log10']:+.4f}", f"{r['ml_rmse_log10']:.4f}",
+                  f"{100 * r['profile_coverage']:.1f} %",
                   _f(r["own_bias_log10"], "+.4f"), _f(r["own_bias_own_target_log10"], "+.4f"),
                   _f(r["own_p90_abs_log10"], ".4f"),
                   _f(r["own_coverage"], ".1%")) for r in cov])
@@ -185,10 +207,11 @@ def main(args) -> int:
         print_table(f"{p['procedure']}: trials against precision ({p['rows'][0]['sessions']} "
                     "sessions a cap)",
                     ["trials at most", "trials (median)", "bias", "median |err|", "90 % |err|",
-                     "RMS", "coverage", "CI width (median)"],
+                     "RMS", "coverage", "profile coverage", "CI width (median)"],
                     [(r["cap"], f"{r['trials_median']:.0f}", f"{r['bias_log10']:+.4f}",
                       f"{r['median_abs_log10']:.4f}", f"{r['p90_abs_log10']:.4f}",
                       f"{r['rmse_log10']:.4f}", f"{100 * r['coverage']:.1f} %",
+                      f"{100 * r['profile_coverage']:.1f} %",
                       _f(r["ci_width_log10_median"], ".3f")) for r in p["rows"]])
         print("  fewest trials with 90 % of the estimates within " + "; ".join(
             f"{q:g} log10 (±{100 * (10 ** q - 1):.0f} %): {v if v else 'more than tested'}"

@@ -61,5 +61,5 @@ def test_the_benchmark_finds_the_observers_threshold_on_a_small_sample():
         r = coverage(procedure, n, seed=3)
         assert r["fitted"] == n
         assert abs(r["bias_log10"]) < 0.08 and r["rmse_log10"] < 0.15, r
-        assert r["coverage"] >= 0.5, r
+        assert r["coverage"] >= 0.5 and r["profile_coverage"] >= 0.5, r
         assert 30 <= r["trials_median"] <= 60
