@@ -21,7 +21,8 @@ from .errors import DeviceError, DeviceFaultError
 from .events import Flags, WindowResult
 from .scene import Material, Pulse, Ringing, Scene
 
-__all__ = ["CHECKS", "CheckFailed", "run_selftest", "check_backend", "SUITE_SCENES"]
+__all__ = ["CHECKS", "TAPPED", "CheckFailed", "Operator", "run_selftest", "check_backend",
+           "SUITE_SCENES"]
 
 Opener = Callable[[], HapticDevice]
 
@@ -44,9 +45,48 @@ def _require(cond: bool, msg: str) -> None:
         raise CheckFailed(msg)
 
 
-def _window(dev: HapticDevice, scene: Scene, duration: float = 1.0, **kw) -> WindowResult:
+class Operator:
+    """The person at a device with a physical contact, whom the self-test asks to tap the
+    stylus during each check of :data:`TAPPED` (a simulated device's hand taps by itself).
+
+    Each such check's window starts with a prompt, then waits up to ``wait_s`` for the
+    first contact; it says when it got one (stop tapping) or when it gave up.
+
+    Parameters
+    ----------
+    say : callable
+        Where the operator reads, one line each (a terminal).
+    wait_s : float [s]
+        How long a window waits for the first contact after its prompt.
+    """
+
+    def __init__(self, say: Callable[[str], None], wait_s: float = 30.0) -> None:
+        if not (math.isfinite(wait_s) and wait_s > 0):
+            raise ValueError(f"the wait for a tap must be a positive number of seconds, "
+                             f"got {wait_s!r}")
+        self.say, self.wait_s, self.check = say, float(wait_s), ""
+
+    def window(self, dev: HapticDevice, duration: float, **kw) -> WindowResult:
+        """Run a window that needs the stylus tapped: prompt, wait, say how it went."""
+        self.say(f"[{self.check}] tap the stylus down onto the virtual surface now, and keep "
+                 f"tapping until told to stop (waiting up to {self.wait_s:g} s for contact)")
+        res = dev.run_window(duration, timeout=self.wait_s, **kw)
+        if res.t_first_contact is None:
+            self.say(f"[{self.check}] no contact in {self.wait_s:g} s: gave up waiting; stop "
+                     "tapping, hold the stylus still above the surface")
+            raise CheckFailed(f"no contact within {self.wait_s:g} s of the prompt to tap the "
+                              "stylus: gave up waiting")
+        self.say(f"[{self.check}] contact: window recorded; stop tapping, hold the stylus "
+                 "still above the surface")
+        return res
+
+
+def _window(dev: HapticDevice, scene: Scene, duration: float = 1.0,
+            operator: Operator | None = None, **kw) -> WindowResult:
     dev.load_scene(scene)
     dev.home()
+    if operator is not None:
+        return operator.window(dev, duration, **kw)
     return dev.run_window(duration, **kw)
 
 
@@ -75,9 +115,9 @@ def check_info(opener: Opener) -> str:
         return f"{i.model} at {i.servo_rate_hz:g} Hz, {i.max_force:.2f} N max{ticks}"
 
 
-def check_real_sample(opener: Opener) -> str:
+def check_real_sample(opener: Opener, operator: Operator | None = None) -> str:
     with opener() as dev:
-        res = _window(dev, SUITE_SCENES["wood"], 1.5)
+        res = _window(dev, SUITE_SCENES["wood"], 1.5, operator)
         _require(len(res.contacts) >= 1, "no contact detected on a real sample")
         _require(not res.saturations, "a real sample reported saturation")
         cur = res.traces["current"]
@@ -87,10 +127,10 @@ def check_real_sample(opener: Opener) -> str:
         return f"{len(v)} contacts, speeds {v.min():.3f}–{v.max():.3f} m/s"
 
 
-def check_spring_law(opener: Opener) -> str:
+def check_spring_law(opener: Opener, operator: Operator | None = None) -> str:
     with opener() as dev:
         sc = SUITE_SCENES["firm_spring"]
-        res = _window(dev, sc, 1.0)
+        res = _window(dev, sc, 1.0, operator)
         tr = res.traces
         pen = np.maximum(sc.surface_height - tr["position"], 0.0)
         steady = (tr["flags"] & Flags.RAMP) == 0
@@ -104,10 +144,10 @@ def check_spring_law(opener: Opener) -> str:
                 f"(peak {expect.max():.2f} N)")
 
 
-def check_transient_scaling(opener: Opener) -> str:
+def check_transient_scaling(opener: Opener, operator: Operator | None = None) -> str:
     with opener() as dev:
         sc = SUITE_SCENES["pulse_firm"]
-        res = _window(dev, sc, 1.5)
+        res = _window(dev, sc, 1.5, operator)
         tr = res.traces
         _require(len(res.contacts) >= 1, "no contact")
         pulse = sc.transient
@@ -131,9 +171,9 @@ def check_transient_scaling(opener: Opener) -> str:
                 f"each at {res.rate_hz:g} Hz")
 
 
-def check_saturation(opener: Opener) -> str:
+def check_saturation(opener: Opener, operator: Operator | None = None) -> str:
     with opener() as dev:
-        res = _window(dev, SUITE_SCENES["hard_pulse"], 1.5)
+        res = _window(dev, SUITE_SCENES["hard_pulse"], 1.5, operator)
         lim = dev.info.current_limit
         cur = np.abs(res.traces["current"])
         _require(bool(res.saturations), "a 200 N·s/m pulse did not saturate")
@@ -152,9 +192,9 @@ def check_saturation(opener: Opener) -> str:
                 f"≥ {want:.2f} A), clamp {lim} A")
 
 
-def check_window_length(opener: Opener) -> str:
+def check_window_length(opener: Opener, operator: Operator | None = None) -> str:
     with opener() as dev:
-        res = _window(dev, SUITE_SCENES["firm_spring"], 1.0)
+        res = _window(dev, SUITE_SCENES["firm_spring"], 1.0, operator)
         _require(res.t_first_contact is not None, "no first contact")
         span = res.traces["t"][-1] - res.t_first_contact
         _require(abs(span - 1.0) <= 2.0 / res.rate_hz, f"window spans {span:.5f} s, expected 1 s")
@@ -162,7 +202,9 @@ def check_window_length(opener: Opener) -> str:
 
 
 def check_estop(opener: Opener) -> str:
-    """An ESTOP during a window latches an estop fault and zeroes output; a device that
+    """An ESTOP during a window latches an estop fault and zeroes output (the windows here
+    run from their start: a device with a physical contact does this check alone, and the
+    checks it does alone never wait for a contact); a device that
     reports what it saw (LINK_REPORT) did so within its stated bound from the frame's
     arrival (``estop_bound_s``), traces streaming meanwhile."""
     with opener() as dev:
@@ -175,7 +217,8 @@ def check_estop(opener: Opener) -> str:
         try:
             if seen is not None:
                 seen(reset=True)
-            res = _window(dev, SUITE_SCENES["pulse_firm"], 1.5, on_progress=stop)
+            res = _window(dev, SUITE_SCENES["pulse_firm"], 1.5, from_first_contact=False,
+                          on_progress=stop)
             _require(bool(res.faults) and res.faults[0].code == "estop", f"faults: {res.faults}")
             report = seen() if seen is not None else None
             bound = dev.estop_bound_s() if report is not None else None
@@ -203,7 +246,7 @@ def check_estop(opener: Opener) -> str:
         finally:
             dev.clear_fault()  # a device keeps its fault across connections; leave it clean
         dev.home()
-        again = dev.run_window(0.5)
+        again = dev.run_window(0.5, from_first_contact=False)
         _require(not again.faults, "fault came back after clearing")
         return f"latched at t={res.faults[0].t:.3f} s{took}; cleared and re-homed"
 
@@ -280,7 +323,7 @@ def check_zero_on_exit(opener: Opener) -> str:
         with dev:
             dev.load_scene(SUITE_SCENES["pulse_firm"])
             dev.home()
-            dev.run_window(0.3)
+            dev.run_window(0.3, from_first_contact=False)
             raise RuntimeError("simulated failure inside the session")
     except RuntimeError:
         pass
@@ -358,6 +401,11 @@ CHECKS: dict[str, Callable[[Opener], str]] = {
     "bad_input": check_bad_input,
 }
 
+#: the checks a device with a physical contact cannot do alone: each needs the stylus tapped
+#: down onto the virtual surface during its window (taken by an :class:`Operator`); the
+#: others need no contact (a simulated device's hand taps in all of them by itself)
+TAPPED = ("real_sample", "spring_law", "transient_scaling", "saturation", "window_length")
+
 
 def _clear_left_fault(opener: Opener) -> str | None:
     """Clear a fault left latched on the device; return its code (None: there was none,
@@ -373,25 +421,60 @@ def _clear_left_fault(opener: Opener) -> str | None:
         return None
 
 
-def run_selftest(spec: str, opener: Opener) -> dict:
-    """Run every check; return ``{"backend", "passed", "failed", "checks": [...]}``.
+def run_selftest(spec: str, opener: Opener, *, operator: Operator | None = None,
+                 device_alone: bool = False, say: Callable[[str], None] | None = None) -> dict:
+    """Run every check; return ``{"backend", "passed", "failed", "not_run", "checks":
+    [...]}``, each check's row ``name``, ``status`` (``passed``, ``failed`` or ``not run``),
+    ``ok`` (passed) and ``detail``.
 
     A check that fails may leave a fault latched (a device keeps it across connections);
     it is named in that check's row and cleared, so that the checks after it test what
     they say instead of failing with "clear it first".
+
+    Parameters
+    ----------
+    operator : Operator, optional
+        The person who taps the stylus in the checks of :data:`TAPPED`, asked at each (a
+        device with a physical contact); first told which checks need them.
+    device_alone : bool
+        Run only the checks the device does alone: those of :data:`TAPPED` are reported
+        as not run, never as passed.
+    say : callable, optional
+        Where the plan is said (default: the operator's, else nowhere).
     """
+    say = say or (operator.say if operator is not None else None)
+    alone = [n for n in CHECKS if n not in TAPPED]
+    tapped = [n for n in CHECKS if n in TAPPED]
+    if say is not None and tapped and (operator is not None or device_alone):
+        say(f"self-test of {spec}: {len(alone)} checks the device does alone "
+            f"({', '.join(alone)}); {len(tapped)} need someone to tap the stylus "
+            f"({', '.join(tapped)})"
+            + (": not run (--device-alone)" if device_alone else
+               ": you will be asked at each; until then hold the stylus still above the "
+               "virtual surface"))
     rows = []
     for name, fn in CHECKS.items():
+        if name in TAPPED and device_alone:
+            rows.append({"name": name, "status": "not run", "ok": False,
+                         "detail": "needs someone to tap the stylus: not run (device alone)"})
+            continue
         try:
-            detail, ok = fn(opener), True
+            if name in TAPPED and operator is not None:
+                operator.check = name
+                detail = fn(opener, operator)
+            else:
+                detail = fn(opener)
+            status = "passed"
         except Exception as exc:  # a check reports, never crashes the self-test
-            detail, ok = f"{type(exc).__name__}: {exc}", False
+            detail, status = f"{type(exc).__name__}: {exc}", "failed"
             left = _clear_left_fault(opener)
             if left is not None:
                 detail += f" (it left a latched {left} fault: cleared for the next checks)"
-        rows.append({"name": name, "ok": ok, "detail": detail})
-    passed = sum(r["ok"] for r in rows)
-    return {"backend": spec, "passed": passed, "failed": len(rows) - passed, "checks": rows}
+        rows.append({"name": name, "status": status, "ok": status == "passed",
+                     "detail": detail})
+    count = {k: sum(r["status"] == k for r in rows) for k in ("passed", "failed", "not run")}
+    return {"backend": spec, "passed": count["passed"], "failed": count["failed"],
+            "not_run": count["not run"], "checks": rows}
 
 
 def check_backend(name: str) -> dict:

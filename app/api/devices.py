@@ -107,22 +107,32 @@ def saturation_forecast(protocol: str | Path, *, device: str, windows: int = 12,
 
 
 def device_selftest(spec: str, *, clear_fault: bool = False,
-                    say: Callable[[str], None] | None = None) -> dict:
+                    say: Callable[[str], None] | None = None, device_alone: bool = False,
+                    tap_wait_s: float = 30.0) -> dict:
     """The backend-independent checks (:mod:`device.suite`) against the device at ``spec``.
 
     The device is opened once first, so a bad spec or an absent device is one named error
     before any check runs (and a fault latched before is cleared there, with
-    ``clear_fault``); each check then opens it afresh.
+    ``clear_fault``); each check then opens it afresh. A device whose contact is physical
+    (``simulated_contact`` false: a bridge to a commercial device, the papers' board) needs
+    a person to tap the stylus in five checks (:data:`device.suite.TAPPED`): they are said
+    first, and each asks for the taps through ``say`` when its window starts, waiting up to
+    ``tap_wait_s`` for the first contact; with ``device_alone`` they are not run.
 
     Returns
     -------
     dict
-        ``spec``, ``checks`` (each ``name``, ``ok``, ``detail``), ``passed``, ``failed``.
+        ``spec``, ``checks`` (each ``name``, ``status``, ``ok``, ``detail``), ``passed``,
+        ``failed``, ``not_run``.
     """
-    from device.suite import run_selftest
+    from device.suite import Operator, run_selftest
 
-    open_device_for(spec, clear_fault=clear_fault, say=say).close()
-    return run_selftest(spec, lambda: open_device_for(spec))
+    say = say or to_stderr
+    with open_device_for(spec, clear_fault=clear_fault, say=say) as dev:
+        physical = not dev.info.simulated_contact
+    operator = Operator(say, tap_wait_s) if physical and not device_alone else None
+    return run_selftest(spec, lambda: open_device_for(spec), operator=operator,
+                        device_alone=device_alone, say=say)
 
 
 def device_list() -> dict:

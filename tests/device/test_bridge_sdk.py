@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -405,3 +406,64 @@ def test_a_missing_prerequisite_is_named_with_what_provides_it(tmp_path):
     assert fd.returncode != 0
     assert "libusb-1.0-0-dev" in fd.stdout, fd.stdout + fd.stderr
     assert not (tmp_path / "hlfw-dhd").exists()
+
+
+def _lenient_cflags() -> str:
+    """The Makefile's CFLAGS with a real device's loop allowed to be held up a minute, not
+    5 ms (HL_OVERRUN_TICKS): a test about what the operator is asked cannot depend on a busy
+    test machine keeping a servo deadline (the device fault it latches otherwise is
+    tests/device/test_bridge_safety.py's subject)."""
+    run = subprocess.run(["make", "-s", "--no-print-directory", "-C", str(FIRMWARE_DIR),
+                          "--eval=hl-print-cflags: ; @echo $(CFLAGS)", "hl-print-cflags"],
+                         capture_output=True, text=True, check=True)
+    return f"CFLAGS={run.stdout.strip()} -DHL_OVERRUN_TICKS=240000u"
+
+
+@pytest.mark.slow
+def test_the_self_test_on_a_real_device_asks_the_operator_to_tap(fd_sdk, tmp_path):
+    """A real device's bridge (`make dhd`, no simulated contact) under `hapticlab device
+    selftest`, the test as its operator: it taps (HL_STUB_DHD_TAP_FILE: the stand-in's hand
+    taps while the file exists) when a prompt asks, and stops when told, except for the
+    saturation check, where it does nothing. The tapped checks pass; saturation fails by
+    name with the window's gave-up; nothing tapped is counted passed unseen. (It once ran
+    13 checks with no word to the operator: 8 passed, 5 failed after 30 s each.)"""
+    run = _make("dhd", f"DHD_SDK={fd_sdk}", f"BRIDGE_OUT={tmp_path}",
+                f"BRIDGE_RATINGS={RATINGS}", _lenient_cflags())
+    assert run.returncode == 0, run.stdout + run.stderr
+    tap = tmp_path / "tapping"
+    bridge = subprocess.Popen([str(tmp_path / "hlfw-dhd")], stdout=subprocess.PIPE,
+                              stderr=subprocess.DEVNULL, text=True,
+                              env={**os.environ, "HL_STUB_DHD_TAP_FILE": str(tap)})
+    said = []
+    try:
+        port = bridge.stdout.readline().strip()
+        assert port.startswith("/dev/")
+        test = subprocess.Popen([sys.executable, "-m", "app", "device", "selftest",
+                                 f"serial:{port}", "--tap-wait", "4"], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True,
+                                env={**os.environ, "COLUMNS": "300"})  # a row, one line
+        for line in test.stderr:  # what the operator reads, and does
+            said.append(line.rstrip("\n"))
+            if "tap the stylus down onto the virtual surface now" in line:
+                if not line.startswith("[saturation]"):
+                    tap.touch()
+            elif "stop tapping" in line:
+                tap.unlink(missing_ok=True)
+        out = test.stdout.read()
+        assert test.wait(timeout=60) == 1
+    finally:
+        bridge.terminate()
+        bridge.communicate(timeout=30)
+    text = "\n".join(said)
+    assert ("8 checks the device does alone (info, estop, end_window, watchdog, ramp, "
+            "zero_on_exit, play_force, bad_input); 5 need someone to tap the stylus "
+            "(real_sample, spring_law, transient_scaling, saturation, window_length)") in text
+    for name in ("real_sample", "spring_law", "transient_scaling", "saturation",
+                 "window_length"):
+        assert f"[{name}] tap the stylus down onto the virtual surface now" in text, text
+    assert "[saturation] no contact in 4 s: gave up waiting" in text, text
+    assert sum("contact: window recorded" in line for line in said) == 4, text
+    assert "12 passed, 1 failed" in out, out
+    row = [line for line in out.splitlines() if "│ saturation " in line]
+    assert len(row) == 1 and "FAIL" in row[0], out
+    assert "no contact within 4 s of the prompt to tap the stylus: gave up waiting" in row[0]

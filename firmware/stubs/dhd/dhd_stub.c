@@ -30,6 +30,10 @@
  *   HL_STUB_DHD_OFF_AXIS_MM=D   the hand holds the stylus D mm off the axis along x (the
  *                               holding spring pulls it back; the largest force it applied
  *                               off the axis is said at exit)
+ *   HL_STUB_DHD_TAP_FILE=PATH   a person taps the stylus onto the virtual surface (z = 0)
+ *                               while PATH exists, and lifts it clear of the surface when
+ *                               PATH is removed (looked at every 10 ms of its time): the
+ *                               operator a real-device build's self-test asks to tap
  * At exit it says on stderr how it was left: open or closed, forces on or off, the last
  * force, the largest force applied off the axis with forces on, and how many force commands
  * did not hold an active wrist or gripper at zero. */
@@ -40,8 +44,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "hl_dhd_api.h"
+#include "hl_hal.h"
 #include "hl_plant.h"
 #include "hl_stub.h"
 
@@ -56,7 +62,8 @@ enum { E_NONE = 0, E_COM = 2, E_NOT_AVAILABLE = 6, E_INVALID_INDEX = 15, E_NULL 
 
 static uint64_t seed;
 static struct {
-    int open, forces_on, initialized, gravity, model, off_cause, off_fired, at_exit;
+    int open, forces_on, initialized, gravity, model, off_cause, off_fired, at_exit, tapping;
+    const char *tap_file;
     uint64_t refreshes, fail_after, off_after, commands, uncommanded, timeguard_k;
     double saturate_n, max_force_n, com_khz, last_force[3], off_axis_m, off_axis_n;
     int error;
@@ -131,6 +138,7 @@ static int open_device(void)
     S.max_force_n = env_num("HL_STUB_DHD_MAX_FORCE", -1.0);
     S.com_khz = env_num("HL_STUB_DHD_COM_KHZ", DHD_STUB_HZ / 1000.0);
     S.off_axis_m = env_num("HL_STUB_DHD_OFF_AXIS_MM", 0.0) * 1e-3;
+    S.tap_file = getenv("HL_STUB_DHD_TAP_FILE");
     static int registered;
     if (!registered) {
         registered = 1;
@@ -276,6 +284,13 @@ static int command(double fx, double fy, double fz)
     if (S.forces_on && !S.off_fired && S.refreshes >= S.off_after) {
         S.off_fired = 1; /* the device turns its own forces off */
         S.forces_on = 0;
+    }
+    if (S.tap_file != NULL && S.refreshes % (DHD_STUB_HZ / 100) == 0) {
+        int tap = access(S.tap_file, F_OK) == 0;
+        if (tap != S.tapping) { /* the person starts tapping, or lifts the stylus clear */
+            S.tapping = tap;
+            plant_task(tap ? HAL_TASK_TAP : HAL_TASK_HOLD);
+        }
     }
     plant_step(S.forces_on ? (float)S.last_force[2] : 0.0f);
     S.refreshes++;

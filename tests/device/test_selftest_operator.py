@@ -1,0 +1,121 @@
+"""The self-test on a device whose contact is physical (review r52 item 2): five checks need
+someone to tap the stylus. The self-test says which, asks at the moment each window starts
+waiting for contact, and reports a check nobody tapped for as failed by name, or, asked to
+run the device-alone checks only, as not run; never as passed.
+
+Here in process, over the simulated device declaring a physical contact (its simulated hand
+taps, as a person would when asked), with a few of the checks to stay cheap; over a real
+device's bridge built against the Force Dimension stand-in, with the test as the operator,
+in tests/device/test_bridge_sdk.py.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+import device.registry
+from app.api import device_selftest
+from device import suite
+from device.sim.backend import SimDevice
+
+# two checks the device does alone, two that need the stylus tapped (cheap ones of each)
+SOME = ("spring_law", "ramp", "window_length", "bad_input")
+ALL = dict(suite.CHECKS)
+
+
+class PhysicalSim(SimDevice):
+    """A device that says its contact is physical, simulated underneath; its windows are
+    written in the same log as what the self-test says, to see when each prompt comes."""
+
+    log: list[str] = []
+
+    def __init__(self, **options):
+        super().__init__(**options)
+        self._info = dataclasses.replace(self._info, backend="bench", simulated_contact=False,
+                                         seeded=False, virtual_time=False)
+
+    def run_window(self, duration=5.0, **kw):
+        res = super().run_window(duration, **kw)
+        waits = kw.get("from_first_contact", True) and kw.get("on_progress") is None
+        self.log.append(f"window {kw.get('timeout', 30.0):g}"
+                        + (" waiting for a contact" if waits else ""))
+        return res
+
+
+@pytest.fixture
+def bench(monkeypatch):
+    """``bench``, a physical device, registered for this test with a few of the checks."""
+    monkeypatch.setitem(device.registry._REGISTERED, "bench", PhysicalSim)
+    monkeypatch.setattr(suite, "CHECKS", {n: ALL[n] for n in SOME})
+    PhysicalSim.log = []
+    return PhysicalSim.log
+
+
+def test_a_physical_device_says_which_checks_need_a_tap_and_asks_at_each_window(bench):
+    report = device_selftest("bench", say=bench.append, tap_wait_s=12.0)
+    assert report["passed"] == 4 and report["failed"] == report["not_run"] == 0, report
+    plan = bench[0]
+    assert ("2 checks the device does alone (ramp, bad_input); 2 need someone to tap the "
+            "stylus (spring_law, window_length): you will be asked at each") in plan, plan
+    for name in ("spring_law", "window_length"):
+        asked = bench.index(f"[{name}] tap the stylus down onto the virtual surface now, and "
+                            "keep tapping until told to stop (waiting up to 12 s for contact)")
+        # the prompt comes as the window starts waiting, the end of the taps after it
+        assert bench[asked + 1] == "window 12 waiting for a contact", bench
+        assert bench[asked + 2].startswith(f"[{name}] contact: window recorded; stop tapping")
+    assert sum("tap the stylus down" in line for line in bench) == 2  # not for ramp, bad_input
+
+
+def test_device_alone_reports_the_tapped_checks_not_run_never_passed(bench):
+    report = device_selftest("bench", say=bench.append, device_alone=True)
+    rows = {r["name"]: r for r in report["checks"]}
+    assert (report["passed"], report["failed"], report["not_run"]) == (2, 0, 2)
+    for name in ("spring_law", "window_length"):
+        assert rows[name]["status"] == "not run" and rows[name]["ok"] is False
+    assert "2 need someone to tap the stylus (spring_law, window_length): not run" in bench[0]
+    assert not any("tap the stylus down" in line for line in bench)
+
+
+def test_a_simulated_contact_is_not_asked_for(monkeypatch):
+    """The simulated device's hand taps by itself: no plan, no prompt, as before."""
+    said: list[str] = []
+    monkeypatch.setattr(suite, "CHECKS", {"window_length": ALL["window_length"]})
+    report = device_selftest("sim", say=said.append)
+    assert report["passed"] == 1 and said == []
+
+
+def test_a_wait_for_a_tap_must_be_positive():
+    with pytest.raises(ValueError, match="positive number of seconds"):
+        suite.Operator(print, float("nan"))
+
+
+def test_the_checks_a_device_does_alone_never_wait_for_a_contact(monkeypatch, bench):
+    """Two of them once ran a window from the first contact, each waiting 30 s on a device
+    nobody taps (the e-stop's window after clearing, the exit's): a minute of silence for
+    an operator told to hold the stylus still."""
+    alone = ("estop", "end_window", "watchdog", "zero_on_exit", "bad_input")
+    monkeypatch.setattr(suite, "CHECKS", {n: ALL[n] for n in alone})
+    report = device_selftest("bench", say=bench.append)
+    assert report["passed"] == len(alone), report
+    windows = [line for line in bench if line.startswith("window")]
+    assert windows and not any("waiting for a contact" in w for w in windows), windows
+
+
+def test_the_command_counts_not_run_apart_and_exits_1(bench, capsys, monkeypatch):
+    """`hapticlab device selftest --device-alone` on a physical device: the table marks the
+    tapped checks *not run*, the summary counts them apart, and only 13 of 13 passed exits
+    0 (a script reading the status cannot take a partial run for a whole one)."""
+    from app.cli import main
+
+    monkeypatch.setenv("COLUMNS", "300")
+    assert main(["device", "selftest", "bench", "--device-alone"]) == 1
+    out = capsys.readouterr()
+    assert "2 passed, 0 failed, 2 not run (they need someone to tap the stylus: run without " \
+           "--device-alone)" in out.out, out.out
+    rows = [line for line in out.out.splitlines() if "│ spring_law " in line]
+    assert len(rows) == 1 and "not run" in rows[0], out.out
+    assert "2 need someone to tap the stylus (spring_law, window_length): not run" in out.err
+    assert main(["device", "selftest", "bench", "--tap-wait", "0"]) == 2
+    assert "--tap-wait must be a positive number of seconds" in capsys.readouterr().err
