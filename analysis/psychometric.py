@@ -26,7 +26,7 @@ support, from the finest step between intensities to three times their span, wit
 flanks), except that w's is flat in ln w where psignifit's is flat in w: with adaptive data,
 crowded around one point, a prior flat in w favours shallow functions and pulls the
 threshold at a criterion below the point the procedure converged on (by about 5 % in
-simulated sessions; flat in ln w, by under 2 % either way). The posterior needs no random
+simulated sessions; flat in ln w, by 1–3 % either way). The posterior needs no random
 numbers, and an adaptive procedure's choice of intensities, which depends on the answers
 alone, leaves it unchanged (the likelihood principle); whether its interval holds the truth
 at the nominal rate on adaptive data is measured by ``hapticlab bench thresholds``. An end
