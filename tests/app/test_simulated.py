@@ -159,20 +159,28 @@ def test_pitch_window_adapts_to_slow_vibrations(f, decay):
 
 
 @pytest.fixture(scope="module")
-def study_dir(tmp_path_factory):
-    data = tmp_path_factory.mktemp("simstudy")
-    for proto, n, prefix in (("realism", 9, "R"), ("identification", 14, "I"),
-                             ("factorial", 9, "F")):
-        out = subprocess.run([*CLI, "simulate", proto, "--participants", str(n), "--seed", "1",
-                              "--data", str(data), "--prefix", prefix, "--traces", "none"],
-                             capture_output=True, text=True, timeout=900)
-        assert out.returncode == 0, out.stderr
-    return data
+def study_dir(demo_study):
+    """The demo's sessions (realism 9, factorial 9, identification 6 experts and 8
+    novices), shared with every test that reads a whole simulated study."""
+    assert demo_study.returncode == 0, demo_study.stderr
+    return demo_study.out / "data"
 
 
 @pytest.fixture(scope="module")
 def study(study_dir):
     return load_sessions(study_dir)
+
+
+@pytest.fixture(scope="module")
+def factorial_study(tmp_path_factory):
+    """The factorial study of seed 1, of which test_face_validity_factorial's docstring
+    says what emerges (the demo's seeds differ)."""
+    data = tmp_path_factory.mktemp("factorial")
+    out = subprocess.run([*CLI, "simulate", "factorial", "--participants", "9", "--seed", "1",
+                          "--data", str(data), "--prefix", "F", "--traces", "none"],
+                         capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr
+    return load_sessions(data)
 
 
 def realism(study):
@@ -220,14 +228,14 @@ def test_face_validity_identification(study):
 
 
 @pytest.mark.integration
-def test_face_validity_factorial(study):
+def test_face_validity_factorial(factorial_study):
     """What emerges in every seed tried (1, 2, 3; p values below are the range over them):
     for wood, frequency (p ≤ .006) and slope (p ≤ .048) matter and their high levels,
     toward the measured 592-Hz, −1500-1/s model, are preferred — frequency matters most in
     two seeds of three, as in the paper; for aluminum, the higher slope (toward the measured
     model's far larger amplitude) is preferred (p ≤ .004). What does not emerge (aluminum's
     300 Hz, rubber's direction) is explained in the README: mostly the simulated device."""
-    res = analyse_recorded(study, "factorial", "rating")["result"]
+    res = analyse_recorded(factorial_study, "factorial", "rating")["result"]
     for mat, factors in (("wood", ("frequency", "slope")), ("aluminum", ("slope",))):
         effects = res[mat]["main_effects"].set_index("factor")
         for factor in factors:
@@ -386,16 +394,14 @@ def test_simulate_over_the_serial_link_to_the_emulator(tmp_path):
 
 @pytest.mark.integration
 @pytest.mark.slow
-def test_demo_writes_the_whole_study_and_its_report(tmp_path):
-    out = subprocess.run([*CLI, "demo", "--out", str(tmp_path / "demo")], capture_output=True,
-                         text=True, timeout=900)
-    assert out.returncode == 0, out.stderr
-    import json
-
-    rep = json.loads((tmp_path / "demo" / "report" / "report.json").read_text())
-    assert (tmp_path / "demo" / "report" / "report.html").stat().st_size > 10_000
+def test_demo_writes_the_whole_study_and_its_report(demo_study):
+    """`make demo`'s job (the run's one demo, shared with the face-validity tests)."""
+    assert demo_study.returncode == 0, demo_study.stderr
+    report = demo_study.out / "report"
+    rep = json.loads((report / "report.json").read_text())
+    assert (report / "report.html").stat().st_size > 10_000
     assert rep["methods"].startswith("These data come from simulated participants")
     assert rep["provenance"]["sessions"] == 9 + 9 + 14
     assert [a["id"] for a in rep["analyses"]] == [
         "factorial/rating", "identification/identification", "realism/testing"]
-    assert "report.html" in out.stdout and "simulating realism" in out.stderr
+    assert "report.html" in demo_study.stdout and "simulating realism" in demo_study.stderr
