@@ -61,6 +61,11 @@ class DemoStudy:
     stderr: str
 
 
+#: a test that asks for the demo study may wait for the whole demo (made in its setup, or by
+#: another worker while it waits on the lock): minutes on a loaded machine [s]
+_DEMO_TIMEOUT_S = 900
+
+
 @pytest.fixture(scope="session")
 def demo_study(tmp_path_factory) -> DemoStudy:
     """One ``hapticlab demo`` for the whole run (32 simulated sessions and their report),
@@ -105,6 +110,9 @@ def pytest_collection_modifyitems(config, items):
     made to pass beside two CPU-bound processes; the other worker is one). Every other test
     goes with its module, so that a module's shared fixture (a study, an identified plant)
     is made once."""
+    for item in items:  # the demo a test waits for is part of its time (demo_study)
+        if "demo_study" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.timeout(_DEMO_TIMEOUT_S), append=False)
     if not config.pluginmanager.hasplugin("xdist"):
         return
     for item in items:
@@ -118,7 +126,10 @@ def pytest_xdist_node_collection_finished(node, ids):
     them): pytest-xdist marks a test's group in its id (``…@realtime``), and pytest 9.2's
     structured ids drop that mark silently (pytest-xdist issue #1386), so real-time tests
     would run side by side. Every test has a group (pytest_collection_modifyitems)."""
-    if ids and node.config.getvalue("dist") == "loadgroup" and not any("@" in i for i in ids):
+    def grouped(nodeid: str) -> bool:  # the groups pytest_collection_modifyitems gives
+        return nodeid.endswith(("@realtime", "@" + nodeid.split("::", 1)[0]))
+
+    if ids and node.config.getvalue("dist") == "loadgroup" and not any(map(grouped, ids)):
         pytest.exit(f"--dist loadgroup: pytest-xdist grouped none of the {len(ids)} tests "
                     f"{node.gateway.id} collected: pytest {pytest.__version__} with this "
                     "pytest-xdist loses the groups (pytest-xdist issue #1386); install pytest "
