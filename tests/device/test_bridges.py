@@ -193,11 +193,13 @@ def test_a_build_against_an_sdk_that_is_not_there_says_what_it_needs(target, var
                                                                       tmp_path):
     """`make -C firmware dhd DHD_SDK=…` and `make -C firmware hd OPENHAPTICS=…` build the
     bridges against a lab's installed SDK; pointed at a folder without it, each stops
-    before compiling and names the variable."""
+    before compiling and names the variable, the folder and the header it lacks (review
+    r52 item 9: it used to say "needs DHD_SDK=…" as if none was given)."""
     run = subprocess.run(["make", "-C", str(FIRMWARE_DIR), target, f"{variable}={tmp_path}"],
                          capture_output=True, text=True, timeout=120)
+    header = {"dhd": "include/dhdc.h", "hd": "include/HD/hd.h"}[target]
     assert run.returncode != 0
-    assert f"make {target} needs" in run.stdout + run.stderr and variable in run.stdout
+    assert f"make {target}: {variable}={tmp_path} does not hold {header}" in run.stdout
 
 
 @pytest.mark.integration
