@@ -272,12 +272,27 @@ class HapticDevice(ABC):
         self._check_open()
         self._end_window()
 
-    def play_force(self, force, *, heartbeats: bool = True) -> WindowResult:
+    def play_force(self, force, *, heartbeats: bool = True,
+                   on_progress: Callable[[float, WindowResult], None] | None = None
+                   ) -> WindowResult:
         """Play an open-loop force command [N per servo tick] while the hand holds still.
 
         The stylus is in free air; the command still passes the enable ramp, watchdog and
-        current clamp. Used for system identification (swept sines) and for checking
-        transients. Home again before the next tapping window.
+        current clamp. Used for system identification (swept sines), for checking
+        transients, and by the self-test to have a force to cut with no contact (its
+        e-stop, watchdog and exit checks). Home again before the next tapping window.
+
+        Parameters
+        ----------
+        force : array_like [N]
+            One command per servo tick.
+        heartbeats : bool
+            As for :meth:`run_window`: False makes the host go silent (the watchdog trips).
+        on_progress : callable, optional
+            As for :meth:`run_window`: called as ``on_progress(t, partial_result)`` a few
+            times per second of device time, where an e-stop (or an exception) can act
+            while the force plays. A backend whose ``_play_force`` takes no callback is
+            given none when there is none.
         """
         self._check_open()
         self._check_fault()
@@ -289,7 +304,9 @@ class HapticDevice(ABC):
                              f"plays in one go: {MAX_WINDOW_TICKS} ticks "
                              f"({self.max_window_s:g} s); split it")
         self._homed = False
-        return self._play_force(f, bool(heartbeats))
+        if on_progress is None:
+            return self._play_force(f, bool(heartbeats))
+        return self._play_force(f, bool(heartbeats), on_progress)
 
     def set_trace_channels(self, channels: Sequence[str] | None = None) -> float:
         """Choose the trace channels the following windows and playbacks record.
@@ -439,8 +456,10 @@ class HapticDevice(ABC):
         """End the running window at the device's next tick (nothing when none runs)."""
 
     @abstractmethod
-    def _play_force(self, force: np.ndarray, heartbeats: bool) -> WindowResult:
-        """Play a checked force array [N per tick] open loop in free air."""
+    def _play_force(self, force: np.ndarray, heartbeats: bool,
+                    on_progress=None) -> WindowResult:
+        """Play a checked force array [N per tick] open loop in free air (``on_progress``
+        as :meth:`_run_window`'s)."""
 
     def _set_trace_channels(self, channels: tuple[str, ...] | None) -> float:
         """Record ``channels`` (checked; None: all) in the following windows; return their

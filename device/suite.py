@@ -201,15 +201,60 @@ def check_window_length(opener: Opener, operator: Operator | None = None) -> str
         return f"window of {span:.4f} s from the first contact"
 
 
+#: the force [N] the safety checks cut, played open loop in free air: a 100-Hz, 0.5-N
+#: cosine, the size of the play_force check's sine (a buzz in a hand holding the stylus
+#: still). No contact is needed, so a device with a physical contact does these checks
+#: alone, and a simulated hand's timing cannot leave the output off at the event; a cosine
+#: is at its peak, not at a zero, at the 0.1-s marks a simulated device reports progress on
+_CUT_N, _CUT_HZ = 0.5, 100.0
+#: output counts as on from 1 mN: the wire's force step
+_OUTPUT_ON_N = 1e-3
+#: "just before" an event [s]: half the force's period, so its peak lies inside
+_JUST_BEFORE_S = 0.5 / _CUT_HZ
+
+
+def _force_to_cut(dev: HapticDevice, seconds: float) -> np.ndarray:
+    """``seconds`` [s] of the force the safety checks cut, one command per servo tick."""
+    rate = dev.info.servo_rate_hz
+    t = np.arange(int(round(seconds * rate))) / rate
+    return _CUT_N * np.cos(2 * np.pi * _CUT_HZ * t)
+
+
+def _output_on(dev: HapticDevice) -> bool:
+    """The device says it is putting out force now (a callback's view)."""
+    return abs(dev.output_force) >= _OUTPUT_ON_N
+
+
+def _cut(dev: HapticDevice, res: WindowResult, event: str) -> float:
+    """The peak force [N] the device put out just before ``res``'s fault (within
+    :data:`_JUST_BEFORE_S`, or its last three records when they are sparser), after
+    requiring that there was one and that the current is zero from the fault on: a check
+    that output was cut passes only when there was output to cut."""
+    tr = res.traces
+    t_f = res.faults[0].t
+    span = max(_JUST_BEFORE_S, 3.0 / res.rate_hz)
+    near = (tr["t"] < t_f) & (tr["t"] >= t_f - span)
+    force = np.abs(tr["current"][near]) * dev.info.force_constant
+    peak = float(force.max()) if force.size else 0.0
+    _require(peak >= _OUTPUT_ON_N, f"no force was being output before the {event}: nothing "
+             f"shown (at most {peak * 1e3:.3g} mN in the {span * 1e3:.3g} ms before it)")
+    after = tr["t"] >= t_f
+    _require(bool(np.all(tr["current"][after] == 0)), f"current not zero after the {event}")
+    return peak
+
+
 def check_estop(opener: Opener) -> str:
-    """An ESTOP during a window latches an estop fault and zeroes output (the windows here
-    run from their start: a device with a physical contact does this check alone, and the
-    checks it does alone never wait for a contact); a device that
-    reports what it saw (LINK_REPORT) did so within its stated bound from the frame's
+    """An ESTOP while the device puts out force (a free-air playback: no contact needed)
+    latches an estop fault and zeroes the output that was there just before it; a device
+    that reports what it saw (LINK_REPORT) did so within its stated bound from the frame's
     arrival (``estop_bound_s``), traces streaming meanwhile."""
     with opener() as dev:
+        dev.load_scene(SUITE_SCENES["firm_spring"])  # to home and run a window once cleared
+        sent: list[float] = []
+
         def stop(t: float, _partial: WindowResult) -> None:
-            if t >= 0.3:
+            if not sent and t >= 0.1 and _output_on(dev):  # past the enable ramp
+                sent.append(dev.output_force)
                 dev.estop()
 
         seen = getattr(dev, "device_link_report", None)
@@ -217,9 +262,12 @@ def check_estop(opener: Opener) -> str:
         try:
             if seen is not None:
                 seen(reset=True)
-            res = _window(dev, SUITE_SCENES["pulse_firm"], 1.5, from_first_contact=False,
-                          on_progress=stop)
+            res = dev.play_force(_force_to_cut(dev, 1.5), on_progress=stop)
+            _require(bool(sent), "no force was being output before the e-stop: nothing "
+                     "shown (the device reported none during a 1.5-s playback of "
+                     f"{_CUT_N:g} N, so the e-stop was never pressed)")
             _require(bool(res.faults) and res.faults[0].code == "estop", f"faults: {res.faults}")
+            peak = _cut(dev, res, "e-stop")
             report = seen() if seen is not None else None
             bound = dev.estop_bound_s() if report is not None else None
             ms = report["estop_max_ms"] if report is not None else None
@@ -232,9 +280,6 @@ def check_estop(opener: Opener) -> str:
                         f"{bound * 1e3:.3f} ms)")
             elif ms is not None:  # another device: its own figure, not judged
                 took = f"; zeroed within {ms:.3f} ms of its arrival, as the device counts it"
-            tr = res.traces
-            after = tr["t"] >= res.faults[0].t
-            _require(bool(np.all(tr["current"][after] == 0)), "current not zero after the e-stop")
             _require(dev.output_force == 0.0, "output not zero after the e-stop")
             for call in (dev.home, lambda: dev.run_window(0.5)):
                 try:
@@ -248,7 +293,8 @@ def check_estop(opener: Opener) -> str:
         dev.home()
         again = dev.run_window(0.5, from_first_contact=False)
         _require(not again.faults, "fault came back after clearing")
-        return f"latched at t={res.faults[0].t:.3f} s{took}; cleared and re-homed"
+        return (f"cut {peak:.2f} N of played force at t={res.faults[0].t:.3f} s, latched"
+                f"{took}; cleared and re-homed")
 
 
 def check_end_window(opener: Opener) -> str:
@@ -280,26 +326,25 @@ def check_end_window(opener: Opener) -> str:
 
 
 def check_watchdog(opener: Opener) -> str:
+    """The host falls silent while the device puts out force (a free-air playback without
+    heartbeats): the watchdog trips within its period, zeroes the output that was there just
+    before, and latches."""
     with opener() as dev:
-        sc = SUITE_SCENES["firm_spring"]
-        dev.load_scene(sc)
-        dev.home()
+        wd = dev.info.watchdog_s
         try:
-            res = dev.run_window(1.0, from_first_contact=False, heartbeats=False)
-            wd = dev.info.watchdog_s
+            res = dev.play_force(_force_to_cut(dev, max(1.0, 2 * wd)), heartbeats=False)
             _require(bool(res.faults) and res.faults[0].code == "watchdog",
                      f"faults: {res.faults}")
             t0 = res.traces["t"][0]
             dt_f = res.faults[0].t - t0
             _require(dt_f <= wd + 2.0 / res.rate_hz + 0.05,
                      f"watchdog tripped after {dt_f:.4f} s")
-            after = res.traces["t"] >= res.faults[0].t
-            _require(bool(np.all(res.traces["current"][after] == 0)),
-                     "output not zero after trip")
+            peak = _cut(dev, res, "watchdog trip")
             _require(dev.fault is not None, "watchdog fault not latched")
         finally:
             dev.clear_fault()  # a device keeps its fault across connections; leave it clean
-        return f"output zeroed {dt_f * 1e3:.1f} ms into a silent window (T_wd {wd * 1e3:g} ms)"
+        return (f"cut {peak:.2f} N of played force {dt_f * 1e3:.1f} ms into a silence "
+                f"(T_wd {wd * 1e3:g} ms)")
 
 
 def check_ramp(opener: Opener) -> str:
@@ -318,23 +363,32 @@ def check_ramp(opener: Opener) -> str:
 
 
 def check_zero_on_exit(opener: Opener) -> str:
+    """A session that fails by an exception while the device puts out force (a free-air
+    playback) leaves it, by the ``with`` block's exit, with zero output and closed."""
     dev = opener()
+    before: list[float] = []
+
+    def fail(t: float, _partial: WindowResult) -> None:
+        if t >= 0.1 and _output_on(dev):  # past the enable ramp
+            before.append(dev.output_force)
+            raise RuntimeError("simulated failure inside the session")
+
     try:
         with dev:
-            dev.load_scene(SUITE_SCENES["pulse_firm"])
-            dev.home()
-            dev.run_window(0.3, from_first_contact=False)
-            raise RuntimeError("simulated failure inside the session")
+            dev.play_force(_force_to_cut(dev, 1.5), on_progress=fail)
+            raise RuntimeError("simulated failure inside the session")  # no force came
     except RuntimeError:
         pass
     _require(dev.output_force == 0.0, f"output {dev.output_force} N after exit by exception")
+    _require(bool(before), "no force was being output before the exit: nothing shown (the "
+             f"device reported none during a 1.5-s playback of {_CUT_N:g} N)")
     try:
         dev.run_window(0.3)
     except DeviceError:
         pass
     else:
         raise CheckFailed("a closed device still ran a window")
-    return "closed with zero output after an exception"
+    return f"closed with zero output after an exception while putting out {abs(before[0]):.2f} N"
 
 
 def check_play_force(opener: Opener) -> str:

@@ -713,7 +713,9 @@ class SerialDevice(HapticDevice):
             self._window_sent = (float(res.traces["t"][0]), sent)
         return res
 
-    def _play_force(self, f: np.ndarray, heartbeats: bool) -> WindowResult:
+    def _play_force(self, f: np.ndarray, heartbeats: bool,
+                    on_progress: Callable[[float, WindowResult], None] | None = None
+                    ) -> WindowResult:
         q = np.clip(np.round(f * 1000), -32768, 32767).astype("<i2")
         lim = self.link.limits
         if lim is not None and q.size > lim.play_items:
@@ -727,7 +729,8 @@ class SerialDevice(HapticDevice):
         wid = self._window_id
         self.link.clear_events()
         self._command(M.PlayStart(wid, q.size))
-        return self._collect(wid, q.size / self._info.servo_rate_hz + 2.0, None, heartbeats)
+        return self._collect(wid, q.size / self._info.servo_rate_hz + 2.0, on_progress,
+                             heartbeats)
 
     def _collect(self, wid: int, limit: float, on_progress, heartbeats: bool) -> WindowResult:
         rate = self._info.servo_rate_hz

@@ -424,7 +424,9 @@ class SimDevice(HapticDevice):
                          and (self._tick - tick0) * dev.dt >= timeout - dev.dt / 2)
         return res
 
-    def _play_force(self, f: np.ndarray, heartbeats: bool) -> WindowResult:
+    def _play_force(self, f: np.ndarray, heartbeats: bool,
+                    on_progress: Callable[[float, WindowResult], None] | None = None
+                    ) -> WindowResult:
         """Play an open-loop force command [N per servo tick] while the hand holds still.
 
         Each call starts with the stylus at rest in free air (no surface within reach) and
@@ -442,8 +444,8 @@ class SimDevice(HapticDevice):
         self._ist[K.IST_SINCE_ENABLE] = since
         self._enabled = False  # a window needs home() afterwards
         self.heartbeat()
-        return self._run(self._free_air, HoldPlan(0.0), f.size, -1, f, None, heartbeats, None,
-                         f.size * self.params.dt)
+        return self._run(self._free_air, HoldPlan(0.0), f.size, -1, f, on_progress, heartbeats,
+                         None, f.size * self.params.dt)
 
     def _run(self, cs: CompiledScene, plan, n_max: int, stop_after: int, f_ext: np.ndarray,
              on_progress, heartbeats: bool, timeout: float | None, initial_s: float
@@ -489,7 +491,7 @@ class SimDevice(HapticDevice):
                                  ev_vel)
             self._tick = tick0 + n_done
             n = n_done
-            if self.live and n:
+            if n:  # what a callback reads as the output now, live or in virtual time
                 self._output_force = float(buf.cur[n - 1] * dev.force_constant)
             ft = int(self._ist[K.IST_FAULT_TICK])
             if ft >= 0:  # latch now, so callers see it mid-window, timed at the zeroing tick
@@ -520,7 +522,10 @@ class SimDevice(HapticDevice):
             if pieces is not None and n - pieces.done >= STREAM_TICKS:
                 self.trace_sink(pieces.done, pieces.take(n))
             if on_progress is not None:
-                on_progress(n * dt, self._result(buf, n, tick0, ev_tick, ev_vel))
+                partial = self._result(buf, n, tick0, ev_tick, ev_vel)
+                if n and not f_ext.size:  # a playback's stylus has no surface in reach
+                    partial.live_height = float(buf.pos[n - 1] - cs.plant.surface_height)
+                on_progress(n * dt, partial)
         if pieces is not None and n > pieces.done:
             self.trace_sink(pieces.done, pieces.take(n))
         res = self._result(buf, n, tick0, ev_tick, ev_vel, final=True, pieces=pieces)
@@ -577,9 +582,7 @@ class SimDevice(HapticDevice):
         res = WindowResult(rate_hz=dev.servo_rate_hz,
                            t_first_contact=(tick0 + first) * dt if first >= 0 else None,
                            contacts=contacts)
-        if not final:
-            if n:
-                res.live_height = float(buf.pos[n - 1] - self._scene.plant.surface_height)
+        if not final:  # the caller says the height: it knows the surface
             return res
         flags = buf.flags[:n].astype(np.uint16)
         fcmd = buf.fcmd[:n]

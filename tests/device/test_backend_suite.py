@@ -74,8 +74,11 @@ class _Lying(HapticDevice):
             res.faults = []
         return res
 
-    def _play_force(self, force, heartbeats):
-        return self.inner.play_force(force, heartbeats=heartbeats)
+    def _play_force(self, force, heartbeats, on_progress=None):
+        res = self.inner.play_force(force, heartbeats=heartbeats, on_progress=on_progress)
+        if self.lie == "no_fault":
+            res.faults = []
+        return res
 
     def _end_window(self):
         self.pending = True

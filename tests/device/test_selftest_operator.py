@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 import device.registry
 from app.api import device_selftest
 from device import suite
 from device.sim.backend import SimDevice
+from device.sim.tapper import HoldPlan, Tapper
 
 # two checks the device does alone, two that need the stylus tapped (cheap ones of each)
 SOME = ("spring_law", "ramp", "window_length", "bad_input")
@@ -42,6 +44,34 @@ class PhysicalSim(SimDevice):
         self.log.append(f"window {kw.get('timeout', 30.0):g}"
                         + (" waiting for a contact" if waits else ""))
         return res
+
+
+@dataclasses.dataclass(frozen=True)
+class Hovers(Tapper):
+    """A hand that holds the stylus still at the top of its stroke, above the surface: the
+    operator between prompts, or one who never taps when asked."""
+
+    def plan(self, rng, duration, surface_height=0.0, speeds=None):
+        return HoldPlan(surface_height + self.top)
+
+
+class HoveringBench(PhysicalSim):
+    """``bench`` held still above the surface throughout."""
+
+    def __init__(self, **options):
+        super().__init__(**options)
+        self.tapper = self._base_tapper = Hovers()
+
+
+class Unpowered(HoveringBench):
+    """``bench`` with its amplifier off (every force it is asked to play comes out as
+    none), held above the surface: a device that never puts out force."""
+
+    def _play_force(self, f, heartbeats, on_progress=None):
+        return super()._play_force(np.zeros_like(f), heartbeats, on_progress)
+
+
+SAFETY = ("estop", "watchdog", "zero_on_exit")
 
 
 @pytest.fixture
@@ -119,3 +149,28 @@ def test_the_command_counts_not_run_apart_and_exits_1(bench, capsys, monkeypatch
     assert "2 need someone to tap the stylus (spring_law, window_length): not run" in out.err
     assert main(["device", "selftest", "bench", "--tap-wait", "0"]) == 2
     assert "--tap-wait must be a positive number of seconds" in capsys.readouterr().err
+
+
+def test_a_check_of_output_cut_fails_by_name_when_there_was_no_output_to_cut(monkeypatch):
+    """Review final item 1: the e-stop, watchdog and exit checks once ran windows with the
+    stylus held above the surface, where no force is commanded, so "current zero after the
+    e-stop" held before it too and could not fail. Each now requires force put out just
+    before its event: a device that never puts any out fails them by name."""
+    monkeypatch.setattr(suite, "CHECKS", {n: ALL[n] for n in SAFETY})
+    report = suite.run_selftest("unpowered", lambda: Unpowered(seed=5))
+    rows = {r["name"]: r for r in report["checks"]}
+    assert report["failed"] == 3, report
+    for name, event in zip(SAFETY, ("e-stop", "watchdog trip", "exit"), strict=True):
+        assert f"no force was being output before the {event}: nothing shown" in \
+            rows[name]["detail"], rows[name]
+
+
+def test_the_safety_checks_cut_a_played_force_with_the_stylus_held_above_the_surface(
+        monkeypatch):
+    """What a physical device's operator does during them (hold the stylus still above
+    the surface): the device plays a small force in free air, and each check cuts it."""
+    monkeypatch.setattr(suite, "CHECKS", {n: ALL[n] for n in SAFETY})
+    report = suite.run_selftest("bench", lambda: HoveringBench(seed=5))
+    assert report["passed"] == 3, report
+    for row in report["checks"]:
+        assert "0.50 N" in row["detail"], row  # the force that was there to cut
