@@ -66,8 +66,15 @@ class Operator:
                              f"got {wait_s!r}")
         self.say, self.wait_s, self.check = say, float(wait_s), ""
 
+    #: what the operator is warned of before a check's prompt
+    WARNINGS = {"saturation": "a hard pulse is coming: each tap is met by a kick as strong "
+                              "as the device gives (its current limit), which is what this "
+                              "check asks for; hold the stylus firmly and tap briskly"}
+
     def window(self, dev: HapticDevice, duration: float, **kw) -> WindowResult:
-        """Run a window that needs the stylus tapped: prompt, wait, say how it went."""
+        """Run a window that needs the stylus tapped: warn, prompt, wait, say how it went."""
+        if self.check in self.WARNINGS:
+            self.say(f"[{self.check}] warning: {self.WARNINGS[self.check]}")
         self.say(f"[{self.check}] tap the stylus down onto the virtual surface now, and keep "
                  f"tapping until told to stop (waiting up to {self.wait_s:g} s for contact)")
         res = dev.run_window(duration, timeout=self.wait_s, **kw)

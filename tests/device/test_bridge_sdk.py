@@ -423,10 +423,12 @@ def _lenient_cflags() -> str:
 def test_the_self_test_on_a_real_device_asks_the_operator_to_tap(fd_sdk, tmp_path):
     """A real device's bridge (`make dhd`, no simulated contact) under `hapticlab device
     selftest`, the test as its operator: it taps (HL_STUB_DHD_TAP_FILE: the stand-in's hand
-    taps while the file exists) when a prompt asks, and stops when told, except for the
-    saturation check, where it does nothing. The tapped checks pass; saturation fails by
-    name with the window's gave-up; nothing tapped is counted passed unseen. (It once ran
-    13 checks with no word to the operator: 8 passed, 5 failed after 30 s each.)"""
+    taps while the file exists) at every prompt and stops when told. All 13 pass and the
+    command exits 0: the e-stop, watchdog and exit checks among them cut a force the
+    device put out with the stylus held above the surface. The wait for a tap is long
+    (120 s) and ends as soon as the contact comes, so a busy host that is slow to play the
+    operator cannot turn a tapped check into "gave up waiting" (it once waited 4 s of wall
+    time); gave up waiting is tests/device/test_selftest_operator.py's, in device time."""
     run = _make("dhd", f"DHD_SDK={fd_sdk}", f"BRIDGE_OUT={tmp_path}",
                 f"BRIDGE_RATINGS={RATINGS}", _lenient_cflags())
     assert run.returncode == 0, run.stdout + run.stderr
@@ -439,31 +441,33 @@ def test_the_self_test_on_a_real_device_asks_the_operator_to_tap(fd_sdk, tmp_pat
         port = bridge.stdout.readline().strip()
         assert port.startswith("/dev/")
         test = subprocess.Popen([sys.executable, "-m", "app", "device", "selftest",
-                                 f"serial:{port}", "--tap-wait", "4"], stdout=subprocess.PIPE,
+                                 f"serial:{port}", "--tap-wait", "120"], stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True,
                                 env={**os.environ, "COLUMNS": "300"})  # a row, one line
         for line in test.stderr:  # what the operator reads, and does
             said.append(line.rstrip("\n"))
             if "tap the stylus down onto the virtual surface now" in line:
-                if not line.startswith("[saturation]"):
-                    tap.touch()
+                tap.touch()
             elif "stop tapping" in line:
                 tap.unlink(missing_ok=True)
         out = test.stdout.read()
-        assert test.wait(timeout=60) == 1
+        code = test.wait(timeout=60)
     finally:
         bridge.terminate()
         bridge.communicate(timeout=30)
     text = "\n".join(said)
+    assert code == 0, out + text
     assert ("8 checks the device does alone (info, estop, end_window, watchdog, ramp, "
             "zero_on_exit, play_force, bad_input); 5 need someone to tap the stylus "
             "(real_sample, spring_law, transient_scaling, saturation, window_length)") in text
     for name in ("real_sample", "spring_law", "transient_scaling", "saturation",
                  "window_length"):
         assert f"[{name}] tap the stylus down onto the virtual surface now" in text, text
-    assert "[saturation] no contact in 4 s: gave up waiting" in text, text
-    assert sum("contact: window recorded" in line for line in said) == 4, text
-    assert "12 passed, 1 failed" in out, out
-    row = [line for line in out.splitlines() if "│ saturation " in line]
-    assert len(row) == 1 and "FAIL" in row[0], out
-    assert "no contact within 4 s of the prompt to tap the stylus: gave up waiting" in row[0]
+    assert "[saturation] warning: a hard pulse is coming" in text, text
+    assert sum("contact: window recorded" in line for line in said) == 5, text
+    assert "gave up waiting" not in text, text
+    assert "13 passed, 0 failed" in out, out
+    for name, cut in (("estop", "N of played force"), ("watchdog", "N of played force"),
+                      ("zero_on_exit", "after an exception while putting out")):
+        row = [line for line in out.splitlines() if f"│ {name} " in line]
+        assert len(row) == 1 and cut in row[0], out

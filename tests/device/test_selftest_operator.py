@@ -174,3 +174,21 @@ def test_the_safety_checks_cut_a_played_force_with_the_stylus_held_above_the_sur
     assert report["passed"] == 3, report
     for row in report["checks"]:
         assert "0.50 N" in row["detail"], row  # the force that was there to cut
+
+
+def test_a_tap_never_given_gives_up_by_name_in_device_time(monkeypatch):
+    """Review final item 2: the gave-up path without a deadline on the host: in process,
+    in the simulated device's own time, a hand that never taps and a 0.5-s wait. The
+    saturation check warns of its hard pulse before it asks."""
+    monkeypatch.setitem(device.registry._REGISTERED, "bench", HoveringBench)
+    monkeypatch.setattr(suite, "CHECKS", {"saturation": ALL["saturation"]})
+    said: list[str] = []
+    report = device_selftest("bench", say=said.append, tap_wait_s=0.5)
+    assert (report["passed"], report["failed"]) == (0, 1), report
+    assert report["checks"][0]["detail"] == ("CheckFailed: no contact within 0.5 s of the "
+                                             "prompt to tap the stylus: gave up waiting")
+    warn = said.index("[saturation] warning: " + suite.Operator.WARNINGS["saturation"])
+    assert "a hard pulse is coming" in said[warn]
+    assert said[warn + 1].startswith("[saturation] tap the stylus down onto the virtual "
+                                     "surface now"), said
+    assert said[warn + 2].startswith("[saturation] no contact in 0.5 s: gave up waiting")
