@@ -534,7 +534,8 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--json", action="store_true", help="print a JSON summary")
     st.add_argument("--device-alone", action="store_true",
                     help="on a physical device, run only the checks it does alone; the five "
-                    "that need someone to tap the stylus are reported as not run")
+                    "that need someone to tap the stylus are reported as not run (ignored, "
+                    "with a note, on a simulated device: its hand taps by itself)")
     st.add_argument("--tap-wait", type=float, default=30.0, metavar="S",
                     help="on a physical device, how long each check that needs the stylus "
                     "tapped waits for contact after asking (default 30 s)")

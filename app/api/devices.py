@@ -117,7 +117,9 @@ def device_selftest(spec: str, *, clear_fault: bool = False,
     (``simulated_contact`` false: a bridge to a commercial device, the papers' board) needs
     a person to tap the stylus in five checks (:data:`device.suite.TAPPED`): they are said
     first, and each asks for the taps through ``say`` when its window starts, waiting up to
-    ``tap_wait_s`` for the first contact; with ``device_alone`` they are not run.
+    ``tap_wait_s`` for the first contact; with ``device_alone`` they are not run. A
+    simulated contact has nothing to leave out: ``device_alone`` is then ignored, with a
+    sentence through ``say``.
 
     Returns
     -------
@@ -130,6 +132,10 @@ def device_selftest(spec: str, *, clear_fault: bool = False,
     say = say or to_stderr
     with open_device_for(spec, clear_fault=clear_fault, say=say) as dev:
         physical = not dev.info.simulated_contact
+    if device_alone and not physical:  # nothing to leave out: its hand taps by itself
+        say(f"--device-alone ignored: {spec}'s contact is simulated, its simulated hand taps "
+            "the stylus in every check, so all of them run")
+        device_alone = False
     operator = Operator(say, tap_wait_s) if physical and not device_alone else None
     return run_selftest(spec, lambda: open_device_for(spec), operator=operator,
                         device_alone=device_alone, say=say)

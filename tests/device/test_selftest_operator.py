@@ -192,3 +192,14 @@ def test_a_tap_never_given_gives_up_by_name_in_device_time(monkeypatch):
     assert said[warn + 1].startswith("[saturation] tap the stylus down onto the virtual "
                                      "surface now"), said
     assert said[warn + 2].startswith("[saturation] no contact in 0.5 s: gave up waiting")
+
+
+def test_device_alone_on_a_simulated_contact_is_ignored_with_a_sentence(monkeypatch):
+    """Review final item 11: its simulated hand taps by itself, so nothing is left out
+    (it once reported the tapped checks not run)."""
+    monkeypatch.setattr(suite, "CHECKS", {"window_length": ALL["window_length"]})
+    said: list[str] = []
+    report = device_selftest("sim", say=said.append, device_alone=True)
+    assert (report["passed"], report["not_run"]) == (1, 0), report
+    assert said == ["--device-alone ignored: sim's contact is simulated, its simulated hand "
+                    "taps the stylus in every check, so all of them run"]
