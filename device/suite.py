@@ -510,7 +510,7 @@ def run_selftest(spec: str, opener: Opener, *, operator: Operator | None = None,
         say(f"self-test of {spec}: {len(alone)} checks the device does alone "
             f"({', '.join(alone)}); {len(tapped)} need someone to tap the stylus "
             f"({', '.join(tapped)})"
-            + (": not run (--device-alone)" if device_alone else
+            + (": not run (device alone)" if device_alone else
                ": you will be asked at each; until then hold the stylus still above the "
                "virtual surface"))
     rows = []

@@ -99,3 +99,21 @@ def test_the_backend_writes_the_device_managers_code():
     template = HapticlabDeviceBackend.getTemplateJSON()
     assert template["plugin"] == "psychopy-hapticlab"
     assert list(template["params"]) == ["name", "spec", "seed", "live", "clearFault", "lsl"]
+
+
+def test_the_check_writes_its_selftest_options_and_builder_checks_the_wait(capsys):
+    """The self-test's options reach the script (the window too: the operator's prompts are
+    drawn there every frame), and a wait for a tap Builder cannot use is an alert naming it."""
+    exp, _ = _experiment()
+    check = HapticCheckComponent(exp, "feel", name="deviceCheck", check="selftest",
+                                 deviceAlone=True, tapWait="0")
+    exp.routines["feel"].append(check)
+    assert _alerts(exp, capsys) == [f"Alert {ALERT}: hapticlab component deviceCheck: Wait for "
+                                    "a tap [s]: must be a finite number > 0, got '0'"]
+    check.params["tapWait"].val = "12"
+    assert _alerts(exp, capsys) == []
+    script = exp.writeScript(target="PsychoPy")
+    assert "check='selftest',\n" in script
+    assert "stopOnFail=True, deviceAlone=True, tapWait=12" in script
+    assert "win=win," in script and "deviceCheck.draw()" in script
+    compile(script, "haptic.py", "exec")

@@ -530,22 +530,46 @@ class HapticlabDevice(BaseResponseDevice, aliases=["hapticlab"]):
         self._dev.clear_fault()
 
     # ------------------------------------------------------------------ checks
-    def selftest(self) -> dict:
+    def selftest(self, deviceAlone: bool = False, tapWait: float = 30.0, say=None) -> dict:
         """hapticlab's device self-test (``hapticlab device selftest``): every check of the
         interface against this device, which is released meanwhile and opened again.
+
+        On a device whose contact is physical (a board, a bridge: ``info.simulated_contact``
+        false) five checks need someone to tap the stylus (:data:`device.suite.TAPPED`): the
+        self-test says so first, then asks for the taps as each of them starts, through
+        ``say``; a check nobody tapped for fails by name. A simulated device's hand taps by
+        itself: nothing is said, and every check runs.
+
+        Parameters
+        ----------
+        deviceAlone : bool
+            On a device whose contact is physical, run only the checks the device does
+            alone: the five others are reported as not run, never as passed. Ignored by a
+            device whose contact is simulated (it runs them all, nobody needed).
+        tapWait : float [s]
+            How long each of the five waits for the first contact after its prompt.
+        say : callable, optional
+            Where what the operator must read goes, one line each (default: PsychoPy's log
+            as warnings, which its console shows).
 
         Returns
         -------
         dict
-            ``spec``, ``checks`` (each ``name``, ``ok``, ``detail``), ``passed``, ``failed``.
+            ``spec``, ``checks`` (each ``name``, ``status`` — ``passed``, ``failed`` or
+            ``not run`` —, ``ok``, ``detail``), ``passed``, ``failed``, ``not_run``.
         """
         from app.api import device_selftest, open_device_for
 
         self._usable()
+        if say is None:
+            def say(text: str) -> None:
+                logging.warning(f"hapticlab {self.label}: {text}")
+        physical = not self.info.simulated_contact
         spec, opts = self.spec, self._options
         self._dev.close()
         try:
-            return device_selftest(spec)
+            return device_selftest(spec, say=say, device_alone=bool(deviceAlone) and physical,
+                                   tap_wait_s=float(tapWait))
         finally:
             self._dev = open_device_for(spec, seed=opts["seed"], person=opts["live"])
 

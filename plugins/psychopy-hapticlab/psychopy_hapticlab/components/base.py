@@ -3,6 +3,8 @@ library class their code drives, and Builder's check of their parameters."""
 
 from __future__ import annotations
 
+import math
+
 from psychopy.alerts import alert
 from psychopy.experiment.components import BaseDeviceComponent, Param
 from psychopy.localization import _translate
@@ -10,7 +12,7 @@ from psychopy.localization import _translate
 from .backend import PLUGIN, HapticlabDeviceBackend
 from .validation import ALERT, register_alert
 
-__all__ = ["HapticComponent"]
+__all__ = ["HapticComponent", "VARIES", "constant"]
 
 
 class HapticComponent(BaseDeviceComponent):
@@ -58,6 +60,18 @@ class HapticComponent(BaseDeviceComponent):
             return ["Device: name the hapticlab device (its label in Device Manager)"]
         return []
 
+    def positive(self, *keys: str) -> list[str]:
+        """A problem for each constant parameter of ``keys`` that is not a finite number
+        > 0 (durations, waits [s]); $-values are checked when the routine runs."""
+        out = []
+        for key in keys:
+            p = self.params[key]
+            v = constant(p)
+            if v is not VARIES and not (isinstance(v, (int, float)) and math.isfinite(v)
+                                        and v > 0):
+                out.append(f"{p.label}: must be a finite number > 0, got {p.val!r}")
+        return out
+
     def writeEndCode(self, buff, poll: str, after: str = "") -> None:
         """Each frame: the start test (``start()``), then while active ``poll`` until it
         says done (the routine ends when asked), then the stop test (``after``)."""
@@ -81,3 +95,25 @@ class HapticComponent(BaseDeviceComponent):
             if after:
                 buff.writeIndentedLines(after)
             buff.setIndentLevel(-indented, relative=True)
+
+
+class _Varies:
+    """A parameter whose value is known only when the experiment runs."""
+
+
+VARIES = _Varies()
+
+
+def constant(param):
+    """A constant parameter's value (a number as a float), or :data:`VARIES` for a
+    $-value or one set every repeat."""
+    val = param.val
+    if param.updates not in ("constant", None) or (isinstance(val, str)
+                                                    and val.strip().startswith("$")):
+        return VARIES
+    if param.valType in ("num", "code") and isinstance(val, str):
+        try:
+            return float(val)
+        except ValueError:
+            return val
+    return val

@@ -1,6 +1,11 @@
 """Builder's Haptic device check component: hapticlab's preflight or self-test of the device
 in the routine it sits in (the experiment's first, usually), its verdict in the data.
 
+On a device whose contact is physical the self-test asks the operator to tap the stylus in
+five of its checks: the prompts are drawn at the foot of the experiment's window and logged
+(a full-screen experiment hides the terminal the command-line self-test prints to); *Device
+alone* runs only the checks nobody has to tap for, the five reported as not run.
+
 The code it writes drives :class:`psychopy_hapticlab.check.HapticCheck`.
 """
 
@@ -32,8 +37,8 @@ class HapticCheckComponent(HapticComponent):
     def __init__(self, exp, parentName, name="hapticCheck", startType="time (s)",
                  startVal=0.0, stopType="duration (s)", stopVal="", startEstim="",
                  durationEstim="", deviceLabel="haptic", check="preflight", stopOnFail=True,
-                 forceEndRoutine=True, saveStartStop=True, syncScreenRefresh=False,
-                 disabled=False):
+                 deviceAlone=False, tapWait=30.0, forceEndRoutine=True, saveStartStop=True,
+                 syncScreenRefresh=False, disabled=False):
         super().__init__(exp, parentName, name=name, startType=startType, startVal=startVal,
                          stopType=stopType, stopVal=stopVal, startEstim=startEstim,
                          durationEstim=durationEstim, deviceLabel=deviceLabel,
@@ -50,24 +55,51 @@ class HapticCheckComponent(HapticComponent):
                                            "(spring law, transients, saturation, e-stop, "
                                            "watchdog, ramp…)"))
         p["stopOnFail"] = Param(stopOnFail, valType="bool", inputType="bool", categ="Basic",
-                                label=_translate("Stop the experiment on a failure"),
-                                hint=_translate("A failed check ends the experiment before "
-                                                "any trial (the verdict is saved first)"))
-        self.order += ["check", "stopOnFail"]
+                                label=_translate("Stop the experiment unless it passes"),
+                                hint=_translate("A check that failed, or a self-test with checks "
+                                                "not run (device alone), ends the experiment "
+                                                "before any trial, naming them (the verdict is "
+                                                "saved first)"))
+        p["deviceAlone"] = Param(deviceAlone, valType="bool", inputType="bool", categ="Basic",
+                                 label=_translate("Device alone (physical device)"),
+                                 hint=_translate("Self-test of a device whose contact is "
+                                                 "physical: run only the checks nobody has to "
+                                                 "tap the stylus for; the five others are "
+                                                 "recorded as not run, so the verdict is "
+                                                 "'incomplete', never 'pass'. Unticked, the "
+                                                 "operator is asked on screen when to tap. A "
+                                                 "simulated device runs every check either "
+                                                 "way"))
+        p["tapWait"] = Param(tapWait, valType="num", inputType="single", categ="Basic",
+                             label=_translate("Wait for a tap [s]"),
+                             hint=_translate("Self-test of a device whose contact is physical: "
+                                             "how long each check that needs a tap waits for "
+                                             "the stylus after asking; nobody tapping fails "
+                                             "that check"))
+        self.depends += [{"dependsOn": "check", "condition": "=='selftest'", "param": param,
+                          "true": "show", "false": "hide"} for param in ("deviceAlone",
+                                                                          "tapWait")]
+        self.order += ["check", "stopOnFail", "deviceAlone", "tapWait"]
+
+    def problems(self) -> list[str]:
+        return super().problems() + self.positive("tapWait")
 
     def writeInitCode(self, buff):
         code = (
             "# hapticlab: %(name)s checks the device labelled %(deviceLabel)s\n"
             "%(name)s = HapticCheck(\n"
             "    device=%(deviceLabel)s, name='%(name)s', check=%(check)s,\n"
-            "    stopOnFail=%(stopOnFail)s,\n"
+            "    stopOnFail=%(stopOnFail)s, deviceAlone=%(deviceAlone)s, tapWait=%(tapWait)s,\n"
+            "    win=win,\n"
             ")\n"
         )
         buff.writeIndentedLines(code % getInitVals(self.params))
 
     def writeFrameCode(self, buff):
-        # the check begins at the start, in its own thread; done when it has its verdict
+        # the check begins at the start, in its own thread; done when it has its verdict.
+        # Meanwhile what the self-test asks of the operator (a physical device) is drawn
         self.writeEndCode(buff, f"{self.params['name']}.poll()")
+        buff.writeIndentedLines(f"{self.params['name']}.draw()\n")
 
     def writeRoutineEndCode(self, buff):
         code = (

@@ -7,7 +7,6 @@ The code it writes drives :class:`psychopy_hapticlab.contact.HapticContact`.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from psychopy.experiment.components import Param, getInitVals
@@ -15,7 +14,7 @@ from psychopy.localization import _translate
 
 from ...contact import SCENE_DEFAULTS, TRACE_MODES, WINDOW_MODES
 from ...scenes import SOURCES, TRANSIENT_FIELDS, TRANSIENTS
-from ..base import HapticComponent
+from ..base import VARIES, HapticComponent, constant
 
 __all__ = ["HapticContactComponent"]
 
@@ -139,17 +138,13 @@ class HapticContactComponent(HapticComponent):
 
         p = self.params
         out = super().problems()
-        for key in ("windowDuration", "timeout"):
-            v = _constant(p[key])
-            if v is not _VARIES and not (isinstance(v, (int, float)) and math.isfinite(v)
-                                         and v > 0):
-                out.append(f"{p[key].label}: must be a finite number > 0, got {p[key].val!r}")
-        fields = {k: _constant(p[k]) for k in SCENE_DEFAULTS}
+        out += self.positive("windowDuration", "timeout")
+        fields = {k: constant(p[k]) for k in SCENE_DEFAULTS}
         source = fields["scene"]
         used = {"built-in sample": ("sample",), "scene file": ("sceneFile",)}.get(
             source, ("surfaceHeight", "spring", "transient",
                      *TRANSIENT_FIELDS.get(str(fields["transient"]), {}).values()))
-        if any(fields[k] is _VARIES for k in used):
+        if any(fields[k] is VARIES for k in used):
             return out  # a $-value: the routine checks the scene it makes
         probe = object.__new__(HapticContact)
         probe.name = p["name"].val
@@ -205,27 +200,3 @@ class HapticContactComponent(HapticComponent):
         )
         buff.writeIndentedLines(code % self.params)
         super().writeRoutineEndCode(buff)
-
-
-class _Varies:
-    """A parameter whose value is known only when the experiment runs."""
-
-
-_VARIES = _Varies()
-
-
-def _constant(param):
-    """A constant parameter's value (a number as a float), or :data:`_VARIES` for a
-    $-value or one set every repeat."""
-    val = param.val
-    if param.updates not in ("constant", None) or (isinstance(val, str)
-                                                    and val.strip().startswith("$")):
-        return _VARIES
-    if param.valType in ("num", "code") and isinstance(val, str):
-        try:
-            return float(val)
-        except ValueError:
-            return val
-    return val
-
-
