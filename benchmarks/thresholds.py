@@ -44,7 +44,7 @@ import numpy as np
 
 from ._common import emit, parse_seeds, print_table
 
-__all__ = ["simulate_track", "coverage", "precision", "main", "PROCEDURES"]
+__all__ = ["simulate_track", "coverage", "precision", "tables", "main", "PROCEDURES"]
 
 #: procedure → the built-in protocol whose ``frequency`` phase it runs (track wood-up)
 PROCEDURES = {"staircase": "thresholds", "questplus": "thresholds_quest"}
@@ -100,11 +100,12 @@ def _observer(seed: int, k: int):
     return draw_observer(np.random.default_rng(np.random.SeedSequence([seed, k, 1])))
 
 
-def _fit(run: dict, interval: str = "posterior") -> dict:
+def _fit(run: dict, interval: str = "posterior", width_prior: str = "ln-w") -> dict:
     from analysis.psychometric import psychometric_fit
 
     return psychometric_fit(run["x"], run["correct"], function="weibull", criterion=CRITERION,
-                            lapse_max=0.06, gof_samples=0, interval=interval)
+                            lapse_max=0.06, gof_samples=0, interval=interval,
+                            width_prior=width_prior)
 
 
 def _covers(fit: dict, truth: float) -> bool:
@@ -113,8 +114,12 @@ def _covers(fit: dict, truth: float) -> bool:
     return (lo is None or lo <= truth) and (hi is None or truth <= hi)
 
 
-def coverage(procedure: str, sessions: int, seed: int = 1, cap: int | None = None) -> dict:
-    """Bias, RMS error and interval coverage of ``sessions`` simulated sessions."""
+def coverage(procedure: str, sessions: int, seed: int = 1, cap: int | None = None,
+             width_prior: str = "ln-w") -> dict:
+    """Bias, RMS error and interval coverage of ``sessions`` simulated sessions;
+    ``width_prior="psignifit"`` fits with psignifit 4's width prior, flat in w, instead of
+    the report's (:func:`analysis.psychometric.threshold_posterior`), to show why the report
+    departs from it."""
     protocol = _protocol(procedure, cap)
     err, covered, own_err, own_target_err, own_cov, widths, trials = [], [], [], [], [], [], []
     ml_err, prof_covered, unstated = [], [], 0
@@ -124,7 +129,7 @@ def coverage(procedure: str, sessions: int, seed: int = 1, cap: int | None = Non
         truth = obs.threshold("frequency", CRITERION, "log")
         run = simulate_track(protocol, obs, int(np.random.SeedSequence([seed, k])
                                                 .generate_state(1, np.uint64)[0] % 2**63))
-        fit, prof = _fit(run), _fit(run, "profile")
+        fit, prof = _fit(run, width_prior=width_prior), _fit(run, "profile")
         trials.append(len(run["x"]))
         if fit["threshold"] is not None:
             err.append(math.log10(fit["threshold"] / truth))
@@ -144,19 +149,12 @@ def coverage(procedure: str, sessions: int, seed: int = 1, cap: int | None = Non
             own_target_err.append(math.log10(own / own_truth))
         if "ci" in est:
             own_cov.append(est["ci"][0] <= truth <= est["ci"][1])
-    err_a = np.asarray(err)
-    off = np.abs(err_a)
+    ml = _errors(ml_err)
     return {"procedure": procedure, "sessions": sessions, "cap": cap,
-            "trials_median": float(np.median(trials)),
-            "fitted": len(err), "bias_log10": float(err_a.mean()),
-            "bias_share": float(10 ** err_a.mean() - 1),
-            "rmse_log10": float(np.sqrt(np.mean(err_a ** 2))),
-            "median_abs_log10": float(np.median(off)),
-            "p90_abs_log10": float(np.quantile(off, 0.9)),
-            "off_by_0_2": float(np.mean(off > 0.2)),
+            "trials_median": float(np.median(trials)), "fitted": len(err), **_errors(err),
             "coverage": float(np.mean(covered)), "ends_unstated": unstated,
-            "ml_bias_log10": float(np.mean(ml_err)),
-            "ml_rmse_log10": float(np.sqrt(np.mean(np.square(ml_err)))),
+            "ml_fitted": len(ml_err), "ml_bias_log10": ml["bias_log10"],
+            "ml_rmse_log10": ml["rmse_log10"],
             "profile_coverage": float(np.mean(prof_covered)),
             "ci_width_log10_median": float(np.median(widths)) if widths else None,
             "own_bias_log10": float(np.mean(own_err)) if own_err else None,
@@ -167,13 +165,72 @@ def coverage(procedure: str, sessions: int, seed: int = 1, cap: int | None = Non
             "seconds": time.perf_counter() - t0}
 
 
+def _errors(err) -> dict:
+    """Bias, RMS and the spread of ``err`` (log10 of estimate/truth over the sessions that
+    gave an estimate); each None when no session did: undefined, not NaN."""
+    if not len(err):
+        return dict.fromkeys(("bias_log10", "bias_share", "rmse_log10", "median_abs_log10",
+                              "p90_abs_log10", "off_by_0_2"))
+    e = np.asarray(err, dtype=float)
+    off = np.abs(e)
+    return {"bias_log10": float(e.mean()), "bias_share": float(10 ** e.mean() - 1),
+            "rmse_log10": float(np.sqrt(np.mean(e ** 2))),
+            "median_abs_log10": float(np.median(off)),
+            "p90_abs_log10": float(np.quantile(off, 0.9)),
+            "off_by_0_2": float(np.mean(off > 0.2))}
+
+
 def precision(procedure: str, sessions: int, seed: int = 1, caps=CAPS) -> dict:
     """Errors and interval width at each cap on trials, and the fewest trials at which 90 %
     of the estimates lie within each precision of :data:`PRECISIONS` [log10]."""
     rows = [coverage(procedure, sessions, seed + 1000 + c, cap=c) for c in caps]
-    need = {p: next((r["cap"] for r in rows if r["p90_abs_log10"] <= p), None)
+    need = {p: next((r["cap"] for r in rows if r["p90_abs_log10"] is not None
+                     and r["p90_abs_log10"] <= p), None)
             for p in PRECISIONS}
     return {"procedure": procedure, "rows": rows, "trials_for": need}
+
+
+def tables(cov: list[dict], prec: list[dict], n: int) -> list[tuple[str, list, list]]:
+    """The printed tables (title, header, rows) of :func:`coverage`'s and :func:`precision`'s
+    results. An undefined figure (no session gave an estimate, no interval had both ends)
+    is "—"; the bias and errors are over the sessions that gave an estimate, and how many
+    those are is printed beside them ("of n")."""
+    def of(r, key="fitted"):
+        return f"{r[key]} of {r['sessions']}"
+
+    out = [(f"the observer's true 75 % threshold against each procedure ({n} sessions; "
+            "bias and RMS in log10 of estimate/truth, over the sessions with a stated "
+            "median; the posterior median and its 95 % credible interval, nominal coverage "
+            "95 %, over all sessions)",
+            ["procedure", "trials (median)", "with a median", "bias", "bias (% of JND)",
+             "RMS", "median |err|", "90 % |err|", "> 0.2", "coverage", "ends unstated",
+             "CI width (median)"],
+            [(r["procedure"], f"{r['trials_median']:.0f}", of(r), _f(r["bias_log10"], "+.4f"),
+              _f(r["bias_share"], "+.1%"), _f(r["rmse_log10"], ".4f"),
+              _f(r["median_abs_log10"], ".4f"), _f(r["p90_abs_log10"], ".4f"),
+              _f(r["off_by_0_2"], ".1%"), _f(r["coverage"], ".1%"),
+              r["ends_unstated"], _f(r["ci_width_log10_median"], ".3f")) for r in cov]),
+           ("beside it: the maximum-likelihood threshold and its 95 % profile interval, "
+            "and the procedure's own estimate (log10 of estimate/truth)",
+            ["procedure", "ML: with a threshold", "ML: bias", "ML: RMS", "profile coverage",
+             "own estimate: bias", "vs its own target", "its 90 % |err|", "own coverage"],
+            [(r["procedure"], of(r, "ml_fitted"), _f(r["ml_bias_log10"], "+.4f"),
+              _f(r["ml_rmse_log10"], ".4f"), _f(r["profile_coverage"], ".1%"),
+              _f(r["own_bias_log10"], "+.4f"), _f(r["own_bias_own_target_log10"], "+.4f"),
+              _f(r["own_p90_abs_log10"], ".4f"), _f(r["own_coverage"], ".1%"))
+             for r in cov])]
+    for p in prec:
+        out.append((f"{p['procedure']}: trials against precision ({p['rows'][0]['sessions']} "
+                     "sessions a cap)",
+                     ["trials at most", "trials (median)", "with a median", "bias",
+                      "median |err|", "90 % |err|", "RMS", "coverage", "profile coverage",
+                      "CI width (median)"],
+                     [(r["cap"], f"{r['trials_median']:.0f}", of(r),
+                       _f(r["bias_log10"], "+.4f"), _f(r["median_abs_log10"], ".4f"),
+                       _f(r["p90_abs_log10"], ".4f"), _f(r["rmse_log10"], ".4f"),
+                       _f(r["coverage"], ".1%"), _f(r["profile_coverage"], ".1%"),
+                       _f(r["ci_width_log10_median"], ".3f")) for r in p["rows"]]))
+    return out
 
 
 def main(args) -> int:
@@ -184,36 +241,11 @@ def main(args) -> int:
     if args.json:
         emit({"seed": seed, "sessions": n, "coverage": cov, "precision": prec}, True)
         return 0
-    print_table(f"the observer's true 75 % threshold against each procedure ({n} sessions; "
-                "bias and RMS in log10 of estimate/truth; the posterior median and its 95 % "
-                "credible interval, nominal coverage 95 %)",
-                ["procedure", "trials (median)", "bias", "bias (% of JND)", "RMS",
-                 "median |err|", "90 % |err|", "> 0.2", "coverage", "ends unstated",
-                 "CI width (median)"],
-                [(r["procedure"], f"{r['trials_median']:.0f}", f"{r['bias_log10']:+.4f}",
-                  f"{100 * r['bias_share']:+.1f} %", f"{r['rmse_log10']:.4f}",
-                  f"{r['median_abs_log10']:.4f}", f"{r['p90_abs_log10']:.4f}",
-                  f"{100 * r['off_by_0_2']:.1f} %", f"{100 * r['coverage']:.1f} %",
-                  r["ends_unstated"], f"{r['ci_width_log10_median']:.3f}") for r in cov])
-    print_table("beside it: the maximum-likelihood threshold and its 95 % profile interval, "
-                "and the procedure's own estimate (log10 of estimate/truth)",
-                ["procedure", "ML: bias", "ML: RMS", "profile coverage",
-                 "own estimate: bias", "vs its own target", "its 90 % |err|", "own coverage"],
-                [(r["procedure"], f"{r['ml_bias_log10']:+.4f}", f"{r['ml_rmse_log10']:.4f}",
-                  f"{100 * r['profile_coverage']:.1f} %",
-                  _f(r["own_bias_log10"], "+.4f"), _f(r["own_bias_own_target_log10"], "+.4f"),
-                  _f(r["own_p90_abs_log10"], ".4f"),
-                  _f(r["own_coverage"], ".1%")) for r in cov])
-    for p in prec:
-        print_table(f"{p['procedure']}: trials against precision ({p['rows'][0]['sessions']} "
-                    "sessions a cap)",
-                    ["trials at most", "trials (median)", "bias", "median |err|", "90 % |err|",
-                     "RMS", "coverage", "profile coverage", "CI width (median)"],
-                    [(r["cap"], f"{r['trials_median']:.0f}", f"{r['bias_log10']:+.4f}",
-                      f"{r['median_abs_log10']:.4f}", f"{r['p90_abs_log10']:.4f}",
-                      f"{r['rmse_log10']:.4f}", f"{100 * r['coverage']:.1f} %",
-                      f"{100 * r['profile_coverage']:.1f} %",
-                      _f(r["ci_width_log10_median"], ".3f")) for r in p["rows"]])
+    shown = tables(cov, prec, n)
+    for (title, header, rows) in shown[:2]:
+        print_table(title, header, rows)
+    for p, (title, header, rows) in zip(prec, shown[2:], strict=True):
+        print_table(title, header, rows)
         print("  fewest trials with 90 % of the estimates within " + "; ".join(
             f"{q:g} log10 (±{100 * (10 ** q - 1):.0f} %): {v if v else 'more than tested'}"
             for q, v in p["trials_for"].items()))
@@ -221,4 +253,5 @@ def main(args) -> int:
 
 
 def _f(v, spec: str) -> str:
+    """``v`` formatted, or "—" where it is undefined (None)."""
     return "—" if v is None else format(v, spec)
