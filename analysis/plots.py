@@ -311,8 +311,11 @@ def staircases(a: dict, data: pd.DataFrame, out: Path) -> list[str]:
 
 def psychometric(a: dict, data: pd.DataFrame, out: Path) -> list[str]:
     """Per track: proportion correct at each intensity (area ∝ trials there, all
-    participants pooled), each participant's fitted function, the criterion, and the
-    group's mean threshold."""
+    participants pooled), each participant's maximum-likelihood function (it meets the
+    criterion at ``threshold_ml``), each participant's stated threshold — the posterior
+    median, which the tables give — as a tick on the criterion with its credible interval,
+    and the group's mean of the stated thresholds (dashed): the figure shows the tables'
+    numbers, and says which number is which in the caption."""
     from .psychometric import levels
 
     got = _per_track(a, data)
@@ -327,11 +330,19 @@ def psychometric(a: dict, data: pd.DataFrame, out: Path) -> list[str]:
         lo, hi = float(lv["x"].min()), float(lv["x"].max())
         xs = np.geomspace(max(lo, 1e-9), hi, 200) if r["function"] == "weibull" and lo > 0 \
             else np.linspace(lo, hi, 200)
+        crit = r["criterion"]
         for f in r["fits"]:
             if f["track"] != name:
                 continue
-            ax.plot(xs, _curve(f, r, xs), lw=0.8, alpha=0.8)
-        ax.axhline(r["criterion"], color="0.6", lw=0.6)
+            line, = ax.plot(xs, _curve(f, r, xs), lw=0.8, alpha=0.8)
+            if f["threshold"] is not None:
+                lo_, hi_ = f["ci_low"], f["ci_high"]
+                if lo_ is not None and hi_ is not None:
+                    ax.plot([lo_, hi_], [crit, crit], color=line.get_color(), lw=2.0,
+                            alpha=0.35, solid_capstyle="butt")
+                ax.plot([f["threshold"]], [crit], marker="|", ms=9, mew=1.5,
+                        color=line.get_color(), ls="none")
+        ax.axhline(crit, color="0.6", lw=0.6)
         mean = next(gr["threshold_mean"] for gr in r["group"] if gr["track"] == name)
         if mean is not None:
             ax.axvline(mean, color="k", ls="--", lw=0.8)

@@ -98,8 +98,9 @@ def _markdown(a: dict) -> tuple[list[str], list[str]]:
     est = "reversal average" if a["procedure"] == "staircase" else "QUEST+ estimate"
     fits = [{"participant": f["participant"], "track": f["track"], "criterion": crit,
              "threshold": f["threshold"], "CI low": f["ci_low"], "CI high": f["ci_high"],
-             "Weber": f["weber"], est: f["procedure_estimate"], "width": f["width"],
-             "lapse": f["lapse"], "deviance": f["deviance"], "p_gof": f["gof_p"],
+             "Weber": f["weber"], est: f["procedure_estimate"],
+             "ML width": f["width"], "ML lapse": f["lapse"], "deviance": f["deviance"],
+             "p_gof": f["gof_p"],
              "trials": f["n_trials"]} for f in a["fits"]]
     out = [f"Thresholds of {a['parameter']} at {crit} correct ({_FUNCTION[a['function']]} "
            f"fits, intensity in {_UNITS[a['units']]}).\n\n", _table(group)]
@@ -131,6 +132,10 @@ THRESHOLD = AnalysisType(
                         "line per participant; filled: right, open: wrong, ringed: a "
                         "reversal).",
               "psychometric": "Proportion correct at each intensity (area: trials there, "
-                              "all participants), each participant's fitted function, and "
-                              "the group's mean threshold at the criterion (dashed)."},
+                              "all participants); each participant's maximum-likelihood "
+                              "function, which meets the criterion at its maximum-likelihood "
+                              "threshold; each participant's stated threshold, the "
+                              "posterior median (tick on the criterion, its credible "
+                              "interval shaded); and the group's mean of the stated "
+                              "thresholds (dashed), as in the table."},
     internal=("alpha",))
