@@ -1233,6 +1233,29 @@ void hl_device_rx_byte(uint8_t b)
     hal_unlock();
 }
 
+/* A due STATUS goes before the next trace chunk, and one the UART has no room for waits
+ * for room instead of being skipped: its 40 Hz holds while traces stream (the host's view
+ * of the output and state, docs §3). */
+static void send_status(void)
+{
+    uint64_t now = hl_device_ticks();
+    if (now < D.next_status) {
+        return;
+    }
+    uint8_t b[HL_STATUS_SIZE];
+    hl_status_set_time_us(b, ticks_to_us(now));
+    hl_status_set_state(b, D.state);
+    hl_status_set_output_mn(b, (int32_t)lroundf(D.current * KF * 1000.0f));
+    hl_status_set_fault(b, D.fault);
+    if (!send(HL_MSG_STATUS, b, sizeof b, 0)) {
+        return; /* no room yet: tried again before the next chunk */
+    }
+    D.next_status = now + REPORT_TICKS;
+    if (D.fault != HL_FAULT_NONE) {
+        fault_reported(); /* a FAULT frame the UART had no room for: STATUS says it */
+    }
+}
+
 void hl_device_poll(void)
 {
     uint8_t buf[256];
@@ -1265,9 +1288,9 @@ void hl_device_poll(void)
     if (!D.done_pending) {
         send_events();
     }
+    send_status();
     send_traces();
     hal_lock();
-    uint64_t now = D.ticks;
     uint8_t pos_due = D.position_due;
     D.position_due = 0;
     int32_t height = D.height_um;
@@ -1279,17 +1302,6 @@ void hl_device_poll(void)
         hl_position_set_tick(b, wt);
         hl_position_set_height_um(b, height);
         send(HL_MSG_POSITION, b, sizeof b, 0);
-    }
-    if (now >= D.next_status) {
-        D.next_status = now + REPORT_TICKS;
-        uint8_t b[HL_STATUS_SIZE];
-        hl_status_set_time_us(b, ticks_to_us(now));
-        hl_status_set_state(b, D.state);
-        hl_status_set_output_mn(b, (int32_t)lroundf(D.current * KF * 1000.0f));
-        hl_status_set_fault(b, D.fault);
-        if (send(HL_MSG_STATUS, b, sizeof b, 0) && D.fault != HL_FAULT_NONE) {
-            fault_reported(); /* a FAULT frame the UART had no room for: STATUS says it */
-        }
     }
 }
 

@@ -105,6 +105,8 @@ class Host:
         self.watchdog = False  # a watchdog fault was reported since it was last reset
         self.version = C.PROTOCOL  # the session's protocol version, from HELLO_ACK
         self.rx_bytes = 0  # bytes read from the device so far
+        self.read_size = 4096  # bytes a read takes at most: less, with a pause after each
+        self.read_pause = 0.0  # [s], is a host slower than the device's stream
 
     def _pump(self, pred, limit: float, keep: list | None = None):
         """The first message ``pred`` accepts; those passed over on the way go to ``keep``
@@ -114,8 +116,10 @@ class Host:
             if time.monotonic() - self.sent > 0.025:  # a host heartbeats while it waits
                 self.write(M.encode(M.Heartbeat(), 0, self.version))
             if not self.pending:
-                data = self.port.read(4096)
+                data = self.port.read(self.read_size)
                 self.rx_bytes += len(data)
+                if self.read_pause:
+                    time.sleep(self.read_pause)
                 self.pending = [M.decode(f) for f in self.dec.feed(data)]
             while self.pending:  # frames read with the one awaited wait for the next ask
                 m = self.pending.pop(0)
