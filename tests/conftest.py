@@ -104,12 +104,12 @@ def is_realtime(item) -> bool:
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    """How pytest-xdist shares the suite between its workers (``make test``: two, ``--dist
-    loadgroup``). Every real-time test (:func:`is_realtime`) goes to one group, run by one
-    worker one test after another as in a serial run: none runs beside another (each was
-    made to pass beside two CPU-bound processes; the other worker is one). Every other test
-    goes with its module, so that a module's shared fixture (a study, an identified plant)
-    is made once."""
+    """How pytest-xdist shares the suite between its workers (``make test WORKERS=2``,
+    ``--dist loadgroup``). Every real-time test (:func:`is_realtime`) goes to one group,
+    run by one worker one test after another as in a serial run: none runs beside another
+    (each was made to pass beside two CPU-bound processes; the other worker yields its core
+    to them, :func:`_yield_to_realtime`). Every other test goes with its module, so that a
+    module's shared fixture (a study, an identified plant) is made once."""
     for item in items:  # the demo a test waits for is part of its time (demo_study)
         if "demo_study" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.timeout(_DEMO_TIMEOUT_S), append=False)
@@ -596,7 +596,35 @@ def _firmware_builds() -> None:
     _FIRMWARE_READY.append(True)
 
 
+#: the niceness a worker of a two-worker run takes for the tests that meet no deadline
+_YIELDING_NICE = 10
+#: whether this process has taken it (a process cannot take it back unprivileged)
+_YIELDING: list[bool] = []
+
+
+def _yield_to_realtime(item) -> None:
+    """On a worker of a two-worker run (``make test WORKERS=2``): before its first test
+    that meets no deadline, lower this process's priority (and its children's) by
+    :data:`_YIELDING_NICE`, so that the real-time lane on the other worker, with its
+    devices and windows, takes a core first and the machine's other work competes with it
+    as in a one-process run. The real-time group is the largest, so the scheduler gives
+    it out first and its worker runs it before anything else; a real-time test that still
+    meets a yielding worker says so in its report."""
+    if not hasattr(item.config, "workerinput"):
+        return
+    if is_realtime(item):
+        if _YIELDING:
+            item.add_report_section("setup", "priority", "a real-time test on a worker that "
+                                    "already yields its core (niceness "
+                                    f"{os.getpriority(os.PRIO_PROCESS, 0)})")
+        return
+    if not _YIELDING:
+        os.nice(_YIELDING_NICE)
+        _YIELDING.append(True)
+
+
 def pytest_runtest_setup(item):
+    _yield_to_realtime(item)
     if not _FIRMWARE_READY and (item.get_closest_marker("firmware")
                                 or item.get_closest_marker("qemu")):
         _firmware_builds()
