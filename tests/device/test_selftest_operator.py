@@ -165,6 +165,24 @@ def test_a_check_of_output_cut_fails_by_name_when_there_was_no_output_to_cut(mon
             rows[name]["detail"], rows[name]
 
 
+@pytest.mark.parametrize("rate_hz", [1000, 4000, 10_000])
+def test_the_force_the_safety_checks_cut_shows_in_every_report_of_it(rate_hz):
+    """Review r60 item 1: the e-stop and exit checks failed on the board build and the
+    Force Dimension bridge with "the device reported none". Their force was a zero-mean
+    100-Hz cosine, and the reference firmware reports its output at 40 Hz, every 2.5
+    periods: one |phase| at every report, exactly 0 mN for 2 starts in 100 at 10 kHz. Now,
+    whatever tick the playback starts on, every 40-Hz report of it (rounded to the wire's
+    mN) shows force, and the peak is the stated 0.5 N."""
+    dev = dataclasses.make_dataclass("D", ["info"])(
+        dataclasses.make_dataclass("I", ["servo_rate_hz"])(rate_hz))
+    f = suite._force_to_cut(dev, 1.5)
+    every = rate_hz // 40  # the firmware's REPORT_TICKS
+    for start in range(every):
+        reported = np.round(np.abs(f[start::every]) * 1000)  # output_mn
+        assert reported.min() >= 1, (start, reported.min())
+    assert np.isclose(f.max(), 0.5, rtol=1e-9) and f.min() > 0.09
+
+
 def test_the_safety_checks_cut_a_played_force_with_the_stylus_held_above_the_surface(
         monkeypatch):
     """What a physical device's operator does during them (hold the stylus still above
