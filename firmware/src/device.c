@@ -536,8 +536,9 @@ void hl_servo_tick(void)
 
 /* ------------------------------------------------------------------ link side */
 /* control frames (ACK, events, HELLO_ACK) take any room; trace chunks and the periodic
- * STATUS and POSITION leave TX_RESERVE for them, and are skipped, not counted, when a host
- * stops reading */
+ * STATUS and POSITION leave TX_RESERVE for them. When a host stops reading, a chunk waits in
+ * the ring, a due STATUS waits for room (send_status), and POSITION is skipped; none is
+ * counted as dropped */
 static int send(uint8_t type, const uint8_t *body, size_t len, int control)
 {
     uint8_t out[HL_MAX_ENCODED + 1], as[HL_MAX_PAYLOAD];
@@ -1242,16 +1243,20 @@ static void send_status(void)
     if (now < D.next_status) {
         return;
     }
+    hal_lock(); /* one view of the servo tick's fields: the fault told is the fault sent */
+    uint8_t state = D.state, fault = D.fault;
+    float current = D.current;
+    hal_unlock();
     uint8_t b[HL_STATUS_SIZE];
     hl_status_set_time_us(b, ticks_to_us(now));
-    hl_status_set_state(b, D.state);
-    hl_status_set_output_mn(b, (int32_t)lroundf(D.current * KF * 1000.0f));
-    hl_status_set_fault(b, D.fault);
+    hl_status_set_state(b, state);
+    hl_status_set_output_mn(b, (int32_t)lroundf(current * KF * 1000.0f));
+    hl_status_set_fault(b, fault);
     if (!send(HL_MSG_STATUS, b, sizeof b, 0)) {
         return; /* no room yet: tried again before the next chunk */
     }
     D.next_status = now + REPORT_TICKS;
-    if (D.fault != HL_FAULT_NONE) {
+    if (fault != HL_FAULT_NONE) {
         fault_reported(); /* a FAULT frame the UART had no room for: STATUS says it */
     }
 }

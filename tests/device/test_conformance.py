@@ -333,20 +333,24 @@ def test_a_device_streams_no_faster_than_the_link_it_states(host):
         assert b1 - b0 <= rate * (t1 - t0) * 1e-6 + 8192 + 2048, (b1 - b0, t1 - t0)
 
 
-@pytest.mark.parametrize("host", WITH_QEMU, indirect=True)
+#: the targets whose transmit buffer a slow host fills within a second (the board's 8-KiB
+#: line: host-board, host-san, QEMU); the others buffer far more than a 1-s window sends
+SMALL_LINE = [t for t in WITH_QEMU if getattr(t, "values", (t,))[0] in ("host-board",
+                                                                       "host-san", "qemu")]
+
+
+@pytest.mark.parametrize("host", SMALL_LINE, indirect=True)
 @deadline_kept
 def test_status_keeps_its_rate_while_traces_stream_to_a_slow_reader(host):
-    """The self-test's e-stop check on the board build and the Force Dimension bridge
-    failed on a busy computer: "the device reported no force during a 1.5-s playback".
-    A STATUS found no room while the host read slower than the trace stream, and was
-    skipped, and the chunks took the room first: no STATUS for the whole run. docs §3:
-    STATUS at 20 Hz or more, traces or not. Here a host that reads 51 kB/s: the run's
-    1 s of device time brings half the 40 Hz at least (a host stalled by a busy computer
-    delays STATUS as it delays everything; half leaves room for that)."""
+    """docs §3: STATUS at 20 Hz or more, traces streaming or not. A STATUS that found no
+    room used to be skipped, and the chunks sent first took the room that freed: with a
+    host reading 51 kB/s, host-board's came 38 in a 1-s window, gaps of 50 ms. A due STATUS
+    now goes before the next chunk and waits for room (40, at most 27.7 ms apart, measured
+    once). Asserted: the documented rate, half the firmware's 40 Hz, which leaves room for
+    a host that a busy computer holds up (the old firmware met it as well: this guards the
+    promise; the measurement is the fix's evidence)."""
     assert host.ask(M.TraceConfig(host.limits.channels & 0x7F, 1)) == S.OK
     spring_homed(host)
-    host.read_size, host.read_pause = 512, 0.010
-    assert host.ask(M.StartWindow(5, 1000, 1000, 0)) == S.OK
     times: list[int] = []  # STATUS device times [µs] during the run
 
     def until(m):
@@ -354,8 +358,12 @@ def test_status_keeps_its_rate_while_traces_stream_to_a_slow_reader(host):
             times.append(m.time_us)
         return isinstance(m, M.WindowDone) and m.window_id == 5
 
-    collect(host, until, 60.0)
-    host.read_size, host.read_pause = 4096, 0.0
+    host.read_size, host.read_pause = 512, 0.010
+    try:
+        assert host.ask(M.StartWindow(5, 1000, 1000, 0)) == S.OK
+        collect(host, until, 60.0)
+    finally:  # a retry (deadline_kept) reads at full speed
+        host.read_size, host.read_pause = 4096, 0.0
     assert len(times) >= 20, (len(times), np.diff(times) * 1e-3)
 
 
