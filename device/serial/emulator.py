@@ -364,7 +364,10 @@ class Emulator:
         """An intact host frame at device time ``now`` [s]: the gap since the last one."""
         if self._gap_prev is not None:
             gap = now - self._gap_prev
-            k = min(int(gap * 1e6) // M.LINK_GAP_BIN_US, M.LINK_GAP_BINS - 1)
+            # binned from the whole µs the report gives its longest in, so that the longest
+            # lies in the highest bin (13.9999996 ms once fell in bin 6 and read 14.000)
+            us = int(round(gap * 1e6))
+            k = min(us // M.LINK_GAP_BIN_US, M.LINK_GAP_BINS - 1)
             self._gaps[k] = min(self._gaps[k] + 1, 0xFFFF)
             self._gap_max = max(self._gap_max, gap)
         self._gap_prev = now
