@@ -6,6 +6,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -118,6 +119,24 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         group = "realtime" if is_realtime(item) else item.nodeid.split("::", 1)[0]
         item.add_marker(pytest.mark.xdist_group(group))
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadgroup`` giving out the real-time group before every other unit, so that
+    the worker it goes to runs it first, at its own priority (:func:`_yield_to_realtime`):
+    pytest-xdist orders units by size, and a subset run can make the group a small one."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadGroupScheduling
+
+    class RealtimeFirst(LoadGroupScheduling):
+        def _assign_work_unit(self, node):
+            if "realtime" in self.workqueue:
+                self.workqueue.move_to_end("realtime", last=False)
+            super()._assign_work_unit(node)
+
+    return RealtimeFirst(config, log)
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -603,20 +622,21 @@ _YIELDING: list[bool] = []
 
 
 def _yield_to_realtime(item) -> None:
-    """On a worker of a two-worker run (``make test WORKERS=2``): before its first test
-    that meets no deadline, lower this process's priority (and its children's) by
-    :data:`_YIELDING_NICE`, so that the real-time lane on the other worker, with its
-    devices and windows, takes a core first and the machine's other work competes with it
-    as in a one-process run. The real-time group is the largest, so the scheduler gives
-    it out first and its worker runs it before anything else; a real-time test that still
-    meets a yielding worker says so in its report."""
-    if not hasattr(item.config, "workerinput"):
+    """On a worker of a run on two workers or more with the real-time group
+    (``make test WORKERS=2``, ``--dist loadgroup``): before its first test that meets no
+    deadline, lower this process's priority (and its children's) by :data:`_YIELDING_NICE`,
+    so that the real-time lane, with its devices and windows, takes a core first and the
+    machine's other work competes with it as in a one-process run. The real-time group is
+    given out first (:func:`pytest_xdist_make_scheduler`), so its worker runs it before
+    anything else; a real-time test that still meets a yielding worker (after a worker
+    crashed) is warned of."""
+    if (not hasattr(item.config, "workerinput") or item.config.getvalue("dist") != "loadgroup"
+            or int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) < 2):
         return
     if is_realtime(item):
         if _YIELDING:
-            item.add_report_section("setup", "priority", "a real-time test on a worker that "
-                                    "already yields its core (niceness "
-                                    f"{os.getpriority(os.PRIO_PROCESS, 0)})")
+            warnings.warn(f"{item.nodeid}: a real-time test on a worker that yields its core "
+                          f"(niceness {os.getpriority(os.PRIO_PROCESS, 0)})", stacklevel=1)
         return
     if not _YIELDING:
         os.nice(_YIELDING_NICE)
