@@ -208,14 +208,15 @@ def check_window_length(opener: Opener, operator: Operator | None = None) -> str
         return f"window of {span:.4f} s from the first contact"
 
 
-#: the force [N] the safety checks cut, played open loop in free air: a 100-Hz vibration
-#: between 0.1 and 0.5 N, the size of the play_force check's sine (a buzz in a hand holding
-#: the stylus still). No contact is needed, so a device with a physical contact does these
-#: checks alone. It never crosses zero: a zero-mean cosine did every 5 ms, and a device
-#: reporting at 40 Hz (every 2.5 periods) samples it at one |phase| all along, at 0 mN
-#: exactly for 1 start in 50 at 10 kHz (1 in 20 at 4 kHz): the e-stop and exit checks then
-#: saw no force to cut (review r60)
-_CUT_N, _CUT_HZ, _CUT_FLOOR = 0.5, 100.0, 0.2
+#: the force [N] the safety checks cut, played open loop in free air: a 100-Hz, ±0.5-N
+#: square wave, the size of the play_force check's sine (a buzz in a hand holding the stylus
+#: still). No contact is needed, so a device with a physical contact does these checks
+#: alone. Square, so that every tick's force is 0.5 N: a cosine crossed zero every 5 ms,
+#: and a device reporting at 40 Hz (every 2.5 periods) samples it at one |phase| all along,
+#: at 0 mN exactly for 1 start in 50 at 10 kHz (1 in 20 at 4 kHz), when the e-stop and
+#: exit checks saw no force to cut (review r60). Zero-mean, so that it pushes the held
+#: stylus nowhere (a force with a 0.3-N floor left it moving into the play_force check)
+_CUT_N, _CUT_HZ = 0.5, 100.0
 #: output counts as on from 1 mN: the wire's force step
 _OUTPUT_ON_N = 1e-3
 #: "just before" an event [s]: half the force's period, so its peak lies inside
@@ -226,8 +227,7 @@ def _force_to_cut(dev: HapticDevice, seconds: float) -> np.ndarray:
     """``seconds`` [s] of the force the safety checks cut, one command per servo tick."""
     rate = dev.info.servo_rate_hz
     t = np.arange(int(round(seconds * rate))) / rate
-    swing = (1 - _CUT_FLOOR) / 2
-    return _CUT_N * (1 - swing + swing * np.cos(2 * np.pi * _CUT_HZ * t))
+    return _CUT_N * np.where(np.cos(2 * np.pi * _CUT_HZ * t) >= 0, 1.0, -1.0)
 
 
 def _output_on(dev: HapticDevice) -> bool:
@@ -276,7 +276,7 @@ def check_estop(opener: Opener) -> str:
                 seen(reset=True)
             res = dev.play_force(_force_to_cut(dev, 1.5), on_progress=stop)
             _require(bool(sent), "no force was being output before the e-stop: nothing "
-                     f"shown (a 1.5-s playback of up to {_CUT_N:g} N ended before the "
+                     f"shown (a 1.5-s playback of {_CUT_N:g} N ended before the "
                      "device reported force or 0.5 s passed, so the e-stop was never "
                      "pressed)")
             _require(bool(res.faults), "the e-stop was pressed after the playback had "
@@ -397,7 +397,7 @@ def check_zero_on_exit(opener: Opener) -> str:
         pass
     _require(dev.output_force == 0.0, f"output {dev.output_force} N after exit by exception")
     _require(bool(before), "no force was being output before the exit: nothing shown (the "
-             f"device reported none during a 1.5-s playback of up to {_CUT_N:g} N)")
+             f"device reported none during a 1.5-s playback of {_CUT_N:g} N)")
     try:
         dev.run_window(0.3)
     except DeviceError:
