@@ -130,7 +130,7 @@ class OldClient:
             if time.monotonic() - self.sent > 0.025:
                 self.send("HEARTBEAT")
             if not self.pending:
-                self.pending = self.dec.feed(self.port.read(4096))
+                self.pending = self.dec.feed(self.port.read(max(1, self.port.in_waiting)))
             while self.pending:
                 frame = self.pending.pop(0)
                 name, m = self.by_type[frame.type]  # a type it does not know: KeyError

@@ -336,7 +336,8 @@ class _RawHost:
     def _read(self):
         from device.serial import messages as M
 
-        got = [M.decode(f) for f in self.dec.feed(self.port.read(4096))]
+        data = self.port.read(max(1, self.port.in_waiting))  # what came, or the next byte
+        got = [M.decode(f) for f in self.dec.feed(data)]
         self.seen.extend(got)  # arrival order, whoever looks at them
         self.pending.extend(got)
 

@@ -116,7 +116,9 @@ class Host:
             if time.monotonic() - self.sent > 0.025:  # a host heartbeats while it waits
                 self.write(M.encode(M.Heartbeat(), 0, self.version))
             if not self.pending:
-                data = self.port.read(self.read_size)
+                # what has come, or the first byte to come within the port's timeout (as
+                # device/serial/link.py reads): read(n) alone waits for all n bytes or 10 ms
+                data = self.port.read(min(self.read_size, max(1, self.port.in_waiting)))
                 self.rx_bytes += len(data)
                 if self.read_pause:
                     time.sleep(self.read_pause)
