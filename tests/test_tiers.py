@@ -149,3 +149,28 @@ def test_the_unit_tier_is_selected_by_its_marker(tmp_path):
     assert set(_run(tmp_path, source, "-m", "unit")) == {"test_plain",
                                                           "test_realtime_alone_is_no_tier"}
     assert set(_run(tmp_path, source, "-m", "not unit")) == {"test_slow"}
+
+
+class _Item:
+    """What :func:`tests.conftest.is_realtime` reads of a collected test."""
+
+    def __init__(self, *marks, fixtures=()):
+        self.marks = {m.name: m for m in (getattr(pytest.mark, n) if isinstance(n, str) else n
+                                          for n in marks)}
+        self.fixturenames = list(fixtures)
+
+    def get_closest_marker(self, name):
+        mark = self.marks.get(name)
+        return mark.mark if mark is not None else None
+
+
+def test_a_test_is_real_time_by_its_tier_or_fixture_unless_it_says_it_has_no_deadline():
+    from .conftest import is_realtime
+
+    assert not is_realtime(_Item("slow", "integration"))
+    assert is_realtime(_Item("screen"))
+    assert is_realtime(_Item("firmware", "slow"))
+    assert is_realtime(_Item(fixtures=("tmp_path", "emulator")))
+    assert is_realtime(_Item(pytest.mark.realtime))
+    assert not is_realtime(_Item("screen", pytest.mark.realtime(False)))
+    assert is_realtime(_Item("integration", pytest.mark.realtime(True)))

@@ -274,6 +274,7 @@ def _chromium_shot(page, png, height=1200):
 
 @pytest.mark.screen
 @pytest.mark.slow
+@pytest.mark.realtime(False)  # headless chromium keeps virtual time: with its module's study
 def test_report_html_is_valid_and_reads_in_a_browser(study, tmp_path, artifacts):
     """report.html parsed strictly (every tag closed, no Markdown syntax leaking into the
     text, every figure shown and found), the same sections as report.md, and rendered
