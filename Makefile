@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test check lint venv clean system-deps screens contract docs
+.PHONY: demo test check lint venv clean system-deps screens contract docs firmware-test
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -93,11 +93,15 @@ WORKERS ?= 1
 PYTEST_WORKERS := $(if $(filter-out 1,$(WORKERS)),-n $(WORKERS) --dist loadgroup,)
 test: $(STAMP) system-deps
 	$(VENV)/bin/ruff check .
-	$(MAKE) docs
-	$(MAKE) -C firmware test
+	$(MAKE) -j2 --output-sync=target docs firmware-test
 	@$(PY) -c 'import sys; from device.serial.native import load; sys.exit(load()[0] is None)' \
 	  || $(PY) -m pip install --quiet --no-deps -e .
 	$(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS)
+
+# the firmware's own tests (firmware/README.md): beside the documentation's build in
+# `make test`, each on a core (the fuzzer's minute is one process)
+firmware-test:
+	$(MAKE) -C firmware test
 
 # The documentation site (docs/, Sphinx + MyST) into docs/_build/html: warnings are errors and
 # every cross-reference must resolve (-n), so a broken link or a stale name fails the build.
