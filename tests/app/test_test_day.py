@@ -492,13 +492,13 @@ def test_clear_fault_over_serial_clears_a_fault_latched_before(emulator, tmp_pat
     with open_device(f"serial:{emulator.port}") as dev:  # a previous host e-stopped
         dev.load_scene(Scene("s", spring=100.0))
         dev.estop()
-    out = subprocess.run([*PY, "run", str(ROOT / "tests" / "data" / "protocols" /
-                                          "six_on_nine.toml"), "--participant", "P05",
+    # the fault tests' protocol: four 1-s windows (a whole session after the clear)
+    mini = ROOT / "tests" / "data" / "mini_two.toml"
+    out = subprocess.run([*PY, "run", str(mini), "--participant", "P05",
                           "--device", f"serial:{emulator.port}", "--dry-run", "--no-audio",
                           "--data", str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert out.returncode == 2 and "latched estop fault" in out.stderr
-    out = subprocess.run([*PY, "run", str(ROOT / "tests" / "data" / "protocols" /
-                                          "six_on_nine.toml"), "--participant", "P05",
+    out = subprocess.run([*PY, "run", str(mini), "--participant", "P05",
                           "--device", f"serial:{emulator.port}", "--dry-run", "--no-audio",
                           "--data", str(tmp_path), "--clear-fault", "--traces", "none",
                           "--quiet"], capture_output=True, text=True, timeout=300)
