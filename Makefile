@@ -87,8 +87,8 @@ check: $(STAMP)
 # processes, and a second worker is a third (beside two `sh -c 'while :; do :; done'`, the
 # two-worker gate failed three host-build timing tests, 2026-11-29). WORKERS=2 runs it on
 # two (pytest-xdist, the real-time tests in one group, given out first; the other worker
-# yields its core to them, tests/conftest.py): 24 minutes on a quiet machine, where one
-# process takes about 36.
+# yields its core to them, tests/conftest.py): 22 minutes on a quiet machine, where one
+# process took about 36.
 WORKERS ?= 1
 PYTEST_WORKERS := $(if $(filter-out 1,$(WORKERS)),-n $(WORKERS) --dist loadgroup,)
 test: $(STAMP) system-deps
