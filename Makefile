@@ -99,7 +99,8 @@ test: $(STAMP) system-deps
 	$(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS)
 
 # the firmware's own tests (firmware/README.md): beside the documentation's build in
-# `make test`, each on a core (the fuzzer's minute is one process)
+# `make test` (the docs' build is one process; the firmware's builds and its fuzz run take
+# two, so the three share the two cores while the docs build)
 firmware-test:
 	$(MAKE) -C firmware test
 

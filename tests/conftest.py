@@ -100,12 +100,14 @@ _REALTIME_FIXTURES = {"emulator", "own_emulator", "emulator_factory", "xdisplay"
 def is_realtime(item) -> bool:
     """Whether ``item`` meets deadlines in real time (see ``realtime`` in pyproject.toml):
     ``@pytest.mark.realtime(False)`` says a test of those tiers has none (a headless
-    browser's screenshot, which keeps its own virtual time)."""
+    browser's screenshot, which keeps its own virtual time); a test on one of the fixtures
+    above is real-time whatever it says."""
+    if _REALTIME_FIXTURES & set(getattr(item, "fixturenames", ())):
+        return True
     own = item.get_closest_marker("realtime")
     if own is not None:
-        return own.args[:1] != (False,)
-    return (any(item.get_closest_marker(m) for m in _REALTIME_TIERS)
-            or bool(_REALTIME_FIXTURES & set(getattr(item, "fixturenames", ()))))
+        return not (own.args and own.args[0] is False)
+    return any(item.get_closest_marker(m) for m in _REALTIME_TIERS)
 
 
 @pytest.hookimpl(tryfirst=True)

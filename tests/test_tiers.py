@@ -173,4 +173,6 @@ def test_a_test_is_real_time_by_its_tier_or_fixture_unless_it_says_it_has_no_dea
     assert is_realtime(_Item(fixtures=("tmp_path", "emulator")))
     assert is_realtime(_Item(pytest.mark.realtime))
     assert not is_realtime(_Item("screen", pytest.mark.realtime(False)))
+    # a device or a display fixture is real time whatever the test says
+    assert is_realtime(_Item("screen", pytest.mark.realtime(False), fixtures=("emulator",)))
     assert is_realtime(_Item("integration", pytest.mark.realtime(True)))
