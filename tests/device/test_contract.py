@@ -320,11 +320,11 @@ def _ready(host: Host, scene: M.Message | None, settle: bool = True) -> None:
     host.clear()
     host.ask(M.Zero())
     host.ask(M.Hello(C.PROTOCOL))
-    end = time.monotonic() + 5  # a playback the ZERO ended may take a moment to wind down
-    state = "IDLE"
-    while settle and (state := host.settled_state()) != "IDLE" and time.monotonic() < end:
-        pass
-    assert state == "IDLE", f"still {state} 5 s after ZERO"
+    if settle:
+        end = time.monotonic() + 5  # a playback the ZERO ended may take a moment to end
+        while (state := host.settled_state()) != "IDLE" and time.monotonic() < end:
+            pass
+        assert state == "IDLE", f"still {state} 5 s after ZERO"
     assert host.ask(BASE["SCENE_BEGIN"]) == M.Status.OK
     assert host.ask(BASE["SCENE_COMMIT"]) == M.Status.OK
     if scene is not None:
