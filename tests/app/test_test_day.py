@@ -436,7 +436,8 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
     serial link with matched samples: on the Python emulator, on the reference firmware
     built for this machine (protocol 2, traces streamed), and on that firmware with the
     board's buffers and 1-Mbaud link (traces every 4th tick; matching asks for the
-    accelerometer alone, at every tick), all at ×10."""
+    accelerometer alone, at every tick), all at ×10. The session is realism cut to the
+    samples it needs."""
     emu = emulator_factory(11, "--firmware", firmware, "--speed", "10")
     spec = f"serial:{emu.port}"
     common = ["--device", spec, "--responder", "scripted", "--no-audio", "--data",
@@ -456,9 +457,15 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
                          text=True, timeout=120)
     assert pre.returncode == 0, pre.stdout + "\nemulator:\n" + emu.stderr()
     assert "ok   libraries: built on this device: matched_firm" in pre.stdout
-    proto = tmp_path / "short.toml"  # realism with one repetition, to keep the test short
-    proto.write_text((ROOT / "protocols" / "realism.toml").read_text()
-                     .replace("repetitions = 3", "repetitions = 1"))
+    # realism with one repetition and the samples this needs: wood (familiarization), the
+    # real sample the library reproduces, and the two matched ones (8 rated trials, not 22)
+    head, *samples = ((ROOT / "protocols" / "realism.toml").read_text()
+                      .replace("repetitions = 3", "repetitions = 1").split("\n[[samples]]\n"))
+    kept = [s for s in samples if s.split("\n")[0] in
+            ('id = "wood"', 'id = "wood_on_foam"', 'id = "matched_firm"', 'id = "matched_soft"')]
+    assert len(kept) == 4
+    proto = tmp_path / "short.toml"
+    proto.write_text("\n[[samples]]\n".join([head, *kept]))
     run = subprocess.run([*PY, "run", str(proto), "--participant", "P04", *common, "--seed",
                           "2", "--traces", "none", "--quiet"], capture_output=True, text=True,
                          timeout=900)
