@@ -77,9 +77,11 @@ static size_t drain(int fd, uint8_t *buf, size_t cap, double wait, size_t want)
 {
     size_t n = 0;
     double end = now_s() + wait;
-    while (n < cap && now_s() < end && (want == 0 || n < want)) {
+    for (double left = wait; n < cap && left > 0 && (want == 0 || n < want);
+         left = end - now_s()) {
+        /* never past `wait`: a 1-ms drain polled 20 ms, and filling the ring took 6 s */
         struct pollfd p = {fd, POLLIN, 0};
-        if (poll(&p, 1, 20) > 0) {
+        if (poll(&p, 1, left < 0.02 ? (int)(left * 1000.0) + 1 : 20) > 0) {
             ssize_t r = read(fd, buf + n, cap - n);
             if (r > 0) {
                 n += (size_t)r;
