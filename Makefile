@@ -18,11 +18,12 @@ PLUGIN := plugins/psychopy-hapticlab
 # python3-wxgtk4.0 is used instead), with the packages it imports that PsychoPy does not
 BUILDER_APP := psychopy-app==2026.2.1 python-gitlab gitpython gitdb smmap pytz future \
                requests-toolbelt
+# --no-compile: pip would compile every module of every package (most of PsychoPy is never
+# imported here) on one core, 30 of an install's 66 s; Python compiles what it imports, once
 $(STAMP): pyproject.toml setup.py firmware/src/hostlink.c firmware/include/hl_hostlink.h \
           $(PLUGIN)/pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet -e '.[test,ui,lsl,docs]'
-	$(PY) -m pip install --quiet -e $(PLUGIN)
-	$(PY) -m pip install --quiet --no-deps --upgrade --target $(VENV)/psychopy-app \
+	$(PY) -m pip install --quiet --no-compile -e '.[test,ui,lsl,docs]' -e $(PLUGIN)
+	$(PY) -m pip install --quiet --no-compile --no-deps --upgrade --target $(VENV)/psychopy-app \
 	  $(BUILDER_APP)
 	touch $(STAMP)
 
