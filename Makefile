@@ -96,11 +96,16 @@ check: $(STAMP)
 # process took about 36.
 WORKERS ?= 1
 PYTEST_WORKERS := $(if $(filter-out 1,$(WORKERS)),-n $(WORKERS) --dist loadgroup,)
+# the project's own bytecode, compiled before the tests: where PYTHONDONTWRITEBYTECODE is set
+# nothing is compiled on import, and each of the suite's hundreds of `python -m app`
+# processes compiled what it imports again (0.15 s of a 1.5-s dry-run session)
+PACKAGES := app device analysis protocols benchmarks plugins
 test: $(STAMP) system-deps
 	$(VENV)/bin/ruff check .
 	$(MAKE) -j2 --output-sync=target docs firmware-test
 	@$(PY) -c 'import sys; from device.serial.native import load; sys.exit(load()[0] is None)' \
 	  || $(PY) -m pip install --quiet --no-deps -e .
+	@$(PY) -m compileall -qq $(PACKAGES)
 	$(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS)
 
 # the firmware's own tests (firmware/README.md): beside the documentation's build in
