@@ -660,6 +660,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="thresholds: simulated sessions per procedure")
     b.add_argument("--points", default=None, help="crash: kill after every write point "
                    "('all') or the listed ones ('3,17')")
+    b.add_argument("--boundaries", default=None, help="crash: cut a simulated participant's "
+                   "session after every row ('all') or the listed ones ('1,12'), and resume it")
     b.add_argument("--seeds", default=None, help="orderings: study seeds (default "
                    "1,2,3,4,5); causes, factorial: device seeds (default 1,2); thresholds: "
                    "the study seed (default 1)")

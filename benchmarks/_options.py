@@ -13,11 +13,12 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["READ_BY", "LOAD_ONLY", "check_options", "parse_points"]
+__all__ = ["READ_BY", "LOAD_ONLY", "BOUNDARY_WORDS", "check_options", "parse_points"]
 
 #: option → the benchmarks that read it (``json`` is read by every one)
 READ_BY = {"repeats": ("accuracy", "analysis", "demo", "link", "scale", "sim"),
            "fuzz": ("link",), "kills": ("crash",), "points": ("crash",),
+           "boundaries": ("crash",),
            "seeds": ("causes", "factorial", "orderings", "thresholds"),
            "sessions": ("thresholds",), "firmware": ("link",),
            "load": ("link",), "targets": ("link",), "seconds": ("link",),
@@ -49,9 +50,12 @@ def _numbers(text: str) -> list[int] | None:
     return [int(p) for p in parts]
 
 
-def parse_points(text: str, n: int | None = None) -> list[int] | None:
-    """``--points``: None for ``all``, else the point numbers (1-based, each once, in the
-    order given); with ``n``, each must be one of the session's ``n`` write points.
+def parse_points(text: str, n: int | None = None, flag: str = "--points",
+                 item: str = "point", items: str = "write points",
+                 each: str = "kills after each of them") -> list[int] | None:
+    """``--points`` (``--boundaries`` with its own words): None for ``all``, else the
+    numbers (1-based, each once, in the order given); with ``n``, each must be one of the
+    session's ``n`` write points (rows).
 
     Raises
     ------
@@ -62,14 +66,19 @@ def parse_points(text: str, n: int | None = None) -> list[int] | None:
         return None
     points = _numbers(text)
     if points is None or not points or min(points) < 1:
-        raise _error(f"--points {text!r}: all, or point numbers >= 1 separated by commas "
+        raise _error(f"{flag} {text!r}: all, or {item} numbers >= 1 separated by commas "
                      "(e.g. 3,17)")
     if n is not None:
         beyond = [p for p in points if p > n]
         if beyond:
-            raise _error(f"--points {text}: point {beyond[0]} is beyond this session's {n} "
-                         f"write points (1..{n}); 'all' kills after each of them")
+            raise _error(f"{flag} {text}: {item} {beyond[0]} is beyond this session's {n} "
+                         f"{items} (1..{n}); 'all' {each}")
     return list(dict.fromkeys(points))
+
+
+#: :func:`parse_points`' words for ``--boundaries`` (bench crash: the rows cut after)
+BOUNDARY_WORDS = {"flag": "--boundaries", "item": "row", "items": "rows a cut can follow",
+                  "each": "cuts after each of them"}
 
 
 def check_options(what: str, options: Mapping[str, Any], defaults: Mapping[str, Any]
@@ -116,6 +125,10 @@ def check_options(what: str, options: Mapping[str, Any], defaults: Mapping[str, 
     _whole("sessions", opts["sessions"], 1)
     if opts["points"] is not None:
         parse_points(opts["points"])
+    if opts["boundaries"] is not None:
+        parse_points(opts["boundaries"], **BOUNDARY_WORDS)
+    if opts["points"] is not None and opts["boundaries"] is not None:
+        raise _error("--points and --boundaries are two crash benchmarks: give one")
     if opts["seeds"] is not None:
         parse_seeds(opts["seeds"], [])
     if opts["firmware"] not in (None, "host", "qemu"):

@@ -18,6 +18,13 @@ end. Reported: ``points``, ``runs``, ``lost_rows`` (runs where a row seen after 
 gone at the end), ``headerless`` (a trials.tsv without its header at any time),
 ``divergent`` (a final sequence that differs from the reference) and ``failed`` (a resume
 that could not complete).
+
+``--boundaries all`` (a simulated participant's session cut after each of its rows): the
+reference session is run with the simulated responder; for each row k, a copy of it is left
+as a crash after that row would leave it (k rows, status interrupted) and resumed. A resumed
+simulated participant replays its memory (its familiarization, the range of what it felt)
+from the recorded attempts, so the final sequence must equal the reference's, column for
+column. Reported: ``rows``, ``resumed``, ``divergent`` and ``failed`` (the rows cut after).
 """
 
 from __future__ import annotations
@@ -36,7 +43,7 @@ import numpy as np
 from analysis.session_format import SessionStatus
 
 from ._common import emit, print_table
-from ._options import parse_points
+from ._options import BOUNDARY_WORDS, parse_points
 
 #: what a resumed session must repeat of the uninterrupted one (an adaptive trial's
 #: intensity and its procedure's state too)
@@ -252,32 +259,103 @@ def kill_at_points(protocol: str = "realism", seed: int = 1, points: str = "all"
             "reference_rows": len(reference), "problems": bad[:20]}
 
 
+def sample_boundaries(phases: list[str]) -> list[int]:
+    """The rows (1-based: cut after row k) of a sample that meets each way a resume replays
+    a simulated participant: after its first row, after the row before each later phase and
+    that phase's first row (the phase's own memory begins), half way, and before the last
+    row. ``phases`` is each row's phase, in order."""
+    n = len(phases)
+    chosen = {1, n // 2, n - 1}
+    for k in range(1, n):
+        if phases[k] != phases[k - 1]:
+            chosen |= {k, k + 1}
+    return sorted(k for k in chosen if 1 <= k < n)
+
+
+def _resume_cut(src: Path, k: int, work: Path, reference: list[tuple]) -> dict:
+    """A copy of the finished session ``src`` as a crash after row ``k`` leaves it,
+    resumed."""
+    import json
+    import shutil
+
+    folder = work / f"after-{k}" / src.name
+    shutil.copytree(src, folder)
+    lines = (folder / "trials.tsv").read_text(encoding="utf-8").splitlines(keepends=True)
+    (folder / "trials.tsv").write_text("".join(lines[: 1 + k]), encoding="utf-8")
+    meta = json.loads((folder / "session.json").read_text(encoding="utf-8"))
+    meta["status"] = SessionStatus.INTERRUPTED
+    (folder / "session.json").write_text(json.dumps(meta), encoding="utf-8")
+    r = subprocess.run(_cmd(["resume", str(folder), "--quiet"]), capture_output=True,
+                       text=True, timeout=600)
+    failed = "" if r.returncode == 0 else (r.stderr.strip().splitlines() or ["?"])[-1][:200]
+    return {"after": k, "failed": failed, "divergent": not failed and _rows(folder) != reference}
+
+
+def resume_after_rows(protocol: str = "realism", seed: int = 5, rows: str = "all",
+                      workdir: Path | None = None, workers: int = 2) -> dict:
+    """Cut a simulated participant's session after each of its rows (``rows``: ``all``,
+    ``sample`` for :func:`sample_boundaries`, or a comma list of row numbers), resume each
+    cut, and check what :mod:`this module <benchmarks.crash>`'s docstring lists."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from app.recorder import read_trials
+
+    work = Path(workdir or tempfile.mkdtemp(prefix="hapticlab-boundaries-"))
+    work.mkdir(parents=True, exist_ok=True)
+    ref = work / "reference"
+    r = subprocess.run(_cmd(["run", protocol, "--participant", "S01", "--seed", str(seed),
+                             "--data", str(ref), "--responder", "simulated", "--no-audio",
+                             "--quiet", "--traces", "none"]),
+                       capture_output=True, text=True, timeout=600)
+    if r.returncode != 0:
+        raise RuntimeError(f"the reference session failed: {r.stderr}")
+    src = _sessions(ref)[-1]
+    recorded, _torn = read_trials(src / "trials.tsv")
+    n = len(recorded)
+    chosen = (sample_boundaries([row["phase"] for row in recorded]) if rows == "sample"
+              else parse_points(rows, n - 1, **BOUNDARY_WORDS)
+              or range(1, n))
+    reference = _rows(src)
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        results = list(pool.map(lambda k: _resume_cut(src, k, work, reference), chosen))
+    return {"rows": n, "resumed": len(results), "after": list(chosen),
+            "divergent": [x["after"] for x in results if x["divergent"]],
+            "failed": [(x["after"], x["failed"]) for x in results if x["failed"]]}
+
+
+def _report(r: dict, t0: float, as_json: bool, title: str, columns: list[str], row: tuple,
+            ok: bool) -> int:
+    """Print ``r`` (its table, or JSON) with the wall time since ``t0``; the exit status."""
+    r["wall_s"] = time.perf_counter() - t0
+    if as_json:
+        emit(r, True)
+    else:
+        print_table(f"{title} ({r['wall_s']:.0f} s)", columns, [row])
+    return 0 if ok else 1
+
+
 def main(args) -> int:
     t0 = time.perf_counter()
+    if getattr(args, "boundaries", None):
+        r = resume_after_rows(rows=args.boundaries)
+        return _report(r, t0, args.json, "crash: a simulated participant's session cut after "
+                       "each row, then resumed", ["rows", "resumed", "divergent",
+                                                  "resumes failed"],
+                       (r["rows"], r["resumed"], len(r["divergent"]), len(r["failed"])),
+                       not (r["divergent"] or r["failed"]))
     if getattr(args, "points", None):
         r = kill_at_points(points=args.points)
-        r["wall_s"] = time.perf_counter() - t0
-        if args.json:
-            emit(r, True)
-        else:
-            print_table(f"crash: kill -9 after every write point, then resume "
-                        f"({r['wall_s']:.0f} s)",
-                        ["points", "runs", "rows lost", "headerless", "divergent",
-                         "resumes failed"],
-                        [(r["points"], r["runs"], r["lost_rows"], r["headerless"],
-                          r["divergent"], r["failed"])])
-        ok = not (r["lost_rows"] or r["headerless"] or r["divergent"] or r["failed"]
-                  or r["not_killed"])
-        return 0 if ok else 1
-    kills = getattr(args, "kills", 1000)
-    r = kill_and_resume(kills)
-    r["wall_s"] = time.perf_counter() - t0
-    if args.json:
-        emit(r, True)
-        return 0
-    print_table(f"crash: kill -9 at random moments, then resume ({r['wall_s']:.0f} s)",
-                ["kills", "sessions", "rows per session", "rows lost", "torn lines set aside",
-                 "every sequence = uninterrupted"],
-                [(r["kills"], r["sessions"], r["reference_rows"], r["lost_rows_events"],
-                  r["torn_lines_set_aside"], "yes" if r["sequence_matches"] else "NO")])
-    return 0 if r["sequence_matches"] and r["lost_rows_events"] == 0 else 1
+        return _report(r, t0, args.json, "crash: kill -9 after every write point, then resume",
+                       ["points", "runs", "rows lost", "headerless", "divergent",
+                        "resumes failed"],
+                       (r["points"], r["runs"], r["lost_rows"], r["headerless"],
+                        r["divergent"], r["failed"]),
+                       not (r["lost_rows"] or r["headerless"] or r["divergent"] or r["failed"]
+                            or r["not_killed"]))
+    r = kill_and_resume(getattr(args, "kills", 1000))
+    return _report(r, t0, args.json, "crash: kill -9 at random moments, then resume",
+                   ["kills", "sessions", "rows per session", "rows lost",
+                    "torn lines set aside", "every sequence = uninterrupted"],
+                   (r["kills"], r["sessions"], r["reference_rows"], r["lost_rows_events"],
+                    r["torn_lines_set_aside"], "yes" if r["sequence_matches"] else "NO"),
+                   r["sequence_matches"] and r["lost_rows_events"] == 0)

@@ -13,7 +13,7 @@ BENCHMARKS = ("sim", "accuracy", "matching", "link", "crash", "analysis", "demo"
 #: the benchmarks' options and their defaults (each benchmark reads those it uses; the
 #: CLI's ``bench --help`` says which)
 BENCH_OPTIONS = {"json": False, "repeats": 5, "fuzz": 100_000, "kills": 1000, "points": None,
-                 "sessions": 200,
+                 "boundaries": None, "sessions": 200,
                  "seeds": None, "firmware": None, "load": None, "targets": None,
                  "seconds": 60.0, "baseline": False, "no_window": False, "rows": None}
 

@@ -22,6 +22,9 @@ CLI = [sys.executable, "-m", "app"]
     ("crash", {"points": "3,x"}, "--points '3,x': all, or point numbers"),
     ("crash", {"points": "0"}, "--points '0': all, or point numbers"),
     ("crash", {"points": ","}, "--points ',': all, or point numbers"),
+    ("crash", {"boundaries": "0"}, "--boundaries '0': all, or row numbers >= 1"),
+    ("crash", {"boundaries": "all", "points": "all"}, "--points and --boundaries are two"),
+    ("sim", {"boundaries": "all"}, "bench sim does not read --boundaries (crash does)"),
     ("orderings", {"seeds": "1,a"}, "--seeds '1,a': whole numbers"),
     ("link", {"firmware": "arm"}, "--firmware 'arm': one of host, qemu"),
     ("link", {"load": "1,two"}, "--load '1,two': competing processes"),
@@ -68,3 +71,17 @@ def test_crash_points_beyond_the_sessions_write_points_say_how_many_there_are(tm
                                          r"session's \d+ write points \(1\.\.\d+\)"):
         kill_at_points(protocol=str(proto), points="2,99999", workdir=tmp_path / "w",
                        traces="none")
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_crash_boundaries_beyond_the_sessions_rows_say_how_many_there_are(tmp_path):
+    from benchmarks.crash import resume_after_rows
+
+    proto = tmp_path / "mini.toml"
+    from pathlib import Path
+
+    proto.write_text((Path(__file__).resolve().parents[1] / "data" / "mini.toml").read_text())
+    with pytest.raises(UsageError, match=r"--boundaries 1,99999: row 99999 is beyond this "
+                                         r"session's \d+ rows a cut can follow \(1\.\.\d+\)"):
+        resume_after_rows(protocol=str(proto), rows="1,99999", workdir=tmp_path / "w")

@@ -3,7 +3,6 @@ endings, the protocol's current limit, no traceback anywhere)."""
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -205,25 +204,27 @@ def test_resume_refuses_files_that_do_not_belong_together(session):
 # ------------------------------------------------------------------ 5: replayed participant
 @pytest.mark.integration
 @pytest.mark.slow
-def test_a_resumed_simulated_session_equals_the_uninterrupted_one_at_every_boundary(tmp_path):
-    """Killed after any trial, a simulated participant's session resumes to the same rows:
-    the participant's memory (its familiarization, the range of what it felt) is replayed
-    from the recorded attempts."""
-    proto = DATA / "six_on_nine.toml"
-    ref = run("run", str(proto), "--participant", "S01", "--seed", "5", "--data",
-              str(tmp_path / "ref"), "--responder", "simulated", "--no-audio", "--quiet",
-              "--traces", "none")
-    assert ref.returncode == 0, ref.stderr
-    src = tmp_path / "ref" / "sub-S01" / "ses-1"
-    full = (src / "trials.tsv").read_text()
-    n = len(full.splitlines()) - 1
-    for k in range(1, n):
-        folder = tmp_path / f"k{k}" / "ses-1"
-        shutil.copytree(src, folder)
-        interrupted(folder, k)
-        out = run("resume", str(folder), "--quiet")
-        assert out.returncode == 0, out.stderr
-        assert cols((folder / "trials.tsv").read_text()) == cols(full), f"killed after row {k}"
+def test_a_resumed_simulated_session_equals_the_uninterrupted_one(tmp_path):
+    """Cut after a trial, a simulated participant's session resumes to the same rows: the
+    participant's memory (its familiarization, the range of what it felt) is replayed from
+    the recorded attempts. The sample: after the familiarization, after the first rated
+    trial, half way and before the last row (`hapticlab bench crash --boundaries all` cuts
+    a whole realism session after every row)."""
+    from benchmarks.crash import resume_after_rows
+
+    r = resume_after_rows(str(DATA / "six_on_nine.toml"), rows="sample",
+                          workdir=tmp_path / "w")
+    assert r["rows"] >= 13 and r["after"] == [1, 2, r["rows"] // 2, r["rows"] - 1], r
+    assert (r["divergent"], r["failed"]) == ([], []), r
+
+
+def test_the_boundary_sample_meets_every_phase_change():
+    from benchmarks.crash import sample_boundaries
+
+    assert sample_boundaries(["warmup"] + ["main"] * 12) == [1, 2, 6, 12]
+    phases = ["fam"] + ["demo"] * 11 + ["test"] * 33
+    assert sample_boundaries(phases) == [1, 2, 12, 13, 22, 44]
+    assert sample_boundaries(["a", "a"]) == [1]
 
 
 # ------------------------------------------------------------------ 6: bounded loops
