@@ -100,17 +100,16 @@ PYTEST_WORKERS := $(if $(filter-out 1,$(WORKERS)),-n $(WORKERS) --dist loadgroup
 # nothing is compiled on import, and each of the suite's hundreds of `python -m app`
 # processes compiled what it imports again (0.15 s of a 1.5-s dry-run session)
 PACKAGES := app device analysis protocols benchmarks plugins
-test: $(STAMP) system-deps
-	$(VENV)/bin/ruff check .
-	$(MAKE) -j2 --output-sync=target docs firmware-test
+test: system-deps
+	$(MAKE) -j2 --output-sync=target lint docs firmware-test
 	@$(PY) -c 'import sys; from device.serial.native import load; sys.exit(load()[0] is None)' \
 	  || $(PY) -m pip install --quiet --no-deps -e .
 	@$(PY) -m compileall -qq $(PACKAGES)
 	$(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS)
 
-# the firmware's own tests (firmware/README.md): beside the documentation's build in
-# `make test` (the docs' build is one process; the firmware's builds and its fuzz run take
-# two, so the three share the two cores while the docs build)
+# the firmware's own tests (firmware/README.md): in `make test`, beside the environment's
+# install, then the lint and the documentation's build, which need it (the firmware needs
+# only the compilers; its builds and its fuzz run take two cores, the install one or two)
 firmware-test:
 	$(MAKE) -C firmware test
 
