@@ -275,16 +275,18 @@ def sample_boundaries(phases: list[str]) -> list[int]:
 def _resume_cut(src: Path, k: int, work: Path, reference: list[tuple]) -> dict:
     """A copy of the finished session ``src`` as a crash after row ``k`` leaves it,
     resumed."""
-    import json
     import shutil
+
+    from analysis.session_format import read_meta
+    from app.recorder import SessionFiles
 
     folder = work / f"after-{k}" / src.name
     shutil.copytree(src, folder)
     lines = (folder / "trials.tsv").read_text(encoding="utf-8").splitlines(keepends=True)
     (folder / "trials.tsv").write_text("".join(lines[: 1 + k]), encoding="utf-8")
-    meta = json.loads((folder / "session.json").read_text(encoding="utf-8"))
-    meta["status"] = SessionStatus.INTERRUPTED
-    (folder / "session.json").write_text(json.dumps(meta), encoding="utf-8")
+    record = read_meta(folder / "session.json")
+    record.interrupted(f"benchmarks.crash: cut after row {k}")
+    SessionFiles(folder).write_meta(record)
     r = subprocess.run(_cmd(["resume", str(folder), "--quiet"]), capture_output=True,
                        text=True, timeout=600)
     failed = "" if r.returncode == 0 else (r.stderr.strip().splitlines() or ["?"])[-1][:200]
