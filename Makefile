@@ -27,8 +27,9 @@ $(STAMP): pyproject.toml setup.py firmware/src/hostlink.c firmware/include/hl_ho
 	$(PY) -m pip install --quiet --no-compile -e '.[test,ui,lsl,docs]' -e $(PLUGIN)
 	$(PY) -m pip install --quiet --no-compile --no-deps --upgrade --target $(VENV)/psychopy-app \
 	  $(BUILDER_APP)
-	$(PY) -m compileall -qq -j 2 $(VENV)/lib $(VENV)/psychopy-app \
-	  || echo "compileall: some modules have no bytecode (they are compiled when imported)"
+	$(PY) -m compileall -q -j 2 $(VENV)/lib $(VENV)/psychopy-app > $(VENV)/compileall.log \
+	  || echo "compileall: the modules in $(VENV)/compileall.log did not compile (pip too" \
+	    "leaves them without bytecode); a process that imports one compiles it"
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -92,8 +93,8 @@ check: $(STAMP)
 # processes, and a second worker is a third (beside two `sh -c 'while :; do :; done'`, the
 # two-worker gate failed three host-build timing tests, 2026-11-29). WORKERS=2 runs it on
 # two (pytest-xdist, the real-time tests in one group, given out first; the other worker
-# yields its core to them, tests/conftest.py): 22 minutes on a quiet machine, where one
-# process took about 36.
+# yields its core to them, tests/conftest.py): 19 minutes on a quiet machine, where one
+# process took about 33-36.
 WORKERS ?= 1
 PYTEST_WORKERS := $(if $(filter-out 1,$(WORKERS)),-n $(WORKERS) --dist loadgroup,)
 # the project's own bytecode, compiled before the tests: where PYTHONDONTWRITEBYTECODE is set
@@ -104,7 +105,7 @@ test: system-deps
 	$(MAKE) -j2 --output-sync=target lint docs firmware-test
 	@$(PY) -c 'import sys; from device.serial.native import load; sys.exit(load()[0] is None)' \
 	  || $(PY) -m pip install --quiet --no-deps -e .
-	@$(PY) -m compileall -qq $(PACKAGES)
+	@$(PY) -m compileall -q $(PACKAGES)
 	$(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS)
 
 # the firmware's own tests (firmware/README.md): in `make test`, beside the environment's

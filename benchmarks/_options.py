@@ -127,8 +127,10 @@ def check_options(what: str, options: Mapping[str, Any], defaults: Mapping[str, 
         parse_points(opts["points"])
     if opts["boundaries"] is not None:
         parse_points(opts["boundaries"], **BOUNDARY_WORDS)
-    if opts["points"] is not None and opts["boundaries"] is not None:
-        raise _error("--points and --boundaries are two crash benchmarks: give one")
+    chosen = [n for n in ("kills", "points", "boundaries") if n in given]
+    if len(chosen) > 1:
+        raise _error(f"{' and '.join(_flag(n) for n in chosen)} are different crash "
+                     "benchmarks: give one")
     if opts["seeds"] is not None:
         parse_seeds(opts["seeds"], [])
     if opts["firmware"] not in (None, "host", "qemu"):

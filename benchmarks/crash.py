@@ -20,11 +20,11 @@ gone at the end), ``headerless`` (a trials.tsv without its header at any time),
 that could not complete).
 
 ``--boundaries all`` (a simulated participant's session cut after each of its rows): the
-reference session is run with the simulated responder; for each row k, a copy of it is left
-as a crash after that row would leave it (k rows, status interrupted) and resumed. A resumed
-simulated participant replays its memory (its familiarization, the range of what it felt)
-from the recorded attempts, so the final sequence must equal the reference's, column for
-column. Reported: ``rows``, ``resumed``, ``divergent`` and ``failed`` (the rows cut after).
+reference session is run with the simulated responder; for each row k, a copy of it is cut
+to its first k rows, marked interrupted and resumed. A resumed simulated participant replays
+its memory (its familiarization, the range of what it felt) from the recorded attempts, so
+the final rows must equal the reference's in every column but the times (:data:`TIMES`).
+Reported: ``rows``, ``resumed``, ``divergent`` and ``failed`` (the rows cut after).
 """
 
 from __future__ import annotations
@@ -51,11 +51,18 @@ KEY = ("trial_index", "item", "attempt", "sample", "status", "rating", "answer",
        "tap_velocities", "track", "intensity", "state")
 
 
-def _rows(folder: Path) -> list[tuple]:
+#: the columns a resumed simulated participant's session need not repeat: its times
+TIMES = ("response_time", "t_start", "t_end")
+
+
+def _rows(folder: Path, key: tuple[str, ...] | None = KEY) -> list[tuple]:
+    """trials.tsv's rows as tuples of the ``key`` columns (every column but
+    :data:`TIMES` when ``key`` is None)."""
     from app.recorder import read_trials
 
     rows, _torn = read_trials(folder / "trials.tsv")
-    return [tuple(r[k] for k in KEY) for r in rows]
+    return [tuple(v for k, v in r.items() if k not in TIMES) if key is None
+            else tuple(r[k] for k in key) for r in rows]
 
 
 def _cmd(args: list[str]) -> list[str]:
@@ -273,8 +280,8 @@ def sample_boundaries(phases: list[str]) -> list[int]:
 
 
 def _resume_cut(src: Path, k: int, work: Path, reference: list[tuple]) -> dict:
-    """A copy of the finished session ``src`` as a crash after row ``k`` leaves it,
-    resumed."""
+    """A copy of the finished session ``src`` cut after row ``k`` (its first ``k`` rows,
+    marked interrupted), resumed."""
     import shutil
 
     from analysis.session_format import read_meta
@@ -290,14 +297,42 @@ def _resume_cut(src: Path, k: int, work: Path, reference: list[tuple]) -> dict:
     r = subprocess.run(_cmd(["resume", str(folder), "--quiet"]), capture_output=True,
                        text=True, timeout=600)
     failed = "" if r.returncode == 0 else (r.stderr.strip().splitlines() or ["?"])[-1][:200]
-    return {"after": k, "failed": failed, "divergent": not failed and _rows(folder) != reference}
+    return {"after": k, "failed": failed,
+            "divergent": not failed and _rows(folder, None) != reference}
 
 
 def resume_after_rows(protocol: str = "realism", seed: int = 5, rows: str = "all",
                       workdir: Path | None = None, workers: int = 2) -> dict:
     """Cut a simulated participant's session after each of its rows (``rows``: ``all``,
     ``sample`` for :func:`sample_boundaries`, or a comma list of row numbers), resume each
-    cut, and check what :mod:`this module <benchmarks.crash>`'s docstring lists."""
+    cut, and check what :mod:`this module <benchmarks.crash>`'s docstring lists.
+
+    Parameters
+    ----------
+    protocol : str
+        A protocol name or TOML file.
+    seed : int
+        The session's seed.
+    rows : str
+        Which cuts (``all``, ``sample``, or row numbers such as ``1,12``).
+    workdir : Path, optional
+        Where the sessions go (a new temporary folder by default).
+    workers : int
+        Resumes run at once.
+
+    Returns
+    -------
+    dict
+        ``rows`` (the uninterrupted session's), ``resumed``, ``after`` (the rows cut after),
+        ``divergent`` (those whose rows differ from it in any column but :data:`TIMES`)
+        and ``failed`` ((row, the resume's last line of error) pairs).
+
+    Raises
+    ------
+    UsageError
+        A row number the session does not have, or a session of fewer than two rows
+        (nothing to cut between).
+    """
     from concurrent.futures import ThreadPoolExecutor
 
     from app.recorder import read_trials
@@ -314,10 +349,14 @@ def resume_after_rows(protocol: str = "realism", seed: int = 5, rows: str = "all
     src = _sessions(ref)[-1]
     recorded, _torn = read_trials(src / "trials.tsv")
     n = len(recorded)
+    if n < 2:
+        from app.errors import UsageError
+
+        raise UsageError(f"{protocol}: its session has {n} row(s); a cut needs two or more")
     chosen = (sample_boundaries([row["phase"] for row in recorded]) if rows == "sample"
               else parse_points(rows, n - 1, **BOUNDARY_WORDS)
               or range(1, n))
-    reference = _rows(src)
+    reference = _rows(src, None)
     with ThreadPoolExecutor(max_workers=workers) as pool:
         results = list(pool.map(lambda k: _resume_cut(src, k, work, reference), chosen))
     return {"rows": n, "resumed": len(results), "after": list(chosen),

@@ -79,7 +79,7 @@ static size_t drain(int fd, uint8_t *buf, size_t cap, double wait, size_t want)
     double end = now_s() + wait;
     for (double left = wait; n < cap && left > 0 && (want == 0 || n < want);
          left = end - now_s()) {
-        /* never past `wait`: a 1-ms drain polled 20 ms, and filling the ring took 6 s */
+        /* at most 1 ms past `wait`: a 1-ms drain polled 20 ms (the ring took 6 s to fill) */
         struct pollfd p = {fd, POLLIN, 0};
         if (poll(&p, 1, left < 0.02 ? (int)(left * 1000.0) + 1 : 20) > 0) {
             ssize_t r = read(fd, buf + n, cap - n);

@@ -23,7 +23,9 @@ CLI = [sys.executable, "-m", "app"]
     ("crash", {"points": "0"}, "--points '0': all, or point numbers"),
     ("crash", {"points": ","}, "--points ',': all, or point numbers"),
     ("crash", {"boundaries": "0"}, "--boundaries '0': all, or row numbers >= 1"),
-    ("crash", {"boundaries": "all", "points": "all"}, "--points and --boundaries are two"),
+    ("crash", {"boundaries": "all", "points": "all"}, "--points and --boundaries are "
+                                                       "different crash benchmarks"),
+    ("crash", {"kills": 5, "points": "all"}, "--kills and --points are different crash"),
     ("sim", {"boundaries": "all"}, "bench sim does not read --boundaries (crash does)"),
     ("orderings", {"seeds": "1,a"}, "--seeds '1,a': whole numbers"),
     ("link", {"firmware": "arm"}, "--firmware 'arm': one of host, qemu"),

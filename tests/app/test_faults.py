@@ -210,8 +210,9 @@ def test_a_resumed_simulated_session_equals_the_uninterrupted_one(tmp_path):
     the recorded attempts. The sample: after the familiarization, after the first rated
     trial, half way and before the last row (`hapticlab bench crash --boundaries all` cuts
     a whole realism session after every row)."""
-    from benchmarks.crash import resume_after_rows
+    from benchmarks.crash import TIMES, resume_after_rows
 
+    assert not set(TIMES) & set(header_line().split("\t")[KEY])  # every column but the times
     r = resume_after_rows(str(DATA / "six_on_nine.toml"), rows="sample",
                           workdir=tmp_path / "w")
     assert r["rows"] >= 13 and r["after"] == [1, 2, r["rows"] // 2, r["rows"] - 1], r

@@ -436,8 +436,8 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
     serial link with matched samples: on the Python emulator, on the reference firmware
     built for this machine (protocol 2, traces streamed), and on that firmware with the
     board's buffers and 1-Mbaud link (traces every 4th tick; matching asks for the
-    accelerometer alone, at every tick), all at ×10. The session is realism cut to the
-    samples it needs."""
+    accelerometer alone, at every tick), all at ×10. The session is realism with one
+    repetition, on the board build with all 11 samples, elsewhere with the 4 it needs."""
     emu = emulator_factory(11, "--firmware", firmware, "--speed", "10")
     spec = f"serial:{emu.port}"
     common = ["--device", spec, "--responder", "scripted", "--no-audio", "--data",
@@ -457,13 +457,15 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
                          text=True, timeout=120)
     assert pre.returncode == 0, pre.stdout + "\nemulator:\n" + emu.stderr()
     assert "ok   libraries: built on this device: matched_firm" in pre.stdout
-    # realism with one repetition and the samples this needs: wood (familiarization), the
-    # real sample the library reproduces, and the two matched ones (8 rated trials, not 22)
+    # realism with one repetition: every sample on the board's narrowest link; elsewhere
+    # the samples this test is about: wood (familiarization), the real sample the library
+    # reproduces, and the two matched ones (8 rated trials, not 22)
     head, *samples = ((ROOT / "protocols" / "realism.toml").read_text()
                       .replace("repetitions = 3", "repetitions = 1").split("\n[[samples]]\n"))
-    kept = [s for s in samples if s.split("\n")[0] in
-            ('id = "wood"', 'id = "wood_on_foam"', 'id = "matched_firm"', 'id = "matched_soft"')]
-    assert len(kept) == 4
+    kept = samples if firmware == "host-board" else [
+        s for s in samples if s.split("\n")[0] in
+        ('id = "wood"', 'id = "wood_on_foam"', 'id = "matched_firm"', 'id = "matched_soft"')]
+    assert len(kept) == (11 if firmware == "host-board" else 4)
     proto = tmp_path / "short.toml"
     proto.write_text("\n[[samples]]\n".join([head, *kept]))
     run = subprocess.run([*PY, "run", str(proto), "--participant", "P04", *common, "--seed",
