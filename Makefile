@@ -91,8 +91,8 @@ check: $(STAMP)
 # threads' fallback, which a busy computer starves. Rebuild it rather than test without it.
 # One pytest process by default: the real-time tests were made to pass beside two CPU-bound
 # processes, and a second worker is a third (beside two `sh -c 'while :; do :; done'`, the
-# two-worker gate failed three host-build timing tests, and at 4b6e932 four tests whose
-# device's watchdog the starved host missed, 2026-11-29). WORKERS=2 runs it on
+# two-worker gate failed three host-build timing tests, and at 4b6e932 four tests on a
+# device's watchdog, docs/howto/run-the-tests.md; 2026-11-29). WORKERS=2 runs it on
 # two (pytest-xdist, the real-time tests in one group, given out first; the other worker
 # yields its core to them, tests/conftest.py): 19 minutes on a quiet machine, where one
 # process took about 33-36.
