@@ -115,8 +115,18 @@ def _run_page(page: Path, tmp_path: Path, shell: bool, not_run: tuple[str, ...] 
         print(f"not run: {where}: {what}")
 
 
+#: commands that start a device on this computer (an emulator, a firmware build on a
+#: pseudo-terminal): its watchdog judges how soon this host's frames come, a deadline
+_DEVICE_STARTS = ("device emulate", "build/hlfw-")
+
+
 def _page_params(sections: tuple[str, ...]) -> list:
-    return [pytest.param(p, id=str(p.relative_to(DOCS)))
+    """A page per test; a page whose commands start a device is real-time (its test runs
+    in the real-time group, not on a worker that yields its core: beside load, the
+    first-session tutorial's self-test met its emulator's watchdog there)."""
+    return [pytest.param(p, id=str(p.relative_to(DOCS)), marks=[pytest.mark.realtime] if any(
+                not b.skip_mark and any(s in b.text for s in _DEVICE_STARTS)
+                for b in read_blocks(p)) else [])
             for p in pages(*sections) if p.name != "index.md"]
 
 
