@@ -620,6 +620,53 @@ def test_a_table_goes_on_the_wire_in_range_and_plays_the_same():
         _wire_table(TransientTable([0.1, 0.2], forces, "linear"), "port: scene 's'")
 
 
+#: an experiment's process (the host's imports, no more) that allocates enough long-lived
+#: containers to bring full collections while it drives a device; argv: port, 1 for the
+#: native link or 0 for the Python threads', and the number of entries in the heap it
+#: holds (three containers each). Prints what it saw as JSON.
+COLLECTIONS = r"""
+import gc, json, sys, time
+from device import Scene, open_device
+full, began = [], []
+
+def count(phase, info):
+    if info["generation"] != 2:
+        return
+    if phase == "start":
+        began.append(time.perf_counter())
+    else:
+        full.append(time.perf_counter() - began.pop())
+
+def allocate(turn=None):
+    keep = []
+    for _ in range(10):
+        keep.extend([] for _ in range(30_000))
+        if turn is not None:
+            turn()
+    return len(keep)
+
+heap = [{"a": [i], "b": (i, str(i)), "c": {i}} for i in range(int(sys.argv[3]))]
+gc.collect()
+gc.callbacks.append(count)
+allocate()
+seen = {"control": len(full)}
+full.clear()
+with open_device("serial:" + sys.argv[1], native=sys.argv[2] == "1") as dev:
+    seen["native"] = dev.link.native
+    dev.load_scene(Scene("firm", spring=680.0))
+    dev.home()
+    allocate(dev.heartbeat)
+    allocate(dev.heartbeat)
+    seen["while_fed"] = len(full)
+    seen["longest_ms"] = max(full, default=0.0) * 1e3
+    dev.run_window(0.2, from_first_contact=False)
+    seen["fault"] = dev.fault and dev.fault.code
+seen["at_close"] = len(full) - seen["while_fed"]
+seen["threshold"] = gc.get_threshold()[2]
+print(json.dumps(seen))
+"""
+
+
 @pytest.mark.realtime
 @pytest.mark.integration
 @pytest.mark.slow
@@ -629,48 +676,33 @@ def test_full_collections_do_not_starve_the_watchdog(own_emulator, native):
     took 90–110 ms with the host's imports, and the emulator's 100-ms watchdog tripped (a
     library build beside two CPU hogs failed 7 runs in 8). The native link heartbeats from
     threads the collector does not stop, so full passes run as usual; the Python-thread
-    link holds them off while it feeds a device and runs the held pass at close."""
-    import gc
+    link holds them off while it feeds a device and runs the held pass at close.
 
-    full = []
+    Run in a process of its own, as an experiment's is: a full pass walks every object the
+    process holds, and in a pytest worker late in the gate (a heap of several hundred
+    thousand objects, 0.24 s a pass quiet after the unit tier alone) one pass beside load
+    outlasted the heartbeats' lease (``LEASE_S``, 1 s), so the device's watchdog tripped as
+    it does for a host that stopped driving it."""
+    import json
 
-    def count(phase, info):
-        if phase == "stop" and info["generation"] == 2:
-            full.append(info["collected"])
-
-    def allocate(turn=None):
-        """Enough long-lived containers to bring full passes at the defaults, in ten
-        parts; ``turn`` between them: a main loop that goes on driving the device (each
-        turn renews the heartbeats' lease, as a window's loop does every 50 ms; the whole
-        took 0.33 s quiet here and over a second, longer than the lease, beside two
-        CPU-bound processes)."""
-        keep = []
-        for _ in range(10):
-            keep.extend([] for _ in range(30_000))
-            if turn is not None:
-                turn()
-        return len(keep)
-
-    gc.collect()
-    gc.callbacks.append(count)
-    try:
-        allocate()
-        assert len(full) >= 1  # the control: this allocation does bring a full pass
-        full.clear()
-        with open_device(f"serial:{own_emulator.port}", native=native) as dev:
-            assert dev.link.native is native
-            dev.load_scene(FIRM)
-            dev.home()
-            allocate(dev.heartbeat)
-            allocate(dev.heartbeat)
-            assert (len(full) >= 1) if native else (full == [])
-            dev.run_window(0.2, from_first_contact=False)
-            assert dev.fault is None
-        if not native:
-            assert len(full) == 1  # the held pass, at close
-    finally:
-        gc.callbacks.remove(count)
-    assert gc.get_threshold()[2] < 1000  # the interpreter's own setting is given back
+    # the native link's process holds an experiment's heap: a full pass walks it in 0.15 s
+    # here, quiet, longer than the device's watchdog period and shorter than the lease; the
+    # Python threads' holds off its passes whatever they take
+    heap = 200_000 if native else 0
+    run = subprocess.run([sys.executable, "-c", COLLECTIONS, own_emulator.port,
+                          "1" if native else "0", str(heap)], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    seen = json.loads(run.stdout.splitlines()[-1])
+    print(seen)
+    assert seen["control"] >= 1  # this allocation does bring a full pass
+    assert seen["native"] is native
+    if native:
+        assert seen["while_fed"] >= 1  # passes ran while the device was fed
+    else:
+        assert seen["while_fed"] == 0 and seen["at_close"] == 1  # held, then run at close
+    assert seen["fault"] is None
+    assert seen["threshold"] < 1000  # the interpreter's own setting is given back
 
 
 @pytest.mark.realtime
