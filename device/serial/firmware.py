@@ -174,9 +174,16 @@ def serve(build: str, seed: int = 0, speed: float = 1.0) -> int:
     stop = lambda *_: proc.terminate()  # noqa: E731
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    held = None
     for line in proc.stdout:
         m = QEMU_PTY.search(line)
         if m:
+            # the pty's device end held open here for QEMU's life: QEMU stops reading a pty
+            # whose last client closed and looks again only once a second, so every host
+            # that connected after another waited up to 1 s for its HELLO to be read. What
+            # the board writes while no host is there (about 45 B/s) now waits in the pty
+            # for the next host, which counts from its HELLO_ACK
+            held = os.open(m.group(1), os.O_RDWR | os.O_NOCTTY)
             print(m.group(1), flush=True)
             print(f"reference firmware on an emulated STM32F405 (QEMU netduinoplus2) at "
                   f"{m.group(1)}; stop with Ctrl-C", file=sys.stderr, flush=True)
@@ -184,4 +191,7 @@ def serve(build: str, seed: int = 0, speed: float = 1.0) -> int:
         print(line.rstrip(), file=sys.stderr, flush=True)
     for line in proc.stdout:  # QEMU's own complaints, if any
         print(line.rstrip(), file=sys.stderr, flush=True)
-    return proc.wait()
+    code = proc.wait()
+    if held is not None:
+        os.close(held)
+    return code
