@@ -450,8 +450,10 @@ def test_preflight_lists_missing_libraries_then_a_build_makes_realism_run(emulat
     command = line.split("build it with: ")[1].split(";")[0].strip()
     assert command == (f"hapticlab library build --device {spec} --protocol realism "
                        "--source wood_on_foam")
-    build = subprocess.run([*PY, *command.split()[1:], "--windows", "4"], capture_output=True,
-                           text=True, timeout=600)
+    # its verification (tapping the matched sample against the spring alone) is
+    # test_resumable_jobs.py's: not this test's, 2 s at x10
+    build = subprocess.run([*PY, *command.split()[1:], "--windows", "4", "--verify", "0"],
+                           capture_output=True, text=True, timeout=600)
     assert build.returncode == 0, build.stderr + "\nemulator:\n" + emu.stderr()
     pre = subprocess.run([*PY, "preflight", "realism", *common], capture_output=True,
                          text=True, timeout=120)
