@@ -89,29 +89,36 @@ check: $(STAMP)
 # The native link (device/serial/_hostlink*.so) is built in the source tree: a `git clean -x`
 # removes it while the environment's stamp stays, and the suite would then test the Python
 # threads' fallback, which a busy computer starves. Rebuild it rather than test without it.
-# One pytest process by default: the real-time tests were made to pass beside two CPU-bound
-# processes, and a second worker is a third (beside two `sh -c 'while :; do :; done'`, the
-# two-worker gate failed three host-build timing tests, and at 4b6e932 four tests on a
-# device's watchdog, docs/howto/run-the-tests.md; 2026-11-29). WORKERS=2 runs it on
-# two (pytest-xdist, the real-time tests in one group, given out first; the other worker
-# yields its core to them, tests/conftest.py): 19 minutes on a quiet machine, where one
-# process took about 33-36.
-WORKERS ?= 1
+# Two pytest workers by default (pytest-xdist, --dist loadgroup): the real-time tests in one
+# group, given out first, and the other worker yields its core to them (tests/conftest.py).
+# They pass beside two CPU-bound processes (docs/howto/run-the-tests.md has the runs).
+# WORKERS=1 runs one process, about 33-36 minutes where two take about 20.
+WORKERS ?= 2
 PYTEST_WORKERS := $(if $(filter-out 1,$(WORKERS)),-n $(WORKERS) --dist loadgroup,)
+# more of pytest's options for `make test`, such as PYTEST_ARGS=--junitxml=report.xml
+PYTEST_ARGS ?=
 # the project's own bytecode, compiled before the tests: where PYTHONDONTWRITEBYTECODE is set
 # nothing is compiled on import, and each of the suite's hundreds of `python -m app`
 # processes compiled what it imports again (0.15 s of a 1.5-s dry-run session)
 PACKAGES := app device analysis protocols benchmarks plugins
+# the documentation's build runs beside the tests at a lower priority (nothing in the suite
+# reads it), its output shown after theirs; either failing fails the gate
+DOCS_LOG := $(VENV)/docs.log
 test: system-deps
-	$(MAKE) -j2 --output-sync=target lint docs firmware-test
+	$(MAKE) -j2 --output-sync=target lint firmware-test
 	@$(PY) -c 'import sys; from device.serial.native import load; sys.exit(load()[0] is None)' \
 	  || $(PY) -m pip install --quiet --no-deps -e .
 	@$(PY) -m compileall -q $(PACKAGES)
-	$(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS)
+	@nice -n 10 $(MAKE) --no-print-directory docs > $(DOCS_LOG) 2>&1 & docs=$$!; \
+	  echo "$(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS) $(PYTEST_ARGS)"; \
+	  $(PY) -m pytest -q --durations=15 $(PYTEST_WORKERS) $(PYTEST_ARGS); tests=$$?; \
+	  wait $$docs; built=$$?; cat $(DOCS_LOG); \
+	  if [ $$built -ne 0 ]; then echo "make docs failed (above)"; fi; \
+	  exit $$(( tests ? tests : built ))
 
 # the firmware's own tests (firmware/README.md): in `make test`, beside the environment's
-# install, then the lint and the documentation's build, which need it (the firmware needs
-# only the compilers; its builds and its fuzz run take two cores, the install one or two)
+# install and then the lint, which needs it (the firmware needs only the compilers; its
+# builds and its fuzz run take two cores, the install one or two)
 firmware-test:
 	$(MAKE) -C firmware test
 
