@@ -112,7 +112,7 @@ def is_realtime(item) -> bool:
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    """How pytest-xdist shares the suite between its workers (``make test WORKERS=2``,
+    """How pytest-xdist shares the suite between its workers (``make test``,
     ``--dist loadgroup``). Every real-time test (:func:`is_realtime`) goes to one group,
     run by one worker one test after another as in a serial run: none runs beside another
     (each was made to pass beside two CPU-bound processes; the other worker yields its core
@@ -304,6 +304,9 @@ class Emulated:
     proc: subprocess.Popen
     port: str
     stderr_lines: list = field(default_factory=list)
+    #: the thread that collects stderr's lines: joined once the emulator has stopped, so
+    #: that its last words (a host build's account at exit) are in :meth:`stderr`
+    pump: threading.Thread | None = None
 
     def stderr(self) -> str:
         return "".join(self.stderr_lines)
@@ -322,7 +325,8 @@ def start_emulator(*extra: str) -> Emulated:
         for line in proc.stderr:
             emu.stderr_lines.append(line)
 
-    threading.Thread(target=pump, daemon=True).start()
+    emu.pump = threading.Thread(target=pump, daemon=True)
+    emu.pump.start()
     return emu
 
 
@@ -334,6 +338,10 @@ def stop_emulator(emu: Emulated) -> None:
             emu.proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
             emu.proc.kill()
+            emu.proc.wait()
+    if emu.pump is not None:
+        emu.pump.join(timeout=10)  # stderr's end comes with the process's; a child it left
+        #                            holding the pipe is waited for no longer
 
 
 @pytest.fixture(scope="session")
@@ -630,7 +638,7 @@ _YIELDING: list[bool] = []
 
 def _yield_to_realtime(item) -> None:
     """On a worker of a run on two workers or more with the real-time group
-    (``make test WORKERS=2``, ``--dist loadgroup``): before its first test that meets no
+    (``make test``, ``--dist loadgroup``): before its first test that meets no
     deadline, lower this process's priority (and its children's) by :data:`_YIELDING_NICE`,
     so that the real-time lane, with its devices and windows, takes a core first and the
     machine's other work competes with it as in a one-process run. The real-time group is

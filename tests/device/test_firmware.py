@@ -478,7 +478,11 @@ def test_emulate_refuses_a_pace_the_firmware_cannot_keep():
 @pytest.mark.firmware
 def test_the_host_build_keeps_device_time_at_its_pace():
     """At --speed 10 the device clock (STATUS.time) advances ten device seconds per wall
-    second, and a window of 2 device seconds streams all its 20,000 records."""
+    second, and a window of 2 device seconds streams all its 20,000 records. A computer
+    that holds the build up lets its clock slip (it never races through the ticks it
+    missed), and the build says at exit how many ticks slipped: beside two CPU-bound
+    processes and the suite's other worker its clock once kept 7.1 device seconds per wall
+    second, so device time is checked against the wall's less what slipped."""
     import time
 
     emu = start_emulator("--firmware", "host", "--seed", "3", "--speed", "10")
@@ -490,12 +494,17 @@ def test_the_host_build_keeps_device_time_at_its_pace():
             res = dev.run_window(2.0, from_first_contact=False)
             time.sleep(0.2)
             wall1, dev1 = dev.last_status
-        assert len(res.traces["t"]) == 20_000 and res.rate_hz == 10_000
-        pace = (dev1 - dev0) / (wall1 - wall0)
-        # ±5 %: each STATUS's arrival may lag its tick by a few ms of a ~2.5-s span
-        assert 9.5 < pace < 10.5, pace
     finally:
         stop_emulator(emu)
+    assert len(res.traces["t"]) == 20_000 and res.rate_hz == 10_000
+    # [device s] over the build's life: what slipped outside the span only loosens the
+    # lower bound, and on a quiet machine nothing slips
+    slipped = int(re.search(r"(\d+) ticks slipped while held up", emu.stderr()).group(1)) / 1e4
+    wall = wall1 - wall0
+    # ±5 %: each STATUS's arrival may lag its tick by a few ms of a ~2.5-s span; never
+    # ahead of its pace, and behind it only by what it let slip
+    assert (dev1 - dev0) / wall < 10.5, (dev1 - dev0) / wall
+    assert (dev1 - dev0 + slipped) / wall > 9.5, (dev1 - dev0, slipped, wall)
 
 
 def _spring():
